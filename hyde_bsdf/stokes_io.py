@@ -1,0 +1,267 @@
+"""Stokes images: EXR files, polarization quantities and their PNG charts.
+
+A *Stokes image* here is a dict of float32 arrays of shape ``(H, W, 3)``
+(one value per RGB channel, linear sRGB primaries, the scene's radiance units):
+
+``"S0"``, ``"S1"``, ``"S2"``, ``"S3"``
+    the Stokes components as Mitsuba's ``stokes`` integrator reports them,
+    i.e. in the **sensor's basis**: for light travelling towards the camera
+    (propagation ``k = -ray.d``) the first basis vector is
+    ``x = normalize(ray.d x up)`` with ``up`` the sensor's up axis -- which is
+    the image's rightward direction -- and ``y = k x x`` is the image's upward
+    direction.  ``S1 > 0``: horizontal polarization (along the image rows);
+    ``S2 > 0``: linear polarization at +45 deg (from image-right towards
+    image-up, as seen by the viewer); ``S3``: Mitsuba's circular component.
+``"RGB"`` (optional)
+    the ordinary colour image (equal to ``S0`` for a Stokes render).
+
+The EXR layout is one float32 channel per component and colour:
+``R, G, B, S0.R, S0.G, S0.B, S1.R, ..., S3.B`` -- the names Mitsuba's
+``stokes`` integrator gives its channels, so ``mi.Bitmap(path).split()`` reads
+our files and we read Mitsuba's.
+
+Derived quantities (computed from the luminance ``Y = 0.2126 R + 0.7152 G +
+0.0722 B`` of each component, or from one colour channel):
+
+* intensity ``I = S0``,
+* degree of linear polarization ``DoLP = sqrt(S1^2 + S2^2) / S0`` in [0, 1],
+* angle of linear polarization ``AoLP = atan2(S2, S1) / 2`` in (-pi/2, pi/2],
+  radians, counter-clockwise from the image's horizontal as seen by the viewer,
+* degree of circular polarization ``DoCP = S3 / S0`` in [-1, 1] (signed).
+
+Where ``S0`` is zero (or not positive) the ratios are undefined: they are set
+to 0 and reported in the ``valid`` mask of :func:`polarization_quantities`.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "STOKES_NAMES",
+    "COLOURS",
+    "exr_channel_names",
+    "write_stokes_exr",
+    "read_stokes_exr",
+    "luminance",
+    "polarization_quantities",
+    "save_polarization_pngs",
+]
+
+STOKES_NAMES = ("S0", "S1", "S2", "S3")
+COLOURS = ("R", "G", "B")
+#: Rec. 709 / sRGB luminance weights for linear RGB.
+LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+#: S0 at or below this is treated as "no light" when forming ratios (float32 noise floor).
+S0_FLOOR = 1e-12
+
+
+def exr_channel_names() -> list[str]:
+    """The channel names written by :func:`write_stokes_exr`, in order."""
+    return list(COLOURS) + [f"{s}.{c}" for s in STOKES_NAMES for c in COLOURS]
+
+
+def _check_stokes(stokes: dict) -> tuple[int, int]:
+    """Validate a Stokes image dict; returns its (H, W)."""
+    if not isinstance(stokes, dict):
+        raise ValueError(f"stokes must be a dict with keys {STOKES_NAMES}, got {type(stokes).__name__}")
+    missing = [s for s in STOKES_NAMES if s not in stokes]
+    if missing:
+        raise ValueError(f"stokes is missing the component(s) {missing}; it needs {list(STOKES_NAMES)}")
+    shape = np.shape(stokes["S0"])
+    if len(shape) != 3 or shape[2] != 3 or shape[0] < 1 or shape[1] < 1:
+        raise ValueError(f"stokes['S0'] must have shape (H, W, 3), got {shape}")
+    for name in STOKES_NAMES[1:] + (("RGB",) if "RGB" in stokes else ()):
+        if np.shape(stokes[name]) != shape:
+            raise ValueError(f"stokes[{name!r}] has shape {np.shape(stokes[name])}, expected {shape}")
+    return shape[0], shape[1]
+
+
+def write_stokes_exr(path, stokes: dict, metadata: dict | None = None) -> Path:
+    """Write a Stokes image to an OpenEXR file (float32 channels, ZIP compressed).
+
+    Parameters
+    ----------
+    path : str or Path, must end in ``.exr``
+    stokes : dict with ``"S0".."S3"`` (and optionally ``"RGB"``), arrays (H, W, 3)
+    metadata : optional dict of short strings stored as EXR header attributes
+        (e.g. variant, spp); keys are prefixed ``hyde_bsdf.``.
+
+    Channels: ``R, G, B`` (``RGB`` if given, else ``S0``) then ``S0.R ... S3.B``.
+    Non-finite values are refused (ValueError), so no NaN reaches a file silently.
+    """
+    import OpenEXR
+
+    path = Path(path)
+    if path.suffix.lower() != ".exr":
+        raise ValueError(f"path must end in .exr, got {str(path)!r}")
+    _check_stokes(stokes)
+    rgb = np.asarray(stokes.get("RGB", stokes["S0"]), dtype=np.float32)
+    channels: dict[str, np.ndarray] = {}
+    for j, c in enumerate(COLOURS):
+        channels[c] = np.ascontiguousarray(rgb[..., j])
+    for s in STOKES_NAMES:
+        arr = np.asarray(stokes[s], dtype=np.float32)
+        for j, c in enumerate(COLOURS):
+            channels[f"{s}.{c}"] = np.ascontiguousarray(arr[..., j])
+    bad = [name for name, a in channels.items() if not np.all(np.isfinite(a))]
+    if bad:
+        raise ValueError(f"stokes has non-finite values in channel(s) {bad}; refusing to write {path}")
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    header["hyde_bsdf.stokes_basis"] = (
+        "Mitsuba sensor basis: x = image right, y = image up, k = towards the viewer")
+    for key, value in (metadata or {}).items():
+        header[f"hyde_bsdf.{key}"] = str(value)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    OpenEXR.File(header, channels).write(str(path))
+    return path
+
+
+def read_stokes_exr(path) -> dict:
+    """Read a Stokes EXR (ours or one Mitsuba's ``stokes`` integrator wrote).
+
+    Returns a dict ``{"RGB", "S0", "S1", "S2", "S3"}`` of float32 arrays (H, W, 3)
+    and ``"metadata"``: the ``hyde_bsdf.*`` header attributes as strings.
+    Raises ValueError naming the missing channels if it is not a Stokes EXR.
+    """
+    import OpenEXR
+
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"path {str(path)!r} is not an existing file")
+    f = OpenEXR.File(str(path), separate_channels=True)
+    chans = {name: ch.pixels for name, ch in f.channels().items()}
+    need = [f"{s}.{c}" for s in STOKES_NAMES for c in COLOURS]
+    missing = [n for n in need if n not in chans]
+    if missing:
+        raise ValueError(f"{path} is not a Stokes EXR: channels {missing} are missing "
+                         f"(found {sorted(chans)})")
+    out: dict = {}
+    for s in STOKES_NAMES:
+        out[s] = np.stack([chans[f"{s}.{c}"] for c in COLOURS], axis=-1).astype(np.float32)
+    if all(c in chans for c in COLOURS):
+        out["RGB"] = np.stack([chans[c] for c in COLOURS], axis=-1).astype(np.float32)
+    else:
+        out["RGB"] = out["S0"].copy()
+    out["metadata"] = {k[len("hyde_bsdf."):]: str(v) for k, v in f.header().items()
+                       if isinstance(k, str) and k.startswith("hyde_bsdf.")}
+    return out
+
+
+def luminance(image, channel: str = "Y") -> np.ndarray:
+    """One scalar per pixel from an (H, W, 3) linear-RGB array.
+
+    channel: ``"Y"`` (Rec. 709 luminance, the default) or one of ``"R", "G", "B"``.
+    """
+    image = np.asarray(image, dtype=np.float64)
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise ValueError(f"image must have shape (H, W, 3), got {image.shape}")
+    if channel == "Y":
+        return image @ LUMINANCE_WEIGHTS
+    if channel in COLOURS:
+        return image[..., COLOURS.index(channel)]
+    raise ValueError(f"channel must be one of 'Y', 'R', 'G', 'B', got {channel!r}")
+
+
+def polarization_quantities(stokes: dict, channel: str = "Y") -> dict:
+    """Intensity, DoLP, AoLP (radians) and DoCP of a Stokes image.
+
+    Returns a dict of float64 arrays (H, W): ``intensity`` (S0), ``dolp`` in [0, 1],
+    ``aolp`` in (-pi/2, pi/2] (radians, counter-clockwise from the image horizontal
+    as seen by the viewer), ``docp`` in [-1, 1], and ``valid`` (bool): S0 > 0, where
+    the ratios are defined.  Where ``valid`` is False, dolp/aolp/docp are 0.
+    DoLP and |DoCP| are clipped to 1 (Monte-Carlo noise can push a ratio of two
+    estimates past 1; a physical Stokes vector never exceeds it).
+    """
+    _check_stokes(stokes)
+    s0, s1, s2, s3 = (luminance(stokes[s], channel) for s in STOKES_NAMES)
+    for name, arr in zip(STOKES_NAMES, (s0, s1, s2, s3)):
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"stokes[{name!r}] has non-finite values")
+    valid = s0 > S0_FLOOR
+    safe_s0 = np.where(valid, s0, 1.0)  # placeholder divisor where undefined; masked below
+    dolp = np.where(valid, np.minimum(np.hypot(s1, s2) / safe_s0, 1.0), 0.0)
+    aolp = np.where(valid, 0.5 * np.arctan2(s2, s1), 0.0)
+    docp = np.where(valid, np.clip(s3 / safe_s0, -1.0, 1.0), 0.0)
+    return {"intensity": s0, "dolp": dolp, "aolp": aolp, "docp": docp, "valid": valid}
+
+
+def _tonemap(rgb: np.ndarray, exposure: float = 1.0) -> np.ndarray:
+    """Linear RGB -> 8-bit-ready sRGB in [0, 1] (clip, then the sRGB transfer curve)."""
+    x = np.clip(np.asarray(rgb, dtype=np.float64) * exposure, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "Y",
+                           dolp_mask: float = 0.01) -> dict[str, Path]:
+    """Write the four polarization charts (plus a colour image) as PNGs with colour bars.
+
+    Files: ``{stem}_intensity.png`` (S0, inferno, clipped at the 99.5th percentile),
+    ``{stem}_dolp.png`` (viridis, [0, 1]), ``{stem}_aolp.png`` (cyclic ``twilight``,
+    [-90, 90] deg, grey where DoLP < ``dolp_mask`` or no light), ``{stem}_docp.png``
+    (diverging, symmetric range), and ``{stem}_rgb.png`` (the colour image, sRGB).
+    Returns {name: path}.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    stem = Path(stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    q = polarization_quantities(stokes, channel)
+    h, w = q["intensity"].shape
+    valid = q["valid"]
+    label = {"Y": "luminance", "R": "red channel", "G": "green channel", "B": "blue channel"}[channel]
+    prefix = f"{title}: " if title else ""
+    paths: dict[str, Path] = {}
+
+    def chart(name, data, cmap, vmin, vmax, cbar_label, heading, bad="0.5"):
+        fig_w = 6.4
+        fig_h = max(2.4, fig_w * h / w * 0.85 + 0.6)
+        fig, ax = plt.subplots(figsize=(fig_w, fig_h), dpi=110)
+        cm = matplotlib.colormaps[cmap].copy()
+        cm.set_bad(bad)
+        im = ax.imshow(data, cmap=cm, vmin=vmin, vmax=vmax, interpolation="nearest")
+        ax.set_title(prefix + heading, fontsize=10)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        cb = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03)
+        cb.set_label(cbar_label)
+        fig.tight_layout()
+        out = Path(f"{stem}_{name}.png")
+        fig.savefig(out)
+        plt.close(fig)
+        paths[name] = out
+
+    inten = q["intensity"]
+    vmax = float(np.percentile(inten, 99.5)) if np.any(inten > 0) else 1.0
+    vmax = vmax if vmax > 0 else 1.0
+    chart("intensity", inten, "inferno", 0.0, vmax, f"S0 ({label}, scene radiance units)",
+          "intensity S0")
+    chart("dolp", np.ma.masked_where(~valid, q["dolp"]), "viridis", 0.0, 1.0,
+          "DoLP = sqrt(S1² + S2²) / S0", "degree of linear polarization")
+    aolp_deg = np.degrees(q["aolp"])
+    chart("aolp", np.ma.masked_where(~valid | (q["dolp"] < dolp_mask), aolp_deg), "twilight",
+          -90.0, 90.0, "AoLP (deg, from image horizontal, counter-clockwise)",
+          f"angle of linear polarization (grey: DoLP < {dolp_mask:g})")
+    docp = q["docp"]
+    lim = float(np.percentile(np.abs(docp[valid]), 99.5)) if np.any(valid) else 1.0
+    lim = min(max(lim, 1e-3), 1.0)  # keep a visible range when S3 is ~0 everywhere
+    chart("docp", np.ma.masked_where(~valid, docp), "RdBu_r", -lim, lim, "DoCP = S3 / S0",
+          "degree of circular polarization")
+
+    rgb = np.asarray(stokes.get("RGB", stokes["S0"]))
+    fig, ax = plt.subplots(figsize=(6.4, max(2.4, 6.4 * h / w * 0.85 + 0.6)), dpi=110)
+    ax.imshow(_tonemap(rgb), interpolation="nearest")
+    ax.set_title(prefix + "colour image (sRGB, clipped at 1)", fontsize=10)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    fig.tight_layout()
+    out = Path(f"{stem}_rgb.png")
+    fig.savefig(out)
+    plt.close(fig)
+    paths["rgb"] = out
+    return paths
