@@ -1,0 +1,197 @@
+"""NumPy evaluator of the Hyde-Schmidt-Havrilla pBRDF, in the paper's angle formulation.
+
+    F(theta_i, theta_r, phi) = F^s + F^d                                   (Eq. 5, 17)
+    F^s = P(alpha) M(beta; eta) G / (4 cos ti cos tr cos alpha)            (Eq. 6, 13)
+    F^d_00 = (1/pi) [1 - rho^{s,PEC}(theta_i)] M_00(beta; eta)             (Eq. 16, 17)
+
+with alpha, beta from Eq. 7, P Beckmann (Eq. 8), M the Mueller matrix of the
+rotated Fresnel Jones matrix (Eqs. 9-11, all 16 elements), G the V-groove
+shadowing (Eq. 12) or an alternative, rho^{s,PEC} the specular DHR (Eqs. 14-16)
+read from the cached table of :mod:`hyde_bsdf.dhr`.
+
+Conventions (this interface)
+----------------------------
+- Angles in radians.  theta_i: polar angle of the direction towards the source,
+  theta_r: towards the observer, phi = phi_r - phi_i.  phi = pi is the specular
+  plane (forward scattering), as in the paper; phi = 0 the backscatter side.  For
+  phi in [0, pi] this is the paper's |phi_r - phi_i|; phi in (pi, 2 pi) (or < 0)
+  is the mirror-image geometry, whose Mueller matrix is D F D, D = diag(1,1,-1,-1).
+- Index: the paper's eta = n - j kappa (e^{+j w t}), given as ``n``, ``k`` >= 0;
+  Mitsuba's n + ik describes the same material with the same Mueller matrix.
+- Stokes bases (the macroscopic s/p bases of Eq. 9): with phi_i = 0,
+  omega_i = (sin ti, 0, cos ti), omega_r = (sin tr cos phi, sin tr sin phi, cos tr),
+  propagation k_i = -omega_i, k_r = omega_r; for each wave s = k x z/|k x z| and
+  p = k x s, so (s, p, k) is right-handed and s_i = s_r = +y in the specular plane.
+  At theta = 0 the basis is the limit at fixed azimuth.
+  S0 = |Es|^2+|Ep|^2, S1 = |Es|^2-|Ep|^2, S2 = 2 Re(Es Ep*), S3 = -2 Im(Es Ep*) in
+  e^{+jwt} phasors (+2 Im(Es Ep*) in e^{-iwt}): a flat mirror at normal incidence
+  is diag(1, 1, -1, -1).
+- Roughness: ``rms_slope`` = sqrt(2) sigma_h / l (the paper's); Beckmann
+  alpha = sqrt(2) rms_slope.  See :mod:`hyde_bsdf.roughness`.
+
+Reciprocity: the specular part satisfies F^s(r -> i) = Q F^s(i -> r)^T Q with
+Q = diag(1, 1, 1, -1) (tests check it).  The paper's diffuse term depends on
+theta_i alone, so the published F is *not* reciprocal; ``diffuse="reciprocal"``
+replaces it by (1 - rho(ti))(1 - rho(tr)) / (pi (1 - rho_avg)) M_00, symmetric in
+i and r and with the same hemispherical integral 1 - rho(ti) (so the PEC energy
+balance of Eq. 15 still closes), where rho_avg = 2 int rho(t) cos t sin t dt.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .dhr import load_table, x_of_theta
+from .facet_geometry import cos_alpha_beta, rotation_terms
+from .fresnel import fresnel_mueller_terms
+from .jones_mueller import rotated_fresnel_mueller
+from .roughness import check_rms_slope
+from .shadowing import SHADOWING, visibility
+from .slope_distribution import beckmann_P
+
+__all__ = ["pbrdf", "specular_pbrdf", "diffuse_pbrdf", "DIFFUSE"]
+
+DIFFUSE = ("paper", "reciprocal", "none")
+RMS_SLOPE_RANGE = (1e-4, 100.0)
+INDEX_MAX = 1e6
+
+
+def _check_angles(name, value, hi):
+    a = np.asarray(value, dtype=float)
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be finite (radians), got non-finite values")
+    if hi is not None and np.any((a < 0.0) | (a > hi)):
+        raise ValueError(f"{name} must be in [0, pi] radians (polar angle; > pi/2 is below the horizon)")
+    return a
+
+
+def _check_index(n, k, pec):
+    if pec:
+        if n is not None:
+            raise ValueError("give either n (and k) or pec=True, not both")
+        return None, None
+    if n is None:
+        raise ValueError("n is required (eta = n - jk) unless pec=True")
+    out = []
+    for name, v in (("n", n), ("k", k)):
+        try:
+            v = float(v)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be a real number in [0, {INDEX_MAX:g}], got {v!r}") from None
+        if not math.isfinite(v) or not (0.0 <= v <= INDEX_MAX):
+            raise ValueError(f"{name} must be a real number in [0, {INDEX_MAX:g}], got {v!r}")
+        out.append(v)
+    if out[0] == 0.0 and out[1] == 0.0:
+        raise ValueError("n and k cannot both be 0 (eta = 0 has no Fresnel reflection)")
+    return out
+
+
+def _check_diffuse(diffuse):
+    if diffuse is True:
+        return "paper"
+    if diffuse is False or diffuse is None:
+        return "none"
+    if isinstance(diffuse, str) and diffuse in DIFFUSE:
+        return diffuse
+    raise ValueError(f"diffuse must be True, False or one of {DIFFUSE}, got {diffuse!r}")
+
+
+def _geometry(theta_i, theta_r, phi):
+    ti, tr, ph = np.broadcast_arrays(theta_i, theta_r, phi)
+    ci, cr = np.cos(ti), np.cos(tr)
+    above = (ci > 0.0) & (cr > 0.0)
+    return ti, tr, ph, ci, cr, above
+
+
+def specular_pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
+                   shadowing="vgroove", out=None):
+    """F^s of Eqs. 6/13 (1/sr), shape broadcast(theta_i, theta_r, phi) + (4, 4).
+
+    Same conventions and validation as :func:`pbrdf` (which adds the diffuse term).
+    """
+    s = check_rms_slope(rms_slope, *RMS_SLOPE_RANGE)
+    nk = _check_index(n, k, pec)
+    if shadowing not in SHADOWING:
+        raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+    theta_i = _check_angles("theta_i", theta_i, math.pi)
+    theta_r = _check_angles("theta_r", theta_r, math.pi)
+    phi = _check_angles("phi", phi, None)
+    return _specular(theta_i, theta_r, phi, s, nk, pec, shadowing, out)
+
+
+def _specular(theta_i, theta_r, phi, s, nk, pec, shadowing, out=None):
+    ti, tr, ph, ci, cr, above = _geometry(theta_i, theta_r, phi)
+    if out is None:
+        out = np.empty(ti.shape + (4, 4))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
+        cos_a, cos_b, tan2_a = cos_alpha_beta(ti, tr, ph)
+        G = visibility(shadowing, cos_a, cos_b, ci, cr, s)
+        # Eq. 6: P M G / (4 cos ti cos tr cos alpha); zero below the horizon
+        scale = beckmann_P(cos_a, tan2_a, s) * G / (4.0 * ci * cr * cos_a)
+        scale = np.where(above, scale, 0.0)
+        A, B, C, S = fresnel_mueller_terms(np.where(above, cos_b, 1.0), *(nk or (0, 0)), pec=pec)
+        rot = rotation_terms(ti, tr, ph)
+        rotated_fresnel_mueller(A, B, C, S, *rot, scale, out)
+    return out, A, ci, cr, above
+
+
+def diffuse_pbrdf(theta_i, theta_r, M00, rms_slope, mode="paper", shadowing="vgroove"):
+    """F^d_00 of Eqs. 16-17: (1/pi)(1 - rho^{s,PEC}(theta_i)) M00, or its reciprocal variant.
+
+    ``M00`` is the facet Fresnel average M_00(beta; eta) (1 for a PEC).  With
+    ``shadowing="none"`` rho can exceed 1 at grazing angles (Priest-Germer is
+    unbounded); 1 - rho is then clipped at 0, which keeps F^d >= 0.
+    """
+    table = load_table(shadowing)
+    grid, rho_x = table.x_slice(float(rms_slope))
+    one_minus = lambda t: np.maximum(1.0 - np.interp(x_of_theta(t), grid, rho_x), 0.0)
+    if mode == "paper":
+        return one_minus(theta_i) * M00 / math.pi
+    avg = max(1.0 - float(table.average(rms_slope)), 1e-300)
+    return one_minus(theta_i) * one_minus(theta_r) * M00 / (math.pi * avg)
+
+
+def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
+          shadowing="vgroove", diffuse=True):
+    """The Hyde-Schmidt-Havrilla pBRDF Mueller matrix F (1/sr), paper Eq. 17.
+
+    Parameters
+    ----------
+    theta_i, theta_r : array_like, radians in [0, pi]
+        polar angles of the directions towards the source and the observer;
+        directions at or below the horizon (cos <= 0) give an all-zero matrix.
+    phi : array_like, radians
+        phi_r - phi_i; pi = specular plane (see module docstring for bases).
+    rms_slope : float in [1e-4, 100]
+        the paper's roughness sqrt(2) sigma_h / l (Beckmann alpha / sqrt(2)).
+    n, k : float >= 0
+        the complex index eta = n - jk; or ``pec=True`` for a perfect conductor.
+    shadowing : "vgroove" (Eq. 12, the paper) | "smith" (exact Beckmann Smith) | "none"
+    diffuse : True / "paper" (Eq. 17) | "reciprocal" (symmetric variant) | False / "none"
+        ``shadowing="none", diffuse=False`` is the Priest-Germer pBRDF (Fig. 4).
+        The diffuse term uses the DHR of the same shadowing model.
+
+    Returns
+    -------
+    ndarray of shape broadcast(theta_i, theta_r, phi) + (4, 4), in the paper's
+    s/p Stokes bases; ``F @ S_in * cos(theta_i) * d omega_i`` is the reflected
+    Stokes radiance for incident Stokes radiance S_in.
+    """
+    s = check_rms_slope(rms_slope, *RMS_SLOPE_RANGE)
+    nk = _check_index(n, k, pec)
+    mode = _check_diffuse(diffuse)
+    if shadowing not in SHADOWING:
+        raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+    theta_i = _check_angles("theta_i", theta_i, math.pi)
+    theta_r = _check_angles("theta_r", theta_r, math.pi)
+    phi = _check_angles("phi", phi, None)
+    out, A, ci, cr, above = _specular(theta_i, theta_r, phi, s, nk, pec, shadowing)
+    if mode != "none":
+        ti, tr = np.broadcast_arrays(theta_i, theta_r)
+        out[..., 0, 0] += np.where(above, diffuse_pbrdf(ti, tr, A, s, mode, shadowing), 0.0)
+    if not np.isfinite(out).all():   # never hand back NaN silently
+        bad = np.argwhere(~np.isfinite(out.reshape(out.shape[:-2] + (16,))).any(-1))[:1]
+        raise FloatingPointError(f"pbrdf produced a non-finite value at index {bad.tolist()} "
+                                 f"(rms_slope={s}, n={n}, k={k}, pec={pec}); please report it")
+    return out

@@ -1,0 +1,101 @@
+"""Facet angles from the macroscopic angles: the paper's Eqs. 7 and 10.
+
+All functions take theta_i, theta_r (polar angles of the directions towards the
+source and the observer) and phi = phi_r - phi_i (phi = pi: specular plane,
+phi = 0: backscatter side), in radians, NumPy-broadcast.
+
+The paper writes these with arccos and divisions that break down at the places
+a user of the model meets first: backscatter (beta = 0), the specular peak
+(alpha = 0), normal incidence (theta = 0).  Each function below states its
+equation and the algebraically identical form it evaluates; the identities use
+only 1 - cos(phi) = 2 sin^2(phi/2) and 1 + cos(phi) = 2 cos^2(phi/2), which
+remove every cancellation.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["half_angle_terms", "cos_alpha_beta", "rotation_terms"]
+
+#: polar angle used in place of an exact 0 when the bases' orientation is needed:
+#: the s/p bases at theta = 0 are defined as the limit at fixed azimuth.
+_THETA_LIMIT = 1e-100
+
+
+def half_angle_terms(sin_i, cos_i, sin_r, cos_r, cos_half_phi_sq):
+    """Squared transverse and normal parts of omega_i + omega_r (= 2 cos(beta) h).
+
+    With phi_i = 0, |omega_i + omega_r|^2 = hxy2 + hz^2 where
+    ``hxy2 = (sin ti - sin tr)^2 + 4 sin ti sin tr cos^2(phi/2)`` and
+    ``hz = cos ti + cos tr``; every term is >= 0 for directions above the horizon.
+    """
+    hxy2 = (sin_i - sin_r) ** 2 + 4.0 * sin_i * sin_r * cos_half_phi_sq
+    hz = cos_i + cos_r
+    return hxy2, hz
+
+
+def cos_alpha_beta(theta_i, theta_r, phi):
+    """cos(alpha) and cos(beta) of paper Eq. 7, with tan^2(alpha).
+
+    Eq. 7: cos(2 beta) = cos ti cos tr + sin ti sin tr cos phi and
+    cos(alpha) = (cos ti + cos tr) / (2 cos beta).  Evaluated as
+    cos(beta) = |omega_i + omega_r| / 2, cos(alpha) = hz / |omega_i + omega_r|,
+    tan^2(alpha) = hxy2 / hz^2 (see :func:`half_angle_terms`), which are exact
+    at alpha = 0 and beta = 0 where the arccos forms lose half their digits.
+
+    Returns (cos_alpha, cos_beta, tan2_alpha).
+    """
+    si, ci = np.sin(theta_i), np.cos(theta_i)
+    sr, cr = np.sin(theta_r), np.cos(theta_r)
+    hxy2, hz = half_angle_terms(si, ci, sr, cr, np.cos(0.5 * phi) ** 2)
+    length2 = hxy2 + hz * hz
+    length = np.sqrt(length2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos_alpha = hz / length
+        tan2_alpha = hxy2 / (hz * hz)
+    return cos_alpha, 0.5 * length, tan2_alpha
+
+
+def rotation_terms(theta_i, theta_r, phi):
+    """cos(2 gamma_i), sin(2 gamma_i), cos(2 gamma_r), sin(2 gamma_r) of paper Eq. 10.
+
+    Eq. 10 gives cos(gamma_i) = (cos alpha - cos ti cos beta) / (sin ti sin beta)
+    (similarly gamma_r): the angle between the macroscopic plane of incidence
+    (reflection) and the facet's plane of scattering, unsigned.  Out of the
+    specular plane the sign matters, so we use the signed form that follows from
+    the bases of the paper's Eq. 9 (s = k x z / |k x z|, p = k x s; the facet's s
+    = k_i x n / |k_i x n|), which spherical trigonometry reduces to
+
+        sin(2 beta) cos(gamma_i) = sin(ti - tr) + 2 sin tr cos ti sin^2(phi/2)
+        sin(2 beta) sin(gamma_i) = -sin tr sin phi
+        sin(2 beta) cos(gamma_r) = sin(tr - ti) + 2 sin ti cos tr sin^2(phi/2)
+        sin(2 beta) sin(gamma_r) = -sin ti sin phi
+
+    (the first equals Eq. 10 times sin(2 beta); the common factor sin(2 beta)
+    cancels in the double angles below, so no division by sin(beta) remains).
+    The rotations enter the Mueller matrix only through 2 gamma.
+
+    Singular cases, each with its limit:
+    - theta = 0: the s/p basis is the limit at fixed azimuth; theta is replaced
+      by 1e-100 here (and only here), which yields that limit to machine precision.
+    - backscatter, omega_r = omega_i (beta = 0): both numerators vanish; the facet
+      is seen at normal incidence, where r_p = -r_s and the Mueller matrix is
+      continuous with gamma_i = gamma_r = 0, which we use.
+    """
+    ti = np.maximum(theta_i, _THETA_LIMIT)
+    tr = np.maximum(theta_r, _THETA_LIMIT)
+    si, ci = np.sin(ti), np.cos(ti)
+    sr, cr = np.sin(tr), np.cos(tr)
+    sin_half_phi_sq = np.sin(0.5 * phi) ** 2
+    sin_phi = np.sin(phi)
+    out = []
+    for c, s in (
+        (np.sin(ti - tr) + 2.0 * sr * ci * sin_half_phi_sq, -sr * sin_phi),
+        (np.sin(tr - ti) + 2.0 * si * cr * sin_half_phi_sq, -si * sin_phi),
+    ):
+        norm = c * c + s * s
+        degenerate = norm == 0.0           # exact backscatter: gamma = 0 (see above)
+        inv = 1.0 / np.where(degenerate, 1.0, norm)
+        out.append(np.where(degenerate, 1.0, (c * c - s * s) * inv))
+        out.append(2.0 * c * s * inv)
+    return tuple(out)

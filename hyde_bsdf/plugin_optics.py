@@ -1,0 +1,192 @@
+"""Dr.Jit building blocks of the ``hyde`` Mitsuba BSDF (vector form of paper Eqs. 9-17).
+
+These functions are written with Dr.Jit operations only, so they run unchanged
+in every Mitsuba variant (scalar, LLVM, CUDA; RGB, spectral, mono) and carry
+gradients in the ``*_ad_*`` variants.  They are a derivation independent of the
+NumPy evaluator (:mod:`hyde_bsdf.evaluator`), which uses the paper's angle
+formulas; the two only share the DHR table (:mod:`hyde_bsdf.dhr`).
+
+Conventions used here
+---------------------
+* Vectors are in the local shading frame, the mean surface normal is +z.
+* The complex index is given as ``n``, ``k`` >= 0 and used as eta = n - i k,
+  the sign that Mitsuba's polarized Fresnel code (``fresnel_polarized``) and the
+  paper (eta = n - j kappa) use; Mitsuba's user-facing ``eta + i k`` describes
+  the same material.  Amplitudes follow the Verdet convention (as Mitsuba).
+* A facet Mueller matrix is expressed in the facet's own s/p bases: its Stokes
+  reference axis is the facet's s direction (perpendicular to the facet plane
+  of incidence), exactly as ``mi.mueller.specular_reflection`` returns it.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+__all__ = [
+    "complex_sqrt_lower",
+    "facet_fresnel",
+    "fresnel_mueller_entries",
+    "fresnel_average",
+    "vgroove_g",
+    "DHRLookup",
+]
+
+
+# --------------------------------------------------------------------------
+# small complex helpers on (re, im) pairs of Dr.Jit arrays
+# --------------------------------------------------------------------------
+def _cmul(ar, ai, br, bi):
+    return ar * br - ai * bi, ar * bi + ai * br
+
+
+def _cdiv(ar, ai, br, bi):
+    # b is never 0 here: Re(b) >= cos(beta) > 0 or |b| >= |u| > 0 (see callers)
+    inv = dr.rcp(br * br + bi * bi)
+    return (ar * br + ai * bi) * inv, (ai * br - ar * bi) * inv
+
+
+def complex_sqrt_lower(zr, zi):
+    """Square root of z = zr + i zi with Re >= 0 and Im <= 0 (z must have zi <= 0).
+
+    The branch of the transmitted wave that decays into an absorbing medium with
+    eta = n - i k (it equals Mitsuba's choice in ``fresnel_polarized``).  Uses the
+    cancellation-free form (t1 from the larger of |z| +- zr, t2 = zi / (2 t1)).
+    """
+    mod = dr.sqrt(zr * zr + zi * zi)
+    t1 = dr.sqrt(0.5 * (mod + dr.abs(zr)))
+    # t1 == 0 only for z == 0 (dielectric at its critical angle); the root is then 0
+    t2 = dr.select(t1 > 0, 0.5 * dr.abs(zi) / dr.select(t1 > 0, t1, 1.0), 0.0)
+    re = dr.select(zr >= 0, t1, t2)
+    im = -dr.select(zr >= 0, t2, t1)
+    return re, im
+
+
+def facet_fresnel(cos_beta, n, k):
+    """Complex Fresnel amplitudes r_s, r_p of one facet (paper Eq. 9's r_s, r_p).
+
+    Parameters
+    ----------
+    cos_beta : Float or UnpolarizedSpectrum, cosine of the facet incidence angle
+        beta (cos beta = wi . h = wo . h), in [0, 1].
+    n, k : UnpolarizedSpectrum, the index eta = n - i k (k >= 0).
+
+    Returns
+    -------
+    (rs_re, rs_im, rp_re, rp_im) : the amplitudes, Verdet sign convention
+        (r_p = r_s = (1 - eta)/(1 + eta) at normal incidence), with
+        r_s = (c - u)/(c + u), r_p = (eta^2 c - u)/(eta^2 c + u),
+        u = eta cos(theta_t) = sqrt(eta^2 - sin^2 beta).
+    """
+    c = cos_beta
+    sin2 = dr.maximum(1.0 - c * c, 0.0)  # rounding can push c slightly above 1
+    e_re = n * n - k * k  # eta^2 = (n - ik)^2
+    e_im = -2.0 * n * k
+    u_re, u_im = complex_sqrt_lower(e_re - sin2, e_im)
+    rs_re, rs_im = _cdiv(c - u_re, -u_im, c + u_re, u_im)
+    ec_re, ec_im = e_re * c, e_im * c
+    rp_re, rp_im = _cdiv(ec_re - u_re, ec_im - u_im, ec_re + u_re, ec_im + u_im)
+    return rs_re, rs_im, rp_re, rp_im
+
+
+def fresnel_mueller_entries(rs_re, rs_im, rp_re, rp_im):
+    """Entries (a, b, c, s) of the facet Mueller matrix (paper Eq. 11, gamma = 0).
+
+    In the facet s/p bases the Mueller matrix of a specular reflection is::
+
+        [[a, b, 0,  0],
+         [b, a, 0,  0],
+         [0, 0, c, -s],
+         [0, 0, s,  c]]
+
+    with a = (|r_s|^2 + |r_p|^2)/2, b = (|r_s|^2 - |r_p|^2)/2,
+    c = Re(r_p r_s*), s = Im(r_p r_s*): the same matrix as Mitsuba's
+    ``mueller::specular_reflection`` (its c cos(delta), c sin(delta)).
+    """
+    rs2 = rs_re * rs_re + rs_im * rs_im
+    rp2 = rp_re * rp_re + rp_im * rp_im
+    a = 0.5 * (rs2 + rp2)
+    b = 0.5 * (rs2 - rp2)
+    c = rp_re * rs_re + rp_im * rs_im
+    s = rp_im * rs_re - rp_re * rs_im
+    return a, b, c, s
+
+
+def fresnel_average(cos_beta, n, k):
+    """Unpolarized facet reflectance M00(beta; eta) = (|r_s|^2 + |r_p|^2)/2 (Eq. 11, M00/2)."""
+    rs_re, rs_im, rp_re, rp_im = facet_fresnel(cos_beta, n, k)
+    return 0.5 * (rs_re * rs_re + rs_im * rs_im + rp_re * rp_re + rp_im * rp_im)
+
+
+def vgroove_g(wi, wo, h):
+    """Torrance-Sparrow V-groove shadowing/masking (paper Eq. 12), vector form.
+
+    G = min(1, 2 (n.h)(n.wo)/(wo.h), 2 (n.h)(n.wi)/(wi.h)) with n = +z; here
+    cos(alpha) = n.h and cos(beta) = wi.h = wo.h.  Returns 0 where a direction
+    is below the horizon or sees the back of the facet.
+    """
+    cos_a = h.z
+    cos_b_i = dr.dot(wi, h)
+    cos_b_o = dr.dot(wo, h)
+    valid = (cos_b_i > 0) & (cos_b_o > 0) & (wi.z > 0) & (wo.z > 0)
+    # the select keeps the division finite where the result is discarded anyway
+    g_i = 2.0 * cos_a * wi.z / dr.select(valid, cos_b_i, 1.0)
+    g_o = 2.0 * cos_a * wo.z / dr.select(valid, cos_b_o, 1.0)
+    g = dr.minimum(1.0, dr.minimum(g_i, g_o))
+    return dr.select(valid, g, 0.0)
+
+
+class DHRLookup:
+    """rho^{s,PEC}(theta_i, rms_slope) (paper Eqs. 14-16) read through a Dr.Jit texture.
+
+    The lead's table (:func:`hyde_bsdf.dhr.load_table`) is resampled, through
+    its own ``__call__``, onto a grid ``refine`` times finer in both axes
+    (theta on [0, pi/2], ln(rms_slope) on the table's range), stored as a
+    float32 ``mi.Texture2f`` with linear filtering and clamped borders, and
+    looked up with ``eval``.  Linear filtering keeps the lookup differentiable
+    w.r.t. rms_slope (piecewise-constant slope in ln(rms_slope)).  The average
+    rho_avg(rms_slope) (for the reciprocal diffuse term), resampled through the
+    table's ``average``, is a ``mi.Texture1f``.
+    ``use_accel=False`` keeps positional gradients on CUDA as well.
+    """
+
+    def __init__(self, table, refine: int = 4):
+        import numpy as np
+
+        theta = np.asarray(table.theta, dtype=float)
+        log_s = np.asarray(table.log_slope, dtype=float)
+        self.theta_lo, self.theta_hi = float(theta[0]), float(theta[-1])
+        self.log_lo, self.log_hi = float(log_s[0]), float(log_s[-1])
+        self.rms_lo, self.rms_hi = math.exp(self.log_lo), math.exp(self.log_hi)
+        nt = (len(theta) - 1) * refine + 1
+        ns = (len(log_s) - 1) * refine + 1
+        tf = np.linspace(self.theta_lo, self.theta_hi, nt)
+        lf = np.linspace(self.log_lo, self.log_hi, ns)
+        tt, ll = np.meshgrid(tf, lf, indexing="ij")
+        rho = np.asarray(table(tt, np.exp(ll)), dtype=float).reshape(nt, ns)
+        avg = np.asarray(table.average(np.exp(lf)), dtype=float)
+        self.nt, self.ns = nt, ns
+        self.rho_fine = rho
+        self.tex = mi.Texture2f(mi.TensorXf(rho.astype(np.float32).ravel(), shape=(nt, ns, 1)),
+                                use_accel=False, filter_mode=dr.FilterMode.Linear,
+                                wrap_mode=dr.WrapMode.Clamp)
+        self.tex_avg = mi.Texture1f(mi.TensorXf(avg.astype(np.float32), shape=(ns, 1)),
+                                    use_accel=False, filter_mode=dr.FilterMode.Linear,
+                                    wrap_mode=dr.WrapMode.Clamp)
+
+    def slope_coord(self, rms_slope):
+        """Texture coordinate of rms_slope along the ln(rms_slope) axis (cell-centred)."""
+        t = (dr.log(rms_slope) - self.log_lo) / (self.log_hi - self.log_lo)
+        return (t * (self.ns - 1) + 0.5) / self.ns
+
+    def rho(self, cos_theta, u_slope):
+        """rho^{s,PEC} at polar angle acos(cos_theta) and slope coordinate u_slope."""
+        theta = dr.safe_acos(cos_theta)
+        t = (theta - self.theta_lo) / (self.theta_hi - self.theta_lo)
+        v = (t * (self.nt - 1) + 0.5) / self.nt
+        return self.tex.eval(mi.Point2f(u_slope, v))[0]
+
+    def rho_avg(self, u_slope):
+        """rho_avg(rms_slope) = 2 int rho cos sin dtheta, for the reciprocal diffuse term."""
+        return self.tex_avg.eval(mi.Point1f(u_slope))[0]
