@@ -194,7 +194,8 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
 
     index = {name: i for i, name in enumerate(names)}
     out: dict = {}
-    rgb_idx = [index[c] for c in ("R", "G", "B")]
+    # Mono variants write one luminance channel "Y" instead of R, G, B.
+    rgb_idx = [index[c] for c in ("R", "G", "B")] if "R" in index else [index["Y"]] * 3
     out["RGB"] = mean[..., rgb_idx].astype(np.float32)
     for s in STOKES_NAMES:
         idx = [index[f"{s}.{c}"] for c in ("R", "G", "B")]
