@@ -47,13 +47,13 @@ The incident power on an effective length L_eff of mean surface is
 
 which is 1 for a PEC (no absorption).  For a flat plate the physical-optics
 current ``Z0 J = 2 cos(ti) e^{-j k x sin ti}`` gives exactly 1, which is the
-flat-plate test.  The power balance is integrated on a fixed internal grid
-(0.1 deg steps over [-90, 90] deg), whatever ``theta_r_deg`` the caller asks for.
+flat-plate test.  The power balance is integrated on an internal grid
+(:func:`power_grid`, steps of min(0.25 deg, 1/(k w))), whatever ``theta_r_deg`` the caller asks for.
 
 ``sigma`` contains both the coherent part (``|<F>|^2``, the specular spike of a
 smooth surface) and the incoherent part; ``sigma_coherent`` and
-``sigma_incoherent`` split them (the coherent estimate from M partitions is
-biased upwards by about sigma_incoherent/M).
+``sigma_incoherent`` split them (the coherent part is the unbiased estimate
+(M |mean F|^2 - mean |F|^2)/(M - 1), noisy where it is near 0).
 
 Where MoM fails (warnings and errors)
 -------------------------------------
@@ -110,13 +110,11 @@ __all__ = [
     "check_sampling",
     "check_taper",
     "check_partition",
-    "FINE_THETA_R",
+    "power_grid",
 ]
 
 K0 = 2.0 * math.pi  # wavenumber in units of 1/lambda
 EULER_GAMMA_EXP = math.exp(np.euler_gamma)  # gamma = 1.781... of the self term
-#: internal observation grid for the power balance (radians, 0.1 deg steps)
-FINE_THETA_R = np.radians(np.linspace(-90.0, 90.0, 1801))
 #: Gauss-Legendre nodes/weights on [-1, 1] for near-neighbour and self integrals
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 #: Thorsos' taper parameter above which the taper is "too narrow" for theta_i
@@ -338,6 +336,20 @@ def far_field(x, y, dfdx, dx, current, theta_r, k=K0):
     return (kern @ weights).T
 
 
+def power_grid(w, k=K0):
+    """Observation grid over [-pi/2, pi/2] (radians) on which the power balance is integrated.
+
+    The tapered current's far-field power |F(u)|^2, u = sin(theta), is the Fourier
+    transform of the current's autocorrelation, which spans |x| < ~4 w; so the
+    trapezoid rule in theta integrates it to round-off once the step is below
+    ~2 pi / (k 4 w) in u, and the coherent spike (standard deviation 1/(k w) in u)
+    to 1e-8 with a step of 1/(k w).  We take min(0.25 deg, 1/(k w)).
+    """
+    h = min(math.radians(0.25), 1.0 / (k * w))
+    n = int(math.ceil(math.pi / h)) + 1
+    return np.linspace(-math.pi / 2.0, math.pi / 2.0, n)
+
+
 # ---------------------------------------------------------------------------
 # Failure checks
 # ---------------------------------------------------------------------------
@@ -428,23 +440,26 @@ def solve_partition(task):
     """Solve one partition: fill, LU-factor once, solve every theta_i, taper, radiate.
 
     ``task`` is a dict with x, y, dfdx (local coordinates, centred on the
-    partition), dx, theta_i [rad], theta_r [rad], w.  Returns a dict with the
-    far fields ``F`` [n_ti, n_tr] and ``F_fine`` [n_ti, len(FINE_THETA_R)],
+    partition), dx, theta_i [rad], theta_r [rad], theta_fine [rad] (the power
+    grid), w.  Returns a dict with the
+    far fields ``F`` [n_ti, n_tr] and ``F_fine`` [n_ti, len(theta_fine)],
     and the CPU seconds of each stage.
     """
     t0 = time.perf_counter()
     x, y, dfdx, dx = task["x"], task["y"], task["dfdx"], task["dx"]
     A = moment_matrix(x, y, dfdx, dx)
     t1 = time.perf_counter()
-    lu = scipy.linalg.lu_factor(A, overwrite_a=True, check_finite=False)
+    # factor A^T: its transpose view is Fortran-ordered, so LAPACK works in place (no copy)
+    # and lu_solve(..., trans=1) solves (A^T)^T J = A J = E_i
+    lu = scipy.linalg.lu_factor(A.T, overwrite_a=True, check_finite=False)
     del A
     t2 = time.perf_counter()
-    current = scipy.linalg.lu_solve(lu, incident_field(x, y, task["theta_i"]), check_finite=False)
+    current = scipy.linalg.lu_solve(lu, incident_field(x, y, task["theta_i"]), trans=1, check_finite=False)
     del lu
     current *= taper(x, 0.0, task["w"])[:, None]
     t3 = time.perf_counter()
     F = far_field(x, y, dfdx, dx, current, task["theta_r"])
-    F_fine = far_field(x, y, dfdx, dx, current, FINE_THETA_R)
+    F_fine = far_field(x, y, dfdx, dx, current, task["theta_fine"])
     t4 = time.perf_counter()
     return {"F": F, "F_fine": F_fine,
             "times": np.array([t1 - t0, t2 - t1, t3 - t2, t4 - t3])}
@@ -481,7 +496,7 @@ class MoMResult:
     sigma_coherent, sigma_incoherent : same shape, the split |<F>|^2 / rest.
     power_balance : ndarray [n_ti], reflected / incident power (1 for a PEC).
     power_coherent : ndarray [n_ti], the coherent (specular) share of it.
-    fine_theta_r, fine_sigma : the internal 0.1-degree grid and sigma on it.
+    fine_theta_r, fine_sigma : the internal power grid (:func:`power_grid`) and sigma on it.
     sigma_std_error : ndarray [n_ti, n_tr], standard error of sigma from the
         spread between partitions (the speckle left by a finite M).
     times : dict of summed worker CPU seconds per stage ("fill", "factor",
@@ -622,6 +637,7 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     for r in reasons:
         warnings.warn("MoM failure risk: " + r, MoMAccuracyWarning, stacklevel=2)
 
+    fine = power_grid(w)
     x_all, f_all, s_all = gaussian_surface(length_wl, n_part * partitions, rms_height_wl, corr_length_wl, seed)
     tasks = []
     for m in range(partitions):
@@ -630,14 +646,14 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         # local coordinates centred on the partition: the incident phase is referred to x_m,
         # so the partition average of F is the coherent field
         tasks.append({"x": x_all[sl] - xc, "y": f_all[sl].copy(), "dfdx": s_all[sl].copy(), "dx": dx,
-                      "theta_i": theta_i, "theta_r": theta_r, "w": w})
+                      "theta_i": theta_i, "theta_r": theta_r, "theta_fine": fine, "w": w})
     del x_all, f_all, s_all
 
     own = executor is None
     ex = _default_executor(partitions) if own else executor
     show = (partitions >= 10) if progress is None else bool(progress)
     bar = _Progress(partitions, show)
-    n_ti, n_tr, n_f = theta_i.size, theta_r.size, FINE_THETA_R.size
+    n_ti, n_tr, n_f = theta_i.size, theta_r.size, fine.size
     sum_F = np.zeros((n_ti, n_tr), complex)
     sum_P = np.zeros((n_ti, n_tr))
     sum_P2 = np.zeros((n_ti, n_tr))
@@ -665,21 +681,28 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     # Eq. 23: sigma = 1/(w sqrt(pi/2)) * (1/M) sum_m (pi/2) |Z0 F_m|^2   (lambda = 1)
     norm = (math.pi / 2.0) / (w * math.sqrt(math.pi / 2.0))
     sigma = norm * sum_P / M
-    sigma_coh = norm * np.abs(sum_F / M) ** 2
+    # |<F>|^2 without the 1/M bias of |mean F|^2:  (M |mean F|^2 - mean |F|^2) / (M - 1)
+    # (an estimate: it can come out slightly negative where the coherent part is ~0)
+    def coherent(sF, sP):
+        if M == 1:
+            return norm * np.abs(sF) ** 2
+        return norm * (np.abs(sF / M) ** 2 * M - sP / M) / (M - 1)
+
+    sigma_coh = coherent(sum_F, sum_P)
     var = np.maximum(sum_P2 / M - (sum_P / M) ** 2, 0.0)  # guard: round-off can make it slightly negative
     std_err = norm * np.sqrt(var / max(M - 1, 1))
     fine_sigma = norm * sum_Pf / M
-    fine_coh = norm * np.abs(sum_Ff / M) ** 2
-    cos_i = np.cos(theta_i)[:, None]
-    power = np.trapezoid(fine_sigma, FINE_THETA_R, axis=1) / (2.0 * math.pi * cos_i[:, 0])
-    power_coh = np.trapezoid(fine_coh, FINE_THETA_R, axis=1) / (2.0 * math.pi * cos_i[:, 0])
+    fine_coh = coherent(sum_Ff, sum_Pf)
+    cos_i = np.cos(theta_i)
+    power = np.trapezoid(fine_sigma, fine, axis=1) / (2.0 * math.pi * cos_i)
+    power_coh = np.trapezoid(fine_coh, fine, axis=1) / (2.0 * math.pi * cos_i)
     if not (np.all(np.isfinite(sigma)) and np.all(np.isfinite(power))):
         raise FloatingPointError("MoM produced non-finite values (singular moment matrix?)")
     wall = time.perf_counter() - t_wall
     return MoMResult(
         theta_i=theta_i, theta_r=theta_r, sigma=sigma, sigma_coherent=sigma_coh,
         sigma_incoherent=sigma - sigma_coh, power_balance=power, power_coherent=power_coh,
-        fine_theta_r=FINE_THETA_R.copy(), fine_sigma=fine_sigma, sigma_std_error=std_err,
+        fine_theta_r=fine, fine_sigma=fine_sigma, sigma_std_error=std_err,
         times={"fill": times[0], "factor": times[1], "solve": times[2], "far_field": times[3], "wall": wall},
         params={"length_wl": length_wl, "partitions": M, "partition_length_wl": part_len,
                 "unknowns_per_partition": n_part, "dx_wl": dx, "pts_per_wl": 1.0 / dx,
