@@ -43,7 +43,7 @@ import math
 import numpy as np
 
 from .dhr import load_table, x_of_theta
-from .facet_geometry import cos_alpha_beta, rotation_terms
+from .facet_geometry import angle_trig, cos_alpha_beta, rotation_terms
 from .fresnel import fresnel_mueller_terms
 from .jones_mueller import rotated_fresnel_mueller
 from .roughness import check_rms_slope
@@ -55,6 +55,7 @@ __all__ = ["pbrdf", "specular_pbrdf", "diffuse_pbrdf", "DIFFUSE"]
 DIFFUSE = ("paper", "reciprocal", "none")
 RMS_SLOPE_RANGE = (1e-4, 100.0)
 INDEX_MAX = 1e6
+INDEX_MIN = 1e-6
 
 
 def _check_angles(name, value, hi):
@@ -82,8 +83,8 @@ def _check_index(n, k, pec):
         if not math.isfinite(v) or not (0.0 <= v <= INDEX_MAX):
             raise ValueError(f"{name} must be a real number in [0, {INDEX_MAX:g}], got {v!r}")
         out.append(v)
-    if out[0] == 0.0 and out[1] == 0.0:
-        raise ValueError("n and k cannot both be 0 (eta = 0 has no Fresnel reflection)")
+    if math.hypot(*out) < INDEX_MIN:       # eta^2 would underflow in the Fresnel terms
+        raise ValueError(f"n and k: |eta| = sqrt(n^2 + k^2) must be >= {INDEX_MIN:g}, got n={out[0]!r}, k={out[1]!r}")
     return out
 
 
@@ -97,15 +98,8 @@ def _check_diffuse(diffuse):
     raise ValueError(f"diffuse must be True, False or one of {DIFFUSE}, got {diffuse!r}")
 
 
-def _geometry(theta_i, theta_r, phi):
-    ti, tr, ph = np.broadcast_arrays(theta_i, theta_r, phi)
-    ci, cr = np.cos(ti), np.cos(tr)
-    above = (ci > 0.0) & (cr > 0.0)
-    return ti, tr, ph, ci, cr, above
-
-
 def specular_pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
-                   shadowing="vgroove", out=None):
+                   shadowing="vgroove"):
     """F^s of Eqs. 6/13 (1/sr), shape broadcast(theta_i, theta_r, phi) + (4, 4).
 
     Same conventions and validation as :func:`pbrdf` (which adds the diffuse term).
@@ -117,23 +111,44 @@ def specular_pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False
     theta_i = _check_angles("theta_i", theta_i, math.pi)
     theta_r = _check_angles("theta_r", theta_r, math.pi)
     phi = _check_angles("phi", phi, None)
-    return _specular(theta_i, theta_r, phi, s, nk, pec, shadowing, out)
+    return _specular(theta_i, theta_r, phi, s, nk, pec, shadowing)[0]
 
 
-def _specular(theta_i, theta_r, phi, s, nk, pec, shadowing, out=None):
-    ti, tr, ph, ci, cr, above = _geometry(theta_i, theta_r, phi)
-    if out is None:
-        out = np.empty(ti.shape + (4, 4))
+#: elements per block: every temporary of a block stays in the CPU cache.
+_BLOCK = 8192
+
+
+def _specular(theta_i, theta_r, phi, s, nk, pec, shadowing):
+    """F^s and M_00(beta) for broadcast angles; returns (F, M00, above).
+
+    F has shape (..., 4, 4) but is a view of a (4, 4, ...) buffer, so that each
+    element F[..., i, j] is contiguous (writing 16 strided planes costs more than
+    the whole model); np.ascontiguousarray(F) gives the other layout.
+    """
+    ti, tr, ph = np.broadcast_arrays(theta_i, theta_r, phi)
+    shape = ti.shape
+    ti, tr, ph = ti.ravel(), tr.ravel(), ph.ravel()
+    size = ti.size
+    buf = np.empty((4, 4, size))
+    M00 = np.empty(size)
+    above = np.empty(size, bool)
+    n, k = nk or (0.0, 0.0)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
-        cos_a, cos_b, tan2_a = cos_alpha_beta(ti, tr, ph)
-        G = visibility(shadowing, cos_a, cos_b, ci, cr, s)
-        # Eq. 6: P M G / (4 cos ti cos tr cos alpha); zero below the horizon
-        scale = beckmann_P(cos_a, tan2_a, s) * G / (4.0 * ci * cr * cos_a)
-        scale = np.where(above, scale, 0.0)
-        A, B, C, S = fresnel_mueller_terms(np.where(above, cos_b, 1.0), *(nk or (0, 0)), pec=pec)
-        rot = rotation_terms(ti, tr, ph)
-        rotated_fresnel_mueller(A, B, C, S, *rot, scale, out)
-    return out, A, ci, cr, above
+        for lo in range(0, size, _BLOCK):
+            sl = slice(lo, lo + _BLOCK)
+            si, ci, sr, cr, sh, ch = trig = angle_trig(ti[sl], tr[sl], ph[sl])
+            up = (ci > 0.0) & (cr > 0.0)                       # below the horizon: F = 0
+            cos_a, cos_b, tan2_a = cos_alpha_beta(*trig)
+            G = visibility(shadowing, cos_a, cos_b, ci, cr, s)
+            # Eq. 6: F^s = P M G / (4 cos ti cos tr cos alpha)
+            scale = beckmann_P(cos_a, tan2_a, s) * G / (4.0 * ci * cr * cos_a)
+            scale = np.where(up, scale, 0.0)
+            A, B, C, S = fresnel_mueller_terms(np.where(up, cos_b, 1.0), n, k, pec=pec)
+            rotated_fresnel_mueller(A, B, C, S, *rotation_terms(*trig), scale, buf[:, :, sl])
+            M00[sl] = A
+            above[sl] = up
+    F = np.moveaxis(buf.reshape((4, 4) + shape), (0, 1), (-2, -1))
+    return F, M00.reshape(shape), above.reshape(shape)
 
 
 def diffuse_pbrdf(theta_i, theta_r, M00, rms_slope, mode="paper", shadowing="vgroove"):
@@ -186,7 +201,7 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
     theta_i = _check_angles("theta_i", theta_i, math.pi)
     theta_r = _check_angles("theta_r", theta_r, math.pi)
     phi = _check_angles("phi", phi, None)
-    out, A, ci, cr, above = _specular(theta_i, theta_r, phi, s, nk, pec, shadowing)
+    out, A, above = _specular(theta_i, theta_r, phi, s, nk, pec, shadowing)
     if mode != "none":
         ti, tr = np.broadcast_arrays(theta_i, theta_r)
         out[..., 0, 0] += np.where(above, diffuse_pbrdf(ti, tr, A, s, mode, shadowing), 0.0)

@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["half_angle_terms", "cos_alpha_beta", "rotation_terms"]
+__all__ = ["angle_trig", "half_angle_terms", "cos_alpha_beta", "rotation_terms"]
 
 #: polar angle used in place of an exact 0 when the bases' orientation is needed:
 #: the s/p bases at theta = 0 are defined as the limit at fixed azimuth.
 _THETA_LIMIT = 1e-100
+#: added to c^2 + s^2 in rotation_terms: selects gamma = 0 at exact backscatter.
+_EPS = 1e-300
 
 
 def half_angle_terms(sin_i, cos_i, sin_r, cos_r, cos_half_phi_sq):
@@ -34,7 +36,25 @@ def half_angle_terms(sin_i, cos_i, sin_r, cos_r, cos_half_phi_sq):
     return hxy2, hz
 
 
-def cos_alpha_beta(theta_i, theta_r, phi):
+def angle_trig(theta_i, theta_r, phi):
+    """sin/cos of theta_i, theta_r and of phi/2, computed once for Eqs. 7 and 10.
+
+    theta is floored at 1e-100 so that the s/p bases at theta = 0 come out as the
+    limit at fixed azimuth (see :func:`rotation_terms`); no other result changes.
+    Returns (si, ci, sr, cr, sh, ch) with sh = sin(phi/2), ch = cos(phi/2).
+    """
+    # one tangent of the half angle per angle instead of a sine and a cosine:
+    # sin = 2t/(1+t^2), cos = (1-t^2)/(1+t^2) are as well conditioned as np.sin/np.cos.
+    out = []
+    for angle in (np.maximum(theta_i, _THETA_LIMIT), np.maximum(theta_r, _THETA_LIMIT)):
+        t = np.tan(0.5 * angle)
+        inv = 1.0 / (1.0 + t * t)
+        out += [2.0 * t * inv, (1.0 - t) * (1.0 + t) * inv]
+    half = 0.5 * np.asarray(phi, dtype=float)
+    return (*out, np.sin(half), np.cos(half))
+
+
+def cos_alpha_beta(si, ci, sr, cr, sh, ch):
     """cos(alpha) and cos(beta) of paper Eq. 7, with tan^2(alpha).
 
     Eq. 7: cos(2 beta) = cos ti cos tr + sin ti sin tr cos phi and
@@ -42,21 +62,19 @@ def cos_alpha_beta(theta_i, theta_r, phi):
     cos(beta) = |omega_i + omega_r| / 2, cos(alpha) = hz / |omega_i + omega_r|,
     tan^2(alpha) = hxy2 / hz^2 (see :func:`half_angle_terms`), which are exact
     at alpha = 0 and beta = 0 where the arccos forms lose half their digits.
+    Arguments are the sines and cosines from :func:`angle_trig`.
 
     Returns (cos_alpha, cos_beta, tan2_alpha).
     """
-    si, ci = np.sin(theta_i), np.cos(theta_i)
-    sr, cr = np.sin(theta_r), np.cos(theta_r)
-    hxy2, hz = half_angle_terms(si, ci, sr, cr, np.cos(0.5 * phi) ** 2)
-    length2 = hxy2 + hz * hz
-    length = np.sqrt(length2)
+    hxy2, hz = half_angle_terms(si, ci, sr, cr, ch * ch)
+    length = np.sqrt(hxy2 + hz * hz)
     with np.errstate(divide="ignore", invalid="ignore"):
         cos_alpha = hz / length
         tan2_alpha = hxy2 / (hz * hz)
     return cos_alpha, 0.5 * length, tan2_alpha
 
 
-def rotation_terms(theta_i, theta_r, phi):
+def rotation_terms(si, ci, sr, cr, sh, ch):
     """cos(2 gamma_i), sin(2 gamma_i), cos(2 gamma_r), sin(2 gamma_r) of paper Eq. 10.
 
     Eq. 10 gives cos(gamma_i) = (cos alpha - cos ti cos beta) / (sin ti sin beta)
@@ -74,28 +92,24 @@ def rotation_terms(theta_i, theta_r, phi):
     (the first equals Eq. 10 times sin(2 beta); the common factor sin(2 beta)
     cancels in the double angles below, so no division by sin(beta) remains).
     The rotations enter the Mueller matrix only through 2 gamma.
+    Arguments are the sines and cosines from :func:`angle_trig`.
 
     Singular cases, each with its limit:
-    - theta = 0: the s/p basis is the limit at fixed azimuth; theta is replaced
-      by 1e-100 here (and only here), which yields that limit to machine precision.
+    - theta = 0: the s/p basis is the limit at fixed azimuth; :func:`angle_trig`
+      floors theta at 1e-100, which yields that limit to machine precision.
     - backscatter, omega_r = omega_i (beta = 0): both numerators vanish; the facet
       is seen at normal incidence, where r_p = -r_s and the Mueller matrix is
-      continuous with gamma_i = gamma_r = 0, which we use.
+      continuous with gamma_i = gamma_r = 0, which the tiny EPS below selects
+      (it is far below any non-zero c^2 + s^2, which is >= ~1e-200).
     """
-    ti = np.maximum(theta_i, _THETA_LIMIT)
-    tr = np.maximum(theta_r, _THETA_LIMIT)
-    si, ci = np.sin(ti), np.cos(ti)
-    sr, cr = np.sin(tr), np.cos(tr)
-    sin_half_phi_sq = np.sin(0.5 * phi) ** 2
-    sin_phi = np.sin(phi)
+    sin_diff = si * cr - ci * sr                 # sin(ti - tr); exactly 0 when ti == tr
+    sh2 = sh * sh
+    sin_phi = 2.0 * sh * ch
     out = []
-    for c, s in (
-        (np.sin(ti - tr) + 2.0 * sr * ci * sin_half_phi_sq, -sr * sin_phi),
-        (np.sin(tr - ti) + 2.0 * si * cr * sin_half_phi_sq, -si * sin_phi),
-    ):
-        norm = c * c + s * s
-        degenerate = norm == 0.0           # exact backscatter: gamma = 0 (see above)
-        inv = 1.0 / np.where(degenerate, 1.0, norm)
-        out.append(np.where(degenerate, 1.0, (c * c - s * s) * inv))
+    for c, s in ((sin_diff + 2.0 * sr * ci * sh2, -sr * sin_phi),
+                 (-sin_diff + 2.0 * si * cr * sh2, -si * sin_phi)):
+        cc, ss = c * c, s * s
+        inv = 1.0 / (cc + ss + _EPS)
+        out.append((cc - ss + _EPS) * inv)
         out.append(2.0 * c * s * inv)
     return tuple(out)

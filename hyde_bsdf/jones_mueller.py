@@ -52,7 +52,7 @@ def jones_to_mueller(T):
 
 
 def rotated_fresnel_mueller(A, B, C, S, cos2gi, sin2gi, cos2gr, sin2gr, scale, out):
-    """scale * Mueller(Eq. 9's T), written into ``out[..., 4, 4]``.
+    """scale * Mueller(Eq. 9's T), written into ``out[4, 4, ...]`` (Mueller indices first).
 
     Because T is a product (rotation, Fresnel, rotation) and the Jones->Mueller map
     is multiplicative, Mueller(T) = L(-2 gamma_r) M_F L(2 gamma_i) with M_F the
@@ -61,21 +61,21 @@ def rotated_fresnel_mueller(A, B, C, S, cos2gi, sin2gi, cos2gr, sin2gr, scale, o
     :func:`jones_matrix` (tests check the identity) at a tenth of the cost.
     """
     sA, sB, sC, sS = scale * A, scale * B, scale * C, scale * S
-    out[..., 0, 0] = sA
-    out[..., 0, 1] = sB * cos2gi
-    out[..., 0, 2] = -sB * sin2gi
-    out[..., 0, 3] = 0.0
-    out[..., 1, 0] = cos2gr * sB
-    out[..., 2, 0] = -sin2gr * sB
-    out[..., 3, 0] = 0.0
+    out[0, 0] = sA
+    out[0, 1] = sB * cos2gi
+    out[0, 2] = -sB * sin2gi
+    out[0, 3] = 0.0
+    out[1, 0] = cos2gr * sB
+    out[2, 0] = -sin2gr * sB
+    out[3, 0] = 0.0
     Aci, Asi, Cci, Csi = sA * cos2gi, sA * sin2gi, sC * cos2gi, sC * sin2gi
-    out[..., 1, 1] = cos2gr * Aci + sin2gr * Csi
-    out[..., 1, 2] = -cos2gr * Asi + sin2gr * Cci
-    out[..., 1, 3] = sin2gr * sS
-    out[..., 2, 1] = -sin2gr * Aci + cos2gr * Csi
-    out[..., 2, 2] = sin2gr * Asi + cos2gr * Cci
-    out[..., 2, 3] = cos2gr * sS
-    out[..., 3, 1] = -sS * sin2gi
-    out[..., 3, 2] = -sS * cos2gi
-    out[..., 3, 3] = sC
+    out[1, 1] = cos2gr * Aci + sin2gr * Csi
+    out[1, 2] = -cos2gr * Asi + sin2gr * Cci
+    out[1, 3] = sin2gr * sS
+    out[2, 1] = -sin2gr * Aci + cos2gr * Csi
+    out[2, 2] = sin2gr * Asi + cos2gr * Cci
+    out[2, 3] = cos2gr * sS
+    out[3, 1] = -sS * sin2gi
+    out[3, 2] = -sS * cos2gi
+    out[3, 3] = sC
     return out

@@ -279,7 +279,8 @@ def _make_class():
             if self.m_dhr is not None:
                 self.m_u_slope = self.m_dhr.slope_coord(self.m_rms_slope)
                 if self.m_diffuse == "reciprocal":
-                    self.m_one_minus_avg = 1.0 - self.m_dhr.rho_avg(self.m_u_slope)
+                    # without shadowing rho_avg can reach 1: keep the division finite
+                    self.m_one_minus_avg = dr.maximum(self.m_dhr.one_minus_rho_avg(self.m_u_slope), 1e-30)
 
         def traverse(self, callback):
             flags = mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous
@@ -317,17 +318,17 @@ def _make_class():
             # "none": G = 1, but still only facets seen from the front by both directions
             return dr.select((dr.dot(wi, h) > 0) & (dr.dot(wo, h) > 0), 1.0, 0.0)
 
-        def _rho(self, cos_theta):
-            return self.m_dhr.rho(cos_theta, self.m_u_slope)
+        def _one_minus_rho(self, cos_theta):
+            return self.m_dhr.one_minus_rho(cos_theta, self.m_u_slope)
 
         def _diffuse_factor(self, ctx, si, wo):
             """(1/pi)(1 - rho(theta_in)) [paper, Eq. 17] or its reciprocal form; no M00, no cos."""
             # rho > 1 is possible without shadowing (Priest-Germer); 1 - rho is clipped at 0
             if self.m_diffuse == "paper":
                 wo_hat_z = wo.z if ctx.mode == mi.TransportMode.Radiance else si.wi.z
-                return dr.maximum(1.0 - self._rho(wo_hat_z), 0.0) * dr.inv_pi
-            one_minus_i = dr.maximum(1.0 - self._rho(si.wi.z), 0.0)
-            one_minus_o = dr.maximum(1.0 - self._rho(wo.z), 0.0)
+                return dr.maximum(self._one_minus_rho(wo_hat_z), 0.0) * dr.inv_pi
+            one_minus_i = dr.maximum(self._one_minus_rho(si.wi.z), 0.0)
+            one_minus_o = dr.maximum(self._one_minus_rho(wo.z), 0.0)
             return one_minus_i * one_minus_o * dr.inv_pi / self.m_one_minus_avg
 
         def _p_spec(self, ctx, si):
@@ -341,7 +342,7 @@ def _make_class():
             if not (spec_on or diff_on):
                 return None
             # ratio of the lobe albedos rho F : (1 - rho) F (F common to both)
-            return dr.clip(self._rho(si.wi.z), 0.05, 0.95)
+            return dr.clip(1.0 - self._one_minus_rho(si.wi.z), 0.05, 0.95)
 
         def _mueller(self, ctx, si, wo, h, n, k, spec, diff):
             """Fresnel(h) * spec + M00(h) * diff as a Spectrum (Mueller matrix if polarized).

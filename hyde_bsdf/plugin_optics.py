@@ -137,56 +137,77 @@ def vgroove_g(wi, wo, h):
     return dr.select(valid, g, 0.0)
 
 
-class DHRLookup:
-    """rho^{s,PEC}(theta_i, rms_slope) (paper Eqs. 14-16) read through a Dr.Jit texture.
+#: rms_slope range of the plugin's DHR texture (the diffuse term needs it)
+DHR_RMS_RANGE = (0.01, 3.0)
+#: texture nodes along x = 1 - sqrt(cos theta) on [0, 1]
+DHR_X_POINTS = 2049
+#: texture nodes per decade of rms_slope
+DHR_SLOPE_PER_DECADE = 640
 
-    The lead's table (:func:`hyde_bsdf.dhr.load_table`) is resampled, through
-    its own ``__call__``, onto a grid ``refine`` times finer in both axes
-    (theta on [0, pi/2], ln(rms_slope) on the table's range), stored as a
-    float32 ``mi.Texture2f`` with linear filtering and clamped borders, and
-    looked up with ``eval``.  Linear filtering keeps the lookup differentiable
-    w.r.t. rms_slope (piecewise-constant slope in ln(rms_slope)).  The average
-    rho_avg(rms_slope) (for the reciprocal diffuse term), resampled through the
-    table's ``average``, is a ``mi.Texture1f``.
-    ``use_accel=False`` keeps positional gradients on CUDA as well.
+_FINE_CACHE: dict = {}
+
+
+def _fine_grid(table):
+    """1 - rho of ``table`` resampled through its own ``__call__`` (cached per table)."""
+    import numpy as np
+
+    key = id(table)
+    if key not in _FINE_CACHE:
+        lo, hi = (math.log(v) for v in DHR_RMS_RANGE)
+        ns = int(round((hi - lo) / math.log(10.0) * DHR_SLOPE_PER_DECADE)) + 1
+        x = np.linspace(0.0, 1.0, DHR_X_POINTS)
+        ls = np.linspace(lo, hi, ns)
+        X, L = np.meshgrid(x, ls, indexing="ij")
+        one_minus = 1.0 - np.asarray(table(np.arccos((1.0 - X) ** 2), np.exp(L)), dtype=float)
+        one_minus_avg = 1.0 - np.asarray(table.average(np.exp(ls)), dtype=float)
+        _FINE_CACHE[key] = (lo, hi, one_minus, one_minus_avg, table)
+    return _FINE_CACHE[key]
+
+
+class DHRLookup:
+    """1 - rho^{s,PEC}(theta_i, rms_slope) (paper Eqs. 14-16) read through a Dr.Jit texture.
+
+    The lead's table (:func:`hyde_bsdf.dhr.load_table`) is resampled, through its
+    own ``__call__`` (a bicubic spline), onto a fine grid: ``DHR_X_POINTS`` nodes
+    uniform in x = 1 - sqrt(cos theta) (dense near grazing, where rho varies most)
+    times ``DHR_SLOPE_PER_DECADE`` nodes per decade of rms_slope over
+    ``DHR_RMS_RANGE``.  It is stored as 1 - rho (so that the small diffuse
+    weights of smooth surfaces keep their float32 relative precision) in an
+    ``mi.Texture2f`` with linear filtering and clamped borders.  Linear filtering
+    keeps the lookup differentiable w.r.t. rms_slope.  1 - rho_avg(rms_slope)
+    (for the reciprocal diffuse term), resampled through the table's
+    ``average``, is an ``mi.Texture1f``.  ``use_accel=False`` keeps positional
+    gradients on CUDA as well.  Interpolation error against the table's
+    ``__call__``: see the README section "Mitsuba plugin".
     """
 
-    def __init__(self, table, refine: int = 4):
+    def __init__(self, table):
         import numpy as np
 
-        theta = np.asarray(table.theta, dtype=float)
-        log_s = np.asarray(table.log_slope, dtype=float)
-        self.theta_lo, self.theta_hi = float(theta[0]), float(theta[-1])
-        self.log_lo, self.log_hi = float(log_s[0]), float(log_s[-1])
-        self.rms_lo, self.rms_hi = math.exp(self.log_lo), math.exp(self.log_hi)
-        nt = (len(theta) - 1) * refine + 1
-        ns = (len(log_s) - 1) * refine + 1
-        tf = np.linspace(self.theta_lo, self.theta_hi, nt)
-        lf = np.linspace(self.log_lo, self.log_hi, ns)
-        tt, ll = np.meshgrid(tf, lf, indexing="ij")
-        rho = np.asarray(table(tt, np.exp(ll)), dtype=float).reshape(nt, ns)
-        avg = np.asarray(table.average(np.exp(lf)), dtype=float)
-        self.nt, self.ns = nt, ns
-        self.rho_fine = rho
-        self.tex = mi.Texture2f(mi.TensorXf(rho.astype(np.float32).ravel(), shape=(nt, ns, 1)),
+        lo, hi, one_minus, one_minus_avg, _ = _fine_grid(table)
+        self.log_lo, self.log_hi = lo, hi
+        self.rms_lo, self.rms_hi = DHR_RMS_RANGE
+        self.nt, self.ns = one_minus.shape
+        self.tex = mi.Texture2f(mi.TensorXf(one_minus.astype(np.float32).ravel(),
+                                            shape=(self.nt, self.ns, 1)),
                                 use_accel=False, filter_mode=dr.FilterMode.Linear,
                                 wrap_mode=dr.WrapMode.Clamp)
-        self.tex_avg = mi.Texture1f(mi.TensorXf(avg.astype(np.float32), shape=(ns, 1)),
+        self.tex_avg = mi.Texture1f(mi.TensorXf(one_minus_avg.astype(np.float32), shape=(self.ns, 1)),
                                     use_accel=False, filter_mode=dr.FilterMode.Linear,
                                     wrap_mode=dr.WrapMode.Clamp)
 
     def slope_coord(self, rms_slope):
-        """Texture coordinate of rms_slope along the ln(rms_slope) axis (cell-centred)."""
+        """Texture coordinate of rms_slope along the ln(rms_slope) axis (texel-centred)."""
         t = (dr.log(rms_slope) - self.log_lo) / (self.log_hi - self.log_lo)
         return (t * (self.ns - 1) + 0.5) / self.ns
 
-    def rho(self, cos_theta, u_slope):
-        """rho^{s,PEC} at polar angle acos(cos_theta) and slope coordinate u_slope."""
-        theta = dr.safe_acos(cos_theta)
-        t = (theta - self.theta_lo) / (self.theta_hi - self.theta_lo)
-        v = (t * (self.nt - 1) + 0.5) / self.nt
+    def one_minus_rho(self, cos_theta, u_slope):
+        """1 - rho^{s,PEC} at polar angle acos(cos_theta) and slope coordinate u_slope."""
+        # x = 1 - sqrt(cos theta); the clamp keeps sqrt real for slightly negative rounding
+        x = 1.0 - dr.sqrt(dr.clip(cos_theta, 0.0, 1.0))
+        v = (x * (self.nt - 1) + 0.5) / self.nt
         return self.tex.eval(mi.Point2f(u_slope, v))[0]
 
-    def rho_avg(self, u_slope):
-        """rho_avg(rms_slope) = 2 int rho cos sin dtheta, for the reciprocal diffuse term."""
+    def one_minus_rho_avg(self, u_slope):
+        """1 - rho_avg(rms_slope), rho_avg = 2 int rho cos sin dtheta (reciprocal diffuse term)."""
         return self.tex_avg.eval(mi.Point1f(u_slope))[0]
