@@ -27,7 +27,7 @@ def test_slope_space_quadrature_equals_the_angular_integral_of_the_evaluator(sha
     for deg, s in ((30, 0.3), (75, 0.3), (60, 1.0)):
         ref = angular_reference(math.radians(deg), s, shadowing)
         # "none" does not vanish at the horizon: the trapezoid grid meets a jump there
-        tol = 1e-4 if shadowing == "none" else 2e-5
+        tol = 3e-4 if shadowing == "none" else 2e-5
         assert abs(dhr.dhr_specular_pec(math.radians(deg), s, shadowing) - ref) < tol
 
 
@@ -41,7 +41,7 @@ def test_dhr_accuracy_1e_4_over_the_specified_domain_with_error_estimate():
     fine = dhr.dhr_quadrature(T, S, n_outer=64, n_inner=40)
     err = np.abs(rho - fine)
     assert err.max() < 1e-4
-    assert np.all(err <= 1.5 * est + 1e-10)
+    assert np.all(err <= est + 1e-10)
     assert np.all((rho > 0) & (rho <= 1 + 1e-12))
 
 
