@@ -202,7 +202,10 @@ def lobe_energy_shares(theta_i, theta_r, sigma_mom, rms_slope, level=0.01):
       ``model_missed`` = 1 - rho_s (what the specular lobe misses; the model's diffuse share),
       ``model_outside`` = model (specular + diffuse) energy outside the lobe,
       ``mom_outside`` = MoM energy outside the lobe,
-      ``model_inside``, ``mom_inside``, ``mom_total``.
+      ``model_inside``, ``mom_inside``, ``mom_total``,
+      ``specular_inside``, ``specular_outside`` (the model's specular term alone),
+      ``mom_excess_inside`` = mom_inside - specular_inside: what the MoM puts inside the
+      lobe beyond the single-reflection term (multiple scattering that stays near the lobe).
     """
     theta_i = np.atleast_1d(np.asarray(theta_i, dtype=float))
     theta_r = np.asarray(theta_r, dtype=float)
@@ -216,11 +219,16 @@ def lobe_energy_shares(theta_i, theta_r, sigma_mom, rms_slope, level=0.01):
         return np.trapezoid(np.where(mask, s, 0.0), theta_r, axis=1) * scale
 
     rho_s = dhr_specular(theta_i, rms_slope)
+    mom_inside = energy(sigma_mom, inside)
+    spec_inside = energy(spec, inside)
     return {
         "model_missed": 1.0 - rho_s,
+        "specular_inside": spec_inside,
+        "specular_outside": energy(spec, ~inside),
+        "mom_excess_inside": mom_inside - spec_inside,
         "model_inside": energy(total, inside),
         "model_outside": energy(total, ~inside),
-        "mom_inside": energy(sigma_mom, inside),
+        "mom_inside": mom_inside,
         "mom_outside": energy(sigma_mom, ~inside),
         "mom_total": energy(sigma_mom, np.ones_like(inside)),
     }
