@@ -463,11 +463,14 @@ def _make_class():
                                / (cos_i * mi.Frame3f.cos_theta(m)))
                 n, k = self._index(si, active)
                 weight = self._mueller(ctx, si, bs.wo, m, n, k, g_ratio, 0.0)
+                bs.pdf = dr.select(active, bs.pdf, 0.0)
                 return bs, dr.select(active, weight, 0.0)
 
             # mixture of the specular (glossy) and diffuse lobes
             choose_spec = sample1 < p_spec
-            m, _ = distr.sample(si.wi, sample2)
+            m, pdf_m = distr.sample(si.wi, sample2)
+            # a back-facing normal (possible without visible-normal sampling) is a failed sample
+            active = active & (~choose_spec | ((pdf_m != 0) & (dr.dot(si.wi, m) > 0)))
             wo_spec = mi.reflect(si.wi, m)
             wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
             bs.wo = dr.select(choose_spec, wo_spec, wo_diff)
@@ -478,6 +481,7 @@ def _make_class():
             active = active & (mi.Frame3f.cos_theta(bs.wo) > 0)
             value, bs.pdf = self.eval_pdf(ctx, si, bs.wo, active)
             ok = active & (bs.pdf > 0)
+            bs.pdf = dr.select(ok, bs.pdf, 0.0)
             weight = value / dr.select(ok, bs.pdf, 1.0)
             return bs, dr.select(ok, weight, 0.0)
 
