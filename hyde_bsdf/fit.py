@@ -1,0 +1,585 @@
+"""Fitting the pBRDF (paper Eq. 17) to normalized Mueller-matrix measurements.
+
+    minimize  chi^2 = sum_e sum_m ((F_e(theta_m; p) / F_00(theta_m; p) - y_em) / sigma_em)^2
+
+over any subset p of (n, k, rms_slope), with ``scipy.optimize.least_squares``
+(trust-region reflective, bounds n, k >= 0 and rms_slope > 0), F the Mueller
+pBRDF of :func:`hyde_bsdf.pbrdf` and y the measured elements M_jk / M_00 (as
+the paper's Figs. 8-9 plot them).
+
+Conventions (this interface)
+----------------------------
+- Angles in radians (degrees only in CSV files and on the command line):
+  theta_i, theta_r polar angles towards source and detector, phi = phi_r - phi_i,
+  phi = pi the specular plane (the paper's Figs. 8-9), phi = 0 backscatter.
+- Index: the paper's eta = n - jk (e^{+jwt}), ``n``, ``k`` >= 0, as the evaluator.
+  The Mitsuba ``hyde`` plugin takes ``eta``, ``k`` meaning n + ik: the **same
+  numbers** (eta = n, k = k) describe the same material, the Mueller matrix is
+  identical.  :meth:`FitResult.plugin_dict` / :meth:`FitResult.plugin_xml` write them so.
+- Roughness ``rms_slope`` = sqrt(2) sigma_h / ell (the paper's and the plugin's name;
+  Beckmann alpha = sqrt(2) rms_slope).
+- Elements are in the paper's s/p Stokes bases (see :mod:`hyde_bsdf.evaluator`).
+
+Uncertainties
+-------------
+With ``sigma`` the standard errors are sqrt(diag((J^T J)^-1)) of the Jacobian J of
+the weighted residuals at the solution (the usual linearized covariance; chi^2
+and reduced chi^2 test whether sigma and the model are right).  Without
+``sigma`` all values weigh 1 and the covariance is scaled by chi^2 / dof (noise
+estimated from the residual scatter).  The correlation matrix is reported with
+every fit, and ill-posed fits (too few data, a singular Jacobian, |correlation|
+above ``corr_limit``, relative errors above 50 %, a parameter on its bound) warn
+with :class:`IllPosedFitWarning` or, with ``strict=True``, raise
+:class:`IllPosedFitError`.  Fewer data than fitted parameters always raise.
+
+Command line::
+
+    hyde-bsdf fit DATA.csv [--fit n,k,rms_slope] [--rms-slope X] [--n0 N] [--k0 K]
+                  [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
+                  [--strict] [-o plot.png]
+
+(CSV format: :mod:`hyde_bsdf.measurements`.)
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .evaluator import RMS_SLOPE_RANGE, pbrdf
+from .measurements import (ELEMENT_NAMES, Measurements, MeasurementFileError, element_index,
+                           read_measurements)
+
+__all__ = ["PARAMETERS", "FitResult", "IllPosedFitWarning", "IllPosedFitError",
+           "mueller_elements", "fit_mueller", "fit_measurements", "synthetic_measurements",
+           "plot_fit", "cli_main"]
+
+#: fittable parameters, in this order everywhere (vectors, covariance, correlation)
+PARAMETERS = ("n", "k", "rms_slope")
+#: search bounds; n, k <= 1e3 covers every natural material (the evaluator accepts 1e6)
+BOUNDS = {"n": (0.0, 1e3), "k": (0.0, 1e3), "rms_slope": RMS_SLOPE_RANGE}
+#: start points tried when n0 / k0 are not given (metals and dielectrics alike)
+DEFAULT_STARTS = {"n": (0.3, 1.5), "k": (0.5, 3.0, 9.0)}
+#: the plugin's DHR texture covers this rms_slope range when diffuse is on
+PLUGIN_RMS_RANGE = (0.01, 3.0)
+
+
+class IllPosedFitWarning(UserWarning):
+    """The data do not determine the fitted parameters well (see the message)."""
+
+
+class IllPosedFitError(ValueError):
+    """Raised instead of :class:`IllPosedFitWarning` when ``strict=True``."""
+
+
+def _diffuse_mode(diffuse):
+    if diffuse is True:
+        return "paper"
+    if diffuse is False or diffuse is None:
+        return "none"
+    if diffuse in ("paper", "reciprocal", "none"):
+        return diffuse
+    raise ValueError(f"diffuse must be True, False, 'paper', 'reciprocal' or 'none', got {diffuse!r}")
+
+
+def mueller_elements(theta_i, theta_r, phi, names, *, rms_slope, n, k,
+                     shadowing="vgroove", diffuse=True) -> dict:
+    """Normalized pBRDF elements F_jk / F_00 (paper Eq. 17) for element names like ``"M23"``.
+
+    Angles in radians (broadcast together), eta = n - jk.  Returns a dict name ->
+    ndarray of the broadcast shape.  Geometries with F_00 = 0 (at or below the
+    horizon) raise ValueError: a normalized element is undefined there.
+    """
+    F = pbrdf(theta_i, theta_r, phi, rms_slope=rms_slope, n=n, k=k, shadowing=shadowing,
+              diffuse=diffuse)
+    F00 = F[..., 0, 0]
+    if np.any(F00 <= 0.0):
+        raise ValueError("theta_i and theta_r must be below 90 deg (pi/2): F_00 = 0 there and "
+                         "normalized Mueller elements are undefined")
+    return {name: F[(...,) + element_index(name)] / F00 for name in names}
+
+
+@dataclass
+class FitResult:
+    """Result of :func:`fit_mueller`.
+
+    Attributes
+    ----------
+    params : dict n, k, rms_slope -> value (fitted or held fixed); eta = n - jk
+    fitted : names of the fitted parameters, the order of ``covariance``/``correlation``
+    stderr : dict fitted name -> standard error (inf when the data do not constrain it)
+    covariance, correlation : ndarray (p, p)
+    chi2, dof, reduced_chi2, p_value : goodness of fit (p_value = P(chi^2_dof >= chi2))
+    residuals : dict element -> normalized residuals (model - data) / sigma
+    success : the optimizer converged (``message`` says how)
+    sigma_given : whether chi^2 uses the given sigma (else unit weights)
+    warnings : the ill-posedness diagnostics (also issued as IllPosedFitWarning)
+    """
+
+    params: dict
+    fitted: tuple
+    stderr: dict
+    covariance: np.ndarray
+    correlation: np.ndarray
+    chi2: float
+    dof: int
+    reduced_chi2: float
+    p_value: float
+    residuals: dict
+    success: bool
+    message: str
+    nfev: int
+    n_data: int
+    sigma_given: bool
+    shadowing: str = "vgroove"
+    diffuse: str = "paper"
+    warnings: list = field(default_factory=list)
+    condition_number: float = float("nan")
+
+    @property
+    def ill_posed(self) -> bool:
+        return bool(self.warnings)
+
+    def model(self, theta_i, theta_r, phi, names=("M01", "M11", "M22", "M23")) -> dict:
+        """The fitted model's normalized elements at other geometries (radians)."""
+        return mueller_elements(theta_i, theta_r, phi, names, **self.params,
+                                shadowing=self.shadowing, diffuse=self.diffuse)
+
+    def correlation_of(self, a: str, b: str) -> float:
+        """Correlation coefficient between two fitted parameters (nan if either is fixed)."""
+        if a not in self.fitted or b not in self.fitted:
+            return float("nan")
+        return float(self.correlation[self.fitted.index(a), self.fitted.index(b)])
+
+    # ---- loading the fitted material into a scene
+    def plugin_dict(self) -> dict:
+        """The ``hyde`` plugin's dict for ``mi.load_dict``.
+
+        The plugin's ``eta``, ``k`` are Mitsuba's n + ik; the paper's eta = n - jk is
+        the same material with the same numbers: eta = n, k = k.
+        """
+        s = self.params["rms_slope"]
+        if self.diffuse != "none" and not PLUGIN_RMS_RANGE[0] <= s <= PLUGIN_RMS_RANGE[1]:
+            warnings.warn(f"rms_slope={s:.4g} is outside the plugin's DHR range {PLUGIN_RMS_RANGE} "
+                          f"with diffuse={self.diffuse!r}: the plugin will refuse it", stacklevel=2)
+        return {"type": "hyde", "rms_slope": float(s), "eta": float(self.params["n"]),
+                "k": float(self.params["k"]), "shadowing": self.shadowing, "diffuse": self.diffuse}
+
+    def plugin_xml(self, indent: str = "") -> str:
+        """The same as :meth:`plugin_dict`, as a Mitsuba XML ``<bsdf>`` element."""
+        d = self.plugin_dict()
+        lines = [f'{indent}<bsdf type="hyde">',
+                 f'{indent}    <float name="rms_slope" value="{d["rms_slope"]:.6g}"/>',
+                 f'{indent}    <!-- Mitsuba n + ik; the paper writes eta = {d["eta"]:.6g} - j{d["k"]:.6g} -->',
+                 f'{indent}    <float name="eta" value="{d["eta"]:.6g}"/>',
+                 f'{indent}    <float name="k" value="{d["k"]:.6g}"/>',
+                 f'{indent}    <string name="shadowing" value="{d["shadowing"]}"/>',
+                 f'{indent}    <string name="diffuse" value="{d["diffuse"]}"/>',
+                 f'{indent}</bsdf>']
+        return "\n".join(lines)
+
+    def summary(self) -> str:
+        """A human-readable report of the fit."""
+        out = [f"pBRDF fit (paper Eq. 17; shadowing={self.shadowing!r}, diffuse={self.diffuse!r}): "
+               f"{self.n_data} values, {len(self.fitted)} fitted parameters"]
+        out.append(f"  converged: {self.success} ({self.message}; {self.nfev} model evaluations)")
+        for name in PARAMETERS:
+            v = self.params[name]
+            if name in self.fitted:
+                e = self.stderr[name]
+                rel = f" ({100 * e / abs(v):.2g} %)" if v != 0 and math.isfinite(e) else ""
+                out.append(f"  {name:9s} = {v:.6g} +- {e:.3g}{rel}")
+            else:
+                out.append(f"  {name:9s} = {v:.6g} (fixed)")
+        n, k = self.params["n"], self.params["k"]
+        out.append(f"  index: paper eta = {n:.6g} - j{k:.6g};  Mitsuba/plugin eta = {n:.6g}, k = {k:.6g} (n + ik)")
+        tag = "" if self.sigma_given else "  [no sigma given: unit weights, errors scaled by the residual scatter]"
+        out.append(f"  chi^2 = {self.chi2:.4g}, dof = {self.dof}, reduced chi^2 = {self.reduced_chi2:.4g}, "
+                   f"p = {self.p_value:.3g}{tag}")
+        if len(self.fitted) > 1:
+            out.append("  correlation matrix:")
+            out.append("    " + " " * 10 + "".join(f"{n:>10s}" for n in self.fitted))
+            for i, a in enumerate(self.fitted):
+                out.append(f"    {a:10s}" + "".join(f"{self.correlation[i, j]:10.4f}"
+                                                    for j in range(len(self.fitted))))
+        for w in self.warnings:
+            out.append(f"  WARNING: {w}")
+        return "\n".join(out)
+
+
+def _as_arrays(theta_i, theta_r, phi, measured, sigma):
+    if not isinstance(measured, dict) or not measured:
+        raise ValueError(f"measured must be a non-empty dict of element name -> array "
+                         f"(names {', '.join(ELEMENT_NAMES)}), got {measured!r}")
+    angles = []
+    for name, a, hi in (("theta_i", theta_i, math.pi / 2), ("theta_r", theta_r, math.pi / 2),
+                        ("phi", phi, None)):
+        a = np.asarray(a, dtype=float)
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be finite (radians)")
+        if hi is not None and np.any((a < 0) | (a >= hi)):
+            raise ValueError(f"{name} must be in [0, pi/2) radians (the detector and source above the surface)")
+        angles.append(a)
+    shape = np.broadcast_shapes(*(a.shape for a in angles))
+    values, sig = {}, {}
+    for name, v in measured.items():
+        element_index(name)
+        v = np.asarray(v, dtype=float)
+        try:
+            shape = np.broadcast_shapes(shape, v.shape)
+        except ValueError:
+            raise ValueError(f"measured[{name!r}] has shape {v.shape}, which does not broadcast with "
+                             f"the angles' shape {shape}") from None
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"measured[{name!r}] must be finite (NaN/inf found)")
+        values[name] = v
+        if sigma is not None:
+            if name not in sigma:
+                raise ValueError(f"sigma has no entry for measured element {name!r}")
+            s = np.asarray(sigma[name], dtype=float)
+            if not np.all(np.isfinite(s)) or np.any(s <= 0):
+                raise ValueError(f"sigma[{name!r}] must be finite and > 0")
+            sig[name] = s
+    if sigma is not None:
+        extra = set(sigma) - set(measured)
+        if extra:
+            raise ValueError(f"sigma has entries {sorted(extra)} with no measured values")
+    ti, tr, ph = (np.broadcast_to(a, shape).ravel() for a in angles)
+    y = {n: np.broadcast_to(v, shape).ravel() for n, v in values.items()}
+    w = {n: np.broadcast_to(sig[n], shape).ravel() if sigma is not None else np.ones(ti.size)
+         for n in values}
+    return ti, tr, ph, y, w, shape
+
+
+def _check_fit_names(fit):
+    if isinstance(fit, str):
+        fit = tuple(p.strip() for p in fit.split(",") if p.strip())
+    fit = tuple(fit)
+    bad = [p for p in fit if p not in PARAMETERS]
+    if bad or not fit or len(set(fit)) != len(fit):
+        raise ValueError(f"fit must be a non-empty subset of {PARAMETERS} without repeats, got {fit!r}")
+    return tuple(p for p in PARAMETERS if p in fit)   # canonical order
+
+
+def _start_value(name, value, fitted):
+    if value is None:
+        if name in fitted:
+            return None
+        raise ValueError(f"{name}0 must be given when {name} is not fitted (it is then held at that value)")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}0 must be a number, got {value!r}") from None
+    lo, hi = BOUNDS[name]
+    if not math.isfinite(v) or not lo <= v <= hi:
+        raise ValueError(f"{name}0 must be in [{lo:g}, {hi:g}], got {value!r}")
+    return v
+
+
+def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), rms_slope=0.3,
+                n0=None, k0=None, shadowing="vgroove", diffuse=True, corr_limit=0.95,
+                strict=False) -> FitResult:
+    """Least-squares fit of the pBRDF (Eq. 17) to normalized Mueller elements.
+
+    Parameters
+    ----------
+    theta_i, theta_r, phi : array_like, radians, broadcast together (shape S)
+        measurement geometries (theta in [0, pi/2); phi = pi the specular plane).
+    measured : dict element name ("M01", "M11", "M22", "M23", ... any of M01..M33)
+        -> array broadcastable to S of M_jk / M_00.
+    sigma : dict of the same names -> standard deviations of those values (> 0), or None
+        (unit weights; the covariance is then scaled by chi^2 / dof).
+    fit : subset of ("n", "k", "rms_slope") (or "n,k,rms_slope") to fit; the others
+        are held at their given values.
+    rms_slope : start (if fitted) or fixed value of the paper's sqrt(2) sigma_h / ell.
+    n0, k0 : start (if fitted) or fixed value of eta = n - jk (n, k >= 0).  A fitted
+        parameter without a start value is started from several points
+        (:data:`DEFAULT_STARTS`) and the best fit is kept.
+    shadowing, diffuse : passed to :func:`hyde_bsdf.pbrdf` (default: the paper's model).
+    corr_limit : |correlation| above which the fit is reported as ill-posed.
+    strict : raise :class:`IllPosedFitError` instead of warning.
+
+    Returns
+    -------
+    FitResult (values, standard errors, covariance, correlation, chi^2, residuals,
+    convergence flag, diagnostics; ``plugin_dict()`` / ``plugin_xml()`` for Mitsuba).
+
+    Raises
+    ------
+    ValueError for bad input, and when there are fewer measured values than fitted
+    parameters (the fit is then undetermined: refused, not attempted).
+    """
+    from scipy.optimize import least_squares
+    from scipy.stats import chi2 as chi2_dist
+
+    fitted = _check_fit_names(fit)
+    mode = _diffuse_mode(diffuse)
+    if not (isinstance(corr_limit, (int, float)) and 0 < corr_limit <= 1):
+        raise ValueError(f"corr_limit must be in (0, 1], got {corr_limit!r}")
+    ti, tr, ph, y, w, _ = _as_arrays(theta_i, theta_r, phi, measured, sigma)
+    names = tuple(y)
+    ydat = np.concatenate([y[n] for n in names])
+    wdat = np.concatenate([w[n] for n in names])
+    m, p = ydat.size, len(fitted)
+    if m < p:
+        raise ValueError(f"too few data to fit {', '.join(fitted)}: {m} measured value(s) for {p} "
+                         f"parameters -- measure more angles or elements, or fix parameters "
+                         f"(fit=...) at known values")
+    given = {"n": _start_value("n", n0, fitted), "k": _start_value("k", k0, fitted),
+             "rms_slope": _start_value("rms_slope", rms_slope, fitted)}
+    if given["rms_slope"] is None:
+        raise ValueError("rms_slope must be given (start value when fitted)")
+    if shadowing not in ("vgroove", "smith", "none"):
+        raise ValueError(f"shadowing must be 'vgroove', 'smith' or 'none', got {shadowing!r}")
+
+    def unpack(x):
+        vals = dict(given)
+        vals.update(zip(fitted, (float(v) for v in x)))
+        # eta = 0 exactly is not a material (the evaluator refuses |eta| < 1e-6)
+        if math.hypot(vals["n"], vals["k"]) < 1e-6:
+            vals["n"] = 1e-6
+        return vals
+
+    def residual(x):
+        model = mueller_elements(ti, tr, ph, names, **unpack(x), shadowing=shadowing, diffuse=mode)
+        return (np.concatenate([model[n] for n in names]) - ydat) / wdat
+
+    lo = np.array([BOUNDS[q][0] for q in fitted])
+    hi = np.array([BOUNDS[q][1] for q in fitted])
+    # every combination of start values (several only for fitted n/k given no start)
+    grids = [DEFAULT_STARTS[q] if given[q] is None else (given[q],) for q in fitted]
+    starts = np.array(np.meshgrid(*grids, indexing="ij")).reshape(p, -1).T
+    best, nfev = None, 0
+    for x0 in starts:
+        x0 = np.clip(x0, lo + 1e-9 * np.maximum(1, np.abs(lo)), hi)   # strictly inside for TRF
+        res = least_squares(residual, x0, jac="3-point", bounds=(lo, hi), x_scale="jac",
+                            xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400 * p)
+        nfev += res.nfev
+        if best is None or res.cost < best.cost:
+            best = res
+    res = best
+    r = res.fun
+    chi2 = float(r @ r)
+    dof = m - p
+    J = np.asarray(res.jac, dtype=float)
+
+    diag = []
+    # ---- linearized covariance from the Jacobian of the weighted residuals
+    sv = np.linalg.svd(J, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+    if not math.isfinite(cond) or cond > 1e10:
+        cov = np.full((p, p), np.inf)
+        corr = np.full((p, p), np.nan)
+        np.fill_diagonal(corr, 1.0)
+        diag.append(f"the Jacobian is singular (condition number {cond:.3g}): the data do not "
+                    f"constrain {', '.join(fitted)} separately; standard errors are infinite")
+    else:
+        cov = np.linalg.inv(J.T @ J)
+        if sigma is None and dof > 0:
+            cov *= chi2 / dof      # noise level estimated from the residual scatter
+        se = np.sqrt(np.diag(cov))
+        corr = cov / np.outer(se, se)
+    stderr = {q: float(math.sqrt(cov[i, i])) if math.isfinite(cov[i, i]) else float("inf")
+              for i, q in enumerate(fitted)}
+    vals = unpack(res.x)
+    if dof == 0:
+        diag.append(f"{m} values for {p} parameters: no degrees of freedom, the fit cannot be "
+                    f"checked (chi^2 has no distribution); measure more angles")
+    for i in range(p):
+        for j in range(i + 1, p):
+            c = corr[i, j]
+            if math.isfinite(c) and abs(c) > corr_limit:
+                diag.append(f"{fitted[i]} and {fitted[j]} are strongly correlated (rho = {c:+.4f}): "
+                            f"the data determine a combination of them rather than each one; "
+                            f"widen the angular range or hold one fixed")
+    for q in fitted:
+        v, e = vals[q], stderr[q]
+        if math.isfinite(e) and v != 0 and e > 0.5 * abs(v):
+            diag.append(f"{q} is poorly determined: {v:.4g} +- {e:.3g} ({100 * e / abs(v):.0f} %)")
+        blo, bhi = BOUNDS[q]
+        if v <= blo + 1e-6 * max(1.0, abs(blo)) or v >= bhi * (1 - 1e-9):
+            diag.append(f"{q} = {v:.4g} sits on its bound [{blo:g}, {bhi:g}]: its standard error "
+                        f"does not describe the uncertainty")
+    if not res.success:
+        diag.append(f"the optimizer did not converge: {res.message}")
+
+    residuals = {}
+    off = 0
+    for n_ in names:
+        size = y[n_].size
+        residuals[n_] = r[off:off + size].copy()
+        off += size
+    result = FitResult(
+        params=vals, fitted=fitted, stderr=stderr, covariance=cov, correlation=corr,
+        chi2=chi2, dof=dof, reduced_chi2=chi2 / dof if dof > 0 else float("nan"),
+        p_value=float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan"),
+        residuals=residuals, success=bool(res.success), message=str(res.message), nfev=int(nfev),
+        n_data=m, sigma_given=sigma is not None, shadowing=shadowing, diffuse=mode,
+        warnings=diag, condition_number=cond)
+    if diag:
+        text = "ill-posed fit: " + "; ".join(diag)
+        if strict:
+            raise IllPosedFitError(text)
+        warnings.warn(text, IllPosedFitWarning, stacklevel=2)
+    return result
+
+
+def fit_measurements(meas: Measurements, **kwargs) -> FitResult:
+    """:func:`fit_mueller` on a :class:`~hyde_bsdf.measurements.Measurements` (e.g. from a CSV)."""
+    return fit_mueller(meas.theta_i, meas.theta_r, meas.phi, meas.values,
+                       sigma=meas.uncertainty(), **kwargs)
+
+
+def synthetic_measurements(theta_i, theta_r, phi, names=("M01", "M11", "M22", "M23"), *,
+                           rms_slope, n, k, noise=0.03, n_samples=256, rng=None,
+                           shadowing="vgroove", diffuse=True) -> Measurements:
+    """Simulated measurements like the paper's Figs. 8-9 (means of ``n_samples`` samples).
+
+    Each of ``n_samples`` single measurements of each normalized element is the model
+    value plus Gaussian noise of standard deviation ``noise``; the result holds their
+    mean, their sample standard deviation (the paper's +-1 sigma bars) and
+    ``n_samples`` (so that the fit uses sigma / sqrt(n_samples), the error of the mean).
+    Angles in radians; eta = n - jk.
+    """
+    if not (isinstance(n_samples, (int, np.integer)) and n_samples >= 2):
+        raise ValueError(f"n_samples must be an integer >= 2, got {n_samples!r}")
+    if not (math.isfinite(noise) and noise > 0):
+        raise ValueError(f"noise must be > 0, got {noise!r}")
+    rng = np.random.default_rng(rng)
+    ti, tr, ph = (np.asarray(a, float).ravel() for a in np.broadcast_arrays(theta_i, theta_r, phi))
+    truth = mueller_elements(ti, tr, ph, names, rms_slope=rms_slope, n=n, k=k,
+                             shadowing=shadowing, diffuse=diffuse)
+    values, sig = {}, {}
+    for name in names:
+        draws = truth[name][:, None] + noise * rng.standard_normal((ti.size, n_samples))
+        values[name] = draws.mean(axis=1)
+        sig[name] = draws.std(axis=1, ddof=1)
+    return Measurements(theta_i=ti, theta_r=tr, phi=ph, values=values, sigma=sig,
+                        n_samples=np.full(ti.size, float(n_samples)), source="<synthetic>")
+
+
+# ---------------------------------------------------------------------------
+# plot
+
+def _signed_theta_r(theta_r, phi):
+    """Signed observation angle in the plane of incidence: + forward (phi = pi), - backscatter."""
+    return np.where(np.cos(phi) < 0, theta_r, -theta_r)
+
+
+def plot_fit(result: FitResult, meas: Measurements, path, title: str = "", truth: dict | None = None):
+    """Plot data (means with +-1 sigma bars) against the fitted model, one panel per element.
+
+    Specular-plane data with theta_i = theta_r (the paper's Figs. 8-9) are plotted
+    against that angle with the model as a line; in-plane data (phi = 0 or pi) against
+    the signed theta_r with one line per theta_i; anything else point by point.
+    ``truth`` (n, k, rms_slope) adds the generating model as a dashed line.
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = meas.elements
+    ncol = min(len(names), 4)
+    nrow = math.ceil(len(names) / ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.6 * ncol, 3.2 * nrow), squeeze=False)
+    ti, tr, ph = meas.theta_i, meas.theta_r, meas.phi
+    in_plane = np.all(np.isclose(np.cos(ph) ** 2, 1.0))
+    specular = in_plane and np.all(np.isclose(ti, tr)) and np.all(np.cos(ph) < 0)
+    bars = meas.sigma
+    for a, name in zip(axes.ravel(), names):
+        err = None if bars is None else bars[name]
+        if specular:
+            x = np.degrees(ti)
+            dense = np.radians(np.linspace(max(0.5, x.min() - 3), min(89.0, x.max() + 3), 200))
+            a.plot(np.degrees(dense), result.model(dense, dense, np.pi, (name,))[name], "C0-",
+                   label="fit")
+            if truth:
+                a.plot(np.degrees(dense), mueller_elements(dense, dense, np.pi, (name,), **truth,
+                       shadowing=result.shadowing, diffuse=result.diffuse)[name], "k--", lw=0.8,
+                       label="truth")
+            a.errorbar(x, meas.values[name], yerr=err, fmt="o", ms=4, color="C1", capsize=2,
+                       label="data")
+            a.set_xlabel(r"$\theta_i = \theta_r$ (deg), $\phi = 180°$")
+        elif in_plane:
+            xs = np.degrees(_signed_theta_r(tr, ph))
+            for c, t in enumerate(np.unique(np.round(ti, 9))):
+                sel = np.isclose(ti, t)
+                dense = np.radians(np.linspace(-89, 89, 300))
+                mod = result.model(t, np.abs(dense), np.where(dense >= 0, np.pi, 0.0), (name,))[name]
+                a.plot(np.degrees(dense), mod, f"C{c % 10}-", lw=1)
+                a.errorbar(xs[sel], meas.values[name][sel], yerr=None if err is None else err[sel],
+                           fmt="o", ms=3, color=f"C{c % 10}", capsize=2,
+                           label=rf"$\theta_i$={np.degrees(t):.0f}°")
+            a.set_xlabel(r"signed $\theta_r$ (deg; + forward)")
+        else:
+            idx = np.arange(len(meas))
+            a.plot(idx, result.model(ti, tr, ph, (name,))[name], "C0s", mfc="none", label="fit")
+            a.errorbar(idx, meas.values[name], yerr=err, fmt="o", ms=3, color="C1", label="data")
+            a.set_xlabel("measurement index")
+        a.set_title(f"{name}/M00")
+        a.grid(alpha=0.3)
+    for a in axes.ravel()[len(names):]:
+        a.axis("off")
+    axes.ravel()[0].legend(fontsize=7)
+    pr = result.params
+    fig.suptitle((title + "\n" if title else "") +
+                 rf"fit: $\eta$ = {pr['n']:.4g} - j{pr['k']:.4g}, rms_slope = {pr['rms_slope']:.4g}; "
+                 rf"$\chi^2_\nu$ = {result.reduced_chi2:.3g}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+# ---------------------------------------------------------------------------
+# command line
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="hyde-bsdf fit",
+        description="Fit the Hyde-Schmidt-Havrilla pBRDF (n, k, rms_slope) to normalized Mueller-matrix "
+                    "measurements in a CSV file (format: python -m pydoc hyde_bsdf.measurements). "
+                    "The index is the paper's eta = n - jk (the plugin's eta = n, k = k).")
+    ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M01, M01_sigma, ...)")
+    ap.add_argument("--fit", default="n,k", help="comma-separated parameters to fit, from n,k,rms_slope "
+                    "(default n,k)")
+    ap.add_argument("--rms-slope", type=float, default=0.3,
+                    help="rms_slope = sqrt(2) sigma_h/ell: start value if fitted, else held fixed (default 0.3)")
+    ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n; default: several starts")
+    ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k; default: several starts")
+    ap.add_argument("--shadowing", default="vgroove", choices=("vgroove", "smith", "none"))
+    ap.add_argument("--diffuse", default="paper", choices=("paper", "reciprocal", "none"))
+    ap.add_argument("--strict", action="store_true", help="fail (exit 1) when the fit is ill-posed")
+    ap.add_argument("-o", "--output", default=None, help="save a PNG of data against the model here")
+    return ap
+
+
+def cli_main(argv=None) -> int:
+    """``hyde-bsdf fit``: read, fit, print the result and the plugin snippet, plot."""
+    args = build_parser().parse_args(argv)
+    try:
+        meas = read_measurements(args.data)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", IllPosedFitWarning)   # printed in the summary instead
+            result = fit_measurements(meas, fit=args.fit, rms_slope=args.rms_slope, n0=args.n0,
+                                      k0=args.k0, shadowing=args.shadowing, diffuse=args.diffuse,
+                                      strict=args.strict)
+    except IllPosedFitError as exc:
+        print(f"hyde-bsdf fit: {exc}", file=sys.stderr)
+        return 1
+    except (MeasurementFileError, ValueError) as exc:
+        print(f"hyde-bsdf fit: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"data: {meas.source} ({len(meas)} geometries, elements {', '.join(meas.elements)}"
+          + (", sigma / sqrt(n_samples)" if meas.n_samples is not None else "") + ")")
+    print(result.summary())
+    print("\nMitsuba material (hyde plugin):")
+    print(result.plugin_xml(indent="    "))
+    if args.output:
+        plot_fit(result, meas, args.output, title=str(meas.source))
+        print(f"\nplot: {args.output}")
+    return 0 if result.success else 1
