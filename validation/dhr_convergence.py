@@ -128,7 +128,7 @@ def table_resolution(out, quick):
     return rows
 
 
-def run(outdir="out/validation", quick=False):
+def validate(outdir="out/validation", quick=False):
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     checks = convergence(out, quick) + table_error(out, quick)
@@ -141,5 +141,5 @@ if __name__ == "__main__":
     ap.add_argument("-o", "--outdir", default="out/validation")
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args()
-    for c in run(a.outdir, a.quick):
+    for c in validate(a.outdir, a.quick):
         print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])

@@ -19,7 +19,7 @@ import hyde_bsdf
 THETA_I = (45, 60, 75, 85)
 
 
-def run(outdir="out/validation", quick=False):
+def validate(outdir="out/validation", quick=False):
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     tr_deg = np.linspace(0, 89.9, 400 if not quick else 150)
@@ -63,5 +63,5 @@ def run(outdir="out/validation", quick=False):
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("-o", "--outdir", default="out/validation")
-    for c in run(ap.parse_args().outdir):
+    for c in validate(ap.parse_args().outdir):
         print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])

@@ -29,7 +29,7 @@ CASES = {
 ELEMENTS = ((0, 1), (1, 1), (2, 2), (2, 3))
 
 
-def run(outdir="out/validation", quick=False):
+def validate(outdir="out/validation", quick=False):
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     deg = np.linspace(0, 89.5, 180)
@@ -79,5 +79,5 @@ def run(outdir="out/validation", quick=False):
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("-o", "--outdir", default="out/validation")
-    for c in run(ap.parse_args().outdir):
+    for c in validate(ap.parse_args().outdir):
         print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])

@@ -107,7 +107,7 @@ def sweeps(quick):
            lambda v: classify(math.radians(v), math.radians(45), 1.0, 0.3, pec=True))
 
 
-def run(outdir="out/validation", quick=False):
+def validate(outdir="out/validation", quick=False):
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     rows, panels = [], []
@@ -153,5 +153,5 @@ if __name__ == "__main__":
     ap.add_argument("-o", "--outdir", default="out/validation")
     ap.add_argument("--quick", action="store_true")
     a = ap.parse_args()
-    for c in run(a.outdir, a.quick):
+    for c in validate(a.outdir, a.quick):
         print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])

@@ -1,0 +1,190 @@
+"""``hyde-bsdf validate [--quick] -o DIR``: run every validation script, write one report.
+
+Each script in ``validation/`` exposes ``validate(outdir, quick=False)`` returning a list of checks
+``dict(name, value, tolerance, passed)`` and writes its PNG and CSV files into ``outdir``.  This
+module runs them in order (in this process, so each one's time is measured), collects the checks
+and the figures, and writes ``DIR/index.html`` (and ``DIR/checks.csv``): the machine, the time
+each script took, a table of every check with its number, tolerance and verdict, and the figures.
+A script that raises is reported as a failed check with its message; the report still completes.
+Exit status: 0 when every check passes, 1 otherwise.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime as _dt
+import html
+import importlib.util
+import os
+import platform
+import sys
+import time
+import traceback
+from pathlib import Path
+
+__all__ = ["SECTIONS", "build_report", "cli_main"]
+
+#: (section title, [validation script stems]) in report order
+SECTIONS = [
+    ("NumPy evaluator and DHR (paper Figs. 4, 8, 9; Eqs. 6-17)",
+     ["fig4_priest_germer", "fig8_9_mueller", "dhr_convergence", "stability_evaluator"]),
+    ("Mitsuba plugin and rendering",
+     ["plugin_checks", "render_checks", "speed_accuracy_render", "model_economy"]),
+    ("Method of moments (paper Fig. 6)", ["fig6_mom", "mom_convergence", "mom_1d_model"]),
+    ("Fitting and inverse rendering (paper Section 4)",
+     ["fit_synthetic", "inverse_render", "gradient_check"]),
+]
+
+
+def validation_dir() -> Path:
+    here = Path(__file__).resolve().parents[1] / "validation"
+    if not here.is_dir():
+        raise FileNotFoundError(f"validation scripts not found at {here}: run from a source checkout")
+    return here
+
+
+def machine_info() -> dict:
+    info = {"date (UTC)": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M"),
+            "host": platform.node(), "OS": platform.platform(), "python": platform.python_version(),
+            "cores": str(os.cpu_count())}
+    try:
+        cpu = next(line.split(":", 1)[1].strip() for line in open("/proc/cpuinfo") if line.startswith("model name"))
+        info["CPU"] = cpu
+    except (OSError, StopIteration):
+        info["CPU"] = platform.processor() or platform.machine()
+    try:
+        mem = next(int(line.split()[1]) for line in open("/proc/meminfo") if line.startswith("MemTotal"))
+        info["memory"] = f"{mem / 2**20:.1f} GiB"
+    except (OSError, StopIteration):
+        pass
+    info["load average at start"] = f"{os.getloadavg()[0]:.2f}"
+    for mod in ("numpy", "scipy", "matplotlib", "mitsuba", "drjit"):
+        try:
+            info[mod] = __import__(mod).__version__
+        except Exception as exc:  # noqa: BLE001 -- report, don't crash
+            info[mod] = f"unavailable ({exc})"
+    try:
+        from .variants import llvm_usable
+        info["Dr.Jit LLVM"] = llvm_usable()[1]
+    except Exception as exc:  # noqa: BLE001
+        info["Dr.Jit LLVM"] = f"unknown ({exc})"
+    return info
+
+
+def _load(path: Path):
+    spec = importlib.util.spec_from_file_location(f"hyde_validation_{path.stem}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _run_script(path: Path, outdir: Path, quick: bool):
+    if not path.exists():
+        return [dict(name=f"{path.stem}: script present", value="missing", tolerance="present",
+                     passed=False)], 0.0, ""
+    t0 = time.perf_counter()
+    try:
+        module = _load(path)
+        checks = list(module.validate(str(outdir), quick=quick))
+        doc = (module.__doc__ or "").strip()
+    except Exception as exc:  # noqa: BLE001 -- a failing script is a failed check, not a crash
+        tb = traceback.format_exc(limit=3)
+        checks = [dict(name=f"{path.stem}: ran", value=f"{type(exc).__name__}: {exc}", tolerance="no error",
+                       passed=False, detail=tb)]
+        doc = ""
+    return checks, time.perf_counter() - t0, doc
+
+
+def _fmt(v):
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return html.escape(str(v))
+
+
+def build_report(outdir, quick=False, progress=True):
+    """Run all scripts into ``outdir``; return (all_passed, rows, seconds)."""
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    vdir = validation_dir()
+    info = machine_info()
+    t_start = time.perf_counter()
+    rows, sections = [], []
+    scripts = [s for _, names in SECTIONS for s in names]
+    done = 0
+    for title, names in SECTIONS:
+        entries = []
+        for stem in names:
+            if progress:
+                print(f"[validate] {done + 1}/{len(scripts)} {stem} ...", file=sys.stderr, flush=True)
+            before = set(out.glob("*.png"))
+            checks, seconds, doc = _run_script(vdir / f"{stem}.py", out, quick)
+            figures = sorted(set(out.glob("*.png")) - before)
+            if progress:
+                bad = sum(not c["passed"] for c in checks)
+                print(f"[validate]    {seconds:.1f} s, {len(checks)} checks, {bad} failed", file=sys.stderr)
+            for c in checks:
+                rows.append(dict(script=stem, **{k: c.get(k, "") for k in ("name", "value", "tolerance", "passed")}))
+            entries.append((stem, doc, seconds, checks, figures))
+            done += 1
+        sections.append((title, entries))
+    total = time.perf_counter() - t_start
+    info["report run time"] = f"{total:.0f} s ({'quick' if quick else 'full'} mode)"
+    all_passed = all(r["passed"] for r in rows)
+    _write_html(out, info, sections, rows, all_passed, quick)
+    with open(out / "checks.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=["script", "name", "value", "tolerance", "passed"])
+        w.writeheader()
+        w.writerows(rows)
+    return all_passed, rows, total
+
+
+def _write_html(out, info, sections, rows, all_passed, quick):
+    n_fail = sum(not r["passed"] for r in rows)
+    parts = [
+        "<!doctype html><html><head><meta charset='utf-8'><title>hyde-bsdf validation report</title>",
+        "<style>body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
+        "table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #ccc;padding:3px 6px}"
+        ".pass{color:#1a7f1a;font-weight:bold}.fail{color:#c00;font-weight:bold}"
+        "img{max-width:100%;border:1px solid #ddd;margin:6px 0}pre{white-space:pre-wrap;font-size:12px;"
+        "background:#f6f6f6;padding:6px}</style></head><body>",
+        "<h1>hyde-bsdf validation report</h1>",
+        f"<p>{'Quick' if quick else 'Full'} run: <span class='{'pass' if all_passed else 'fail'}'>"
+        f"{len(rows) - n_fail} of {len(rows)} checks pass</span>.</p>",
+        "<h2>Machine</h2><table>",
+    ]
+    parts += [f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>" for k, v in info.items()]
+    parts.append("</table><h2>All checks</h2><table><tr><th>script</th><th>check</th><th>value</th>"
+                 "<th>tolerance</th><th>verdict</th></tr>")
+    for r in rows:
+        verdict = "<span class='pass'>pass</span>" if r["passed"] else "<span class='fail'>FAIL</span>"
+        parts.append(f"<tr><td>{r['script']}</td><td>{html.escape(str(r['name']))}</td><td>{_fmt(r['value'])}</td>"
+                     f"<td>{_fmt(r['tolerance'])}</td><td>{verdict}</td></tr>")
+    parts.append("</table>")
+    for title, entries in sections:
+        parts.append(f"<h2>{html.escape(title)}</h2>")
+        for stem, doc, seconds, checks, figures in entries:
+            parts.append(f"<h3>{stem} <small>({seconds:.1f} s)</small></h3>")
+            if doc:
+                parts.append(f"<pre>{html.escape(doc)}</pre>")
+            for c in checks:
+                if c.get("detail"):
+                    parts.append(f"<pre>{html.escape(c['detail'])}</pre>")
+            for fig in figures:
+                parts.append(f"<img src='{html.escape(fig.name)}' alt='{html.escape(fig.stem)}'>")
+    parts.append("</body></html>")
+    (out / "index.html").write_text("\n".join(parts), encoding="utf-8")
+
+
+def cli_main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="hyde-bsdf validate", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)")
+    ap.add_argument("--quick", action="store_true", help="small sweeps; under 3 minutes on 2 cores")
+    a = ap.parse_args(argv)
+    ok, rows, seconds = build_report(a.outdir, quick=a.quick)
+    n_fail = sum(not r["passed"] for r in rows)
+    print(f"{len(rows) - n_fail} of {len(rows)} checks pass in {seconds:.0f} s; report: {Path(a.outdir) / 'index.html'}")
+    for r in rows:
+        if not r["passed"]:
+            print(f"  FAIL [{r['script']}] {r['name']}: {r['value']} (tolerance {r['tolerance']})")
+    return 0 if ok else 1
