@@ -1,0 +1,68 @@
+"""Package set-up: import without Mitsuba, the LLVM guard, roughness conversions, CLI dispatch."""
+import math
+import subprocess
+import sys
+import warnings
+
+import pytest
+
+import hyde_bsdf
+from hyde_bsdf import roughness, variants
+
+
+def test_import_does_not_import_mitsuba():
+    code = "import sys, hyde_bsdf; assert 'mitsuba' not in sys.modules and 'drjit' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_roughness_conversions():
+    """Paper: rms slope sqrt(2) sigma_h / l; Beckmann alpha = 2 sigma_h / l = sqrt(2) rms slope."""
+    s = hyde_bsdf.rms_slope_from(3.0, 10.0)
+    assert s == pytest.approx(math.sqrt(2) * 0.3)
+    assert roughness.alpha_from_rms_slope(s) == pytest.approx(2 * 3.0 / 10.0)
+    assert roughness.rms_slope_from_alpha(0.6) == pytest.approx(0.6 / math.sqrt(2))
+    with pytest.raises(ValueError, match="sigma_h"):
+        hyde_bsdf.rms_slope_from(-1.0, 10.0)
+    with pytest.raises(ValueError, match="ell"):
+        hyde_bsdf.rms_slope_from(1.0, 0.0)
+
+
+def test_old_llvm_falls_back_to_scalar_with_a_message(monkeypatch):
+    """Dr.Jit 1.5 aborts the process with libLLVM 15: we must never select llvm_* then."""
+    import drjit
+    monkeypatch.setattr(drjit.detail, "llvm_version", lambda: (15, 0, 7))
+    with pytest.warns(RuntimeWarning, match="libLLVM 15.0.7"):
+        assert variants.usable_variant("llvm_ad_spectral_polarized") == "scalar_spectral_polarized"
+    with pytest.raises(variants.VariantUnavailable, match="version >= 16"):
+        variants.usable_variant("llvm_ad_rgb", fallback=False)
+
+
+def test_missing_llvm_falls_back(monkeypatch):
+    import drjit
+
+    def boom():
+        raise RuntimeError("libLLVM not found")
+    monkeypatch.setattr(drjit.detail, "llvm_version", boom)
+    with pytest.warns(RuntimeWarning, match="no libLLVM"):
+        assert variants.usable_variant("llvm_ad_rgb") == "scalar_rgb"
+
+
+def test_current_llvm_is_usable_here():
+    """The set-up (run.sh) installs libLLVM >= 16; on such a machine the LLVM variants are kept."""
+    ok, why = variants.llvm_usable()
+    assert ok, why
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert variants.usable_variant("llvm_ad_spectral_polarized") == "llvm_ad_spectral_polarized"
+
+
+def test_unknown_variant_is_refused():
+    with pytest.raises(variants.VariantUnavailable, match="variant='llvm_ad_nonsense'"):
+        variants.usable_variant("llvm_ad_nonsense")
+
+
+def test_cli_lists_commands():
+    out = subprocess.run([sys.executable, "-m", "hyde_bsdf.cli", "--help"], capture_output=True, text=True)
+    assert out.returncode == 0
+    for cmd in ("demo", "render", "fit", "invert", "validate"):
+        assert cmd in out.stdout
