@@ -185,15 +185,15 @@ def _make_class():
             # ---- roughness: exactly one of rms_slope / alpha / (sigma_h, ell)
             groups = [g for g, names in (("rms_slope", ("rms_slope",)), ("alpha", ("alpha",)),
                                          ("sigma_h+ell", ("sigma_h", "ell")))
-                      if any(props.has_property(x) for x in names)]
+                      if any((x in props) for x in names)]
             if len(groups) > 1:
                 raise ValueError(f"hyde: give the roughness as exactly one of rms_slope, alpha or "
                                  f"sigma_h+ell; got conflicting {', '.join(groups)}")
-            if props.has_property("alpha"):
+            if ("alpha" in props):
                 rms = _read_float(props, "alpha") / SQRT2
                 src = "alpha"
-            elif props.has_property("sigma_h") or props.has_property("ell"):
-                missing = [x for x in ("sigma_h", "ell") if not props.has_property(x)]
+            elif ("sigma_h" in props) or ("ell" in props):
+                missing = [x for x in ("sigma_h", "ell") if not (x in props)]
                 if missing:
                     raise ValueError(f"hyde: sigma_h and ell must be given together; missing {missing[0]}")
                 sh, ell = _read_float(props, "sigma_h"), _read_float(props, "ell")
@@ -202,15 +202,15 @@ def _make_class():
                 rms = SQRT2 * sh / ell
                 src = "sigma_h/ell"
             else:
-                rms = _read_float(props, "rms_slope") if props.has_property("rms_slope") else 0.3
+                rms = _read_float(props, "rms_slope") if ("rms_slope" in props) else 0.3
                 src = "rms_slope"
             if not (0.0 < rms <= 50.0):
                 raise ValueError(f"hyde: roughness from {src} gives rms_slope={rms:g}; "
                                  f"the accepted range is (0, 50]")
 
             # ---- index: eta/k or material
-            if props.has_property("material"):
-                given = [x for x in ("eta", "k") if props.has_property(x)]
+            if ("material" in props):
+                given = [x for x in ("eta", "k") if (x in props)]
                 if given:
                     raise ValueError(f"hyde: give either material or eta/k, not both "
                                      f"(got material and {', '.join(given)})")
@@ -225,7 +225,7 @@ def _make_class():
                 self.m_material = material
             else:
                 for name, lo in (("eta", 0.0), ("k", 0.0)):
-                    if props.has_property(name) and props.type(name) == mi.Properties.Type.Float:
+                    if (name in props) and props.type(name) == mi.Properties.Type.Float:
                         v = _read_float(props, name)
                         if v < lo:
                             raise ValueError(f"hyde: parameter '{name}' must be >= 0 "
@@ -244,6 +244,10 @@ def _make_class():
             diffuse = str(diffuse).lower()
             if diffuse not in DIFFUSE:
                 raise ValueError(f"hyde: diffuse={diffuse!r} is not one of {', '.join(DIFFUSE)}")
+            if diffuse == "reciprocal" and shadowing == "none":
+                # without shadowing the specular DHR average rho_avg reaches 1: 1/(1 - rho_avg) diverges
+                raise ValueError("hyde: diffuse='reciprocal' needs shadowing='vgroove' or 'smith' "
+                                 "(with shadowing='none' the specular albedo average is >= 1)")
             self.m_shadowing = shadowing
             self.m_diffuse = diffuse
             self.m_sample_visible = bool(props.get("sample_visible", True))
@@ -370,13 +374,14 @@ def _make_class():
                 wo_hat, wi_hat = wo, si.wi
             else:
                 wo_hat, wi_hat = si.wi, wo
-            # the facet's s axis is perpendicular to its plane of incidence
-            s_in = dr.cross(h, -wo_hat)
-            s_out = dr.cross(h, wi_hat)
+            # The facet's s axis is perpendicular to its plane of incidence: roughconductor
+            # uses h x (-wo_hat) = h x wi_hat, both parallel to wo_hat x wi_hat, which is
+            # computed here with a compensated cross product (accurate near backscatter).
+            s_axis = po.accurate_cross(wo_hat, wi_hat)
             # singular when both directions are collinear with the facet normal: any s axis will do
-            collinear = dr.all(s_in == mi.Vector3f(0))
-            s_in = dr.select(collinear, mi.Vector3f(1, 0, 0), dr.normalize(s_in))
-            s_out = dr.select(collinear, mi.Vector3f(1, 0, 0), dr.normalize(s_out))
+            collinear = dr.all(s_axis == mi.Vector3f(0))
+            s_axis = dr.select(collinear, mi.Vector3f(1, 0, 0), dr.normalize(s_axis))
+            s_in = s_out = s_axis
             F = mi.mueller.rotate_mueller_basis(F, -wo_hat, s_in, mi.mueller.stokes_basis(-wo_hat),
                                                 wi_hat, s_out, mi.mueller.stokes_basis(wi_hat))
             if not (isinstance(diff, float) and diff == 0.0):

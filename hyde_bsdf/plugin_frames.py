@@ -106,6 +106,7 @@ def eval_paper(bsdf, om_i, om_r, s_i, s_r, *, wavelength=550.0, mode="radiance")
         M = mi.mueller.rotate_mueller_basis(
             value, k_in, mi.mueller.stokes_basis(k_in), V(si_ax),
             k_out, mi.mueller.stokes_basis(k_out), V(sr_ax))
+        dr.eval(M)   # one kernel for all 16 entries
         out = np.empty((len(cos_o), 4, 4))
         for r in range(4):
             for c in range(4):

@@ -25,6 +25,7 @@ import drjit as dr
 import mitsuba as mi
 
 __all__ = [
+    "accurate_cross",
     "complex_sqrt_lower",
     "facet_fresnel",
     "fresnel_mueller_entries",
@@ -45,6 +46,26 @@ def _cdiv(ar, ai, br, bi):
     # b is never 0 here: Re(b) >= cos(beta) > 0 or |b| >= |u| > 0 (see callers)
     inv = dr.rcp(br * br + bi * bi)
     return (ar * br + ai * bi) * inv, (ai * br - ar * bi) * inv
+
+
+def _diff_of_products(a, b, c, d):
+    """a b - c d with Kahan's compensation (one fma recovers the rounding error of c d)."""
+    w = c * d
+    err = dr.fma(-c, d, w)      # w - c d, exactly
+    return dr.fma(a, b, -w) + err
+
+
+def accurate_cross(u, v):
+    """u x v, accurate even when u and v are nearly parallel.
+
+    The facet's s axis is wo_hat x wi_hat; near backscatter (wi ~ wo) a plain
+    float32 cross product loses ~eps / sin(angle) relative accuracy, which tilts
+    the Stokes frames by ~1e-5 rad and shows up as 1e-5-level errors in the
+    off-diagonal Mueller elements.  Kahan's difference of products avoids it.
+    """
+    return type(u)(_diff_of_products(u.y, v.z, u.z, v.y),
+                   _diff_of_products(u.z, v.x, u.x, v.z),
+                   _diff_of_products(u.x, v.y, u.y, v.x))
 
 
 def complex_sqrt_lower(zr, zi):
