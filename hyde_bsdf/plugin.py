@@ -140,8 +140,10 @@ def _ior_texture(path):
                              "values": ", ".join(repr(float(v)) for v in values)})
     color = mi.spectrum_list_to_srgb(wavelengths, values, False, False)
     if mi.is_monochromatic:
-        return mi.load_dict({"type": "uniform", "value": float(mi.luminance(color)[0])
-                             if not isinstance(mi.luminance(color), float) else mi.luminance(color)})
+        import numpy as np
+
+        return mi.load_dict({"type": "uniform",
+                             "value": float(np.asarray(mi.luminance(color), dtype=float).ravel()[0])})
     return mi.load_dict({"type": "srgb", "color": color, "unbounded": True})
 
 
@@ -293,7 +295,17 @@ def _make_class():
             callback.put("k", self.m_k, flags)
 
         def parameters_changed(self, keys=[]):
-            if not dr.is_jit_v(self.m_rms_slope) or not dr.grad_enabled(self.m_rms_slope):
+            """Validate an updated rms_slope and refresh alpha and the DHR texture coordinate.
+
+            Outside the DHR texture's rms_slope range the diffuse term uses the
+            nearest tabulated roughness (clamped texture lookup).
+            """
+            import numpy as np
+
+            value = float(np.asarray(self.m_rms_slope, dtype=float).ravel()[0])
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"hyde: rms_slope must be a finite number > 0, got {value!r}")
+            if dr.is_jit_v(type(self.m_rms_slope)):
                 dr.make_opaque(self.m_rms_slope)
             self._update_derived()
 
