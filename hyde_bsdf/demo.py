@@ -119,8 +119,7 @@ def _overview(stokes: dict, path: Path, title: str) -> Path:
     lim = min(max(lim, 1e-3), 1.0)  # visible range even when S3 ~ 0
     panels.append((axes[1, 1], np.ma.masked_where(~valid, docp), "RdBu_r", -lim, lim, "DoCP = S3/S0"))
     for ax, data, cmap, lo, hi, name in panels:
-        cm = matplotlib.colormaps[cmap].copy()
-        cm.set_bad("0.5")
+        cm = matplotlib.colormaps[cmap].with_extremes(bad="0.5")
         im = ax.imshow(data, cmap=cm, vmin=lo, vmax=hi, interpolation="nearest")
         fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02)
         ax.set_title(name)

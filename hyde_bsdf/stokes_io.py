@@ -222,8 +222,7 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
         fig_w = 6.4
         fig_h = max(2.4, fig_w * h / w * 0.85 + 0.6)
         fig, ax = plt.subplots(figsize=(fig_w, fig_h), dpi=110)
-        cm = matplotlib.colormaps[cmap].copy()
-        cm.set_bad(bad)
+        cm = matplotlib.colormaps[cmap].with_extremes(bad=bad)
         im = ax.imshow(data, cmap=cm, vmin=vmin, vmax=vmax, interpolation="nearest")
         ax.set_title(prefix + heading, fontsize=10)
         ax.set_xticks([])
