@@ -12,7 +12,7 @@ Conventions used here
 * The complex index is given as ``n``, ``k`` >= 0 and used as eta = n - i k,
   the sign that Mitsuba's polarized Fresnel code (``fresnel_polarized``) and the
   paper (eta = n - j kappa) use; Mitsuba's user-facing ``eta + i k`` describes
-  the same material.  Amplitudes follow the Verdet convention (as Mitsuba).
+  the same material.  Amplitude signs follow Mitsuba (r_p = -r_s at normal incidence).
 * A facet Mueller matrix is expressed in the facet's own s/p bases: its Stokes
   reference axis is the facet's s direction (perpendicular to the facet plane
   of incidence), exactly as ``mi.mueller.specular_reflection`` returns it.
@@ -95,9 +95,10 @@ def facet_fresnel(cos_beta, n, k):
 
     Returns
     -------
-    (rs_re, rs_im, rp_re, rp_im) : the amplitudes, Verdet sign convention
-        (r_p = r_s = (1 - eta)/(1 + eta) at normal incidence), with
-        r_s = (c - u)/(c + u), r_p = (eta^2 c - u)/(eta^2 c + u),
+    (rs_re, rs_im, rp_re, rp_im) : the amplitudes in Mitsuba's sign convention
+        (``fresnel_polarized``: r_p = -r_s = (eta - 1)/(eta + 1) at normal
+        incidence, so a mirror's Mueller matrix there is diag(1, 1, -1, -1) as in
+        the paper's bases), with r_s = (c - u)/(c + u), r_p = (eta^2 c - u)/(eta^2 c + u),
         u = eta cos(theta_t) = sqrt(eta^2 - sin^2 beta).
     """
     c = cos_beta

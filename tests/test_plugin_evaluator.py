@@ -164,3 +164,19 @@ def test_dhr_texture_matches_evaluator_table():
             want = math.pi * diffuse_pbrdf(theta, theta, 1.0, rms, "paper", shadowing)
             err = np.abs(got - want).max()
             assert err <= E_TEX[shadowing], (shadowing, rms, err)
+
+
+@pytest.mark.parametrize("variant", ["scalar_spectral_polarized", "llvm_ad_spectral_polarized"])
+def test_normal_incidence_mirror_is_diag_1_1_m1_m1(variant):
+    """Paper's convention check without the evaluator: at normal incidence and normal
+    observation r_p = -r_s, so any metal's Mueller matrix in the paper's bases is
+    F00 diag(1, 1, -1, -1) (COMMON.md); this also exercises the collinear-frame fallback."""
+    from hyde_bsdf import plugin_frames as pf
+
+    mi = _setup(variant)
+    bsdf = mi.load_dict({"type": "hyde", "rms_slope": 0.1, "material": "Au", "diffuse": "none"})
+    om_i, om_r, s_i, s_r = pf.paper_geometry([0.0], [0.0], [math.pi], [0.0])
+    for mode in ("radiance", "importance"):
+        F = pf.eval_paper(bsdf, om_i, om_r, s_i, s_r, mode=mode)[0]
+        assert F[0, 0] > 1.0
+        assert np.allclose(F / F[0, 0], np.diag([1.0, 1.0, -1.0, -1.0]), atol=1e-6), F / F[0, 0]
