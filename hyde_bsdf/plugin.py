@@ -34,7 +34,7 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
    - float
    - 0.3 (if no roughness is given)
    - the paper's roughness sqrt(2) sigma_h / ell (rms facet slope along one axis);
-     useful range 0.02-1.5
+     useful range 0.02-1.5; accepted (0, 50], [0.01, 3] with a diffuse term
    - exposed as ``rms_slope``, differentiable, discontinuous
  * - alpha
    - float
@@ -103,11 +103,32 @@ of the direction the light arrives from, i.e. of ``wo_hat`` (``wo`` in Radiance
 mode, ``si.wi`` in Importance mode), so light and importance transport see the
 same physical BRDF.  ``diffuse="reciprocal"`` is symmetric in the two directions.
 
-Stokes sign convention.  Mitsuba's Stokes vectors use the basis
-(x = stokes_basis(k), y = k x x, k) and the same S0..S3 definitions as the
-paper's bases (s, p, k) with S3 = -2 Im(E_s E_p*) for e^{+j w t}; see the README
-section "Mitsuba plugin" for the measured agreement with the NumPy evaluator
-after rotating Mitsuba's bases into the paper's.
+Stokes sign convention.  Mitsuba's Stokes vectors use the reference axis
+x = ``stokes_basis(k)`` with y = k x x, and the same S0..S3 definitions as the
+paper's bases (s, p, k) with S3 = -2 Im(E_s E_p*) for e^{+j w t}: rotating
+Mitsuba's bases into the paper's (``mi.mueller.rotate_mueller_basis``, see
+:mod:`hyde_bsdf.plugin_frames`) reproduces all 16 elements of
+:func:`hyde_bsdf.pbrdf`, S3 rows and columns included - no sign conversion is
+needed at this boundary.  At normal incidence r_p = -r_s (Mitsuba's Fresnel
+signs), so a mirror gives F00 diag(1, 1, -1, -1) in the paper's bases.
+
+Facet frame.  The facet's s axis (perpendicular to its plane of incidence) is
+wo_hat x wi_hat, parallel to roughconductor's cross(h, -wo_hat), but computed with
+a compensated (Kahan) cross product: near backscatter the plain float32 product
+tilts the Stokes frame by ~eps/|wi x wo| (roughconductor is off the float64
+evaluator by up to 3e-5 there, this plugin by < 2e-6).  Directions collinear
+with the facet normal fall back to the x axis, as in roughconductor.
+
+Index.  Textures of eta and k are evaluated per wavelength (spectral), per RGB
+channel (unbounded sRGB) or as luminance (mono); like Mitsuba, |k| is used.
+
+DHR lookup.  1 - rho^{s,PEC} is resampled from the table's bicubic ``__call__``
+onto 2049 nodes in x = 1 - sqrt(cos theta) times 640 per decade of rms_slope over
+[0.01, 3] and read with a linear ``mi.Texture2f`` (differentiable in rms_slope);
+its deviation from the evaluator's lookup is < 3e-6 absolute for theta <= 89 deg,
+two orders below the table's own quadrature accuracy.  With a diffuse term
+rms_slope must lie in [0.01, 3]; 1 - rho is clipped at 0 (rho > 1 happens
+without shadowing near grazing).
 
 Sampling.  With probability p_spec the specular lobe is sampled from the
 (visible) Beckmann normals (``mi.MicrofacetDistribution``), otherwise a cosine
