@@ -86,7 +86,9 @@ def test_weight_is_eval_over_pdf_polarized(mode, diffuse, visible):
         assert 0.05 < (comp == 1).mean() < 0.95
     else:
         assert (comp == 0).all()
-    assert np.allclose(np.array(bs.pdf)[ok], np.array(pdf)[ok], rtol=1e-5)
+    # sample() uses the sampled normal m, pdf() the recomputed h = normalize(wi + wo): float32
+    # noise, up to 1.6e-5 at grazing wo (roughconductor's own sample/pdf differ identically)
+    assert np.allclose(np.array(bs.pdf)[ok], np.array(pdf)[ok], rtol=5e-5)
     assert np.allclose(np.array(pdf_only)[ok], np.array(pdf)[ok], rtol=1e-6)
     for r in range(4):
         for c in range(4):
