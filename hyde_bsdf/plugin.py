@@ -8,6 +8,7 @@ works in that variant.  The parameter table and the conventions are in
 from __future__ import annotations
 
 import math
+import os
 
 import drjit as dr
 import mitsuba as mi
@@ -169,8 +170,6 @@ def _ior_texture(path):
 
 
 def _known_materials():
-    import os
-
     folder = os.path.join(os.path.dirname(mi.__file__), "data", "ior")
     try:
         names = sorted({f[:-len(".eta.spd")] for f in os.listdir(folder) if f.endswith(".eta.spd")})
@@ -208,15 +207,15 @@ def _make_class():
             # ---- roughness: exactly one of rms_slope / alpha / (sigma_h, ell)
             groups = [g for g, names in (("rms_slope", ("rms_slope",)), ("alpha", ("alpha",)),
                                          ("sigma_h+ell", ("sigma_h", "ell")))
-                      if any((x in props) for x in names)]
+                      if any(x in props for x in names)]
             if len(groups) > 1:
                 raise ValueError(f"hyde: give the roughness as exactly one of rms_slope, alpha or "
                                  f"sigma_h+ell; got conflicting {', '.join(groups)}")
-            if ("alpha" in props):
+            if "alpha" in props:
                 rms = _read_float(props, "alpha") / SQRT2
                 src = "alpha"
-            elif ("sigma_h" in props) or ("ell" in props):
-                missing = [x for x in ("sigma_h", "ell") if not (x in props)]
+            elif "sigma_h" in props or "ell" in props:
+                missing = [x for x in ("sigma_h", "ell") if x not in props]
                 if missing:
                     raise ValueError(f"hyde: sigma_h and ell must be given together; missing {missing[0]}")
                 sh, ell = _read_float(props, "sigma_h"), _read_float(props, "ell")
@@ -225,21 +224,20 @@ def _make_class():
                 rms = SQRT2 * sh / ell
                 src = "sigma_h/ell"
             else:
-                rms = _read_float(props, "rms_slope") if ("rms_slope" in props) else 0.3
+                rms = _read_float(props, "rms_slope") if "rms_slope" in props else 0.3
                 src = "rms_slope"
             if not (0.0 < rms <= 50.0):
                 raise ValueError(f"hyde: roughness from {src} gives rms_slope={rms:g}; "
                                  f"the accepted range is (0, 50]")
 
             # ---- index: eta/k or material
-            if ("material" in props):
-                given = [x for x in ("eta", "k") if (x in props)]
+            if "material" in props:
+                given = [x for x in ("eta", "k") if x in props]
                 if given:
                     raise ValueError(f"hyde: give either material or eta/k, not both "
                                      f"(got material and {', '.join(given)})")
                 material = str(props.get("material"))
                 path = mi.file_resolver().resolve(f"data/ior/{material}.eta.spd")
-                import os
                 if not os.path.exists(str(path)):
                     raise ValueError(f"hyde: unknown material={material!r}; Mitsuba's data/ior has "
                                      f"{', '.join(_known_materials())}")
@@ -247,12 +245,15 @@ def _make_class():
                 self.m_k = _ior_texture(str(path).replace(".eta.spd", ".k.spd"))
                 self.m_material = material
             else:
-                for name, lo in (("eta", 0.0), ("k", 0.0)):
-                    if (name in props) and props.type(name) == mi.Properties.Type.Float:
-                        v = _read_float(props, name)
-                        if v < lo:
+                consts = {}
+                for name in ("eta", "k"):
+                    if name in props and props.type(name) == mi.Properties.Type.Float:
+                        consts[name] = _read_float(props, name)
+                        if consts[name] < 0:
                             raise ValueError(f"hyde: parameter '{name}' must be >= 0 "
-                                             f"(index n + i k with k >= 0), got {v}")
+                                             f"(index n + i k with k >= 0), got {consts[name]}")
+                if consts.get("eta", 0.0) == 0.0 and consts.get("k", 1.0) == 0.0:
+                    raise ValueError("hyde: eta and k cannot both be 0 (no material has index 0)")
                 self.m_eta = props.get_unbounded_texture("eta", 0.0)
                 self.m_k = props.get_unbounded_texture("k", 1.0)
                 self.m_material = None

@@ -109,6 +109,7 @@ BAD = [
     ({"material": "Unobtainium"}, ["material", "Unobtainium", "Au"]),
     ({"eta": -0.5}, ["eta", ">= 0"]),
     ({"k": -1.0}, ["k", ">= 0"]),
+    ({"eta": 0.0, "k": 0.0}, ["eta", "k", "0"]),
     ({"shadowing": "ggx"}, ["shadowing", "vgroove", "smith", "none"]),
     ({"diffuse": "lambert"}, ["diffuse", "paper", "reciprocal", "none"]),
     ({"diffuse": "reciprocal", "shadowing": "none"}, ["reciprocal", "shadowing"]),
