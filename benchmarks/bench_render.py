@@ -1,0 +1,193 @@
+"""Render speed of the ``hyde`` BSDF against Mitsuba's ``roughconductor``.
+
+One scene (a gold sphere, an aluminium sphere and a dark-glass floor under a low
+sun and a dim sky, path tracer depth 4, ``stokes`` integrator), rendered in the
+same process with every BSDF replaced by:
+
+``roughconductor``  Mitsuba's Beckmann microfacet conductor (visible-normal sampling)
+``hyde smith``      hyde with shadowing="smith", diffuse="none" -- the same model as
+                    roughconductor, so the ratio is the plugin's overhead (target <= 1.10)
+``hyde full``       hyde with the paper's model: V-groove shadowing + diffuse="paper"
+
+and timed for (a) a forward render and (b) one forward+backward AD pass
+(``dr.enable_grad`` on every BSDF's roughness, ``mi.render(scene, params, spp=...)``,
+loss = mean of the image, ``dr.backward``; path integrator), target <= 1.5.
+
+Each configuration is warmed up first (JIT compilation excluded), then the
+configurations are timed in interleaved rounds (so machine load hits all of them
+alike) and the median over rounds is reported; the ratio is the median of the
+per-round ratios.  Prints a table and writes a CSV (``-o``, default
+out/bench/bench_render.csv).
+
+    python benchmarks/bench_render.py [--spp 16] [--width 256 --height 160] [--repeats 7]
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import drjit as dr
+import mitsuba as mi
+
+from hyde_bsdf.render import prepare_variant
+from hyde_bsdf.roughness import alpha_from_rms_slope
+
+#: (name, rms_slope, n, k) of the three surfaces; metals at the paper's 1064 nm values.
+SURFACES = [("gold", 0.15, 0.285, 7.3523), ("alu", 0.3, 1.226, 10.413), ("floor", 0.4, 1.5, 0.0)]
+
+CONFIGS = {
+    "roughconductor": None,
+    "hyde smith": {"shadowing": "smith", "diffuse": "none"},
+    "hyde full": {"shadowing": "vgroove", "diffuse": "paper"},
+}
+
+
+def bsdf_dict(config: str, rms_slope: float, n: float, k: float) -> dict:
+    if config == "roughconductor":
+        return {"type": "roughconductor", "distribution": "beckmann",
+                "alpha": alpha_from_rms_slope(rms_slope), "eta": n, "k": k}
+    return {"type": "hyde", "rms_slope": rms_slope, "eta": n, "k": k, **CONFIGS[config]}
+
+
+def scene_dict(config: str, width: int, height: int, spp: int, stokes: bool) -> dict:
+    T = mi.ScalarTransform4f
+    path = {"type": "path", "max_depth": 4}
+    d = {
+        "type": "scene",
+        "integrator": {"type": "stokes", "integrator": path} if stokes else path,
+        "sensor": {"type": "perspective", "fov": 35,
+                   "to_world": T().look_at(origin=[0.5, -7.5, 2.6], target=[0.3, 0.3, 0.5], up=[0, 0, 1]),
+                   "film": {"type": "hdrfilm", "width": width, "height": height},
+                   "sampler": {"type": "independent", "sample_count": spp}},
+        "sun": {"type": "directional", "direction": [0.55, -0.6, -0.58],
+                "irradiance": {"type": "rgb", "value": 3.0}},
+        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": 0.2}},
+    }
+    shapes = {"gold": {"type": "sphere", "center": [-1.0, 0.3, 0.85], "radius": 0.85},
+              "alu": {"type": "sphere", "center": [1.0, 0.0, 0.7], "radius": 0.7},
+              "floor": {"type": "rectangle", "to_world": T().scale(14.0)}}
+    for name, rms, n, k in SURFACES:
+        d[name] = dict(shapes[name], bsdf=bsdf_dict(config, rms, n, k))
+    return d
+
+
+def roughness_keys(params) -> list[str]:
+    return [k for k in params.keys() if k.endswith("bsdf.alpha.value") or k.endswith("bsdf.alpha")
+            or k.endswith("bsdf.rms_slope")]
+
+
+def forward_once(scene, spp: int, seed: int) -> float:
+    t0 = time.perf_counter()
+    img = mi.render(scene, spp=spp, seed=seed)
+    dr.eval(img)
+    dr.sync_thread()
+    return time.perf_counter() - t0
+
+
+def ad_once(scene, params, keys, spp: int, seed: int) -> tuple[float, list[float]]:
+    """One optimisation-style AD pass: fresh grad-enabled roughness values are written
+    into the scene (as an optimizer step would), then render, loss = mean, backward."""
+    t0 = time.perf_counter()
+    values = []
+    for key in keys:
+        v = type(params[key])(dr.detach(params[key]))
+        dr.enable_grad(v)
+        params[key] = v
+        values.append(v)
+    params.update()
+    img = mi.render(scene, params, spp=spp, seed=seed)
+    loss = dr.mean(img, axis=None)
+    dr.backward(loss)
+    grads = [dr.grad(v) for v in values]
+    dr.eval(grads)
+    dr.sync_thread()
+    elapsed = time.perf_counter() - t0
+    return elapsed, [float(dr.ravel(g)[0]) for g in grads]
+
+
+def run(width=256, height=160, spp=16, ad_spp=4, repeats=7, warmup=2, variant="llvm_ad_spectral_polarized"):
+    chosen = prepare_variant(variant, fallback=False)
+    print(f"[bench_render] {chosen}, {width}x{height} px, forward {spp} spp, AD {ad_spp} spp, "
+          f"{repeats} rounds after {warmup} warm-up renders each", file=sys.stderr)
+    scenes = {c: mi.load_dict(scene_dict(c, width, height, spp, stokes=True)) for c in CONFIGS}
+    ad_scenes = {c: mi.load_dict(scene_dict(c, width, height, ad_spp, stokes=False)) for c in CONFIGS}
+    ad_params = {c: mi.traverse(s) for c, s in ad_scenes.items()}
+    ad_keys = {c: roughness_keys(p) for c, p in ad_params.items()}
+    for c, keys in ad_keys.items():
+        if len(keys) != len(SURFACES):
+            raise RuntimeError(f"{c}: expected {len(SURFACES)} roughness parameters, found {keys}")
+
+    for c in CONFIGS:                       # warm up: compile every kernel once
+        for w in range(warmup):
+            forward_once(scenes[c], spp, seed=1000 + w)
+            ad_once(ad_scenes[c], ad_params[c], ad_keys[c], ad_spp, seed=1000 + w)
+    fwd = {c: [] for c in CONFIGS}
+    ad = {c: [] for c in CONFIGS}
+    grads = {}
+    for r in range(repeats):
+        for c in CONFIGS:
+            fwd[c].append(forward_once(scenes[c], spp, seed=r))
+        for c in CONFIGS:
+            t, g = ad_once(ad_scenes[c], ad_params[c], ad_keys[c], ad_spp, seed=r)
+            ad[c].append(t)
+            grads[c] = g
+        print(f"\r[bench_render] round {r + 1}/{repeats}", end="\n" if r == repeats - 1 else "",
+              file=sys.stderr, flush=True)
+
+    rows = []
+    base_f, base_a = fwd["roughconductor"], ad["roughconductor"]
+    targets = {"hyde smith": (1.10, 1.5), "hyde full": (None, None), "roughconductor": (None, None)}
+    for c in CONFIGS:
+        rf = statistics.median(a / b for a, b in zip(fwd[c], base_f))
+        ra = statistics.median(a / b for a, b in zip(ad[c], base_a))
+        tf, ta = targets[c]
+        rows.append({"config": c, "forward_ms": 1e3 * statistics.median(fwd[c]),
+                     "forward_ratio": rf, "forward_target": tf or "",
+                     "ad_ms": 1e3 * statistics.median(ad[c]), "ad_ratio": ra, "ad_target": ta or "",
+                     "grad_gold": grads[c][0] if grads[c] else float("nan"),
+                     "width": width, "height": height, "spp": spp, "ad_spp": ad_spp,
+                     "repeats": repeats, "variant": chosen})
+    return rows
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("-o", "--out", default="out/bench/bench_render.csv")
+    p.add_argument("--width", type=int, default=256)
+    p.add_argument("--height", type=int, default=160)
+    p.add_argument("--spp", type=int, default=16, help="forward spp (default 16)")
+    p.add_argument("--ad-spp", type=int, default=4, help="AD pass spp (default 4)")
+    p.add_argument("--repeats", type=int, default=7)
+    p.add_argument("--variant", default="llvm_ad_spectral_polarized")
+    args = p.parse_args(argv)
+    rows = run(args.width, args.height, args.spp, args.ad_spp, args.repeats, variant=args.variant)
+    by = {r["config"]: r for r in rows}
+    # Same model, same paths: d/d rms_slope (hyde smith) = sqrt(2) d/d alpha (roughconductor).
+    gratio = by["hyde smith"]["grad_gold"] / (math.sqrt(2) * by["roughconductor"]["grad_gold"])
+    print(f"\n{'configuration':16s} {'forward ms':>11s} {'ratio':>7s} {'target':>7s}   "
+          f"{'fwd+bwd ms':>11s} {'ratio':>7s} {'target':>7s}")
+    for r in rows:
+        tf = f"<= {r['forward_target']:.2f}" if r["forward_target"] else ""
+        ta = f"<= {r['ad_target']:.2f}" if r["ad_target"] else ""
+        print(f"{r['config']:16s} {r['forward_ms']:11.1f} {r['forward_ratio']:7.3f} {tf:>7s}   "
+              f"{r['ad_ms']:11.1f} {r['ad_ratio']:7.3f} {ta:>7s}")
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with open(out, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    print(f"gradient check: d loss/d rms_slope (hyde smith) / (sqrt 2 * d loss/d alpha (roughconductor)) "
+          f"on the gold sphere = {gratio:.4f} (1 = same model, same gradient)")
+    print(f"[bench_render] wrote {out}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
