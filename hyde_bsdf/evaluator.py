@@ -160,10 +160,15 @@ def diffuse_pbrdf(theta_i, theta_r, M00, rms_slope, mode="paper", shadowing="vgr
     """
     table = load_table(shadowing)
     grid, rho_x = table.x_slice(float(rms_slope))
-    one_minus = lambda t: np.maximum(1.0 - np.interp(x_of_theta(t), grid, rho_x), 0.0)
+    one_minus_x = np.maximum(1.0 - rho_x, 0.0)
+    one_minus = lambda t: np.interp(x_of_theta(t), grid, one_minus_x)
     if mode == "paper":
         return one_minus(theta_i) * M00 / math.pi
-    avg = max(1.0 - float(table.average(rms_slope)), 1e-300)
+    # 1 - rho_avg = int (1 - rho) d(cos^2 theta) = int_0^1 4 (1-x)^3 (1 - rho(x)) dx, from the very
+    # samples used above, so that the hemispherical integral is exactly 1 - rho(theta_i)
+    avg = float(np.trapezoid(4.0 * (1.0 - grid) ** 3 * one_minus_x, grid))
+    if avg <= 0.0:    # rho = 1 everywhere (a mirror-smooth surface): no multiple scattering
+        return np.zeros(np.broadcast(theta_i, theta_r, M00).shape)
     return one_minus(theta_i) * one_minus(theta_r) * M00 / (math.pi * avg)
 
 
@@ -198,6 +203,11 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
     mode = _check_diffuse(diffuse)
     if shadowing not in SHADOWING:
         raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+    if mode == "reciprocal" and shadowing == "none":
+        # without shadowing rho^{s,PEC} exceeds 1 at grazing incidence, so the reciprocal
+        # normalisation 1 - rho_avg is not positive (the plugin refuses the same pair)
+        raise ValueError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'; with shadowing='none' "
+                         "the specular DHR exceeds 1 and (1 - rho_avg) is not positive")
     theta_i = _check_angles("theta_i", theta_i, math.pi)
     theta_r = _check_angles("theta_r", theta_r, math.pi)
     phi = _check_angles("phi", phi, None)
