@@ -1,0 +1,245 @@
+"""The `hyde` Mitsuba plugin against the NumPy evaluator: evaluator back ends charted speed
+against accuracy, and a stability map of the plugin.
+
+1. Back ends (x = seconds per full evaluation, y = max relative error against the float64
+   evaluator, |F - F_eval| / (max|F_eval| + 1e-7 /sr) per matrix; for the evaluator itself the
+   error is against the independent vector derivation of validation/stability_evaluator.py):
+   NumPy evaluator; plugin in scalar_spectral_polarized (Python loop over directions);
+   plugin in llvm_ad_spectral_polarized (vectorised, after its JIT warm-up); the plugin's
+   unpolarized M00 path in llvm_ad_rgb; Mitsuba's roughconductor in llvm_ad_spectral_polarized
+   for the speed reference (its error is against the evaluator with Smith shadowing, where
+   Mitsuba's rational G1 fit differs by < 0.7 %).
+2. Stability map of the plugin (llvm_ad_spectral_polarized): theta -> 0 and 90 deg, rms_slope
+   1e-5 .. 1e3, k 0 .. 1e7: accurate (<= 1e-4 of the evaluator, float32), degrades, refuses
+   (an error naming the parameter at load time), fails (NaN/Inf/crash).
+
+Writes plugin_backends.png/.csv and plugin_stability.png/.csv.
+"""
+import argparse
+import csv
+import math
+import time
+from pathlib import Path
+
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+import hyde_bsdf
+from hyde_bsdf import plugin_frames as pf
+
+GOLD_MI = dict(eta=0.285, k=7.3523)          # n + ik at the plugin; the same numbers as the paper's n - jk
+RMS = 0.44
+
+
+def _geometry(n, seed=5):
+    rng = np.random.default_rng(seed)
+    ti, tr, ph, phi_i = pf.random_angles(n, rng)
+    om_i, om_r, s_i, s_r = pf.paper_geometry(ti, tr, ph, phi_i)
+    om_i = om_i.astype(np.float32).astype(float)     # what Mitsuba sees
+    om_r = om_r.astype(np.float32).astype(float)
+    ti, tr, ph, _ = pf.angles_of(om_i, om_r)
+    return (ti, tr, ph), (om_i, om_r, s_i, s_r)
+
+
+def _rel(F, ref):
+    if F.ndim == 1:
+        return float((np.abs(F - ref[..., 0, 0]) / (np.abs(ref[..., 0, 0]) + 1e-7)).max())
+    scale = np.abs(ref).max(axis=(-2, -1), keepdims=True)
+    return float((np.abs(F - ref) / (scale + 1e-7)).max())
+
+
+def _timed(fn, repeat=3):
+    best = float("inf")
+    out = None
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return out, best
+
+
+def _time_eval(mi, bsdf, om_i, om_r):
+    """Seconds for bsdf.eval over all directions (Radiance mode: wi = omega_r, wo = omega_i),
+    excluding conversions: JIT variants time the second launch of the cached kernel, scalar
+    variants a Python loop."""
+    import drjit as dr
+
+    ctx = mi.BSDFContext()
+    if dr.is_jit_v(mi.Float):
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        si.wi = mi.Vector3f(*(mi.Float(om_r[:, j].astype(np.float32)) for j in range(3)))
+        if mi.is_spectral:
+            si.wavelengths = mi.UnpolarizedSpectrum(633.0)
+        wo = mi.Vector3f(*(mi.Float(om_i[:, j].astype(np.float32)) for j in range(3)))
+        dr.eval(si, wo)
+
+        def go():
+            v = bsdf.eval(ctx, si, wo)
+            dr.eval(v)
+            dr.sync_thread()
+        go()                                   # trace + compile once
+        return _timed(go, repeat=3)[1]
+    pairs = [(mi.Vector3f(*map(float, b)), mi.Vector3f(*map(float, a))) for a, b in zip(om_i, om_r)]
+
+    def loop():
+        for wi, wo in pairs:
+            si = dr.zeros(mi.SurfaceInteraction3f)
+            si.wi = wi
+            if mi.is_spectral:
+                si.wavelengths = mi.UnpolarizedSpectrum(633.0)
+            bsdf.eval(ctx, si, wo)
+    return _timed(loop, repeat=1)[1]
+
+
+def backends(out, quick):
+    import mitsuba as mi
+    from hyde_bsdf.variants import set_variant
+    from stability_evaluator import vector_reference  # noqa: E402 -- sibling validation script
+
+    n_vec = 20_000 if quick else 200_000
+    n_scalar = 64 if quick else 400
+    angles, dirs = _geometry(n_vec)
+    kw = dict(rms_slope=RMS, n=GOLD_MI["eta"], k=GOLD_MI["k"])
+    F_eval, t_eval = _timed(lambda: hyde_bsdf.pbrdf(*angles, **kw, diffuse=False))
+    sub = range(0, n_vec, max(1, n_vec // 300))
+    err_eval = max(
+        float(np.abs(F_eval[j] - vector_reference(angles[0][j], angles[1][j], angles[2][j], RMS, kw["n"], kw["k"], False)).max()
+              / (np.abs(F_eval[j]).max() + 1e-7)) for j in sub)
+    rows = [["NumPy evaluator (float64)", n_vec, t_eval / n_vec, err_eval]]
+    params = {"type": "hyde", "rms_slope": RMS, "diffuse": "none", **GOLD_MI}
+    for variant, n_dirs, label in (("llvm_ad_spectral_polarized", n_vec, "plugin, LLVM polarized (float32)"),
+                                   ("llvm_ad_rgb", n_vec, "plugin, LLVM unpolarized M00 path"),
+                                   ("scalar_spectral_polarized", n_scalar, "plugin, scalar polarized (Python loop)")):
+        set_variant(variant, fallback=False)
+        hyde_bsdf.register()
+        bsdf = mi.load_dict(params)
+        d = tuple(a[:n_dirs] for a in dirs)
+        F = pf.eval_paper(bsdf, *d, wavelength=633.0)
+        rows.append([label, n_dirs, _time_eval(mi, bsdf, d[0], d[1]) / n_dirs, _rel(F, F_eval[:n_dirs])])
+    set_variant("llvm_ad_spectral_polarized", fallback=False)
+    hyde_bsdf.register()
+    rc = mi.load_dict({"type": "roughconductor", "distribution": "beckmann",
+                       "alpha": hyde_bsdf.alpha_from_rms_slope(RMS), **GOLD_MI})
+    F = pf.eval_paper(rc, *dirs, wavelength=633.0)
+    t = _time_eval(mi, rc, dirs[0], dirs[1])
+    F_smith = hyde_bsdf.pbrdf(*angles, **kw, shadowing="smith", diffuse=False)
+    rows.append(["roughconductor, LLVM polarized (Smith; vs exact-G1 evaluator)", n_vec, t / n_vec, _rel(F, F_smith)])
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.5))
+    for j, (label, n_dirs, sec, err) in enumerate(rows):
+        ax.loglog(sec, max(err, 1e-17), "o", ms=8, color=f"C{j}", label=f"{label} ({n_dirs} dirs)")
+    ax.axhline(1e-5, color="k", ls=":", lw=0.8)
+    ax.text(ax.get_xlim()[0] * 1.5, 1.3e-5, "float32 target 1e-5", fontsize=7)
+    ax.set_xlabel("seconds per BSDF evaluation (bare eval; this machine)")
+    ax.set_ylabel("max relative error")
+    ax.set_title("Evaluator back ends: speed against accuracy (gold, rms_slope 0.44)")
+    ax.legend(fontsize=7, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(out / "plugin_backends.png", dpi=130)
+    plt.close(fig)
+    with open(out / "plugin_backends.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["backend", "directions", "seconds_per_evaluation", "max_rel_error"])
+        w.writerows(rows)
+    tol = {0: 1e-9, 1: 1e-5, 2: 1e-5, 3: 1e-5, 4: 7e-3}
+    return [dict(name=f"back end '{r[0]}': max relative error", value=r[3], tolerance=tol[j], passed=r[3] <= tol[j])
+            for j, r in enumerate(rows)]
+
+
+def _classify_plugin(mi, params, angles_deg, n, k):
+    ti, tr, ph = (np.atleast_1d(np.radians(a)).astype(float) for a in angles_deg)
+    try:
+        bsdf = mi.load_dict({"type": "hyde", **params, "eta": n, "k": k})
+    except Exception as exc:  # noqa: BLE001 -- a refusal is what the map records
+        msg = str(exc)
+        return ("refuses" if any(p in msg for p in ("rms_slope", "eta", "k=", "k ")) else "fails"), float("nan"), msg[-160:]
+    om_i, om_r, s_i, s_r = pf.paper_geometry(ti, tr, ph)
+    F = pf.eval_paper(bsdf, om_i, om_r, s_i, s_r, wavelength=633.0)
+    if not np.all(np.isfinite(F)):
+        return "fails", float("nan"), "non-finite"
+    ti, tr, ph, _ = pf.angles_of(om_i.astype(np.float32), om_r.astype(np.float32))
+    try:
+        ref = hyde_bsdf.pbrdf(ti, tr, ph, rms_slope=params["rms_slope"], n=n, k=k,
+                              diffuse=params.get("diffuse", "paper"))
+    except ValueError as exc:
+        return "refuses", float("nan"), f"evaluator: {exc}"
+    err = _rel(F, ref)
+    return ("accurate" if err <= 1e-4 else "degrades"), err, ""
+
+
+def stability(out, quick):
+    import mitsuba as mi
+    from hyde_bsdf.variants import set_variant
+    from stability_evaluator import CLASSES, COLOURS  # noqa: E402
+
+    set_variant("llvm_ad_spectral_polarized", fallback=False)
+    hyde_bsdf.register()
+    m = 17 if quick else 41
+    deg = np.concatenate([[0.0, 1e-4], np.linspace(1, 89, m - 6), [89.9, 89.99, 90.0, 95.0]])
+    slopes = np.logspace(-5, 3, m)
+    ks = np.concatenate([[0.0], np.logspace(-3, 7, m - 1)])
+    sweeps = [
+        ("theta_i (deg), theta_r = 30, phi = 2, diffuse paper", deg,
+         lambda v: _classify_plugin(mi, dict(rms_slope=0.3), (v, 30.0, math.degrees(2.0)), 0.285, 7.35)),
+        ("theta_r (deg), theta_i = 60, phi = 180", deg,
+         lambda v: _classify_plugin(mi, dict(rms_slope=0.3), (60.0, v, 180.0), 0.285, 7.35)),
+        ("rms_slope (log), diffuse none", slopes,
+         lambda v: _classify_plugin(mi, dict(rms_slope=float(v), diffuse="none"), (40.0, 50.0, 170.0), 0.285, 7.35)),
+        ("rms_slope (log), diffuse paper", slopes,
+         lambda v: _classify_plugin(mi, dict(rms_slope=float(v)), (40.0, 50.0, 170.0), 0.285, 7.35)),
+        ("k (log; 0 first), eta = 1.5", ks,
+         lambda v: _classify_plugin(mi, dict(rms_slope=0.3), (40.0, 50.0, 170.0), 1.5, float(v))),
+    ]
+    rows, panels = [], []
+    for title, values, fn in sweeps:
+        res = [fn(v) for v in values]
+        panels.append((title, values, res))
+        rows += [[title, v, c, e, msg] for v, (c, e, msg) in zip(values, res)]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.3 * len(panels) + 0.8))
+    for ax, (title, values, res) in zip(axes, panels):
+        x = np.arange(len(values))
+        ax.bar(x, 1, width=1.0, color=[COLOURS[c] for c, _, _ in res])
+        errs = np.array([e for _, e, _ in res])
+        ax2 = ax.twinx()
+        ax2.semilogy(x, np.where(np.isfinite(errs) & (errs > 0), errs, np.nan), "k.", ms=3)
+        ax2.set_ylim(1e-9, 1)
+        ticks = np.linspace(0, len(values) - 1, 6).astype(int)
+        ax.set_xticks(ticks, [f"{values[t]:.3g}" for t in ticks], fontsize=7)
+        ax.set_yticks([])
+        ax.set_title(title, fontsize=8)
+    handles = [plt.Rectangle((0, 0), 1, 1, color=COLOURS[c]) for c in CLASSES]
+    fig.legend(handles, CLASSES, loc="lower center", ncol=4, fontsize=8)
+    fig.suptitle("Plugin stability map, llvm_ad_spectral_polarized (dots: error vs evaluator)", fontsize=9)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.savefig(out / "plugin_stability.png", dpi=120)
+    plt.close(fig)
+    with open(out / "plugin_stability.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["sweep", "value", "class", "rel_error_vs_evaluator", "message"])
+        w.writerows(rows)
+    counts = {c: sum(r[2] == c for r in rows) for c in CLASSES}
+    return [dict(name="Plugin stability map: points that fail (NaN/Inf/crash)", value=counts["fails"],
+                 tolerance=0, passed=counts["fails"] == 0),
+            dict(name="Plugin stability map: points that degrade (> 1e-4 from the evaluator)",
+                 value=counts["degrades"], tolerance="reported", passed=True),
+            dict(name="Plugin stability map: points refused with a named parameter", value=counts["refuses"],
+                 tolerance="reported", passed=True)]
+
+
+def validate(outdir="out/validation", quick=False):
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    return backends(out, quick) + stability(out, quick)
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("-o", "--outdir", default="out/validation")
+    ap.add_argument("--quick", action="store_true")
+    a = ap.parse_args()
+    for c in validate(a.outdir, a.quick):
+        print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
