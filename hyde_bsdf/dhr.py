@@ -216,6 +216,15 @@ class DHRTable:
         ls = np.clip(np.log(s), self.log_slope[0], self.log_slope[-1])
         return np.clip(self.spline().ev(x_of_theta(t), ls), 0.0, None).reshape(t.shape)
 
+    def on_grid(self, x, log_slope):
+        """rho on the tensor grid x[:, None] x log_slope[None, :] (x = 1 - sqrt(cos theta)).
+
+        The same bicubic spline as ``__call__``, evaluated as a tensor product: several times
+        faster than ``__call__`` on a meshgrid (used to resample the table into textures).
+        """
+        ls = np.clip(np.asarray(log_slope, float), self.log_slope[0], self.log_slope[-1])
+        return np.clip(self.spline()(np.clip(np.asarray(x, float), 0.0, 1.0), ls, grid=True), 0.0, None)
+
     def average(self, rms_slope):
         """rho_avg at rms_slope (cubic in ln rms_slope)."""
         from scipy.interpolate import CubicSpline

@@ -160,13 +160,14 @@ def diffuse_pbrdf(theta_i, theta_r, M00, rms_slope, mode="paper", shadowing="vgr
     """
     table = load_table(shadowing)
     grid, rho_x = table.x_slice(float(rms_slope))
-    one_minus_x = np.maximum(1.0 - rho_x, 0.0)
-    one_minus = lambda t: np.interp(x_of_theta(t), grid, one_minus_x)
+    one_minus_x = 1.0 - rho_x
+    # interpolate, then clip (rho > 1 only without shadowing; the plugin's texture does the same)
+    one_minus = lambda t: np.maximum(np.interp(x_of_theta(t), grid, one_minus_x), 0.0)
     if mode == "paper":
         return one_minus(theta_i) * M00 / math.pi
     # 1 - rho_avg = int (1 - rho) d(cos^2 theta) = int_0^1 4 (1-x)^3 (1 - rho(x)) dx, from the very
     # samples used above, so that the hemispherical integral is exactly 1 - rho(theta_i)
-    avg = float(np.trapezoid(4.0 * (1.0 - grid) ** 3 * one_minus_x, grid))
+    avg = float(np.trapezoid(4.0 * (1.0 - grid) ** 3 * np.maximum(one_minus_x, 0.0), grid))
     if avg <= 0.0:    # rho = 1 everywhere (a mirror-smooth surface): no multiple scattering
         return np.zeros(np.broadcast(theta_i, theta_r, M00).shape)
     return one_minus(theta_i) * one_minus(theta_r) * M00 / (math.pi * avg)

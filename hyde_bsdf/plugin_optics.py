@@ -179,8 +179,7 @@ def _fine_grid(table):
         ns = int(round((hi - lo) / math.log(10.0) * DHR_SLOPE_PER_DECADE)) + 1
         x = np.linspace(0.0, 1.0, DHR_X_POINTS)
         ls = np.linspace(lo, hi, ns)
-        X, L = np.meshgrid(x, ls, indexing="ij")
-        one_minus = 1.0 - np.asarray(table(np.arccos((1.0 - X) ** 2), np.exp(L)), dtype=float)
+        one_minus = 1.0 - table.on_grid(x, ls)      # = table(arccos((1 - x)^2), exp(ls)) on the grid
         one_minus_avg = 1.0 - np.asarray(table.average(np.exp(ls)), dtype=float)
         _FINE_CACHE[key] = (lo, hi, one_minus, one_minus_avg, table)
     return _FINE_CACHE[key]
