@@ -263,9 +263,12 @@ def moment_matrix(x, y, dfdx, dx, k=K0, near=4, block=256):
 
     Pulse basis on straight segments of x-width ``dx`` centred on (x_n, y_n) with
     slope ``dfdx[n]`` (arc length D_n = dx sqrt(1 + f'^2)); delta testing at the
-    segment centres.  Far entries use the midpoint rule D_n H_0^(2)(k R_mn);
-    entries with |m - n| <= ``near`` use 8-point Gauss-Legendre over the source
-    segment; the diagonal is :func:`_self_term`.  ``k/4 = pi/(2 lambda)`` is
+    segment centres.  Far entries use the midpoint rule with the segment's phase
+    variation, D_n H_0^(2)(k R_mn) sinc(k D_n cos(psi_mn) / 2) (psi: angle between
+    the segment and the line to the match point; the bare midpoint rule would make
+    a flat plate's current 1 % too large at 10 points per wavelength); entries
+    with |m - n| <= ``near`` use 8-point Gauss-Legendre over the source segment;
+    the diagonal is :func:`_self_term`.  ``k/4 = pi/(2 lambda)`` is
     Eq. 18's prefactor over Z0.
 
     Parameters
