@@ -16,7 +16,8 @@ loss = mean of the image, ``dr.backward``; path integrator), target <= 1.5.
 Each configuration is warmed up first (JIT compilation excluded), then the
 configurations are timed in interleaved rounds (so machine load hits all of them
 alike) and the median over rounds is reported; the ratio is the median of the
-per-round ratios.  Prints a table and writes a CSV (``-o``, default
+per-round ratios, both for wall-clock time and for the process's CPU time (all
+threads) -- on a machine shared with other jobs the CPU-time ratio is the steadier.  Prints a table and writes a CSV (``-o``, default
 out/bench/bench_render.csv).
 
     python benchmarks/bench_render.py [--spp 16] [--width 256 --height 160] [--repeats 7]
@@ -81,18 +82,20 @@ def roughness_keys(params) -> list[str]:
             or k.endswith("bsdf.rms_slope")]
 
 
-def forward_once(scene, spp: int, seed: int) -> float:
-    t0 = time.perf_counter()
+def forward_once(scene, spp: int, seed: int) -> tuple[float, float]:
+    """(wall seconds, CPU seconds of this process, all threads) of one forward render."""
+    t0, c0 = time.perf_counter(), time.process_time()
     img = mi.render(scene, spp=spp, seed=seed)
     dr.eval(img)
     dr.sync_thread()
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
-def ad_once(scene, params, keys, spp: int, seed: int) -> tuple[float, list[float]]:
+def ad_once(scene, params, keys, spp: int, seed: int) -> tuple[tuple[float, float], list[float]]:
     """One optimisation-style AD pass: fresh grad-enabled roughness values are written
-    into the scene (as an optimizer step would), then render, loss = mean, backward."""
-    t0 = time.perf_counter()
+    into the scene (as an optimizer step would), then render, loss = mean, backward.
+    Returns ((wall s, CPU s), gradients of the loss for each key)."""
+    t0, c0 = time.perf_counter(), time.process_time()
     values = []
     for key in keys:
         v = type(params[key])(dr.detach(params[key]))
@@ -106,7 +109,7 @@ def ad_once(scene, params, keys, spp: int, seed: int) -> tuple[float, list[float
     grads = [dr.grad(v) for v in values]
     dr.eval(grads)
     dr.sync_thread()
-    elapsed = time.perf_counter() - t0
+    elapsed = (time.perf_counter() - t0, time.process_time() - c0)
     return elapsed, [float(dr.ravel(g)[0]) for g in grads]
 
 
@@ -140,18 +143,70 @@ def run(width=256, height=160, spp=16, ad_spp=4, repeats=7, warmup=2, variant="l
               file=sys.stderr, flush=True)
 
     rows = []
-    base_f, base_a = fwd["roughconductor"], ad["roughconductor"]
     targets = {"hyde smith": (1.10, 1.5), "hyde full": (None, None), "roughconductor": (None, None)}
+
+    def ratio(series, c, which):
+        return statistics.median(a[which] / b[which] for a, b in zip(series[c], series["roughconductor"]))
+
     for c in CONFIGS:
-        rf = statistics.median(a / b for a, b in zip(fwd[c], base_f))
-        ra = statistics.median(a / b for a, b in zip(ad[c], base_a))
         tf, ta = targets[c]
-        rows.append({"config": c, "forward_ms": 1e3 * statistics.median(fwd[c]),
-                     "forward_ratio": rf, "forward_target": tf or "",
-                     "ad_ms": 1e3 * statistics.median(ad[c]), "ad_ratio": ra, "ad_target": ta or "",
+        rows.append({"config": c,
+                     "forward_wall_ms": 1e3 * statistics.median(t[0] for t in fwd[c]),
+                     "forward_cpu_ms": 1e3 * statistics.median(t[1] for t in fwd[c]),
+                     "forward_ratio_wall": ratio(fwd, c, 0), "forward_ratio_cpu": ratio(fwd, c, 1),
+                     "forward_target": tf or "",
+                     "ad_wall_ms": 1e3 * statistics.median(t[0] for t in ad[c]),
+                     "ad_cpu_ms": 1e3 * statistics.median(t[1] for t in ad[c]),
+                     "ad_ratio_wall": ratio(ad, c, 0), "ad_ratio_cpu": ratio(ad, c, 1),
+                     "ad_target": ta or "",
                      "grad_gold": grads[c][0] if grads[c] else float("nan"),
                      "width": width, "height": height, "spp": spp, "ad_spp": ad_spp,
                      "repeats": repeats, "variant": chosen})
+    return rows
+
+
+def micro(n_log2: int = 20, repeats: int = 7) -> list[dict]:
+    """Per-query cost of the BSDF methods on 2**n_log2 random (wi, wo) pairs (gold, rms 0.15).
+
+    Same variant as the renders; CPU time of this process, median of ``repeats`` after two
+    warm-up calls; ns per query and the ratio to roughconductor.  Evidence for where a
+    render-time difference comes from (the path tracer calls ``sample`` and ``eval_pdf``).
+    """
+    n = 1 << n_log2
+    rng = mi.PCG32(n)
+
+    def cosine_dirs():
+        return mi.warp.square_to_cosine_hemisphere(mi.Point2f(rng.next_float32(), rng.next_float32()))
+
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = cosine_dirs()
+    si.n = mi.Vector3f(0, 0, 1)
+    si.sh_frame = mi.Frame3f(si.n)
+    if mi.is_spectral:
+        si.wavelengths = mi.sample_rgb_spectrum(mi.sample_shifted(rng.next_float32()))[0]
+    wo = cosine_dirs()
+    s1, s2 = rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32())
+    dr.eval(si, wo, s1, s2)
+    ctx = mi.BSDFContext()
+    name, rms, eta, k = SURFACES[0]
+    cost = {}
+    for c in CONFIGS:
+        bsdf = mi.load_dict(bsdf_dict(c, rms, eta, k))
+        ops = {"eval": lambda: bsdf.eval(ctx, si, wo), "pdf": lambda: bsdf.pdf(ctx, si, wo),
+               "eval_pdf": lambda: bsdf.eval_pdf(ctx, si, wo), "sample": lambda: bsdf.sample(ctx, si, s1, s2)}
+        for op, f in ops.items():
+            times = []
+            for r in range(repeats + 2):
+                c0 = time.process_time()
+                out = f()
+                dr.eval(out)
+                dr.sync_thread()
+                times.append(time.process_time() - c0)
+            cost[(c, op)] = statistics.median(times[2:]) / n
+    rows = []
+    for (c, op), t in cost.items():
+        rows.append({"config": c, "method": op, "ns_per_query": 1e9 * t,
+                     "ratio": t / cost[("roughconductor", op)], "queries": n})
     return rows
 
 
@@ -164,18 +219,22 @@ def main(argv=None) -> int:
     p.add_argument("--ad-spp", type=int, default=4, help="AD pass spp (default 4)")
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--variant", default="llvm_ad_spectral_polarized")
+    p.add_argument("--no-micro", action="store_true", help="skip the per-method BSDF timing")
     args = p.parse_args(argv)
     rows = run(args.width, args.height, args.spp, args.ad_spp, args.repeats, variant=args.variant)
     by = {r["config"]: r for r in rows}
     # Same model, same paths: d/d rms_slope (hyde smith) = sqrt(2) d/d alpha (roughconductor).
     gratio = by["hyde smith"]["grad_gold"] / (math.sqrt(2) * by["roughconductor"]["grad_gold"])
-    print(f"\n{'configuration':16s} {'forward ms':>11s} {'ratio':>7s} {'target':>7s}   "
-          f"{'fwd+bwd ms':>11s} {'ratio':>7s} {'target':>7s}")
+    print(f"\n{'configuration':15s} | {'forward: wall ms':>16s} {'CPU ms':>8s} {'ratio wall':>10s} "
+          f"{'ratio CPU':>9s} {'target':>7s} | {'fwd+bwd: wall ms':>16s} {'CPU ms':>8s} {'ratio wall':>10s} "
+          f"{'ratio CPU':>9s} {'target':>7s}")
     for r in rows:
         tf = f"<= {r['forward_target']:.2f}" if r["forward_target"] else ""
         ta = f"<= {r['ad_target']:.2f}" if r["ad_target"] else ""
-        print(f"{r['config']:16s} {r['forward_ms']:11.1f} {r['forward_ratio']:7.3f} {tf:>7s}   "
-              f"{r['ad_ms']:11.1f} {r['ad_ratio']:7.3f} {ta:>7s}")
+        print(f"{r['config']:15s} | {r['forward_wall_ms']:16.1f} {r['forward_cpu_ms']:8.1f} "
+              f"{r['forward_ratio_wall']:10.3f} {r['forward_ratio_cpu']:9.3f} {tf:>7s} | "
+              f"{r['ad_wall_ms']:16.1f} {r['ad_cpu_ms']:8.1f} {r['ad_ratio_wall']:10.3f} "
+              f"{r['ad_ratio_cpu']:9.3f} {ta:>7s}")
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     with open(out, "w", newline="") as f:
@@ -186,6 +245,21 @@ def main(argv=None) -> int:
     print(f"gradient check: d loss/d rms_slope (hyde smith) / (sqrt 2 * d loss/d alpha (roughconductor)) "
           f"on the gold sphere = {gratio:.4f} (1 = same model, same gradient)")
     print(f"[bench_render] wrote {out}", file=sys.stderr)
+    if not args.no_micro:
+        mrows = micro()
+        print(f"\nper-method BSDF cost (gold, rms_slope 0.15, {mrows[0]['queries']} random queries, "
+              f"CPU ns per query, ratio to roughconductor):")
+        print(f"{'method':10s} " + " ".join(f"{c:>22s}" for c in CONFIGS))
+        for op in ("eval", "pdf", "eval_pdf", "sample"):
+            cells = [r for r in mrows if r["method"] == op]
+            print(f"{op:10s} " + " ".join(f"{r['ns_per_query']:12.1f} ({r['ratio']:5.2f}x)" for r in cells))
+        mout = out.with_name(out.stem + "_micro.csv")
+        with open(mout, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(mrows[0]))
+            w.writeheader()
+            for r in mrows:
+                w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+        print(f"[bench_render] wrote {mout}", file=sys.stderr)
     return 0
 
 
