@@ -391,7 +391,7 @@ def check_sampling(pts_per_wl, corr_length_wl=None, rough=True):
     reasons = []
     if pts_per_wl < 5.0:
         reasons.append(f"pts_per_wl={pts_per_wl:g} is below ~5 points per wavelength: the pulse-basis current "
-                       "does not resolve the field; expect errors of several percent or more")
+                       "does not resolve the field; expect errors of a few percent or more")
     if rough and corr_length_wl is not None and corr_length_wl * pts_per_wl < 5.0:
         reasons.append(f"only {corr_length_wl * pts_per_wl:.1f} samples per correlation length: the surface "
                        "curvature is not resolved")
@@ -687,7 +687,11 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         warnings.warn("MoM failure risk: " + r, MoMAccuracyWarning, stacklevel=2)
 
     fine = power_grid(w)
-    x_all, f_all, s_all = gaussian_surface(length_wl, n_part * partitions, rms_height_wl, corr_length_wl, seed)
+    try:
+        x_all, f_all, s_all = gaussian_surface(length_wl, n_part * partitions, rms_height_wl, corr_length_wl, seed)
+    except ValueError as exc:
+        raise ValueError(f"pts_per_wl={pts_per_wl:g} is too coarse for corr_length_wl={corr_length_wl:g} "
+                         f"(the surface spectrum needs > {3.9 / corr_length_wl:.3g} points per wavelength): {exc}") from None
     tasks = []
     for m in range(partitions):
         sl = slice(m * n_part, (m + 1) * n_part)

@@ -79,12 +79,19 @@ def test_small_rough_surface_conserves_power():
 
 
 def test_reproducible_by_seed_and_executor():
-    """Same seed: the same sigma, serially or in a process pool; another seed: another surface."""
+    """Same seed: the same sigma, serially, in the default process pool or any other Executor;
+    another seed: another surface."""
+    from concurrent.futures import ThreadPoolExecutor
+
     args = (60.0, 2, 0.3, 1.5, [20.0], np.arange(-80, 81, 10.0))
     a = mom.scatter(*args, pts_per_wl=6, seed=7, executor=SERIAL)
     b = mom.scatter(*args, pts_per_wl=6, seed=7)  # default process pool
+    with ThreadPoolExecutor(2) as pool:
+        t = mom.scatter(*args, pts_per_wl=6, seed=7, executor=pool)
     c = mom.scatter(*args, pts_per_wl=6, seed=8, executor=SERIAL)
     np.testing.assert_allclose(a.sigma, b.sigma, rtol=1e-10)
+    np.testing.assert_allclose(a.sigma, t.sigma, rtol=1e-10)
+    np.testing.assert_allclose(a.power_balance, b.power_balance, rtol=1e-12)
     assert np.max(np.abs(a.sigma - c.sigma)) > 1e-2 * np.max(a.sigma)
 
 
@@ -109,12 +116,14 @@ def test_warns_when_mom_fails():
     ({"partitions": 0}, "partitions"),
     ({"rms_height_wl": -0.1}, "rms_height_wl"),
     ({"corr_length_wl": float("nan")}, "corr_length_wl"),
+    ({"rms_height_wl": 0.1, "corr_length_wl": 0.5, "pts_per_wl": 3.0}, "pts_per_wl"),
 ])
 def test_bad_input_names_parameter(kwargs, name):
     args = {"length_wl": 20.0, "partitions": 1, "rms_height_wl": 0.0, "corr_length_wl": 1.0,
             "theta_i_deg": 0.0, "theta_r_deg": 0.0, "executor": SERIAL}
     args.update(kwargs)
-    with pytest.raises(ValueError, match=name):
+    with pytest.raises(ValueError, match=name), warnings.catch_warnings():
+        warnings.simplefilter("ignore", mom.MoMAccuracyWarning)  # coarse sampling also warns before it fails
         mom.scatter(**args)
 
 
