@@ -198,7 +198,8 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
                            dolp_mask: float = 0.01) -> dict[str, Path]:
     """Write the four polarization charts (plus a colour image) as PNGs with colour bars.
 
-    Files: ``{stem}_intensity.png`` (S0, inferno, clipped at the 99.5th percentile),
+    Files: ``{stem}_intensity.png`` (S0, inferno on a square-root scale, clipped at the
+    99.5th percentile),
     ``{stem}_dolp.png`` (viridis, [0, 1]), ``{stem}_aolp.png`` (cyclic ``twilight``,
     [-90, 90] deg, grey where DoLP < ``dolp_mask`` or no light), ``{stem}_docp.png``
     (diverging, symmetric range), and ``{stem}_rgb.png`` (the colour image, sRGB).
@@ -218,12 +219,16 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
     prefix = f"{title}: " if title else ""
     paths: dict[str, Path] = {}
 
-    def chart(name, data, cmap, vmin, vmax, cbar_label, heading, bad="0.5"):
+    def chart(name, data, cmap, vmin, vmax, cbar_label, heading, bad="0.5", gamma=None):
         fig_w = 6.4
         fig_h = max(2.4, fig_w * h / w * 0.85 + 0.6)
         fig, ax = plt.subplots(figsize=(fig_w, fig_h), dpi=110)
         cm = matplotlib.colormaps[cmap].with_extremes(bad=bad)
-        im = ax.imshow(data, cmap=cm, vmin=vmin, vmax=vmax, interpolation="nearest")
+        if gamma is None:
+            im = ax.imshow(data, cmap=cm, vmin=vmin, vmax=vmax, interpolation="nearest")
+        else:
+            norm = matplotlib.colors.PowerNorm(gamma, vmin=vmin, vmax=vmax)
+            im = ax.imshow(data, cmap=cm, norm=norm, interpolation="nearest")
         ax.set_title(prefix + heading, fontsize=10)
         ax.set_xticks([])
         ax.set_yticks([])
@@ -238,8 +243,9 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
     inten = q["intensity"]
     vmax = float(np.percentile(inten, 99.5)) if np.any(inten > 0) else 1.0
     vmax = vmax if vmax > 0 else 1.0
-    chart("intensity", inten, "inferno", 0.0, vmax, f"S0 ({label}, scene radiance units)",
-          "intensity S0")
+    # Square-root colour scale: highlights are orders of magnitude above the rest.
+    chart("intensity", inten, "inferno", 0.0, vmax, f"S0 ({label}, scene radiance units; sqrt scale)",
+          "intensity S0", gamma=0.5)
     chart("dolp", np.ma.masked_where(~valid, q["dolp"]), "viridis", 0.0, 1.0,
           "DoLP = sqrt(S1² + S2²) / S0", "degree of linear polarization")
     aolp_deg = np.degrees(q["aolp"])
