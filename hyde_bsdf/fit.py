@@ -357,7 +357,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     for x0 in starts:
         x0 = np.clip(x0, lo + 1e-9 * np.maximum(1, np.abs(lo)), hi)   # strictly inside for TRF
         res = least_squares(residual, x0, jac="3-point", bounds=(lo, hi), x_scale="jac",
-                            xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=400 * p)
+                            xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=100 * p)
         nfev += res.nfev
         if best is None or res.cost < best.cost:
             best = res

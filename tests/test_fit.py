@@ -1,0 +1,212 @@
+"""Fitting n, k, rms_slope to normalized Mueller elements (hyde_bsdf.fit), the CSV reader, the CLI.
+
+Physics checked: the pBRDF of Eq. 17 fitted to its own (noiseless / noisy) specular-plane
+elements returns the generating parameters (exactly / within 3 standard errors), the
+standard errors match the scatter of repeated fits, and ill-posed data are refused or flagged.
+"""
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from hyde_bsdf.fit import (IllPosedFitError, IllPosedFitWarning, cli_main, fit_measurements, fit_mueller,
+                           mueller_elements, synthetic_measurements)
+from hyde_bsdf.measurements import MeasurementFileError, read_measurements, write_measurements
+
+GOLD = {"n": 0.285, "k": 7.3523, "rms_slope": 0.44}      # paper Fig. 8 (Infragold)
+FSA = {"n": 1.226, "k": 10.413, "rms_slope": 0.43}       # paper Fig. 9 (flame-sprayed Al)
+ELEMENTS = ("M01", "M11", "M22", "M23")
+TH = np.radians(np.arange(10.0, 81.0, 10.0))             # specular plane, theta_i = theta_r
+
+
+def exact(truth, names=ELEMENTS, th=TH):
+    return mueller_elements(th, th, np.pi, names, **truth)
+
+
+@pytest.mark.parametrize("truth", [GOLD, FSA], ids=["infragold", "fsa"])
+def test_noiseless_recovery_from_default_multistart(truth):
+    sigma = {e: np.full(TH.size, 0.002) for e in ELEMENTS}
+    r = fit_mueller(TH, TH, np.pi, exact(truth), sigma=sigma, fit=("n", "k", "rms_slope"), rms_slope=0.3)
+    assert r.success
+    for q in ("n", "k", "rms_slope"):
+        assert r.params[q] == pytest.approx(truth[q], rel=1e-5)
+    assert r.chi2 < 1e-8
+    assert r.dof == 4 * TH.size - 3
+    assert not r.warnings
+
+
+@pytest.mark.parametrize("truth,seed", [(GOLD, 1), (FSA, 2)], ids=["infragold", "fsa"])
+def test_noisy_recovery_pulls_within_3_sigma(truth, seed):
+    meas = synthetic_measurements(TH, TH, np.pi, ELEMENTS, **truth, noise=0.03, n_samples=256, rng=seed)
+    r = fit_measurements(meas, fit="n,k,rms_slope", rms_slope=0.3)
+    for q in ("n", "k", "rms_slope"):
+        pull = (r.params[q] - truth[q]) / r.stderr[q]
+        assert abs(pull) < 3.0, (q, r.params[q], r.stderr[q])
+    # chi^2 with 29 dof: the 0.1 %-99.9 % range is [11.6, 58.3]
+    assert 11.6 < r.chi2 < 58.3
+    # sigma of the mean: 0.03/16 per value; n is the least determined (|eta| large, n small)
+    assert 0.005 < r.stderr["n"] < 0.03 and r.stderr["rms_slope"] < 2e-3
+
+
+def test_standard_errors_match_scatter_of_repeated_fits():
+    """The Jacobian standard errors equal the spread of fits over noise realizations (+-35 %)."""
+    rng = np.random.default_rng(7)
+    fits, errs = [], []
+    for _ in range(40):
+        meas = synthetic_measurements(TH, TH, np.pi, ELEMENTS, **FSA, noise=0.03, n_samples=256, rng=rng)
+        r = fit_measurements(meas, fit=("n", "k"), rms_slope=FSA["rms_slope"], n0=1.0, k0=8.0)
+        fits.append([r.params["n"], r.params["k"]])
+        errs.append([r.stderr["n"], r.stderr["k"]])
+    spread = np.std(fits, axis=0, ddof=1)
+    mean_err = np.mean(errs, axis=0)
+    np.testing.assert_allclose(spread, mean_err, rtol=0.35)
+
+
+def test_phase_elements_decorrelate_n_and_k_intensity_elements_do_not():
+    """With M22/M23 (ellipsometric phase) n, k are uncorrelated; with M01, M11 alone strongly correlated."""
+    sig = lambda names: {e: np.full(TH.size, 0.002) for e in names}
+    full = fit_mueller(TH, TH, np.pi, exact(GOLD), sigma=sig(ELEMENTS), fit=("n", "k", "rms_slope"),
+                       rms_slope=0.44, n0=0.285, k0=7.3523)
+    assert abs(full.correlation_of("n", "k")) < 0.05
+    with pytest.warns(IllPosedFitWarning, match="strongly correlated"):
+        few = fit_mueller(TH, TH, np.pi, exact(GOLD, ("M01", "M11")), sigma=sig(("M01", "M11")),
+                          fit=("n", "k", "rms_slope"), rms_slope=0.44, n0=0.285, k0=7.3523)
+    assert few.correlation_of("n", "k") > 0.95
+    assert few.stderr["n"] > 5 * full.stderr["n"]
+
+
+def test_fit_subset_holds_others_fixed_and_plugin_snippet():
+    r = fit_mueller(TH, TH, np.pi, exact(GOLD), fit=("rms_slope",), rms_slope=0.2, n0=0.285, k0=7.3523)
+    assert r.fitted == ("rms_slope",)
+    assert r.params["rms_slope"] == pytest.approx(0.44, rel=1e-6)
+    assert r.params["n"] == 0.285 and r.params["k"] == 7.3523
+    d = r.plugin_dict()
+    # the plugin's eta, k (n + ik) are the paper's n, k (eta = n - jk): same numbers
+    assert d == {"type": "hyde", "rms_slope": pytest.approx(0.44, rel=1e-6), "eta": 0.285, "k": 7.3523,
+                 "shadowing": "vgroove", "diffuse": "paper"}
+    xml = r.plugin_xml()
+    assert '<bsdf type="hyde">' in xml and 'name="eta" value="0.285"' in xml and 'name="k" value="7.3523"' in xml
+
+
+def test_fitted_material_loads_into_mitsuba():
+    import mitsuba as mi
+
+    import hyde_bsdf
+
+    mi.set_variant("scalar_spectral_polarized")
+    hyde_bsdf.register()
+    r = fit_mueller(TH, TH, np.pi, exact(GOLD), fit=("n", "k"), rms_slope=0.44)
+    bsdf = mi.load_dict(r.plugin_dict())
+    p = mi.traverse(bsdf)
+    assert p["eta.value"] == pytest.approx(0.285, rel=1e-4)
+    assert p["k.value"] == pytest.approx(7.3523, rel=1e-4)
+    assert p["rms_slope"] == pytest.approx(0.44, rel=1e-6)
+    mi.load_string(f'<scene version="3.0.0"><shape type="sphere">{r.plugin_xml()}</shape></scene>')
+
+
+def test_too_few_data_refused_and_singular_warned():
+    a = np.radians([45.0])
+    with pytest.raises(ValueError, match="too few data.*1 measured value.*3 parameters"):
+        fit_mueller(a, a, np.pi, {"M01": [0.01]}, fit=("n", "k", "rms_slope"))
+    b = np.radians([10.0, 15.0])
+    data = exact(GOLD, ("M01", "M11"), b)
+    with pytest.warns(IllPosedFitWarning, match="singular|correlated"):
+        r = fit_mueller(b, b, np.pi, data, fit=("n", "k", "rms_slope"), n0=1.0, k0=5.0)
+    assert r.ill_posed
+    with pytest.raises(IllPosedFitError):
+        fit_mueller(b, b, np.pi, data, fit=("n", "k", "rms_slope"), n0=1.0, k0=5.0, strict=True)
+
+
+def test_bad_arguments_name_the_parameter():
+    with pytest.raises(ValueError, match="fit must be"):
+        fit_mueller(TH, TH, np.pi, exact(GOLD), fit=("n", "eta"))
+    with pytest.raises(ValueError, match="Mueller element name"):
+        fit_mueller(TH, TH, np.pi, {"M00": np.ones(TH.size)})
+    with pytest.raises(ValueError, match="theta_r must be in"):
+        fit_mueller(TH, TH + 1.0, np.pi, exact(GOLD))
+    with pytest.raises(ValueError, match="sigma\\['M01'\\] must be finite and > 0"):
+        fit_mueller(TH, TH, np.pi, {"M01": np.zeros(TH.size)}, sigma={"M01": np.zeros(TH.size)})
+    with pytest.raises(ValueError, match="n0 must be given when n is not fitted"):
+        fit_mueller(TH, TH, np.pi, exact(GOLD), fit=("k",))
+
+
+# ---------------------------------------------------------------------------- CSV reader
+
+HEADER = "theta_i_deg,theta_r_deg,phi_deg,M01,M01_sigma,M22,M22_sigma"
+
+
+def write(tmp_path, text, name="data.csv"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_csv_round_trip(tmp_path):
+    meas = synthetic_measurements(TH, TH, np.pi, ELEMENTS, **GOLD, rng=3)
+    p = write_measurements(tmp_path / "m.csv", meas, comments=["synthetic"])
+    back = read_measurements(p)
+    np.testing.assert_allclose(back.theta_i, meas.theta_i, rtol=1e-9)
+    np.testing.assert_allclose(back.phi, np.pi, rtol=1e-9)
+    for e in ELEMENTS:
+        np.testing.assert_allclose(back.values[e], meas.values[e], rtol=1e-9)
+        np.testing.assert_allclose(back.uncertainty()[e], meas.sigma[e] / 16.0, rtol=1e-9)
+    assert back.comments == ["synthetic"]
+
+
+@pytest.mark.parametrize("body,match", [
+    ("theta_i_deg,phi_deg,M01,M01_sigma\n10,180,0.1,0.01\n", r"line 1: missing column 'theta_r_deg'"),
+    (HEADER + "\n10,10,180,abc,0.01,-0.7,0.02\n", r"line 2, column 'M01': 'abc' is not a number"),
+    (HEADER + "\n10,10,180,0.0,0.01,-0.7,0.02\n95,95,180,0.0,0.01,-0.7,0.02\n",
+     r"line 3, column 'theta_i_deg': angle 95 deg is out of range \[0, 90\)"),
+    (HEADER + "\n10,10,400,0.0,0.01,-0.7,0.02\n", r"line 2, column 'phi_deg': angle 400 deg"),
+    (HEADER + "\n10,10,180,0.0,0,-0.7,0.02\n", r"line 2, column 'M01_sigma': standard deviation must be > 0"),
+    (HEADER + "\n10,10,180,0.0,0.01,-70,0.02\n", r"column 'M22': -70 is not a normalized element"),
+    (HEADER + "\n10,10,180,0.0,0.01\n", r"line 2: 5 cells, the header has 7 columns"),
+    ("theta_i_deg,theta_r_deg,phi_deg,M01,M01_sigma,M22\n10,10,180,0,0.01,-0.7\n",
+     r"missing column 'M22_sigma'"),
+    ("theta_i_deg,theta_r_deg,phi_deg,M01,M01_sd\n10,10,180,0,0.01\n", r"column 'M01_sd': unknown column"),
+    ("theta_i_deg,theta_r_deg,phi_deg,M00,M01\n10,10,180,1,0\n", r"column 'M00': unknown column \(M00 is"),
+    ("# only a comment\n", r"no header line"),
+    (HEADER + "\n", r"header but no data rows"),
+    (HEADER + ",n_samples\n10,10,180,0,0.01,-0.7,0.02,2.5\n", r"column 'n_samples': n_samples must be an integer"),
+])
+def test_csv_errors_name_file_line_column(tmp_path, body, match):
+    p = write(tmp_path, "# comment line\n" + body if body.startswith("theta") else body)
+    with pytest.raises(MeasurementFileError) as info:
+        read_measurements(p)
+    text = str(info.value)
+    assert str(p) in text
+    # the comment line shifts data lines by one: line numbers count every line of the file
+    import re
+    expected = match
+    if body.startswith("theta"):
+        expected = re.sub(r"line (\d)", lambda m: f"line {int(m.group(1)) + 1}", match)
+    assert re.search(expected, text), text
+
+
+def test_csv_missing_file(tmp_path):
+    with pytest.raises(MeasurementFileError, match="does not exist"):
+        read_measurements(tmp_path / "nope.csv")
+
+
+# ---------------------------------------------------------------------------- CLI
+
+def test_cli_end_to_end_on_tiny_csv(tmp_path, capsys):
+    a = np.radians([20.0, 40.0, 60.0, 75.0])
+    meas = synthetic_measurements(a, a, np.pi, ("M01", "M22", "M23"), **FSA, noise=0.01, n_samples=64, rng=5)
+    p = write_measurements(tmp_path / "tiny.csv", meas)
+    png = tmp_path / "fit.png"
+    rc = cli_main([str(p), "--fit", "n,k", "--rms-slope", "0.43", "-o", str(png)])
+    out = capsys.readouterr().out
+    assert rc == 0
+    assert "n         = 1.2" in out and "k         = 10." in out
+    assert '<bsdf type="hyde">' in out and "reduced chi^2" in out
+    assert png.stat().st_size > 10_000
+
+
+def test_cli_reports_bad_file_with_exit_code_2(tmp_path, capsys):
+    p = write(tmp_path, HEADER + "\n10,10,180,x,0.01,-0.7,0.02\n")
+    assert cli_main([str(p)]) == 2
+    assert "line 2, column 'M01'" in capsys.readouterr().err
+    assert cli_main([str(p), "--fit", "n,q"]) == 2
