@@ -360,8 +360,17 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
 
 
 def loss_and_gradient(scene, loss_fn: StokesLoss, values: dict, *, spp: int, seed: int,
-                      bsdf: str = "hyde") -> tuple[float, dict]:
-    """The loss at ``values`` and its AD gradient with respect to each of them (one render)."""
+                      seed_grad: int | None = None, bsdf: str = "hyde") -> tuple[float, dict]:
+    """The loss at ``values`` and its AD gradient with respect to each of them.
+
+    ``mi.render`` differentiates in a second pass whose samples come from ``seed_grad``;
+    by default (None) Mitsuba derives a decorrelated one from ``seed`` (what the
+    optimization uses: the gradient is then that of (E[image] - reference)^2, without
+    the noise-variance term).  ``seed_grad=seed`` (seed >= 1) makes the gradient pass
+    reuse the primal samples: the gradient of exactly the loss that a finite
+    difference with that seed sees (computed by tracing the integrator's primal render
+    with AD on, as ``mi.render`` refuses equal seeds).
+    """
     import drjit as dr
     import mitsuba as mi
 
@@ -373,9 +382,20 @@ def loss_and_gradient(scene, loss_fn: StokesLoss, values: dict, *, spp: int, see
         dr.enable_grad(latent[p])
         params[keys[p]] = latent[p] * SQRT2 if (p == "rms_slope" and bsdf == "roughconductor") else latent[p]
     params.update()
-    img = mi.render(scene, params, spp=int(spp), seed=int(seed))
-    loss = loss_fn(stokes_images(img, channel_names(scene)))
-    dr.backward(loss)
+    if seed_grad is not None and int(seed_grad) == int(seed):
+        # mi.render refuses equal seeds; the integrator's own render, traced with AD on,
+        # differentiates its primal samples directly (fine for small images)
+        # (evaluated loops: reverse-mode AD cannot go through the path tracer's symbolic loop)
+        with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, False):
+            img = scene.integrator().render(scene, scene.sensors()[0], seed=int(seed), spp=int(spp),
+                                            develop=True, evaluate=False)
+            loss = loss_fn(stokes_images(img, channel_names(scene)))
+            dr.backward(loss)
+    else:
+        img = mi.render(scene, params, spp=int(spp), seed=int(seed),
+                        seed_grad=0 if seed_grad is None else int(seed_grad))
+        loss = loss_fn(stokes_images(img, channel_names(scene)))
+        dr.backward(loss)
     grads = {p: float(np.asarray(dr.grad(latent[p])).ravel()[0]) for p in values}
     return float(np.asarray(loss).ravel()[0]), grads
 
