@@ -256,3 +256,17 @@ def test_demo_cli_tiny(tmp_path):
     for name in ("demo.exr", "demo_intensity.png", "demo_dolp.png", "demo_aolp.png", "demo_docp.png",
                  "demo_overview.png"):
         assert (tmp_path / name).stat().st_size > 1000, name
+
+
+def test_demo_scalar_variant(tmp_path):
+    """The scalar fallback path renders and writes the same files (roughconductor metals here,
+    so that this test exercises the render/EXR code on the scalar variant only)."""
+    from hyde_bsdf.demo import cli_main
+    from hyde_bsdf.stokes_io import read_stokes_exr
+
+    code = cli_main(["-o", str(tmp_path), "--variant", "scalar_spectral_polarized", "--bsdf", "roughconductor",
+                     "--width", "12", "--height", "8", "--spp", "2"])
+    assert code == 0
+    st = read_stokes_exr(tmp_path / "demo.exr")
+    assert st["metadata"]["variant"] == "scalar_spectral_polarized"
+    assert st["S0"].shape == (8, 12, 3) and st["S0"].max() > 0
