@@ -34,7 +34,6 @@ to 0 and reported in the ``valid`` mask of :func:`polarization_quantities`.
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np

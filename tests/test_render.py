@@ -12,7 +12,6 @@ Physics checked:
 """
 import importlib.util
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path
