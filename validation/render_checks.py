@@ -378,7 +378,8 @@ def plot_furnace(rows: list[dict], images: dict, path: Path, title: str) -> None
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.4))
-    vmin, vmax = 0.8, 1.2
+    pred = images["predicted"][np.isfinite(images["predicted"])]
+    vmin, vmax = min(0.8, float(pred.min()) - 0.02), max(1.2, float(pred.max()) + 0.02)
     for ax, key, name in ((axes[0], "rendered", "rendered S0"), (axes[1], "predicted", "predicted")):
         im = ax.imshow(images[key], vmin=vmin, vmax=vmax, cmap="viridis")
         ax.set_title(name, fontsize=10)
