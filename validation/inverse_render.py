@@ -16,10 +16,11 @@ mapped.  (At beta = 45 deg even the full Stokes image would not do: there
 |r_p|^2 = |r_s|^4 for every index (Abeles), so S1 follows from S0.)
 
 Writes to OUTDIR (default out/validation/): inverse_render.png, inverse_render.csv
-(final values and errors), inverse_history_<run>.csv (trajectories),
-inverse_identifiability.png, inverse_landscape.csv.
+(final values and errors), inverse_history_<scene>_<loss>.csv (trajectories),
+inverse_identifiability.png, inverse_landscape.csv, inverse_valley.csv.
 
-    python validation/inverse_render.py [-o OUTDIR] [--iterations 400] [--quick]
+    python validation/inverse_render.py [-o OUTDIR] [--iterations 400]
+                                        [--iterations-directional 1000] [--quick]
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ from hyde_bsdf import inverse as inv
 
 
 def recovery(out, iterations, spp, spp_ref, res, lighting, tag, runs=("stokes", "s0")):
+    """Reference at TRUTH, then one Adam run per loss from START."""
     scene = inv.load_scene(None, res=res, spp=spp, lighting=lighting)
     ref = inv.render_reference(scene, inv.TRUTH, spp_ref, seed=0)
     results = {}
@@ -65,10 +67,39 @@ def landscape(scene, spp, grid_n=15, seed=7):
     return etas, ks, maps
 
 
+def valley_profile(scene, spp, seed=7, points=13):
+    """Both losses along the curve of equal facet reflectance A(beta = 60 deg) through the truth.
+
+    The curve k(eta) solves A(60 deg; eta, k) = A(60 deg; truth) with the NumPy Fresnel terms
+    (:mod:`hyde_bsdf.fresnel`); along it the S0 image barely changes (one facet angle), so the
+    S0 loss stays at its floor while the Stokes loss, which also sees |r_s|^2 - |r_p|^2, rises.
+    """
+    from scipy.optimize import brentq
+
+    from hyde_bsdf.fresnel import fresnel_mueller_terms
+
+    c = np.cos(np.radians(60.0))
+    A = lambda e, k: float(fresnel_mueller_terms(np.array(c), e, k)[0])
+    target = A(inv.TRUTH["eta"], inv.TRUTH["k"])
+    ref = inv.render_reference(scene, inv.TRUTH, spp, seed=seed)
+    losses = {comp: inv.StokesLoss(ref, components=comp) for comp in ("s0", "stokes")}
+    rows = []
+    for e in np.exp(np.linspace(np.log(0.6), np.log(6.0), points)):
+        try:
+            k = brentq(lambda kk: A(e, kk) - target, 0.01, 40.0)
+        except ValueError:       # no k gives this reflectance at this eta
+            continue
+        S = inv.render_reference(scene, {"rms_slope": inv.TRUTH["rms_slope"], "eta": e, "k": k}, spp, seed=seed)
+        rows.append({"eta": e, "k": k, "loss_s0": losses["s0"].numpy(S), "loss_stokes": losses["stokes"].numpy(S)})
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("-o", "--outdir", default="out/validation")
-    ap.add_argument("--iterations", type=int, default=400)
+    ap.add_argument("--iterations", type=int, default=400, help="Adam iterations, two-light scene")
+    ap.add_argument("--iterations-directional", type=int, default=1000,
+                    help="Adam iterations, directional scene (its Stokes valley is long and narrow)")
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--spp-ref", type=int, default=512)
     ap.add_argument("--res", type=int, default=64)
@@ -76,9 +107,9 @@ def main(argv=None):
     args = ap.parse_args(argv)
     out = Path(args.outdir)
     out.mkdir(parents=True, exist_ok=True)
-    it, res, grid_n = args.iterations, args.res, 15
+    it, itd, res, grid_n = args.iterations, args.iterations_directional, args.res, 15
     if args.quick:
-        it, res, grid_n = 20, 24, 5
+        it, itd, res, grid_n = 20, 20, 24, 5
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -86,8 +117,16 @@ def main(argv=None):
     t0 = time.perf_counter()
     inv.prepare()
     _, refA, A = recovery(out, it, args.spp, args.spp_ref, res, "points", "points")
-    sceneB, _, B = recovery(out, it, args.spp, args.spp_ref, res, "directional", "directional")
+    sceneB, _, B = recovery(out, itd, args.spp, args.spp_ref, res, "directional", "directional")
     etas, ks, maps = landscape(sceneB, args.spp, grid_n)
+    valley = valley_profile(sceneB, args.spp)
+    with (out / "inverse_valley.csv").open("w", newline="") as fh:
+        fh.write("# directional light (beta = 60 deg): losses along the curve of equal facet reflectance "
+                 "A(60 deg) through the truth; rms_slope at truth; same seed for reference and renders\n")
+        w = csv.DictWriter(fh, fieldnames=list(valley[0]))
+        w.writeheader()
+        for r in valley:
+            w.writerow({k: f"{v:.6g}" for k, v in r.items()})
 
     rows = []
     for tag, runs in (("points", A), ("directional", B)):
@@ -143,8 +182,8 @@ def main(argv=None):
     plt.close(fig)
 
     # ---- figure 2: identifiability (directional light)
-    fig, axes = plt.subplots(1, 4, figsize=(18, 4.2))
-    for a, comp in zip(axes[:2], ("s0", "stokes")):
+    fig, axes = plt.subplots(1, 5, figsize=(22, 4.2))
+    for a, comp in zip(axes[:2], ("s0", "stokes")):  # maps[comp][i_eta, j_k]
         im = a.pcolormesh(ks, etas, np.log10(maps[comp] + 1e-12), shading="auto", cmap="viridis")
         a.set_xscale("log")
         a.set_yscale("log")
@@ -163,11 +202,19 @@ def main(argv=None):
         for a, p in zip(axes[2:], ("eta", "k")):
             a.plot(itx, [h[p] for h in r.history], f"C{c}-",
                    label=f"{comp} loss: {r.final[p]:.3g} ({100 * (r.final[p] / inv.TRUTH[p] - 1):+.1f} %)")
-    for a, p in zip(axes[2:], ("eta", "k")):
+    for a, p in zip(axes[2:4], ("eta", "k")):
         a.axhline(inv.TRUTH[p], color="k", ls="--", lw=0.8)
         a.set_title(f"{p}: directional light, phase 120 deg")
         a.set_xlabel("iteration")
         a.legend(fontsize=7)
+    ve = [r["eta"] for r in valley]
+    axes[4].semilogy(ve, [r["loss_s0"] for r in valley], "C0o-", label="S0 loss")
+    axes[4].semilogy(ve, [r["loss_stokes"] for r in valley], "C1s-", label="Stokes loss")
+    axes[4].axvline(inv.TRUTH["eta"], color="k", ls="--", lw=0.8)
+    axes[4].set_xscale("log")
+    axes[4].set_xlabel("eta along the curve A(60 deg; eta, k) = A(60 deg; truth)")
+    axes[4].set_title("losses along the S0 valley", fontsize=9)
+    axes[4].legend(fontsize=7)
     fig.suptitle("identifiability: one facet angle (beta = 60 deg); S0 alone fixes one combination "
                  "of n and k, S1-S3 fix both", fontsize=9)
     fig.tight_layout()
