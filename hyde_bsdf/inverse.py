@@ -33,7 +33,7 @@ eta = n - jk describes the same material with the same numbers.
 
 Command line::
 
-    hyde-bsdf invert [--scene SCENE.xml | (built-in scene)] [--truth rms_slope=0.3,eta=1.5,k=3]
+    hyde-bsdf invert [--scene SCENE.xml [--target PREFIX] | (built-in scene)] [--truth rms_slope=0.3,eta=1.5,k=3]
                      [--reference REF.exr] [--start rms_slope=0.6,eta=3,k=6]
                      [--fit rms_slope,eta,k] [--loss stokes|s0] [--iterations 200]
                      [--spp 16] [--spp-ref 512] [--res 64] [--lr 0.05] [--seed 0] [-o OUTDIR]
@@ -167,7 +167,8 @@ def parameter_keys(params, names=PARAMETERS, prefix: str | None = None) -> dict:
         if len(found) != 1:
             raise ValueError(f"need exactly one BSDF parameter for {name!r} "
                              f"(keys ending in {' or '.join(suffix[name])}"
-                             f"{'' if prefix is None else ' under ' + repr(prefix)}); found {found}")
+                             f"{'' if prefix is None else ' under ' + repr(prefix)}); found {found}"
+                             f"{'; name the BSDF with prefix= (CLI: --target)' if len(found) > 1 else ''}")
         out[name] = found[0]
     return out
 
@@ -251,12 +252,12 @@ def _set(params, keys, values, bsdf="hyde"):
     params.update()
 
 
-def render_reference(scene, values: dict, spp: int, seed: int = 0, bsdf="hyde") -> np.ndarray:
+def render_reference(scene, values: dict, spp: int, seed: int = 0, bsdf="hyde", prefix=None) -> np.ndarray:
     """Luminance Stokes images (4, H, W) (float64) of ``scene`` with the BSDF set to ``values``."""
     import mitsuba as mi
 
     params = mi.traverse(scene)
-    _set(params, parameter_keys(params, tuple(values)), values, bsdf)
+    _set(params, parameter_keys(params, tuple(values), prefix), values, bsdf)
     img = mi.render(scene, spp=int(spp), seed=int(seed))
     return np.array([np.asarray(s, dtype=np.float64)
                      for s in stokes_images(img, channel_names(scene))])
@@ -283,7 +284,8 @@ class InversionResult:
 
 def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iterations: int = 200,
            lr: float = 0.05, spp: int = 16, seed: int = 0, truth: dict | None = None,
-           bsdf: str = "hyde", progress: bool = True, average_last: int = 20) -> InversionResult:
+           bsdf: str = "hyde", progress: bool = True, average_last: int = 20,
+           prefix: str | None = None) -> InversionResult:
     """Optimize the BSDF parameters ``fit`` of ``scene`` to minimize ``loss_fn``.
 
     ``start`` gives every parameter's start value (the unfitted ones stay there).
@@ -291,6 +293,7 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
     iteration i renders ``spp`` samples with seed ``seed + 1 + i``.  The final value
     is the mean of the parameters over the last ``average_last`` iterations
     (Polyak averaging: it cancels the Monte-Carlo jitter of single steps).
+    ``prefix`` picks the BSDF when the scene has several (see :func:`parameter_keys`).
     """
     import drjit as dr
     import mitsuba as mi
@@ -304,7 +307,7 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
     if not (isinstance(iterations, int) and iterations >= 1):
         raise ValueError(f"iterations must be an integer >= 1, got {iterations!r}")
     params = mi.traverse(scene)
-    keys = parameter_keys(params, PARAMETERS)
+    keys = parameter_keys(params, PARAMETERS, prefix)
     fixed = {p: float(start[p]) for p in PARAMETERS if p not in fit}
     _set(params, keys, {**fixed, **{p: float(start[p]) for p in fit}}, bsdf)
     opt = mi.ad.Adam(lr=lr)
@@ -494,6 +497,8 @@ def build_parser():
                     "same numbers) from a Stokes image by differentiable rendering (llvm_ad_spectral_polarized).")
     ap.add_argument("--scene", default=None, help="Mitsuba XML scene with one hyde BSDF (default: the "
                     "built-in sphere scene, = scenes/inverse.xml)")
+    ap.add_argument("--target", default=None, help="key prefix of the BSDF to recover when the scene has "
+                    "several, e.g. sphere.bsdf (mi.traverse names)")
     ap.add_argument("--reference", default=None, help="reference Stokes EXR (hyde-bsdf render output) of "
                     "the same scene, resolution and camera; default: render one at --truth")
     ap.add_argument("--truth", default="rms_slope=0.3,eta=1.5,k=3",
@@ -532,7 +537,7 @@ def cli_main(argv=None) -> int:
         kw = {"res": args.res, "spp": args.spp} if args.scene is None else {}
         scene = load_scene(args.scene, **kw)
         params = mi_traverse(scene)
-        parameter_keys(params)   # exactly one hyde BSDF, or a clear error
+        parameter_keys(params, PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
         if args.reference:
             from .stokes_io import read_stokes_exr
 
@@ -541,14 +546,14 @@ def cli_main(argv=None) -> int:
             truth_known = args.truth != build_parser().get_default("truth")
         else:
             _log(f"rendering the reference at {truth} ({args.spp_ref} spp)")
-            ref = render_reference(scene, truth, args.spp_ref, seed=args.seed)
+            ref = render_reference(scene, truth, args.spp_ref, seed=args.seed, prefix=args.target)
             truth_known = True
         loss_fn = StokesLoss(ref, components=args.loss)
     except (ValueError, RuntimeError, OSError) as exc:
         print(f"hyde-bsdf invert: error: {exc}", file=sys.stderr)
         return 2
     res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
-                 seed=args.seed, truth=truth if truth_known else None)
+                 seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
     out = Path(args.output)
     write_history(res, out / "invert_history.csv")
     plot_history({args.loss: res}, out / "invert.png",
