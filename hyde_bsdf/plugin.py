@@ -302,13 +302,23 @@ def _make_class():
 
         # ------------------------------------------------------------------
         def _update_derived(self):
-            """alpha and the DHR texture coordinate follow rms_slope (kept in the AD graph)."""
-            self.m_alpha = SQRT2 * self.m_rms_slope
-            if self.m_dhr is not None:
-                self.m_u_slope = self.m_dhr.slope_coord(self.m_rms_slope)
-                if self.m_diffuse == "reciprocal":
-                    # without shadowing rho_avg can reach 1: keep the division finite
-                    self.m_one_minus_avg = dr.maximum(self.m_dhr.one_minus_rho_avg(self.m_u_slope), 1e-30)
+            """Nothing is cached: alpha, the DHR texture coordinate and 1 - rho_avg are derived
+            from rms_slope at every call (properties below), so each AD pass sees a fresh graph
+            edge from rms_slope (a derived copy made once would lose its gradient after the
+            first dr.backward, which consumes the graph)."""
+
+        @property
+        def m_alpha(self):
+            return SQRT2 * self.m_rms_slope
+
+        @property
+        def m_u_slope(self):
+            return self.m_dhr.slope_coord(self.m_rms_slope)
+
+        @property
+        def m_one_minus_avg(self):
+            # without shadowing rho_avg can reach 1: keep the division finite
+            return dr.maximum(self.m_dhr.one_minus_rho_avg(self.m_u_slope), 1e-30)
 
         def traverse(self, callback):
             flags = mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous
@@ -509,7 +519,8 @@ def _make_class():
             choose_spec = sample1 < p_spec
             m, pdf_m = distr.sample(si.wi, sample2)
             # a back-facing normal (possible without visible-normal sampling) is a failed sample
-            active = active & (~choose_spec | ((pdf_m != 0) & (dr.dot(si.wi, m) > 0)))
+            # (sample1 >= p_spec), not ~choose_spec: in scalar variants choose_spec is a Python bool
+            active = active & ((sample1 >= p_spec) | ((pdf_m != 0) & (dr.dot(si.wi, m) > 0)))
             wo_spec = mi.reflect(si.wi, m)
             wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
             bs.wo = dr.select(choose_spec, wo_spec, wo_diff)
