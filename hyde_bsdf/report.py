@@ -72,8 +72,11 @@ def machine_info() -> dict:
 
 
 def _load(path: Path):
-    spec = importlib.util.spec_from_file_location(f"hyde_validation_{path.stem}", path)
+    if str(path.parent) not in sys.path:      # scripts import their siblings by name
+        sys.path.insert(0, str(path.parent))
+    spec = importlib.util.spec_from_file_location(path.stem, path)
     module = importlib.util.module_from_spec(spec)
+    sys.modules[path.stem] = module           # dataclasses look their module up here
     spec.loader.exec_module(module)
     return module
 
