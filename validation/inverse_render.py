@@ -17,7 +17,8 @@ mapped.  (At beta = 45 deg even the full Stokes image would not do: there
 
 Writes to OUTDIR (default out/validation/): inverse_render.png, inverse_render.csv
 (final values and errors), inverse_history_<scene>_<loss>.csv (trajectories),
-inverse_identifiability.png, inverse_landscape.csv, inverse_valley.csv.
+inverse_identifiability.png, inverse_landscape.csv, inverse_valley.csv,
+inverse_endpoints.csv.
 
     python validation/inverse_render.py [-o OUTDIR] [--iterations 400]
                                         [--iterations-directional 1000] [--quick]
@@ -94,6 +95,27 @@ def valley_profile(scene, spp, seed=7, points=13):
     return rows
 
 
+def endpoint_losses(scene, runs, spp, spp_ref, seed=7):
+    """Both losses at the truth and at each run's end point (same seed as the reference: no
+    sampling noise), and the noise floor an iteration sees (a 16-spp render at the truth
+    against the high-spp reference)."""
+    ref_crn = inv.render_reference(scene, inv.TRUTH, spp, seed=seed)
+    ref_hi = inv.render_reference(scene, inv.TRUTH, spp_ref, seed=0)
+    rows = []
+    points = {"truth": inv.TRUTH, **{f"end of {c} run": r.final for c, r in runs.items()}}
+    for label, values in points.items():
+        S = inv.render_reference(scene, values, spp, seed=seed)
+        row = {"point": label, **{p: values[p] for p in inv.PARAMETERS}}
+        for comp in ("s0", "stokes"):
+            row[f"loss_{comp}"] = inv.StokesLoss(ref_crn, components=comp).numpy(S)
+        rows.append(row)
+    S = inv.render_reference(scene, inv.TRUTH, spp, seed=seed + 1)
+    rows.append({"point": f"noise floor ({spp} spp vs {spp_ref} spp reference)",
+                 **{p: inv.TRUTH[p] for p in inv.PARAMETERS},
+                 **{f"loss_{c}": inv.StokesLoss(ref_hi, components=c).numpy(S) for c in ("s0", "stokes")}})
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("-o", "--outdir", default="out/validation")
@@ -120,6 +142,14 @@ def main(argv=None):
     sceneB, _, B = recovery(out, itd, args.spp, args.spp_ref, res, "directional", "directional")
     etas, ks, maps = landscape(sceneB, args.spp, grid_n)
     valley = valley_profile(sceneB, args.spp)
+    ends = endpoint_losses(sceneB, B, args.spp, args.spp_ref)
+    with (out / "inverse_endpoints.csv").open("w", newline="") as fh:
+        fh.write("# directional light (beta = 60 deg): both losses at the truth and at the end points of the "
+                 "two runs, rendered with the reference's seed (no sampling noise between them)\n")
+        w = csv.DictWriter(fh, fieldnames=list(ends[0]))
+        w.writeheader()
+        for r in ends:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
     with (out / "inverse_valley.csv").open("w", newline="") as fh:
         fh.write("# directional light (beta = 60 deg): losses along the curve of equal facet reflectance "
                  "A(60 deg) through the truth; rms_slope at truth; same seed for reference and renders\n")
@@ -225,6 +255,9 @@ def main(argv=None):
     for r in rows:
         print(f"{r['scene']:12s} {r['loss']:7s} {r['parameter']:10s} {r['truth']:7.4g} {r['final']:9.5g} "
               f"{100 * r['rel_error']:+7.2f}%  {'yes' if r['within'] else 'NO'}")
+    print("directional scene, losses without sampling noise:")
+    for r in ends:
+        print(f"  {r['point']:45s} S0 loss {r['loss_s0']:.3g}   Stokes loss {r['loss_stokes']:.3g}")
     print(f"s/iteration (stokes loss, points scene): {A['stokes'].seconds_per_iteration:.3f}; "
           f"total {time.perf_counter() - t0:.0f} s; wrote {out}/inverse_*.png/csv")
     ok = all(r["within"] for r in rows if r["scene"] == "points" and r["loss"] == "stokes")
