@@ -442,28 +442,49 @@ def check_partition(partition_length, corr_length_wl, rough=True):
 # One partition (the unit of parallel work)
 # ---------------------------------------------------------------------------
 
-def _limit_blas_threads(n=1):
-    """Limit OpenBLAS to n threads in this process (workers share the cores; one BLAS thread each).
+def _openblas_libs():
+    """(set_num_threads, get_num_threads) ctypes functions of every OpenBLAS loaded in this process.
 
-    NumPy's and SciPy's wheels each bundle OpenBLAS; we call their
-    set_num_threads through ctypes (what threadpoolctl does) and skip any we
-    cannot find.
+    NumPy's and SciPy's wheels each bundle OpenBLAS; we reach their thread
+    controls through ctypes (what threadpoolctl does) and skip any we cannot find.
     """
     try:
         maps = open("/proc/self/maps").read().split("\n")
     except OSError:  # not Linux: leave the BLAS alone
-        return
-    libs = {line.split()[-1] for line in maps if "openblas" in line.lower() and line.split()[-1].startswith("/")}
-    for path in libs:
+        return []
+    paths = {line.split()[-1] for line in maps if "openblas" in line.lower() and line.split()[-1].startswith("/")}
+    found = []
+    for path in sorted(paths):
         try:
             lib = ctypes.CDLL(path)
         except OSError:
             continue
-        for name in ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads", "openblas_set_num_threads"):
-            fn = getattr(lib, name, None)
-            if fn is not None:
-                fn(int(n))
+        for suffix in ("64_", "", "_64_"):
+            set_fn = getattr(lib, "scipy_openblas_set_num_threads" + suffix, None)
+            get_fn = getattr(lib, "scipy_openblas_get_num_threads" + suffix, None)
+            if set_fn is not None and get_fn is not None:
+                found.append((set_fn, get_fn))
                 break
+        else:
+            set_fn = getattr(lib, "openblas_set_num_threads", None)
+            get_fn = getattr(lib, "openblas_get_num_threads", None)
+            if set_fn is not None and get_fn is not None:
+                found.append((set_fn, get_fn))
+    return found
+
+
+def _limit_blas_threads(n=1):
+    """Limit OpenBLAS to n threads in this process; returns the previous counts (for restoring)."""
+    previous = []
+    for set_fn, get_fn in _openblas_libs():
+        previous.append((set_fn, int(get_fn())))
+        set_fn(int(n))
+    return previous
+
+
+def _restore_blas_threads(previous):
+    for set_fn, count in previous:
+        set_fn(count)
 
 
 def _worker_init():
@@ -509,10 +530,15 @@ class SerialExecutor(cf.Executor):
 
     def submit(self, fn, /, *args, **kwargs):
         fut = cf.Future()
+        # one BLAS thread while the task runs: threaded BLAS only slows down these matrix sizes
+        # (the 2-thread LU of a 500-unknown partition is 10x slower here) -- restored afterwards
+        previous = _limit_blas_threads(1)
         try:
             fut.set_result(fn(*args, **kwargs))
         except BaseException as exc:  # hand the error to the caller through the future
             fut.set_exception(exc)
+        finally:
+            _restore_blas_threads(previous)
         return fut
 
 
