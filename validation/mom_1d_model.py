@@ -134,5 +134,22 @@ def main(argv=None):
     return 0
 
 
+def validate(outdir="out/validation", quick=False):
+    """Runs after fig6_mom.py in the report and reuses its MoM result (OUTDIR/fig6_mom.npz)."""
+    main(["-o", str(outdir)])
+    with open(os.path.join(str(outdir), "mom_1d_model_table.csv"), newline="") as fh:
+        table = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+    tol = 2.5 if quick else 1.5
+    checks = []
+    for r in table:
+        ti = r["theta_i_deg"]
+        checks.append(dict(name=f"MoM vs 1-D model, absolute (no normalisation), theta_i = {ti:g} deg: rms dB over the lobe",
+                           value=r["rms_diff_dB"], tolerance=tol, passed=r["rms_diff_dB"] <= tol))
+        checks.append(dict(name=f"energy the specular lobe misses (1 - rho_s, 1-D model) vs MoM outside the lobe, "
+                                f"theta_i = {ti:g} deg", value=f"{r['model_missed_by_lobe']:.4f} vs {r['mom_outside_lobe']:.4f}",
+                           tolerance="reported", passed=True))
+    return checks
+
+
 if __name__ == "__main__":
     sys.exit(main())

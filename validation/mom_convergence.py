@@ -96,8 +96,8 @@ def main(argv=None):
     import matplotlib.pyplot as plt
     from hyde_bsdf import model1d
 
-    ppws = [4, 6, 10, 20] if args.quick else [4, 5, 6, 8, 10, 12, 15, 20]
-    Ms = [5, 20] if args.quick else [5, 10, 20, 50, 100]
+    ppws = [4, 6, 10, 15] if args.quick else [4, 5, 6, 8, 10, 12, 15, 20]
+    Ms = [5, 10] if args.quick else [5, 10, 20, 50, 100]
     Lps = [150, 75] if args.quick else [300, 150, 75, 50]
     rows = []
     load0 = open("/proc/loadavg").read().split()[0] if os.path.exists("/proc/loadavg") else "?"
@@ -183,6 +183,18 @@ def main(argv=None):
               f"{r['cpu_s']:.1f} | {r['wall_s']:.1f} | {r['lobe_error_dB']:.3f} | {r['power_error']:.4f} | {r['warnings']} |")
     print(f"load average {load0} -> {load1}; wrote {png}")
     return 0
+
+
+def validate(outdir="out/validation", quick=False):
+    main(["-o", str(outdir)] + (["--quick"] if quick else []))
+    with open(os.path.join(str(outdir), "mom_convergence.csv"), newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    a = {float(r["pts_per_wl"]): float(r["lobe_error_dB"]) for r in rows if r["sweep"] == "A_pts_per_wl"}
+    power = max(float(r["power_error"]) for r in rows if float(r["pts_per_wl"]) >= 10)
+    return [dict(name="MoM convergence: lobe error at the default 10 pts/lambda vs 20 pts/lambda (dB)",
+                 value=a.get(10.0, float("nan")), tolerance=0.1, passed=a.get(10.0, 1.0) <= 0.1),
+            dict(name="MoM convergence: max |power balance - 1| at >= 10 pts/lambda, all sweeps",
+                 value=power, tolerance=0.02, passed=power <= 0.02)]
 
 
 if __name__ == "__main__":
