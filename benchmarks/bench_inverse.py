@@ -10,6 +10,8 @@ compilation), the median of the later ones, and the process's resident memory
 before the loop and at its peak (ru_maxrss).  roughconductor gets the same
 Beckmann roughness (alpha = sqrt(2) rms_slope) and the same eta, k; it has no
 diffuse term and uses Smith shadowing, so it is the cost floor of a conductor lobe.
+The multijitter sampler rounds sample counts to a product of two near-equal integers
+(16 stays 16; 32 becomes 35): prefer squares.
 
     python benchmarks/bench_inverse.py [--res 64] [--spp 16] [--iterations 40] [--csv out/bench_inverse.csv]
 """
@@ -80,7 +82,8 @@ def main(argv=None):
         if out.returncode != 0:
             print(out.stderr, file=sys.stderr)
             return 1
-        rows.append(json.loads(out.stdout.strip().splitlines()[-1]))
+        # Mitsuba's log (e.g. the multijitter sampler's rounding warning) also goes to stdout
+        rows.append(json.loads(out.stdout[out.stdout.rindex('{"config"'):].splitlines()[0]))
     base = next(r for r in rows if r["config"] == "roughconductor")
     print(f"inverse-rendering iteration, llvm_ad_spectral_polarized, {args.res}x{args.res}, {args.spp} spp, "
           f"{args.iterations} iterations, {os.cpu_count()} CPU threads")
