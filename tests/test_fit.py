@@ -94,15 +94,20 @@ def test_fitted_material_loads_into_mitsuba():
 
     import hyde_bsdf
 
+    previous = mi.variant()
     mi.set_variant("scalar_spectral_polarized")
-    hyde_bsdf.register()
-    r = fit_mueller(TH, TH, np.pi, exact(GOLD), fit=("n", "k"), rms_slope=0.44)
-    bsdf = mi.load_dict(r.plugin_dict())
-    p = mi.traverse(bsdf)
-    assert p["eta.value"] == pytest.approx(0.285, rel=1e-4)
-    assert p["k.value"] == pytest.approx(7.3523, rel=1e-4)
-    assert p["rms_slope"] == pytest.approx(0.44, rel=1e-6)
-    mi.load_string(f'<scene version="3.0.0"><shape type="sphere">{r.plugin_xml()}</shape></scene>')
+    try:
+        hyde_bsdf.register()
+        r = fit_mueller(TH, TH, np.pi, exact(GOLD), fit=("n", "k"), rms_slope=0.44)
+        bsdf = mi.load_dict(r.plugin_dict())
+        p = mi.traverse(bsdf)
+        assert p["eta.value"] == pytest.approx(0.285, rel=1e-4)
+        assert p["k.value"] == pytest.approx(7.3523, rel=1e-4)
+        assert p["rms_slope"] == pytest.approx(0.44, rel=1e-6)
+        mi.load_string(f'<scene version="3.0.0"><shape type="sphere">{r.plugin_xml()}</shape></scene>')
+    finally:
+        if previous is not None:
+            mi.set_variant(previous)
 
 
 def test_too_few_data_refused_and_singular_warned():

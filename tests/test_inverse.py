@@ -20,10 +20,13 @@ AT = {"rms_slope": 0.4, "eta": 2.0, "k": 4.0}
 
 @pytest.fixture(scope="module")
 def tiny():
+    previous = mi.variant()
     inv.prepare()
     scene = inv.load_scene(None, res=RES, spp=SPP)
     ref = inv.render_reference(scene, inv.TRUTH, 64, seed=0)
-    return scene, ref
+    yield scene, ref
+    if previous is not None and previous != mi.variant():
+        mi.set_variant(previous)
 
 
 def test_loss_is_zero_at_reference_and_mask_excludes_silhouette(tiny):
