@@ -8,7 +8,7 @@
 
 Writes dhr_convergence.png/.csv, dhr_table_error.png/.csv, dhr_table_resolution.png/.csv into OUTDIR.
 """
-import argparse
+import sys
 import csv
 import math
 import time
@@ -18,6 +18,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cli  # noqa: E402
 
 from hyde_bsdf import dhr
 
@@ -154,9 +157,4 @@ def validate(outdir="out/validation", quick=False):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("-o", "--outdir", default="out/validation")
-    ap.add_argument("--quick", action="store_true")
-    a = ap.parse_args()
-    for c in validate(a.outdir, a.quick):
-        print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
+    cli(validate, __doc__)

@@ -4,7 +4,7 @@ theta_r -> 90 deg while the Hyde pBRDF (V-groove G, Eq. 13) stays bounded.
 PEC, rms_slope = 0.3, specular plane (phi = pi), theta_i = 45, 60, 75, 85 deg.
 Writes fig4_priest_germer.png and .csv into OUTDIR (default out/validation).
 """
-import argparse
+import sys
 import csv
 import math
 from pathlib import Path
@@ -13,6 +13,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cli  # noqa: E402
 
 import hyde_bsdf
 
@@ -61,7 +64,4 @@ def validate(outdir="out/validation", quick=False):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("-o", "--outdir", default="out/validation")
-    for c in validate(ap.parse_args().outdir):
-        print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
+    cli(validate, __doc__)

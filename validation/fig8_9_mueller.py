@@ -8,7 +8,7 @@
 
 Full model of Eq. 17 (V-groove, diffuse term).  Writes fig8_9_mueller.png and .csv.
 """
-import argparse
+import sys
 import csv
 import math
 from pathlib import Path
@@ -17,6 +17,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cli  # noqa: E402
 
 import hyde_bsdf
 
@@ -77,7 +80,4 @@ def validate(outdir="out/validation", quick=False):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("-o", "--outdir", default="out/validation")
-    for c in validate(ap.parse_args().outdir):
-        print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
+    cli(validate, __doc__)

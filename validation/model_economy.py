@@ -14,7 +14,6 @@ Rule (documented in the README): a cheaper choice is the default wherever its im
 below the Monte-Carlo noise of a typical render (here: 32 spp); otherwise the more complete
 model stays the default.  Writes model_economy.png and .csv.
 """
-import argparse
 import csv
 import sys
 import time
@@ -24,6 +23,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cli  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from speed_accuracy_render import SURFACES, scene_dict  # noqa: E402
@@ -56,7 +58,7 @@ def _renders(scene, polarized):
 
 def _compare(a, b):
     """RMS of the mean difference and the RMS Monte-Carlo noise of one SPP render (not the mean)."""
-    (ma, sa, ta), (mb, sb, tb) = a, b
+    (ma, sa, ta), (mb, _, tb) = a, b
     noise = float(np.sqrt(np.mean(sa ** 2) * len(SEEDS)))   # one render's noise
     diff = float(np.sqrt(np.mean((ma - mb) ** 2)))
     return diff, noise, tb / ta
@@ -130,9 +132,4 @@ def validate(outdir="out/validation", quick=False):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("-o", "--outdir", default="out/validation")
-    ap.add_argument("--quick", action="store_true")
-    a = ap.parse_args()
-    for c in validate(a.outdir, a.quick):
-        print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
+    cli(validate, __doc__)

@@ -15,7 +15,6 @@ against accuracy, and a stability map of the plugin.
 
 Writes plugin_backends.png/.csv and plugin_stability.png/.csv.
 """
-import argparse
 import csv
 import math
 import time
@@ -26,8 +25,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+import sys
+
 import hyde_bsdf
 from hyde_bsdf import plugin_frames as pf
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import CLASSES, cli, stability_chart  # noqa: E402
 
 GOLD_MI = dict(eta=0.285, k=7.3523)          # n + ik at the plugin; the same numbers as the paper's n - jk
 RMS = 0.44
@@ -172,7 +176,6 @@ def _classify_plugin(mi, params, angles_deg, n, k):
 def stability(out, quick):
     import mitsuba as mi
     from hyde_bsdf.variants import set_variant
-    from stability_evaluator import CLASSES, COLOURS  # noqa: E402
 
     set_variant("llvm_ad_spectral_polarized", fallback=False)
     hyde_bsdf.register()
@@ -197,24 +200,9 @@ def stability(out, quick):
         res = [fn(v) for v in values]
         panels.append((title, values, res))
         rows += [[title, v, c, e, msg] for v, (c, e, msg) in zip(values, res)]
-    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.3 * len(panels) + 0.8))
-    for ax, (title, values, res) in zip(axes, panels):
-        x = np.arange(len(values))
-        ax.bar(x, 1, width=1.0, color=[COLOURS[c] for c, _, _ in res])
-        errs = np.array([e for _, e, _ in res])
-        ax2 = ax.twinx()
-        ax2.semilogy(x, np.where(np.isfinite(errs) & (errs > 0), errs, np.nan), "k.", ms=3)
-        ax2.set_ylim(1e-9, 1)
-        ticks = np.linspace(0, len(values) - 1, 6).astype(int)
-        ax.set_xticks(ticks, [f"{values[t]:.3g}" for t in ticks], fontsize=7)
-        ax.set_yticks([])
-        ax.set_title(title, fontsize=8)
-    handles = [plt.Rectangle((0, 0), 1, 1, color=COLOURS[c]) for c in CLASSES]
-    fig.legend(handles, CLASSES, loc="lower center", ncol=4, fontsize=8)
-    fig.suptitle("Plugin stability map, llvm_ad_spectral_polarized (dots: error vs evaluator)", fontsize=9)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
-    fig.savefig(out / "plugin_stability.png", dpi=120)
-    plt.close(fig)
+    stability_chart(panels, out / "plugin_stability.png",
+                    "Plugin stability map, llvm_ad_spectral_polarized (dots: error vs evaluator)",
+                    err_label="rel. err", err_ylim=(1e-9, 1.0))
     with open(out / "plugin_stability.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["sweep", "value", "class", "rel_error_vs_evaluator", "message"])
@@ -229,17 +217,10 @@ def stability(out, quick):
 
 
 def validate(outdir="out/validation", quick=False):
-    import sys
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     return backends(out, quick) + stability(out, quick)
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("-o", "--outdir", default="out/validation")
-    ap.add_argument("--quick", action="store_true")
-    a = ap.parse_args()
-    for c in validate(a.outdir, a.quick):
-        print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
+    cli(validate, __doc__)

@@ -10,7 +10,7 @@ same accuracy with either BSDF if the plugin costs nothing extra.
 
 Writes speed_accuracy_render.png and .csv.
 """
-import argparse
+import sys
 import csv
 import time
 from pathlib import Path
@@ -19,6 +19,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cli  # noqa: E402
 
 SURFACES = [("gold", 0.15, 0.285, 7.3523), ("alu", 0.3, 1.226, 10.413), ("floor", 0.4, 1.5, 0.0)]
 #: the default spp of `hyde-bsdf render` when the scene gives none is the scene's own; for this
@@ -134,9 +137,4 @@ def validate(outdir="out/validation", quick=False):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("-o", "--outdir", default="out/validation")
-    ap.add_argument("--quick", action="store_true")
-    a = ap.parse_args()
-    for c in validate(a.outdir, a.quick):
-        print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
+    cli(validate, __doc__)

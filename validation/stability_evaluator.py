@@ -12,21 +12,20 @@ Sweeps every input to its edges — theta_i, theta_r -> 0 and 90 deg, rms_slope 
 
 Writes stability_evaluator.png (one panel per sweep) and stability_evaluator.csv.
 """
-import argparse
 import csv
 import math
 from pathlib import Path
 
-import matplotlib
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+
+import sys
 
 import hyde_bsdf
 from hyde_bsdf.jones_mueller import jones_to_mueller
 
-CLASSES = ("accurate", "degrades", "refuses", "fails")
-COLOURS = {"accurate": "#2ca02c", "degrades": "#ff7f0e", "refuses": "#7f7f7f", "fails": "#d62728"}
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import CLASSES, cli, stability_chart  # noqa: E402
+
 
 
 def vector_reference(ti, tr, ph, s, n, k, pec):
@@ -115,25 +114,8 @@ def validate(outdir="out/validation", quick=False):
         res = [fn(v) for v in values]
         panels.append((title, values, res))
         rows += [[name, v, c, e, msg] for v, (c, e, msg) in zip(values, res)]
-    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.3 * len(panels) + 0.8))
-    for ax, (title, values, res) in zip(axes, panels):
-        x = np.arange(len(values))
-        ax.bar(x, 1, width=1.0, color=[COLOURS[c] for c, _, _ in res])
-        errs = np.array([e for _, e, _ in res])
-        ax2 = ax.twinx()
-        ax2.semilogy(x, np.where(np.isfinite(errs) & (errs > 0), errs, np.nan), "k.", ms=3)
-        ax2.set_ylim(1e-17, 1)
-        ax2.set_ylabel("rel. err", fontsize=7)
-        ticks = np.linspace(0, len(values) - 1, 6).astype(int)
-        ax.set_xticks(ticks, [f"{values[t]:.3g}" for t in ticks], fontsize=7)
-        ax.set_yticks([])
-        ax.set_title(title, fontsize=8)
-    handles = [plt.Rectangle((0, 0), 1, 1, color=COLOURS[c]) for c in CLASSES]
-    fig.legend(handles, CLASSES, loc="lower center", ncol=4, fontsize=8)
-    fig.suptitle("Evaluator stability map (bars: class; dots: error vs vector derivation)", fontsize=9)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
-    fig.savefig(out / "stability_evaluator.png", dpi=120)
-    plt.close(fig)
+    stability_chart(panels, out / "stability_evaluator.png",
+                    "Evaluator stability map (bars: class; dots: error vs vector derivation)")
     with open(out / "stability_evaluator.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["sweep", "value", "class", "rel_error_vs_vector_form", "message"])
@@ -149,9 +131,4 @@ def validate(outdir="out/validation", quick=False):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("-o", "--outdir", default="out/validation")
-    ap.add_argument("--quick", action="store_true")
-    a = ap.parse_args()
-    for c in validate(a.outdir, a.quick):
-        print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
+    cli(validate, __doc__)

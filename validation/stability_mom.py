@@ -13,20 +13,16 @@ partitions), degrades (a MoMAccuracyWarning, or the power balance off by more), 
 ValueError naming the parameter), fails (NaN/Inf or another exception: must never happen).
 Writes stability_mom.png and .csv.
 """
-import argparse
 import csv
 import math
 import sys
 import warnings
 from pathlib import Path
 
-import matplotlib
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from stability_evaluator import CLASSES, COLOURS  # noqa: E402
+from _common import CLASSES, cli, stability_chart  # noqa: E402
 
 ELL = 5.0
 SIGMA_H = 0.3 * ELL / math.sqrt(2.0)
@@ -67,22 +63,8 @@ def validate(outdir="out/validation", quick=False):
         res = [fn(v) for v in values]
         panels.append((title, values, res))
         rows += [[title, v, c, e, m] for v, (c, e, m) in zip(values, res)]
-    fig, axes = plt.subplots(len(panels), 1, figsize=(8, 1.5 * len(panels) + 0.8))
-    for ax, (title, values, res) in zip(axes, panels):
-        x = np.arange(len(values))
-        ax.bar(x, 1, width=1.0, color=[COLOURS[c] for c, _, _ in res])
-        ax.set_xticks(x, [f"{v:g}" for v in values], fontsize=7)
-        ax.set_yticks([])
-        ax.set_title(title, fontsize=8)
-        for j, (c, e, _) in enumerate(res):
-            if math.isfinite(e):
-                ax.text(j, 0.5, f"{e:.3f}", ha="center", fontsize=6, rotation=90)
-    handles = [plt.Rectangle((0, 0), 1, 1, color=COLOURS[c]) for c in CLASSES]
-    fig.legend(handles, CLASSES, loc="lower center", ncol=4, fontsize=8)
-    fig.suptitle("MoM stability map (text: |power balance - 1|; 6 partitions, rms slope 0.3)", fontsize=9)
-    fig.tight_layout(rect=(0, 0.06, 1, 1))
-    fig.savefig(out / "stability_mom.png", dpi=120)
-    plt.close(fig)
+    stability_chart(panels, out / "stability_mom.png",
+                    "MoM stability map (text: |power balance - 1|; 6 partitions, rms slope 0.3)", text_errors=True)
     with open(out / "stability_mom.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["sweep", "value", "class", "abs_power_balance_error", "message"])
@@ -99,9 +81,4 @@ def validate(outdir="out/validation", quick=False):
 
 
 if __name__ == "__main__":
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("-o", "--outdir", default="out/validation")
-    ap.add_argument("--quick", action="store_true")
-    a = ap.parse_args()
-    for c in validate(a.outdir, a.quick):
-        print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
+    cli(validate, __doc__)

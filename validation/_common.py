@@ -1,0 +1,57 @@
+"""Shared pieces of the validation scripts: the command line and the stability-map chart."""
+import argparse
+import math
+import sys
+
+import numpy as np
+
+CLASSES = ("accurate", "degrades", "refuses", "fails")
+COLOURS = {"accurate": "#2ca02c", "degrades": "#ff7f0e", "refuses": "#7f7f7f", "fails": "#d62728"}
+
+
+def cli(validate, doc):
+    """``python SCRIPT.py [-o OUTDIR] [--quick]``: run ``validate`` and print each check."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("-o", "--outdir", default="out/validation")
+    ap.add_argument("--quick", action="store_true", help="smaller sweeps (as in the quick report)")
+    a = ap.parse_args()
+    checks = validate(a.outdir, a.quick)
+    for c in checks:
+        print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
+    sys.exit(0 if all(c["passed"] for c in checks) else 1)
+
+
+def stability_chart(panels, path, title, err_label="rel. err", err_ylim=(1e-17, 1.0), text_errors=False):
+    """One bar row per sweep, coloured by class; errors as dots (log axis) or as text.
+
+    ``panels``: list of (title, values, [(class, error, message), ...]).
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.3 * len(panels) + 0.8))
+    for ax, (sub, values, res) in zip(np.atleast_1d(axes), panels):
+        x = np.arange(len(values))
+        ax.bar(x, 1, width=1.0, color=[COLOURS[c] for c, _, _ in res])
+        errs = np.array([e for _, e, _ in res], dtype=float)
+        if text_errors:
+            for j, e in enumerate(errs):
+                if math.isfinite(e):
+                    ax.text(j, 0.5, f"{e:.3f}", ha="center", fontsize=6, rotation=90)
+            ax.set_xticks(x, [f"{v:g}" for v in values], fontsize=7)
+        else:
+            ax2 = ax.twinx()
+            ax2.semilogy(x, np.where(np.isfinite(errs) & (errs > 0), errs, np.nan), "k.", ms=3)
+            ax2.set_ylim(*err_ylim)
+            ax2.set_ylabel(err_label, fontsize=7)
+            ticks = np.linspace(0, len(values) - 1, 6).astype(int)
+            ax.set_xticks(ticks, [f"{values[t]:.3g}" for t in ticks], fontsize=7)
+        ax.set_yticks([])
+        ax.set_title(sub, fontsize=8)
+    handles = [plt.Rectangle((0, 0), 1, 1, color=COLOURS[c]) for c in CLASSES]
+    fig.legend(handles, CLASSES, loc="lower center", ncol=4, fontsize=8)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
