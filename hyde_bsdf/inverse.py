@@ -536,8 +536,9 @@ def cli_main(argv=None) -> int:
         prepare()
         kw = {"res": args.res, "spp": args.spp} if args.scene is None else {}
         scene = load_scene(args.scene, **kw)
-        params = mi_traverse(scene)
-        parameter_keys(params, PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
+        import mitsuba as mi
+
+        parameter_keys(mi.traverse(scene), PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
         if args.reference:
             from .stokes_io import read_stokes_exr
 
@@ -570,8 +571,3 @@ def cli_main(argv=None) -> int:
     print(f"wrote {out / 'invert_history.csv'} and {out / 'invert.png'}")
     return 0
 
-
-def mi_traverse(scene):
-    import mitsuba as mi
-
-    return mi.traverse(scene)

@@ -4,8 +4,6 @@ Physics checked: the pBRDF of Eq. 17 fitted to its own (noiseless / noisy) specu
 elements returns the generating parameters (exactly / within 3 standard errors), the
 standard errors match the scatter of repeated fits, and ill-posed data are refused or flagged.
 """
-import math
-import warnings
 
 import numpy as np
 import pytest
