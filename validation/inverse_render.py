@@ -233,9 +233,10 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
                    label=f"{comp} loss: {r.final[p]:.3g} ({100 * (r.final[p] / inv.TRUTH[p] - 1):+.1f} %)")
     for a, p in zip(axes[2:4], ("eta", "k")):
         a.axhline(inv.TRUTH[p], color="k", ls="--", lw=0.8)
-        a.set_title(f"{p}: directional light, phase 120 deg")
+        a.set_title(f"{p}: directional light, phase 120 deg" + ("" if B else " (runs skipped: quick mode)"))
         a.set_xlabel("iteration")
-        a.legend(fontsize=7)
+        if B:
+            a.legend(fontsize=7)
     ve = [r["eta"] for r in valley]
     axes[4].semilogy(ve, [r["loss_s0"] for r in valley], "C0o-", label="S0 loss")
     axes[4].semilogy(ve, [r["loss_stokes"] for r in valley], "C1s-", label="Stokes loss")
