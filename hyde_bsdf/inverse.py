@@ -339,6 +339,9 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
         dr.backward(loss)
         row = {"iteration": it, "loss": float(np.asarray(loss).ravel()[0])}
         row.update({p: float(np.asarray(values[p]).ravel()[0]) for p in fit})
+        if not math.isfinite(row["loss"]):   # never hand back a NaN trajectory silently
+            raise FloatingPointError(f"the loss became {row['loss']} at iteration {it} with "
+                                     + ", ".join(f"{p}={row[p]:.6g}" for p in fit))
         row.update(fixed)
         opt.step()
         if it >= iterations - iterations // 4:
