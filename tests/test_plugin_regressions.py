@@ -83,4 +83,4 @@ def test_smith_no_diffuse_renders_the_same_stokes_image_as_roughconductor():
     dr.sync_thread()
     scale = np.abs(a[..., 3:6]).max()
     assert scale > 0
-    assert np.abs(b - a).max() <= 2e-4 * scale
+    assert np.abs(b - a).max() <= 1e-5 * scale      # measured 3.6e-7
