@@ -135,7 +135,7 @@ def test_scalar_polarized_matches_evaluator(label, shadowing, diffuse, rms, mode
     mi = _setup("scalar_spectral_polarized")
     index = dict(INDICES)[label]
     params = {"rms_slope": rms, "shadowing": shadowing, "diffuse": diffuse, **index}
-    F_plugin, F_eval = _compare(mi, params, 400, seed=7, mode=mode)
+    F_plugin, F_eval = _compare(mi, params, 10_000, seed=7, mode=mode)   # ~2 s per case
     _check(F_plugin, F_eval, diffuse, shadowing)
 
 
