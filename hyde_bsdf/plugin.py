@@ -288,7 +288,6 @@ def _make_class():
                 raise ValueError(f"hyde: rms_slope={rms:g} is outside the DHR table range "
                                  f"[{self.m_dhr.rms_lo:g}, {self.m_dhr.rms_hi:g}] needed by "
                                  f"diffuse={diffuse!r}")
-            self._update_derived()
 
             glossy = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
             comps = [glossy]
@@ -301,12 +300,10 @@ def _make_class():
             self.m_flags = flags
 
         # ------------------------------------------------------------------
-        def _update_derived(self):
-            """Nothing is cached: alpha, the DHR texture coordinate and 1 - rho_avg are derived
-            from rms_slope at every call (properties below), so each AD pass sees a fresh graph
-            edge from rms_slope (a derived copy made once would lose its gradient after the
-            first dr.backward, which consumes the graph)."""
-
+        # Nothing derived from rms_slope is cached: alpha, the DHR texture coordinate and
+        # 1 - rho_avg are recomputed at every call, so each AD pass sees a fresh graph edge
+        # from rms_slope (a copy derived once would lose its gradient after the first
+        # dr.backward, which consumes the graph).
         @property
         def m_alpha(self):
             return SQRT2 * self.m_rms_slope
@@ -327,7 +324,7 @@ def _make_class():
             callback.put("k", self.m_k, flags)
 
         def parameters_changed(self, keys=[]):
-            """Validate an updated rms_slope and refresh alpha and the DHR texture coordinate.
+            """Validate an updated rms_slope (alpha and the DHR coordinate follow it at every call).
 
             Outside the DHR texture's rms_slope range the diffuse term uses the
             nearest tabulated roughness (clamped texture lookup).
@@ -339,7 +336,6 @@ def _make_class():
                 raise ValueError(f"hyde: rms_slope must be a finite number > 0, got {value!r}")
             if dr.is_jit_v(type(self.m_rms_slope)):
                 dr.make_opaque(self.m_rms_slope)
-            self._update_derived()
 
         def to_string(self):
             index = (f"material={self.m_material!r}" if self.m_material else
