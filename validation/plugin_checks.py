@@ -148,6 +148,11 @@ def backends(out, quick):
     fig, ax = plt.subplots(figsize=(7.5, 4.5))
     for j, (label, n_dirs, sec, err) in enumerate(rows):
         ax.loglog(sec, max(err, 1e-17), "o", ms=8, color=f"C{j}", label=f"{label} ({n_dirs} dirs)")
+    # defaults: renders use the LLVM plugin (the fastest back end within the float32 target);
+    # analysis (fits, validation) the float64 NumPy evaluator
+    for j in (0, 1):
+        ax.plot(rows[j][2], max(rows[j][3], 1e-17), "k*", ms=14, zorder=5)
+    ax.plot([], [], "k*", ms=10, label="defaults: LLVM plugin for renders, NumPy evaluator for analysis")
     ax.axhline(1e-5, color="k", ls=":", lw=0.8)
     ax.text(ax.get_xlim()[0] * 1.5, 1.3e-5, "float32 target 1e-5", fontsize=7)
     ax.set_xlabel("seconds per BSDF evaluation (bare eval; this machine)")
