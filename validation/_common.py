@@ -21,6 +21,22 @@ def cli(validate, doc):
     sys.exit(0 if all(c["passed"] for c in checks) else 1)
 
 
+def write_csv(path, header, rows):
+    """Write the numbers behind a figure: one header row, then ``rows``."""
+    import csv
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(header)
+        w.writerows(rows)
+
+
+def save_figure(fig, path, dpi=130):
+    """Save a matplotlib figure as PNG and close it."""
+    import matplotlib.pyplot as plt
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def stability_chart(panels, path, title, err_label="rel. err", err_ylim=(1e-17, 1.0), text_errors=False):
     """One bar row per sweep, coloured by class; errors as dots (log axis) or as text.
 
@@ -53,5 +69,4 @@ def stability_chart(panels, path, title, err_label="rel. err", err_ylim=(1e-17, 
     fig.legend(handles, CLASSES, loc="lower center", ncol=4, fontsize=8)
     fig.suptitle(title, fontsize=9)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_figure(fig, path, dpi=120)

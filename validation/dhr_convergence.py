@@ -9,7 +9,6 @@
 Writes dhr_convergence.png/.csv, dhr_table_error.png/.csv, dhr_table_resolution.png/.csv into OUTDIR.
 """
 import sys
-import csv
 import math
 import time
 from pathlib import Path
@@ -20,7 +19,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import cli  # noqa: E402
+from _common import cli, save_figure, write_csv  # noqa: E402
 
 from hyde_bsdf import dhr
 
@@ -48,9 +47,6 @@ def convergence(out, quick):
         worst_default[sh] = float(np.abs(dhr.dhr_specular_pec(t, s, sh) - ref).max())
         ax1.semilogy(nodes, errs, "o-", color=f"C{c}", label=sh)
         ax2.loglog(np.array(times) * 1e3, errs, "o-", color=f"C{c}", label=sh)
-        d = dhr.dhr_quadrature(t, s, sh)
-        ax2.plot([], [])
-        _ = d
     ax1.set_xlabel("Gauss-Legendre nodes per piece (outer)")
     ax1.set_ylabel("max |error| over hard points")
     ax1.axhline(1e-4, color="k", ls=":", lw=0.8)
@@ -62,12 +58,8 @@ def convergence(out, quick):
         ax.legend(fontsize=8)
     fig.suptitle("DHR quadrature: accuracy against nodes and time")
     fig.tight_layout()
-    fig.savefig(out / "dhr_convergence.png", dpi=130)
-    plt.close(fig)
-    with open(out / "dhr_convergence.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["shadowing", "n_outer", "n_inner", "max_abs_error", "seconds_per_point"])
-        w.writerows(rows)
+    save_figure(fig, out / "dhr_convergence.png")
+    write_csv(out / "dhr_convergence.csv", ["shadowing", "n_outer", "n_inner", "max_abs_error", "seconds_per_point"], rows)
     return [dict(name=f"DHR quadrature ({sh}) default rule, hard points: max error", value=v,
                  tolerance=1e-4, passed=v < 1e-4) for sh, v in worst_default.items()]
 
@@ -88,14 +80,9 @@ def table_error(out, quick):
     fig.colorbar(im, label="log10 |table - quadrature|")
     ax.set_title("DHR table (V-groove) interpolation error")
     fig.tight_layout()
-    fig.savefig(out / "dhr_table_error.png", dpi=130)
-    plt.close(fig)
-    with open(out / "dhr_table_error.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["theta_i_deg", "rms_slope", "abs_error"])
-        for i in range(nt):
-            for j in range(ns):
-                w.writerow([deg[i], math.exp(ls[j]), err[i, j]])
+    save_figure(fig, out / "dhr_table_error.png")
+    write_csv(out / "dhr_table_error.csv", ["theta_i_deg", "rms_slope", "abs_error"],
+              [[deg[i], math.exp(ls[j]), err[i, j]] for i in range(nt) for j in range(ns)])
     S = np.exp(L)
     in_spec = (S >= 0.01) & (S <= 3)
     return [dict(name="DHR table interpolation error, rms_slope 0.01-3, θi 0-89.9°", value=float(err[in_spec].max()),
@@ -124,10 +111,7 @@ def table_resolution(out, quick):
         spl = RectBivariateSpline(x, ls, rho, kx=3, ky=3)
         err = float(np.abs(spl.ev(dhr.x_of_theta(t), np.log(s)) - exact).max())
         rows.append([nx, ns, build, err])
-    with open(out / "dhr_table_resolution.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["n_x", "n_log_slope", "build_seconds", "max_interp_error_0.01_3"])
-        w.writerows(rows)
+    write_csv(out / "dhr_table_resolution.csv", ["n_x", "n_log_slope", "build_seconds", "max_interp_error_0.01_3"], rows)
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.loglog([r[2] for r in rows], [r[3] for r in rows], "o-")
     for nx, ns, sec, err in rows:
@@ -143,8 +127,7 @@ def table_resolution(out, quick):
     ax.set_title("DHR table: resolution, speed against accuracy\n"
                  "default: the smallest table 10x below the target (errors fall ~h^4)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "dhr_table_resolution.png", dpi=130)
-    plt.close(fig)
+    save_figure(fig, out / "dhr_table_resolution.png")
     return rows
 
 

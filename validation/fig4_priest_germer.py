@@ -5,7 +5,6 @@ PEC, rms_slope = 0.3, specular plane (phi = pi), theta_i = 45, 60, 75, 85 deg.
 Writes fig4_priest_germer.png and .csv into OUTDIR (default out/validation).
 """
 import sys
-import csv
 import math
 from pathlib import Path
 
@@ -15,7 +14,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import cli  # noqa: E402
+from _common import cli, save_figure, write_csv  # noqa: E402
 
 import hyde_bsdf
 
@@ -54,12 +53,8 @@ def validate(outdir="out/validation", quick=False):
     ax.set_ylim(1e-3, 1e3)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
-    fig.savefig(out / "fig4_priest_germer.png", dpi=130)
-    plt.close(fig)
-    with open(out / "fig4_priest_germer.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["theta_i_deg", "theta_r_deg", "F00_priest_germer", "F00_hyde_eq13"])
-        w.writerows(rows)
+    save_figure(fig, out / "fig4_priest_germer.png")
+    write_csv(out / "fig4_priest_germer.csv", ["theta_i_deg", "theta_r_deg", "F00_priest_germer", "F00_hyde_eq13"], rows)
     return checks
 
 

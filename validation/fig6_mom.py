@@ -175,8 +175,8 @@ def main(argv=None):
         for r in table:
             w.writerow({k: (f"{v:.4f}" if isinstance(v, float) else v) for k, v in r.items()})
 
-    print(f"| theta_i | lobe (deg) | MoM - pBRDF rms / mean / max dB | MoM - 1-D model rms / mean dB "
-          f"| peak MoM / pBRDF (deg) | speckle rms dB | power balance (nominal) | coherent |")
+    print("| theta_i | lobe (deg) | MoM - pBRDF rms / mean / max dB | MoM - 1-D model rms / mean dB "
+          "| peak MoM / pBRDF (deg) | speckle rms dB | power balance (nominal) | coherent |")
     print("|---|---|---|---|---|---|---|---|")
     for r in table:
         print(f"| {r['theta_i_deg']:g} | {r['lobe_from_deg']:g} .. {r['lobe_to_deg']:g} "

@@ -9,7 +9,6 @@
 Full model of Eq. 17 (V-groove, diffuse term).  Writes fig8_9_mueller.png and .csv.
 """
 import sys
-import csv
 import math
 from pathlib import Path
 
@@ -19,7 +18,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import cli  # noqa: E402
+from _common import cli, save_figure, write_csv  # noqa: E402
 
 import hyde_bsdf
 
@@ -60,12 +59,8 @@ def validate(outdir="out/validation", quick=False):
     axes[0, 0].legend(fontsize=7)
     fig.suptitle("Figs. 8-9 model curves, specular plane (φ = π)")
     fig.tight_layout()
-    fig.savefig(out / "fig8_9_mueller.png", dpi=130)
-    plt.close(fig)
-    with open(out / "fig8_9_mueller.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["case", "n", "k", "rms_slope", "theta_deg"] + [f"M{i}{j}/M00" for i, j in ELEMENTS])
-        w.writerows(rows)
+    save_figure(fig, out / "fig8_9_mueller.png")
+    write_csv(out / "fig8_9_mueller.csv", ["case", "n", "k", "rms_slope", "theta_deg"] + [f"M{i}{j}/M00" for i, j in ELEMENTS], rows)
     # near normal incidence the specular lobe acts as a mirror: M22/M00 -> Re(rs rp*)/A ~ -1;
     # the unpolarized diffuse term of Eq. 17 pulls the full model's value towards 0
     spec = hyde_bsdf.pbrdf(0.0, 0.0, math.pi, diffuse=False, **CASES["Infragold (Fig. 8)"])

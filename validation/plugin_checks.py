@@ -15,7 +15,6 @@ against accuracy, and a stability map of the plugin.
 
 Writes plugin_backends.png/.csv and plugin_stability.png/.csv.
 """
-import csv
 import math
 import time
 from pathlib import Path
@@ -31,7 +30,7 @@ import hyde_bsdf
 from hyde_bsdf import plugin_frames as pf
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import CLASSES, cli, stability_chart  # noqa: E402
+from _common import CLASSES, cli, save_figure, stability_chart, write_csv  # noqa: E402
 
 GOLD_MI = dict(eta=0.285, k=7.3523)          # n + ik at the plugin; the same numbers as the paper's n - jk
 RMS = 0.44
@@ -160,12 +159,8 @@ def backends(out, quick):
     ax.set_title("Evaluator back ends: speed against accuracy (gold, rms_slope 0.44)")
     ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
-    fig.savefig(out / "plugin_backends.png", dpi=130)
-    plt.close(fig)
-    with open(out / "plugin_backends.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["backend", "directions", "seconds_per_evaluation", "max_rel_error"])
-        w.writerows(rows)
+    save_figure(fig, out / "plugin_backends.png")
+    write_csv(out / "plugin_backends.csv", ["backend", "directions", "seconds_per_evaluation", "max_rel_error"], rows)
     checks = [dict(name=f"back end '{r[0]}': max relative error over {r[1]} pairs", value=r[3],
                    tolerance="1e-9" if j == 0 else ("7e-3" if j == 4 else "reported"),
                    passed=r[3] <= 1e-9 if j == 0 else (r[3] <= 7e-3 if j == 4 else True))
@@ -231,10 +226,7 @@ def stability(out, quick):
     stability_chart(panels, out / "plugin_stability.png",
                     "Plugin stability map, llvm_ad_spectral_polarized (dots: error vs evaluator)",
                     err_label="rel. err", err_ylim=(1e-9, 1.0))
-    with open(out / "plugin_stability.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["sweep", "value", "class", "rel_error_vs_evaluator", "message"])
-        w.writerows(rows)
+    write_csv(out / "plugin_stability.csv", ["sweep", "value", "class", "rel_error_vs_evaluator", "message"], rows)
     counts = {c: sum(r[2] == c for r in rows) for c in CLASSES}
     return [dict(name="Plugin stability map: points that fail (NaN/Inf/crash)", value=counts["fails"],
                  tolerance=0, passed=counts["fails"] == 0),

@@ -11,7 +11,6 @@ same accuracy with either BSDF if the plugin costs nothing extra.
 Writes speed_accuracy_render.png and .csv.
 """
 import sys
-import csv
 import time
 from pathlib import Path
 
@@ -21,7 +20,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import cli  # noqa: E402
+from _common import cli, save_figure, write_csv  # noqa: E402
 
 SURFACES = [("gold", 0.15, 0.285, 7.3523), ("alu", 0.3, 1.226, 10.413), ("floor", 0.4, 1.5, 0.0)]
 #: the default spp of `hyde-bsdf render` when the scene gives none is the scene's own; for this
@@ -114,12 +113,8 @@ def validate(outdir="out/validation", quick=False):
         ax.legend(fontsize=7)
     fig.suptitle(f"Render spp {spps} against a {ref_spp}-spp reference (star: default {DEFAULT_SPP} spp)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "speed_accuracy_render.png", dpi=130)
-    plt.close(fig)
-    with open(out / "speed_accuracy_render.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["bsdf", "spp", "seconds", "err_S0", "err_S1", "err_S2", "err_S3"])
-        w.writerows(rows)
+    save_figure(fig, out / "speed_accuracy_render.png")
+    write_csv(out / "speed_accuracy_render.csv", ["bsdf", "spp", "seconds", "err_S0", "err_S1", "err_S2", "err_S3"], rows)
     checks = []
     # Monte-Carlo convergence: error ~ spp^-1/2 for every configuration (ratio over 16x spp ~ 4)
     for label, pts in curves.items():

@@ -12,7 +12,6 @@ Sweeps every input to its edges — theta_i, theta_r -> 0 and 90 deg, rms_slope 
 
 Writes stability_evaluator.png (one panel per sweep) and stability_evaluator.csv.
 """
-import csv
 import math
 from pathlib import Path
 
@@ -24,7 +23,7 @@ import hyde_bsdf
 from hyde_bsdf.jones_mueller import jones_to_mueller
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import CLASSES, cli, stability_chart  # noqa: E402
+from _common import CLASSES, cli, stability_chart, write_csv  # noqa: E402
 
 
 
@@ -116,10 +115,7 @@ def validate(outdir="out/validation", quick=False):
         rows += [[name, v, c, e, msg] for v, (c, e, msg) in zip(values, res)]
     stability_chart(panels, out / "stability_evaluator.png",
                     "Evaluator stability map (bars: class; dots: error vs vector derivation)")
-    with open(out / "stability_evaluator.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["sweep", "value", "class", "rel_error_vs_vector_form", "message"])
-        w.writerows(rows)
+    write_csv(out / "stability_evaluator.csv", ["sweep", "value", "class", "rel_error_vs_vector_form", "message"], rows)
     counts = {c: sum(r[2] == c for r in rows) for c in CLASSES}
     refusals_named = all(any(p in r[4] for p in ("rms_slope", "theta", "k", "n")) for r in rows if r[2] == "refuses")
     return [dict(name="Evaluator stability map: points that fail (NaN/Inf/crash)", value=counts["fails"],

@@ -13,7 +13,6 @@ partitions), degrades (a MoMAccuracyWarning, or the power balance off by more), 
 ValueError naming the parameter), fails (NaN/Inf or another exception: must never happen).
 Writes stability_mom.png and .csv.
 """
-import csv
 import math
 import sys
 import warnings
@@ -22,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import CLASSES, cli, stability_chart  # noqa: E402
+from _common import CLASSES, cli, stability_chart, write_csv  # noqa: E402
 
 ELL = 5.0
 SIGMA_H = 0.3 * ELL / math.sqrt(2.0)
@@ -65,10 +64,7 @@ def validate(outdir="out/validation", quick=False):
         rows += [[title, v, c, e, m] for v, (c, e, m) in zip(values, res)]
     stability_chart(panels, out / "stability_mom.png",
                     "MoM stability map (text: |power balance - 1|; 6 partitions, rms slope 0.3)", text_errors=True)
-    with open(out / "stability_mom.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["sweep", "value", "class", "abs_power_balance_error", "message"])
-        w.writerows(rows)
+    write_csv(out / "stability_mom.csv", ["sweep", "value", "class", "abs_power_balance_error", "message"], rows)
     counts = {c: sum(r[2] == c for r in rows) for c in CLASSES}
     low = [r for r in rows if r[0].startswith("points") and r[1] < 5]
     return [dict(name="MoM stability map: points that fail (NaN/Inf/crash)", value=counts["fails"], tolerance=0,
