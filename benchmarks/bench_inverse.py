@@ -2,7 +2,7 @@
 
 One iteration = set the parameters, ``mi.render(scene, params, spp, seed)`` through
 ``stokes`` around ``path`` (llvm_ad_spectral_polarized), the masked Stokes loss,
-``dr.backward``, one ``mi.ad.Adam`` step (exactly hyde_bsdf.inverse.invert).  Each
+``dr.backward``, one ``mi.ad.Adam`` step (exactly hyde_bsdf.render.inverse.invert).  Each
 material runs in its own fresh process (so the peak resident memory is its own):
 the scene of scenes/inverse.xml at ``--res`` x ``--res`` pixels and ``--spp`` samples,
 ``--iterations`` iterations; reported: the first iteration (includes the JIT
@@ -42,7 +42,7 @@ def _rss_mib():
 def run_one(name, res, spp, iterations):
     import numpy as np
 
-    from hyde_bsdf import inverse as inv
+    from hyde_bsdf.render import inverse as inv
 
     cfg = CONFIGS[name]
     inv.prepare()

@@ -36,7 +36,7 @@ import drjit as dr
 import mitsuba as mi
 
 from hyde_bsdf.render import prepare_variant
-from hyde_bsdf.roughness import alpha_from_rms_slope
+from hyde_bsdf.model.roughness import alpha_from_rms_slope
 
 #: (name, rms_slope, n, k) of the three surfaces; metals at the paper's 1064 nm values.
 SURFACES = [("gold", 0.15, 0.285, 7.3523), ("alu", 0.3, 1.226, 10.413), ("floor", 0.4, 1.5, 0.0)]

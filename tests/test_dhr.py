@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import hyde_bsdf
-from hyde_bsdf import dhr
+from hyde_bsdf.model import dhr
 
 rng = np.random.default_rng(14)
 

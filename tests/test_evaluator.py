@@ -6,9 +6,9 @@ import pytest
 from hypothesis import given, settings, strategies as st, HealthCheck
 
 import hyde_bsdf
-from hyde_bsdf.evaluator import specular_pbrdf
-from hyde_bsdf.facet_geometry import angle_trig, cos_alpha_beta, rotation_terms
-from hyde_bsdf.jones_mueller import jones_matrix, jones_to_mueller
+from hyde_bsdf.model.evaluator import specular_pbrdf
+from hyde_bsdf.model.facet_geometry import angle_trig, cos_alpha_beta, rotation_terms
+from hyde_bsdf.model.jones_mueller import jones_matrix, jones_to_mueller
 
 Q = np.diag([1.0, 1.0, 1.0, -1.0])   # Mueller reciprocity: circular component flips
 D = np.diag([1.0, 1.0, -1.0, -1.0])  # mirror image through the plane of incidence
@@ -88,8 +88,8 @@ def test_signed_rotation_angles_reduce_to_eq10():
 
 def test_fast_mueller_equals_jones_to_mueller_of_eq9():
     """The factored Mueller product equals Jones->Mueller (all 16 elements) of Eq. 9's T."""
-    from hyde_bsdf.fresnel import fresnel_mueller_terms, fresnel_rs_rp
-    from hyde_bsdf.jones_mueller import rotated_fresnel_mueller
+    from hyde_bsdf.model.fresnel import fresnel_mueller_terms, fresnel_rs_rp
+    from hyde_bsdf.model.jones_mueller import rotated_fresnel_mueller
     gi, gr, cb = rng.uniform(-3, 3, 50), rng.uniform(-3, 3, 50), rng.uniform(0, 1, 50)
     rs, rp = fresnel_rs_rp(cb, 1.226, 10.413)
     slow = jones_to_mueller(jones_matrix(rs, rp, gi, gr))

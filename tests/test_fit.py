@@ -10,7 +10,7 @@ import pytest
 
 from hyde_bsdf.fit import (IllPosedFitError, IllPosedFitWarning, cli_main, fit_measurements, fit_mueller,
                            mueller_elements, synthetic_measurements)
-from hyde_bsdf.measurements import MeasurementFileError, read_measurements, write_measurements
+from hyde_bsdf.fit.measurements import MeasurementFileError, read_measurements, write_measurements
 
 GOLD = {"n": 0.285, "k": 7.3523, "rms_slope": 0.44}      # paper Fig. 8 (Infragold)
 FSA = {"n": 1.226, "k": 10.413, "rms_slope": 0.43}       # paper Fig. 9 (flame-sprayed Al)

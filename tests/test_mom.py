@@ -127,12 +127,12 @@ def test_bad_input_names_parameter(kwargs, name):
         mom.scatter(**args)
 
 
-# --- the pBRDF's 1-D reduction (hyde_bsdf.model1d), the MoM's apples-to-apples counterpart ---
+# --- the pBRDF's 1-D reduction (hyde_bsdf.mom.model1d), the MoM's apples-to-apples counterpart ---
 
 def test_model1d_conserves_energy_and_is_reciprocal():
     """1-D Eqs. 14-17 for a PEC: specular + Lambertian diffuse reflect exactly all power;
     the specular term is reciprocal, f_s(ti -> tr) = f_s(tr -> ti) (mirror the geometry: tr -> -tr)."""
-    from hyde_bsdf import model1d
+    from hyde_bsdf.mom import model1d
 
     ti = np.radians([0.0, 10.0, 30.0, 45.0, 60.0, 75.0])
     tr = np.linspace(-math.pi / 2, math.pi / 2, 4001)
@@ -150,7 +150,7 @@ def test_model1d_conserves_energy_and_is_reciprocal():
 def test_model1d_unshadowed_projected_area_identity():
     """Without shadowing and over all facet tilts, the facets' projected length is the mean surface's:
     int p(alpha) cos(ti + alpha) / (cos alpha cos ti) d alpha = 1 - tan(ti) <tan alpha> = 1."""
-    from hyde_bsdf import model1d
+    from hyde_bsdf.mom import model1d
 
     alpha = np.linspace(-math.pi / 2 + 1e-6, math.pi / 2 - 1e-6, 200001)
     p = model1d.facet_pdf(alpha, 0.3)
@@ -168,7 +168,7 @@ def test_mom_lobe_matches_the_1d_facet_model():
     20 partitions of 60 lambda leave sampling noise: over seeds 0-3 the centroids scatter by
     +-2.5 deg and the widths by +-3 deg around the model, hence the 4-degree tolerances.
     """
-    from hyde_bsdf import model1d
+    from hyde_bsdf.mom import model1d
 
     ell = 4.0
     res = mom.scatter(1200.0, 20, 0.3 * ell / math.sqrt(2), ell, [20.0, 50.0], [0.0], pts_per_wl=8, seed=0,

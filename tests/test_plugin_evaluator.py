@@ -20,7 +20,7 @@ import zlib
 import numpy as np
 import pytest
 
-from hyde_bsdf.variants import set_variant
+from hyde_bsdf.mitsuba.variants import set_variant
 
 RTOL = 1e-5
 ATOL = 1e-7            # sr^-1, far below any visible BRDF value
@@ -57,7 +57,7 @@ def _index_at(mi, bsdf_params, wavelength):
 
 
 def _directions(n, seed, theta_max_deg=89.0):
-    from hyde_bsdf import plugin_frames as pf
+    from hyde_bsdf.mitsuba import frames as pf
 
     rng = np.random.default_rng(seed)
     ti, tr, ph, phi_i = pf.random_angles(n, rng, math.radians(theta_max_deg))
@@ -71,7 +71,7 @@ def _directions(n, seed, theta_max_deg=89.0):
 
 def _compare(mi, params, n_dirs, seed, mode="radiance", wavelength=633.0):
     import hyde_bsdf
-    from hyde_bsdf import plugin_frames as pf
+    from hyde_bsdf.mitsuba import frames as pf
 
     dirs, (ti, tr, ph) = _directions(n_dirs, seed)
     bsdf = mi.load_dict({"type": "hyde", **params})
@@ -150,8 +150,8 @@ def test_smith_matches_evaluator_within_rational_g1_error():
 
 def test_dhr_texture_matches_evaluator_table():
     """The plugin's float32 texture of 1 - rho^{s,PEC} against the evaluator's own lookup."""
-    from hyde_bsdf.evaluator import diffuse_pbrdf
-    from hyde_bsdf import plugin as plugin_mod
+    from hyde_bsdf.model.evaluator import diffuse_pbrdf
+    from hyde_bsdf.mitsuba import plugin as plugin_mod
 
     mi = _setup("llvm_ad_rgb")
     rng = np.random.default_rng(11)
@@ -171,7 +171,7 @@ def test_normal_incidence_mirror_is_diag_1_1_m1_m1(variant):
     """Paper's convention check without the evaluator: at normal incidence and normal
     observation r_p = -r_s, so any metal's Mueller matrix in the paper's bases is
     F00 diag(1, 1, -1, -1) (COMMON.md); this also exercises the collinear-frame fallback."""
-    from hyde_bsdf import plugin_frames as pf
+    from hyde_bsdf.mitsuba import frames as pf
 
     mi = _setup(variant)
     bsdf = mi.load_dict({"type": "hyde", "rms_slope": 0.1, "material": "Au", "diffuse": "none"})

@@ -16,7 +16,7 @@ import sys
 import numpy as np
 import pytest
 
-from hyde_bsdf.variants import set_variant
+from hyde_bsdf.mitsuba.variants import set_variant
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -121,7 +121,7 @@ BAD = [
 @pytest.mark.parametrize("params,words", BAD, ids=[",".join(p) for p, _ in BAD])
 def test_bad_parameters_raise_naming_them(params, words):
     mi = _setup("scalar_rgb")
-    from hyde_bsdf.plugin import plugin_class
+    from hyde_bsdf.mitsuba.plugin import plugin_class
 
     props = mi.Properties("hyde")
     for k, v in params.items():

@@ -4,7 +4,7 @@ import math
 import numpy as np
 
 import hyde_bsdf
-from hyde_bsdf.variants import set_variant
+from hyde_bsdf.mitsuba.variants import set_variant
 
 
 def _sphere_scene(mi, bsdf):

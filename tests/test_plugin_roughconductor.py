@@ -11,7 +11,7 @@ Tolerance: |a - b| <= 1e-5 max|b| (per matrix, or per array for pdfs) + 1e-7.
 Near backscatter (wi ~ wo) roughconductor's float32 s axis, cross(H, -wo_hat), is
 ill-conditioned (relative error ~ eps32 / |wi x wo|) while the plugin uses a
 compensated cross product, so there the tolerance adds 16 eps32 / |wi x wo|.
-(Measured with ``python -m hyde_bsdf.plugin_report``: at |wi x wo| = 6.9e-3 the
+(Measured with ``python validation/plugin_report.py``: at |wi x wo| = 6.9e-3 the
 normalized Mueller matrix of roughconductor is 2.9e-5 off the float64 evaluator,
 the plugin's 4e-7; over 10^4 pairs the plugin stays within 1.3e-6.)
 """
@@ -20,7 +20,7 @@ import math
 import numpy as np
 import pytest
 
-from hyde_bsdf.variants import set_variant
+from hyde_bsdf.mitsuba.variants import set_variant
 
 RTOL = 1e-5
 ATOL = 1e-7

@@ -3,7 +3,7 @@
 Physics checked: the directions ``sample`` draws (visible-normal Beckmann sampling
 of the specular lobe mixed with cosine sampling of the diffuse lobe) follow the
 density ``pdf`` reports - Mitsuba's chi^2 test on the sphere (``mitsuba.chi2``,
-with the polarization-aware adapter ``hyde_bsdf.plugin_chi2``) at 13 (rms_slope,
+with the polarization-aware adapter ``hyde_bsdf.mitsuba.chi2``) at 13 (rms_slope,
 theta_i) configurations spanning rms_slope 0.02-1.5 and theta_i 0-85 deg, for
 several shadowing/diffuse/sample_visible settings, in an unpolarized and a
 polarized LLVM variant; and the returned Mueller weight is eval/pdf.
@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pytest
 
-from hyde_bsdf.variants import set_variant
+from hyde_bsdf.mitsuba.variants import set_variant
 
 CONFIGS = [(0.02, 30), (0.02, 60), (0.05, 0), (0.05, 45), (0.1, 0), (0.1, 85), (0.3, 45),
            (0.3, 80), (0.6, 10), (0.6, 70), (1.0, 30), (1.5, 0), (1.5, 85)]
@@ -41,7 +41,7 @@ def _setup(variant):
                          ids=[f"{v}-{m[0]}-{m[1]}-{'vis' if m[2] else 'all'}-{c[0]}-{c[1]}deg"
                               for v, m, c in CASES])
 def test_chi2(variant, model, config):
-    from hyde_bsdf.plugin_chi2 import chi2_test
+    from hyde_bsdf.mitsuba.chi2 import chi2_test
 
     mi = _setup(variant)
     shadowing, diffuse, visible = model

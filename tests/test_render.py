@@ -97,7 +97,7 @@ def test_stokes_exr_reads_back(tiny_render):
     the light is partially polarized (the scene has polarizing reflections)."""
     import mitsuba as mi
 
-    from hyde_bsdf.stokes_io import polarization_quantities, read_stokes_exr
+    from hyde_bsdf.render.stokes_io import polarization_quantities, read_stokes_exr
 
     _, out = tiny_render
     st = read_stokes_exr(out)
@@ -117,7 +117,7 @@ def test_stokes_exr_reads_back(tiny_render):
 
 def test_polarization_quantities_known_states():
     """DoLP, AoLP, DoCP of hand-made Stokes vectors; zero S0 is flagged, not NaN."""
-    from hyde_bsdf.stokes_io import polarization_quantities
+    from hyde_bsdf.render.stokes_io import polarization_quantities
 
     S = {k: np.zeros((1, 3, 3), np.float32) for k in ("S0", "S1", "S2", "S3")}
     # pixel 0: 30 deg linear, 50 % polarized; pixel 1: right circular 40 %; pixel 2: dark.
@@ -136,7 +136,7 @@ def test_polarization_quantities_known_states():
 
 def test_bad_arguments_give_clear_errors(tmp_path, tiny_scene, capsys):
     from hyde_bsdf.render import cli_main, render_stokes
-    from hyde_bsdf.stokes_io import read_stokes_exr, write_stokes_exr
+    from hyde_bsdf.render.stokes_io import read_stokes_exr, write_stokes_exr
 
     assert cli_main([str(tmp_path / "missing.xml"), "-o", str(tmp_path / "a.exr")]) == 2
     assert "does not exist" in capsys.readouterr().err
@@ -175,7 +175,7 @@ def test_sensor_to_paper_rotation_matches_mitsuba():
     import mitsuba as mi
 
     from hyde_bsdf.render import sensor_to_paper_rotation
-    from hyde_bsdf.variants import set_variant
+    from hyde_bsdf.mitsuba.variants import set_variant
 
     set_variant("scalar_spectral_polarized")
     rng = np.random.default_rng(5)
@@ -248,7 +248,7 @@ def test_white_furnace_paper_diffuse():
 
 def test_demo_cli_tiny(tmp_path):
     """The README's main job at toy size: demo.exr and the PNGs are written."""
-    from hyde_bsdf.demo import cli_main
+    from hyde_bsdf.render.demo import cli_main
 
     code = cli_main(["-o", str(tmp_path), "--width", "24", "--height", "16", "--spp", "2"])
     assert code == 0
@@ -260,8 +260,8 @@ def test_demo_cli_tiny(tmp_path):
 def test_demo_scalar_variant(tmp_path):
     """The scalar fallback path renders and writes the same files (roughconductor metals here,
     so that this test exercises the render/EXR code on the scalar variant only)."""
-    from hyde_bsdf.demo import cli_main
-    from hyde_bsdf.stokes_io import read_stokes_exr
+    from hyde_bsdf.render.demo import cli_main
+    from hyde_bsdf.render.stokes_io import read_stokes_exr
 
     code = cli_main(["-o", str(tmp_path), "--variant", "scalar_spectral_polarized", "--bsdf", "roughconductor",
                      "--width", "12", "--height", "8", "--spp", "2"])

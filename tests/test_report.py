@@ -2,7 +2,7 @@
 command).  This runs every validation script in quick mode (about 2-3 minutes on 2 cores)."""
 import csv
 
-from hyde_bsdf.report import SECTIONS, build_report, cli_main
+from hyde_bsdf.report.build import SECTIONS, build_report, cli_main
 
 
 def test_quick_report_builds_and_all_checks_pass(tmp_path):

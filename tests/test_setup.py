@@ -7,7 +7,8 @@ import warnings
 import pytest
 
 import hyde_bsdf
-from hyde_bsdf import roughness, variants
+from hyde_bsdf.model import roughness
+from hyde_bsdf.mitsuba import variants
 
 
 def test_import_does_not_import_mitsuba():

@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import cli, save_figure, write_csv  # noqa: E402
 
-from hyde_bsdf import dhr
+from hyde_bsdf.model import dhr
 
 POINTS = [(0.0, 0.01), (45.0, 0.3), (80.0, 0.05), (89.0, 0.5), (89.9, 0.01), (60.0, 3.0)]
 

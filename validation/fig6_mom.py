@@ -109,7 +109,7 @@ def main(argv=None):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from hyde_bsdf import model1d
+    from hyde_bsdf.mom import model1d
 
     t0 = time.perf_counter()
     d = run_mom(args)

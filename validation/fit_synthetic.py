@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.fit import IllPosedFitWarning, fit_measurements, fit_mueller, plot_fit, synthetic_measurements
-from hyde_bsdf.measurements import write_measurements
+from hyde_bsdf.fit.measurements import write_measurements
 
 MATERIALS = {
     "infragold": {"n": 0.285, "k": 7.3523, "rms_slope": 0.44, "label": "LabSphere Infragold (Fig. 8)"},

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf import inverse as inv
+from hyde_bsdf.render import inverse as inv
 
 
 def recovery(out, iterations, spp, spp_ref, res, lighting, tag, runs=("stokes", "s0"), lr=0.05):
@@ -72,12 +72,12 @@ def valley_profile(scene, spp, seed=7, points=13):
     """Both losses along the curve of equal facet reflectance A(beta = 60 deg) through the truth.
 
     The curve k(eta) solves A(60 deg; eta, k) = A(60 deg; truth) with the NumPy Fresnel terms
-    (:mod:`hyde_bsdf.fresnel`); along it the S0 image barely changes (one facet angle), so the
+    (:mod:`hyde_bsdf.model.fresnel`); along it the S0 image barely changes (one facet angle), so the
     S0 loss stays at its floor while the Stokes loss, which also sees |r_s|^2 - |r_p|^2, rises.
     """
     from scipy.optimize import brentq
 
-    from hyde_bsdf.fresnel import fresnel_mueller_terms
+    from hyde_bsdf.model.fresnel import fresnel_mueller_terms
 
     c = np.cos(np.radians(60.0))
     A = lambda e, k: float(fresnel_mueller_terms(np.array(c), e, k)[0])

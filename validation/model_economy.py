@@ -67,8 +67,8 @@ def _compare(a, b):
 def validate(outdir="out/validation", quick=False):
     import mitsuba as mi
     import hyde_bsdf
-    from hyde_bsdf import plugin, plugin_optics
-    from hyde_bsdf.variants import set_variant
+    from hyde_bsdf.mitsuba import plugin, optics as plugin_optics
+    from hyde_bsdf.mitsuba.variants import set_variant
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     rows = []

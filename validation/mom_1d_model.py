@@ -1,7 +1,7 @@
 """Apples to apples: the MoM against the pBRDF's own reduction to a 1-D surface, in absolute units.
 
 The MoM (hyde_bsdf.mom) scatters from a 1-D surface; the paper's pBRDF is for a
-2-D surface.  hyde_bsdf.model1d rebuilds the pBRDF for a 1-D surface from the
+2-D surface.  hyde_bsdf.mom.model1d rebuilds the pBRDF for a 1-D surface from the
 same physics (Gaussian facet slopes with std rms_slope along x, facet
 reflection in the plane, the 2-D V-groove G, the diffuse term from the 2-D
 DHR, Eqs. 6-17 in the plane) and expresses it in the MoM's Eq. 23 units,
@@ -35,7 +35,7 @@ LOBE_LEVEL = 0.1
 
 def model1d_level():
     import inspect
-    from hyde_bsdf import model1d
+    from hyde_bsdf.mom import model1d
     return inspect.signature(model1d.lobe_energy_shares).parameters["level"].default
 
 
@@ -56,7 +56,7 @@ def main(argv=None):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from hyde_bsdf import model1d
+    from hyde_bsdf.mom import model1d
 
     d = fig6_mom.run_mom(args)
     s_slope = fig6_mom.RMS_SLOPE
@@ -102,7 +102,7 @@ def main(argv=None):
         ax.set_xlabel("theta_r (deg, + = specular side)")
     axes[0].set_ylabel("sigma (dB, absolute)")
     axes[0].legend(loc="lower center", fontsize=7)
-    fig.suptitle("MoM vs the pBRDF's 1-D reduction (hyde_bsdf.model1d), absolute: "
+    fig.suptitle("MoM vs the pBRDF's 1-D reduction (hyde_bsdf.mom.model1d), absolute: "
                  "sigma = 2 pi cos(ti) f cos(tr); rms slope 0.3, 15000 lambda, 100 partitions")
     fig.tight_layout()
     png = os.path.join(args.outdir, "mom_1d_model.png")

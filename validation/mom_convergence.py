@@ -94,7 +94,7 @@ def main(argv=None):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from hyde_bsdf import model1d
+    from hyde_bsdf.mom import model1d
 
     ppws = [4, 6, 10, 15] if args.quick else [4, 5, 6, 8, 10, 12, 15, 20]
     Ms = [5, 10] if args.quick else [5, 10, 20, 50, 100]

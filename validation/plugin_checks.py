@@ -27,7 +27,7 @@ import numpy as np
 import sys
 
 import hyde_bsdf
-from hyde_bsdf import plugin_frames as pf
+from hyde_bsdf.mitsuba import frames as pf
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import CLASSES, cli, save_figure, stability_chart, write_csv  # noqa: E402
@@ -108,7 +108,7 @@ def _time_eval(mi, bsdf, om_i, om_r):
 
 def backends(out, quick):
     import mitsuba as mi
-    from hyde_bsdf.variants import set_variant
+    from hyde_bsdf.mitsuba.variants import set_variant
     from stability_evaluator import vector_reference  # noqa: E402 -- sibling validation script
 
     n_vec = 20_000 if quick else 200_000      # both above the 1e4 pairs
@@ -198,7 +198,7 @@ def _classify_plugin(mi, params, angles_deg, n, k):
 
 def stability(out, quick):
     import mitsuba as mi
-    from hyde_bsdf.variants import set_variant
+    from hyde_bsdf.mitsuba.variants import set_variant
 
     set_variant("llvm_ad_spectral_polarized", fallback=False)
     hyde_bsdf.register()

@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.render import prepare_variant, render_stokes, rotate_stokes, sensor_to_paper_rotation
-from hyde_bsdf.roughness import alpha_from_rms_slope
+from hyde_bsdf.model.roughness import alpha_from_rms_slope
 
 DEFAULT_VARIANT = "llvm_ad_spectral_polarized"
 
@@ -265,9 +265,9 @@ def furnace_prediction(theta_o, rms_slope, shadowing, diffuse):
     """Predicted furnace radiance at viewing angle theta_o (radians) for an albedo-1 index.
 
     rho^s(theta_o) + [1 - rho_avg] (paper), 1 (reciprocal), rho^s(theta_o) (none);
-    rho^s = rho^{s,PEC} of the chosen shadowing from ``hyde_bsdf.dhr.load_table``.
+    rho^s = rho^{s,PEC} of the chosen shadowing from ``hyde_bsdf.model.dhr.load_table``.
     """
-    from hyde_bsdf.dhr import load_table
+    from hyde_bsdf.model.dhr import load_table
 
     table = load_table(shadowing)
     rho = table(theta_o, rms_slope)

@@ -29,7 +29,7 @@ DEFAULT_SPP = 16
 
 
 def bsdf_dict(kind, rms, n, k, **extra):
-    from hyde_bsdf.roughness import alpha_from_rms_slope
+    from hyde_bsdf.model.roughness import alpha_from_rms_slope
     if kind == "roughconductor":
         return {"type": "roughconductor", "distribution": "beckmann", "alpha": alpha_from_rms_slope(rms),
                 "eta": n, "k": k}
@@ -74,7 +74,7 @@ def render(scene, spp, seed):
 def validate(outdir="out/validation", quick=False):
     import mitsuba as mi
     import hyde_bsdf
-    from hyde_bsdf.variants import set_variant
+    from hyde_bsdf.mitsuba.variants import set_variant
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     set_variant("llvm_ad_spectral_polarized", fallback=False)

@@ -20,7 +20,7 @@ import numpy as np
 import sys
 
 import hyde_bsdf
-from hyde_bsdf.jones_mueller import jones_to_mueller
+from hyde_bsdf.model.jones_mueller import jones_to_mueller
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import CLASSES, cli, stability_chart, write_csv  # noqa: E402

@@ -7,7 +7,7 @@
 with alpha, beta from Eq. 7, P Beckmann (Eq. 8), M the Mueller matrix of the
 rotated Fresnel Jones matrix (Eqs. 9-11, all 16 elements), G the V-groove
 shadowing (Eq. 12) or an alternative, rho^{s,PEC} the specular DHR (Eqs. 14-16)
-read from the cached table of :mod:`hyde_bsdf.dhr`.
+read from the cached table of :mod:`hyde_bsdf.model.dhr`.
 
 Conventions (this interface)
 ----------------------------
@@ -27,7 +27,7 @@ Conventions (this interface)
   e^{+jwt} phasors (+2 Im(Es Ep*) in e^{-iwt}): a flat mirror at normal incidence
   is diag(1, 1, -1, -1).
 - Roughness: ``rms_slope`` = sqrt(2) sigma_h / l (the paper's); Beckmann
-  alpha = sqrt(2) rms_slope.  See :mod:`hyde_bsdf.roughness`.
+  alpha = sqrt(2) rms_slope.  See :mod:`hyde_bsdf.model.roughness`.
 
 Reciprocity: the specular part satisfies F^s(r -> i) = Q F^s(i -> r)^T Q with
 Q = diag(1, 1, 1, -1) (tests check it).  The paper's diffuse term depends on
@@ -42,13 +42,13 @@ import math
 
 import numpy as np
 
-from .dhr import load_table, x_of_theta
-from .facet_geometry import angle_trig, cos_alpha_beta, rotation_terms
-from .fresnel import fresnel_mueller_terms
-from .jones_mueller import rotated_fresnel_mueller
-from .roughness import check_rms_slope
-from .shadowing import SHADOWING, visibility
-from .slope_distribution import beckmann_P
+from hyde_bsdf.model.dhr import load_table, x_of_theta
+from hyde_bsdf.model.facet_geometry import angle_trig, cos_alpha_beta, rotation_terms
+from hyde_bsdf.model.fresnel import fresnel_mueller_terms
+from hyde_bsdf.model.jones_mueller import rotated_fresnel_mueller
+from hyde_bsdf.model.roughness import check_rms_slope
+from hyde_bsdf.model.shadowing import SHADOWING, visibility
+from hyde_bsdf.model.slope_distribution import beckmann_P
 
 __all__ = ["pbrdf", "specular_pbrdf", "diffuse_pbrdf", "DIFFUSE"]
 

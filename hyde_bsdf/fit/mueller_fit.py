@@ -18,7 +18,7 @@ Conventions (this interface)
   identical.  :meth:`FitResult.plugin_dict` / :meth:`FitResult.plugin_xml` write them so.
 - Roughness ``rms_slope`` = sqrt(2) sigma_h / ell (the paper's and the plugin's name;
   Beckmann alpha = sqrt(2) rms_slope).
-- Elements are in the paper's s/p Stokes bases (see :mod:`hyde_bsdf.evaluator`).
+- Elements are in the paper's s/p Stokes bases (see :mod:`hyde_bsdf.model.evaluator`).
 
 Uncertainties
 -------------
@@ -38,7 +38,7 @@ Command line::
                   [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
                   [--strict] [-o plot.png]
 
-(CSV format: :mod:`hyde_bsdf.measurements`.)
+(CSV format: :mod:`hyde_bsdf.fit.measurements`.)
 """
 from __future__ import annotations
 
@@ -50,8 +50,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .evaluator import RMS_SLOPE_RANGE, pbrdf
-from .measurements import (ELEMENT_NAMES, Measurements, MeasurementFileError, element_index,
+from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.fit.measurements import (ELEMENT_NAMES, Measurements, MeasurementFileError, element_index,
                            read_measurements)
 
 __all__ = ["PARAMETERS", "FitResult", "IllPosedFitWarning", "IllPosedFitError",
@@ -429,7 +429,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
 
 
 def fit_measurements(meas: Measurements, **kwargs) -> FitResult:
-    """:func:`fit_mueller` on a :class:`~hyde_bsdf.measurements.Measurements` (e.g. from a CSV)."""
+    """:func:`fit_mueller` on a :class:`~hyde_bsdf.fit.measurements.Measurements` (e.g. from a CSV)."""
     return fit_mueller(meas.theta_i, meas.theta_r, meas.phi, meas.values,
                        sigma=meas.uncertainty(), **kwargs)
 
@@ -542,7 +542,7 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="hyde-bsdf fit",
         description="Fit the Hyde-Schmidt-Havrilla pBRDF (n, k, rms_slope) to normalized Mueller-matrix "
-                    "measurements in a CSV file (format: python -m pydoc hyde_bsdf.measurements). "
+                    "measurements in a CSV file (format: python -m pydoc hyde_bsdf.fit.measurements). "
                     "The index is the paper's eta = n - jk (the plugin's eta = n, k = k).")
     ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M01, M01_sigma, ...)")
     ap.add_argument("--fit", default="n,k", help="comma-separated parameters to fit, from n,k,rms_slope "

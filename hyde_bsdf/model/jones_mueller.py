@@ -16,7 +16,7 @@ def jones_matrix(rs, rp, gamma_i, gamma_r):
 
     ``T[..., 0, 0] = T_ss, T[..., 0, 1] = T_ps, T[..., 1, 0] = T_sp, T[..., 1, 1] = T_pp``
     so that (E_r^s, E_r^p) = T (E_i^s, E_i^p).  gamma_i, gamma_r are signed
-    (see :func:`hyde_bsdf.facet_geometry.rotation_terms`).
+    (see :func:`hyde_bsdf.model.facet_geometry.rotation_terms`).
     """
     ci, si = np.cos(gamma_i), np.sin(gamma_i)
     cr, sr = np.cos(gamma_r), np.sin(gamma_r)

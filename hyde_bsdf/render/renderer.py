@@ -6,7 +6,7 @@ it is not already) in ``spp`` chunks, showing a progress line on stderr, and
 returns the mean image and, from the spread between chunks, its Monte-Carlo
 standard error.
 
-Stokes basis of the result: Mitsuba's sensor basis (see :mod:`hyde_bsdf.stokes_io`):
+Stokes basis of the result: Mitsuba's sensor basis (see :mod:`hyde_bsdf.render.stokes_io`):
 for light travelling towards the camera, S1 > 0 is polarization along the image
 rows, S2 > 0 is at +45 deg counter-clockwise from image-right as seen by the
 viewer.  :func:`hyde_bsdf.render.sensor_to_paper_rotation` re-expresses it in
@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .stokes_io import STOKES_NAMES, save_polarization_pngs, write_stokes_exr
+from hyde_bsdf.render.stokes_io import STOKES_NAMES, save_polarization_pngs, write_stokes_exr
 
 __all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "render_stokes",
            "sensor_to_paper_rotation", "rotate_stokes", "cli_main"]
@@ -50,7 +50,7 @@ def prepare_variant(variant: str = DEFAULT_VARIANT, fallback: bool = True) -> st
     """
     import mitsuba as mi
 
-    from .variants import VariantUnavailable, set_variant
+    from hyde_bsdf.mitsuba.variants import VariantUnavailable, set_variant
 
     if not isinstance(variant, str) or not variant.endswith("_polarized"):
         pol = [v for v in mi.variants() if v.endswith("_polarized")]
@@ -69,7 +69,7 @@ def prepare_variant(variant: str = DEFAULT_VARIANT, fallback: bool = True) -> st
 def _register_hyde() -> bool:
     """Register the ``hyde`` BSDF for the current variant; False if the plugin is not installed."""
     try:
-        from .plugin import register
+        from hyde_bsdf.mitsuba.plugin import register
     except ModuleNotFoundError as exc:
         if exc.name and exc.name.endswith("plugin"):
             return False

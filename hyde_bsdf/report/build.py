@@ -37,7 +37,7 @@ SECTIONS = [
 
 
 def validation_dir() -> Path:
-    here = Path(__file__).resolve().parents[1] / "validation"
+    here = Path(__file__).resolve().parents[2] / "validation"
     if not here.is_dir():
         raise FileNotFoundError(f"validation scripts not found at {here}: run from a source checkout")
     return here
@@ -64,7 +64,7 @@ def machine_info() -> dict:
         except Exception as exc:  # noqa: BLE001 -- report, don't crash
             info[mod] = f"unavailable ({exc})"
     try:
-        from .variants import llvm_usable
+        from hyde_bsdf.mitsuba.variants import llvm_usable
         info["Dr.Jit LLVM"] = llvm_usable()[1]
     except Exception as exc:  # noqa: BLE001
         info["Dr.Jit LLVM"] = f"unknown ({exc})"

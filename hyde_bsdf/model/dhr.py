@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .shadowing import SHADOWING, g1_smith_beckmann
+from hyde_bsdf.model.shadowing import SHADOWING, g1_smith_beckmann
 
 __all__ = ["dhr_specular_pec", "dhr_quadrature", "DHRTable", "load_table", "build_table",
            "x_of_theta", "theta_of_x",

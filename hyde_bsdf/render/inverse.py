@@ -78,8 +78,8 @@ def prepare(variant: str = VARIANT) -> str:
     """Select the (LLVM-checked) variant and register ``hyde``; returns the variant set."""
     import mitsuba as mi
 
-    from . import register
-    from .variants import set_variant
+    from hyde_bsdf import register
+    from hyde_bsdf.mitsuba.variants import set_variant
 
     if mi.variant() != variant:
         variant = set_variant(variant)
@@ -145,7 +145,7 @@ def load_scene(path=None, **kwargs):
 
     if path is None:
         return mi.load_dict(scene_dict(**kwargs))
-    from .render import load_scene as _load
+    from hyde_bsdf.render.renderer import load_scene as _load
 
     return _load(path, {k: v for k, v in kwargs.items()})
 
@@ -543,7 +543,7 @@ def cli_main(argv=None) -> int:
 
         parameter_keys(mi.traverse(scene), PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
         if args.reference:
-            from .stokes_io import read_stokes_exr
+            from hyde_bsdf.render.stokes_io import read_stokes_exr
 
             st = read_stokes_exr(args.reference)
             ref = np.array([np.asarray(st[s], float) @ np.array(Y_WEIGHTS) for s in ("S0", "S1", "S2", "S3")])

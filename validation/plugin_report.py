@@ -1,6 +1,6 @@
 """Measured agreement figures of the ``hyde`` plugin (the numbers quoted in the README).
 
-Run ``python -m hyde_bsdf.plugin_report [-o OUTDIR] [--quick]``.  It prints, and
+Run ``python validation/plugin_report.py [-o OUTDIR] [--quick]``.  It prints, and
 writes as CSV into OUTDIR (default ``out/validation/``):
 
 * ``plugin_vs_evaluator.csv`` - max over 10^4 random direction pairs of
@@ -39,8 +39,8 @@ def _progress(msg):
 
 def _setup(variant):
     import mitsuba as mi
-    from . import register
-    from .variants import set_variant
+    from hyde_bsdf import register
+    from hyde_bsdf.mitsuba.variants import set_variant
 
     set_variant(variant, fallback=False)
     register()
@@ -57,8 +57,8 @@ def _index_at(mi, index):
 
 
 def vs_evaluator(n_dirs=10_000, seed=1):
-    from . import pbrdf
-    from . import plugin_frames as pf
+    from hyde_bsdf import pbrdf
+    from hyde_bsdf.mitsuba import frames as pf
 
     mi = _setup("llvm_ad_spectral_polarized")
     rng = np.random.default_rng(seed)
@@ -143,7 +143,7 @@ def vs_roughconductor(n=10_000):
 
 
 def chi2_pvalues():
-    from .plugin_chi2 import chi2_test
+    from hyde_bsdf.mitsuba.chi2 import chi2_test
 
     configs = [(0.02, 30), (0.02, 60), (0.05, 0), (0.05, 45), (0.1, 0), (0.1, 85), (0.3, 45),
                (0.3, 80), (0.6, 10), (0.6, 70), (1.0, 30), (1.5, 0), (1.5, 85)]
@@ -168,13 +168,13 @@ def chi2_pvalues():
 
 
 def dhr_texture():
-    from .evaluator import diffuse_pbrdf
-    from .plugin import _dhr_lookup
+    from hyde_bsdf.model.evaluator import diffuse_pbrdf
+    from hyde_bsdf.mitsuba.plugin import _dhr_lookup
 
     mi = _setup("llvm_ad_rgb")
     rng = np.random.default_rng(11)
     theta = np.arccos(rng.uniform(math.cos(math.radians(89.0)), 1.0, 20_000))
-    from .dhr import load_table
+    from hyde_bsdf.model.dhr import load_table
 
     rows = []
     th2 = np.arccos(rng.uniform(math.cos(math.radians(89.0)), 1.0, 200_000))
@@ -215,7 +215,7 @@ def _show(title, rows):
 
 
 def cli_main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m hyde_bsdf.plugin_report", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(prog="python validation/plugin_report.py", description=__doc__.split("\n")[0])
     ap.add_argument("-o", "--outdir", default=os.path.join("out", "validation"))
     ap.add_argument("--skip-chi2", action="store_true", help="leave out the chi^2 p-values (~30 s)")
     args = ap.parse_args(argv)

@@ -3,8 +3,8 @@
 These functions are written with Dr.Jit operations only, so they run unchanged
 in every Mitsuba variant (scalar, LLVM, CUDA; RGB, spectral, mono) and carry
 gradients in the ``*_ad_*`` variants.  They are a derivation independent of the
-NumPy evaluator (:mod:`hyde_bsdf.evaluator`), which uses the paper's angle
-formulas; the two only share the DHR table (:mod:`hyde_bsdf.dhr`).
+NumPy evaluator (:mod:`hyde_bsdf.model.evaluator`), which uses the paper's angle
+formulas; the two only share the DHR table (:mod:`hyde_bsdf.model.dhr`).
 
 Conventions used here
 ---------------------
@@ -188,7 +188,7 @@ def _fine_grid(table):
 class DHRLookup:
     """1 - rho^{s,PEC}(theta_i, rms_slope) (paper Eqs. 14-16) read through a Dr.Jit texture.
 
-    The lead's table (:func:`hyde_bsdf.dhr.load_table`) is resampled, through its
+    The lead's table (:func:`hyde_bsdf.model.dhr.load_table`) is resampled, through its
     own ``__call__`` (a bicubic spline), onto a fine grid: ``DHR_X_POINTS`` nodes
     uniform in x = 1 - sqrt(cos theta) (dense near grazing, where rho varies most)
     times ``DHR_SLOPE_PER_DECADE`` nodes per decade of rms_slope over

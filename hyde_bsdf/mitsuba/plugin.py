@@ -13,7 +13,7 @@ import os
 import drjit as dr
 import mitsuba as mi
 
-from . import plugin_optics as po
+from hyde_bsdf.mitsuba import optics as po
 
 __all__ = ["register", "plugin_class", "DOC", "SHADOWING", "DIFFUSE"]
 
@@ -90,7 +90,7 @@ Mueller matrix rotated from the facet s/p bases into Mitsuba's Stokes bases.
 ``eval`` returns f cos(theta_o) (Mitsuba's convention); the BSDF is one-sided.
 rho = rho^{s,PEC}(theta, rms_slope) is the directional-hemispherical reflectance
 of the specular lobe of a perfect conductor (Eqs. 14-16) for the chosen
-shadowing, read from :func:`hyde_bsdf.dhr.load_table` through a Dr.Jit texture.
+shadowing, read from :func:`hyde_bsdf.model.dhr.load_table` through a Dr.Jit texture.
 
 Frames (as ``roughconductor``).  All vectors are in the local shading frame
 (normal +z).  Light arrives along ``-wo_hat`` and leaves along ``+wi_hat``, where
@@ -108,7 +108,7 @@ Stokes sign convention.  Mitsuba's Stokes vectors use the reference axis
 x = ``stokes_basis(k)`` with y = k x x, and the same S0..S3 definitions as the
 paper's bases (s, p, k) with S3 = -2 Im(E_s E_p*) for e^{+j w t}: rotating
 Mitsuba's bases into the paper's (``mi.mueller.rotate_mueller_basis``, see
-:mod:`hyde_bsdf.plugin_frames`) reproduces all 16 elements of
+:mod:`hyde_bsdf.mitsuba.frames`) reproduces all 16 elements of
 :func:`hyde_bsdf.pbrdf`, S3 rows and columns included - no sign conversion is
 needed at this boundary.  At normal incidence r_p = -r_s (Mitsuba's Fresnel
 signs), so a mirror gives F00 diag(1, 1, -1, -1) in the paper's bases.
@@ -185,7 +185,7 @@ def _dhr_lookup(shadowing):
     """One DHRLookup per (variant, shadowing), shared by all instances."""
     key = (mi.variant(), shadowing)
     if key not in _DHR_CACHE:
-        from .dhr import load_table
+        from hyde_bsdf.model.dhr import load_table
 
         _DHR_CACHE[key] = po.DHRLookup(load_table(shadowing))
     return _DHR_CACHE[key]
@@ -558,7 +558,7 @@ def register(variant: str | None = None) -> None:
     if variant is None:
         if current is None:
             raise RuntimeError("hyde: no Mitsuba variant is set; call mi.set_variant(...) "
-                               "(or hyde_bsdf.variants.set_variant) before register()")
+                               "(or hyde_bsdf.mitsuba.variants.set_variant) before register()")
         variant = current
     if variant != current:
         mi.set_variant(variant)

@@ -28,13 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .render import DEFAULT_VARIANT, _positive_int, prepare_variant, render_stokes
-from .stokes_io import polarization_quantities, save_polarization_pngs, write_stokes_exr, _tonemap
+from hyde_bsdf.render.renderer import DEFAULT_VARIANT, _positive_int, prepare_variant, render_stokes
+from hyde_bsdf.render.stokes_io import polarization_quantities, save_polarization_pngs, write_stokes_exr, _tonemap
 
 __all__ = ["DEMO_SCENE", "cli_main", "render_demo"]
 
 #: The demo scene, in the repository's scenes/ folder.
-DEMO_SCENE = Path(__file__).resolve().parent.parent / "scenes" / "demo.xml"
+DEMO_SCENE = Path(__file__).resolve().parents[2] / "scenes" / "demo.xml"
 
 
 def _log(msg: str) -> None:

@@ -1,0 +1,16 @@
+"""The paper's model in NumPy: one module per equation group, float64, no Mitsuba.
+
+``facet_geometry`` (Eqs. 7, 10), ``slope_distribution`` (Eq. 8), ``fresnel`` and
+``jones_mueller`` (Eqs. 9, 11), ``shadowing`` (Eq. 12, Smith, none), ``roughness`` (the
+roughness spellings), ``dhr`` (Eqs. 14-16 and the cached DHR table) and ``evaluator``
+(Eqs. 6, 13, 16, 17: :func:`pbrdf`).
+
+May import: NumPy, SciPy and the standard library only.  Everything else in the package may
+import this subpackage; it imports nothing from the rest of ``hyde_bsdf``.
+"""
+from hyde_bsdf.model.dhr import dhr_specular_pec
+from hyde_bsdf.model.evaluator import diffuse_pbrdf, pbrdf, specular_pbrdf
+from hyde_bsdf.model.roughness import alpha_from_rms_slope, rms_slope_from, rms_slope_from_alpha
+
+__all__ = ["pbrdf", "specular_pbrdf", "diffuse_pbrdf", "dhr_specular_pec", "rms_slope_from",
+           "alpha_from_rms_slope", "rms_slope_from_alpha"]

@@ -1,0 +1,12 @@
+"""Method-of-moments reference for 1-D random rough surfaces, and the model reduced to 1-D.
+
+``solver`` (:func:`scatter`: Gaussian surfaces, the integral equation, partitions, executors)
+and ``model1d`` (the pBRDF of a 1-D facet surface, the apples-to-apples counterpart of the
+MoM result).
+
+May import: ``hyde_bsdf.model``.  Independent of Mitsuba.
+"""
+from hyde_bsdf.mom.solver import *  # noqa: F401,F403  (the public names of the solver)
+from hyde_bsdf.mom.solver import __all__ as _solver_all
+
+__all__ = list(_solver_all)
