@@ -87,7 +87,7 @@ def test_few_adam_steps_reduce_loss_and_approach_truth(tiny):
 def test_parameter_keys_and_errors(tiny):
     scene, _ = tiny
     keys = inv.parameter_keys(mi.traverse(scene))
-    assert keys == {"rms_slope": "sphere.bsdf.rms_slope", "eta": "sphere.bsdf.eta.value",
+    assert keys == {"rms_slope": "sphere.bsdf.rms_slope.value", "eta": "sphere.bsdf.eta.value",
                     "k": "sphere.bsdf.k.value"}
     empty = mi.load_dict({"type": "scene", "s": {"type": "sphere", "bsdf": {"type": "diffuse"}}})
     with pytest.raises(ValueError, match="exactly one BSDF parameter for 'rms_slope'"):

@@ -102,8 +102,10 @@ BAD = [
     ({"sigma_h": 1.0}, ["sigma_h", "ell"]),
     ({"ell": 1.0}, ["ell"]),
     ({"sigma_h": -1.0, "ell": 1.0}, ["sigma_h"]),
-    ({"rms_slope": 0.0}, ["rms_slope", "range"]),
-    ({"rms_slope": 0.005}, ["rms_slope", "DHR table range"]),
+    ({"rms_slope": 0.0}, ["rms_slope", "range", "0.0001", "50"]),
+    ({"rms_slope": 60.0}, ["rms_slope", "range", "0.0001", "50"]),
+    ({"alpha": 1e-5}, ["alpha", "range", "0.0001414", "70.71"]),
+    ({"sigma_h": 100.0, "ell": 1.0}, ["sigma_h", "rms_slope", "range"]),
     ({"material": "Au", "eta": 1.0}, ["material", "eta"]),
     ({"material": "Au", "k": 1.0}, ["material", "k"]),
     ({"material": "Unobtainium"}, ["material", "Unobtainium", "Au"]),
@@ -114,7 +116,9 @@ BAD = [
     ({"diffuse": "lambert"}, ["diffuse", "paper", "reciprocal", "none"]),
     ({"diffuse": "reciprocal", "shadowing": "none"}, ["reciprocal", "shadowing"]),
     ({"roughness": 0.3}, ["unknown", "roughness"]),
-    ({"distribution": "beckmann"}, ["unknown", "distribution"]),
+    ({"distribution": "ggx"}, ["ggx", "Beckmann", "isotropic"]),
+    ({"alpha_u": 0.1, "alpha_v": 0.3}, ["alpha_u", "anisotropic", "Beckmann"]),
+    ({"sample_visible": "maybe"}, ["sample_visible", "boolean"]),
 ]
 
 
@@ -190,7 +194,9 @@ def test_unpolarized_variants_give_m00_of_polarized(variant, shadowing, diffuse)
     got = _eval_batch(mi, b, wi, wo)
     if mi.is_polarized:   # mono_polarized: its own Mueller matrix's M00
         got = got[:, 0, 0]
-    assert np.allclose(got, ref, rtol=2e-6, atol=1e-9)
+    # scalar variants compute the DHR texture coordinate in double, LLVM in float32: the diffuse
+    # term then differs by up to 4.5e-6 relative (measured), the specular lobe by < 3e-7
+    assert np.allclose(got, ref, rtol=2e-6 if diffuse == "none" else 1e-5, atol=1e-9)
     assert b.m_polarized == bool(mi.is_polarized)
 
 
@@ -200,14 +206,14 @@ def test_traverse_exposes_differentiable_roughness_and_index():
     mi = _setup("llvm_ad_spectral_polarized")
     b = mi.load_dict({"type": "hyde", "rms_slope": 0.3, "eta": 0.5, "k": 3.0})
     params = mi.traverse(b)
-    assert set(params.keys()) == {"rms_slope", "eta.value", "k.value"}
+    assert set(params.keys()) == {"rms_slope.value", "eta.value", "k.value", "specular_reflectance.value"}
     for key in params.keys():
         flags = int(params.properties[key][3])   # (value, type, node, flags)
         assert flags & int(mi.ParamFlags.NonDifferentiable) == 0, key
         assert flags & int(mi.ParamFlags.ReadOnly) == 0, key
     # parameters_changed refreshes derived quantities: updating rms_slope = a new instance
     wi, wo = _dirs(mi, 500, 8)
-    params["rms_slope"] = mi.Float(0.6)
+    params["rms_slope.value"] = mi.Float(0.6)
     params.update()
     fresh = mi.load_dict({"type": "hyde", "rms_slope": 0.6, "eta": 0.5, "k": 3.0})
     assert np.allclose(_eval_batch(mi, b, wi, wo), _eval_batch(mi, fresh, wi, wo), rtol=1e-5, atol=1e-8)
@@ -233,7 +239,7 @@ def test_gradients_match_finite_differences(component):
         v = b.eval(ctx, si, wo_v)
         return dr.sum(v[0, 0][0] + 0.5 * v[2, 3][0] + 0.3 * v[1, 0][0])
 
-    keys = ["rms_slope"] if component == "diffuse" else ["rms_slope", "eta.value", "k.value"]
+    keys = ["rms_slope.value"] if component == "diffuse" else ["rms_slope.value", "eta.value", "k.value"]
     for key in keys:
         x0 = float(np.array(params[key]).ravel()[0])
         params[key] = mi.Float(x0)

@@ -41,7 +41,7 @@ def test_gradient_survives_repeated_backward_passes():
     hyde_bsdf.register()
     scene = _sphere_scene(mi, {"type": "hyde", "rms_slope": 0.3, "eta": 0.2, "k": 3.0})
     params = mi.traverse(scene)
-    key = next(k for k in params.keys() if k.endswith("rms_slope"))
+    key = next(k for k in params.keys() if k.endswith("rms_slope.value"))
     dr.enable_grad(params[key])
     params.update()
     grads = []

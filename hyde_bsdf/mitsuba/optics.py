@@ -32,6 +32,8 @@ __all__ = [
     "fresnel_average",
     "vgroove_g",
     "DHRLookup",
+    "RMS_RANGE",
+    "dhr_rms_range",
 ]
 
 
@@ -159,12 +161,18 @@ def vgroove_g(wi, wo, h):
     return dr.select(valid, g, 0.0)
 
 
-#: rms_slope range of the plugin's DHR texture (the diffuse term needs it)
-DHR_RMS_RANGE = (0.01, 3.0)
+#: accepted rms_slope: the NumPy evaluator's range (``hyde_bsdf.model.roughness.check_rms_slope``)
+RMS_RANGE = (1e-4, 50.0)
 #: texture nodes along x = 1 - sqrt(cos theta) on [0, 1]
 DHR_X_POINTS = 2049
-#: texture nodes per decade of rms_slope
-DHR_SLOPE_PER_DECADE = 640
+#: texture nodes per decade of rms_slope (over the DHR table's whole range, 1e-4..100)
+DHR_SLOPE_PER_DECADE = 256
+
+
+def dhr_rms_range(table):
+    """rms_slope range of the plugin's DHR texture: the table's whole range (data from the model)."""
+    return float(math.exp(table.log_slope[0])), float(math.exp(table.log_slope[-1]))
+
 
 _FINE_CACHE: dict = {}
 
@@ -175,7 +183,7 @@ def _fine_grid(table):
 
     key = id(table)
     if key not in _FINE_CACHE:
-        lo, hi = (math.log(v) for v in DHR_RMS_RANGE)
+        lo, hi = (math.log(v) for v in dhr_rms_range(table))
         ns = int(round((hi - lo) / math.log(10.0) * DHR_SLOPE_PER_DECADE)) + 1
         x = np.linspace(0.0, 1.0, DHR_X_POINTS)
         ls = np.linspace(lo, hi, ns)
@@ -191,15 +199,15 @@ class DHRLookup:
     The lead's table (:func:`hyde_bsdf.model.dhr.load_table`) is resampled, through its
     own ``__call__`` (a bicubic spline), onto a fine grid: ``DHR_X_POINTS`` nodes
     uniform in x = 1 - sqrt(cos theta) (dense near grazing, where rho varies most)
-    times ``DHR_SLOPE_PER_DECADE`` nodes per decade of rms_slope over
-    ``DHR_RMS_RANGE``.  It is stored as 1 - rho (so that the small diffuse
+    times ``DHR_SLOPE_PER_DECADE`` nodes per decade of rms_slope over the
+    table's whole range (:func:`dhr_rms_range`, 1e-4..100).  It is stored as 1 - rho (so that the small diffuse
     weights of smooth surfaces keep their float32 relative precision) in an
     ``mi.Texture2f`` with linear filtering and clamped borders.  Linear filtering
     keeps the lookup differentiable w.r.t. rms_slope.  1 - rho_avg(rms_slope)
     (for the reciprocal diffuse term), resampled through the table's
     ``average``, is an ``mi.Texture1f``.  ``use_accel=False`` keeps positional
     gradients on CUDA as well.  Interpolation error against the table's
-    ``__call__``: see the README section "Mitsuba plugin".
+    ``__call__``: ``validation/plugin_checks.py`` ("DHR texture interpolation error").
     """
 
     def __init__(self, table):
@@ -207,7 +215,7 @@ class DHRLookup:
 
         lo, hi, one_minus, one_minus_avg, _ = _fine_grid(table)
         self.log_lo, self.log_hi = lo, hi
-        self.rms_lo, self.rms_hi = DHR_RMS_RANGE
+        self.rms_lo, self.rms_hi = dhr_rms_range(table)
         self.nt, self.ns = one_minus.shape
         self.tex = mi.Texture2f(mi.TensorXf(one_minus.astype(np.float32).ravel(),
                                             shape=(self.nt, self.ns, 1)),

@@ -1,9 +1,10 @@
 """The ``hyde`` BSDF: Hyde-Schmidt-Havrilla (2009) pBRDF as a Mitsuba 3 plugin.
 
-Call :func:`register` (also exposed as ``hyde_bsdf.register()``) after
-``mi.set_variant``; then ``{'type': 'hyde', ...}`` / ``<bsdf type="hyde">``
-works in that variant.  The parameter table and the conventions are in
-:data:`DOC` (which is also the class docstring).
+Call :func:`register` (also exposed as ``hyde_bsdf.register()``): with no argument it
+registers ``hyde`` in every usable variant (set the variant before or after), with a
+variant name only in that one.  Then ``{'type': 'hyde', ...}`` / ``<bsdf type="hyde">``
+works.  The parameter table and the conventions are in :data:`DOC` (which is also the
+class docstring).
 """
 from __future__ import annotations
 
@@ -15,11 +16,15 @@ import mitsuba as mi
 
 from hyde_bsdf.mitsuba import optics as po
 
-__all__ = ["register", "plugin_class", "DOC", "SHADOWING", "DIFFUSE"]
+__all__ = ["register", "plugin_class", "DOC", "SHADOWING", "DIFFUSE", "RMS_RANGE", "ALPHA_RANGE"]
 
 SHADOWING = ("vgroove", "smith", "none")
 DIFFUSE = ("paper", "reciprocal", "none")
 SQRT2 = math.sqrt(2.0)
+#: accepted rms_slope, the NumPy evaluator's range (:func:`hyde_bsdf.model.roughness.check_rms_slope`)
+RMS_RANGE = po.RMS_RANGE
+#: the same range as Beckmann alpha = sqrt(2) rms_slope
+ALPHA_RANGE = (SQRT2 * RMS_RANGE[0], SQRT2 * RMS_RANGE[1])
 
 DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
 
@@ -29,39 +34,59 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
  * - Parameter
    - Type
    - Default
-   - Meaning
-   - Exposed / differentiable
+   - Meaning and range
+   - Traverse key / differentiable
  * - rms_slope
-   - float
+   - float or texture
    - 0.3 (if no roughness is given)
-   - the paper's roughness sqrt(2) sigma_h / ell (rms facet slope along one axis);
-     useful range 0.02-1.5; accepted (0, 50], [0.01, 3] with a diffuse term
-   - exposed as ``rms_slope``, differentiable, discontinuous
+   - the paper's roughness sqrt(2) sigma_h / ell (rms facet slope along one axis),
+     per shading point (texture ``eval_1(si)``, like roughconductor's alpha);
+     useful range 0.02-1.5; accepted [1e-4, 50], with every diffuse term
+   - ``rms_slope.value`` (float), ``rms_slope.data`` (bitmap), ``rms_slope.color0.value``
+     (checkerboard), ...; differentiable, discontinuous
  * - alpha
-   - float
+   - float or texture
    - (none)
-   - Beckmann alpha = sqrt(2) rms_slope = 2 sigma_h / ell (Mitsuba's roughconductor alpha);
-     alternative to rms_slope
-   - (stored as rms_slope)
+   - Beckmann alpha = sqrt(2) rms_slope = 2 sigma_h / ell (roughconductor's alpha);
+     alternative to rms_slope; accepted [1.414e-4, 70.71]
+   - ``alpha.value`` / ``alpha.data`` / ...: Beckmann alpha, as roughconductor;
+     differentiable, discontinuous
  * - sigma_h, ell
-   - float, float
+   - float, float (scalars only: use rms_slope or alpha for a texture)
    - (none)
    - rms surface height and Gaussian correlation length (same units, both needed);
      alternative to rms_slope
-   - (stored as rms_slope)
+   - ``rms_slope.value`` (stored as rms_slope = sqrt(2) sigma_h / ell)
  * - eta, k
-   - float or spectrum texture
+   - float, spectrum, rgb or texture
    - 0, 1 (a 100 % reflective mirror, as roughconductor)
    - real and imaginary part of the complex index n + i k (Mitsuba's sign;
-     the paper writes the same material as eta = n - j kappa); k >= 0
-   - exposed as ``eta.value``, ``k.value``, differentiable, discontinuous
+     the paper writes the same material as eta = n - j kappa); eta >= 0, k >= 0,
+     not both 0.  ``k = 0`` with any eta is a dielectric (dispersive if eta is a
+     spectrum).  Spatially varying textures (bitmaps) cannot be checked at load.
+   - ``eta.value``, ``k.value`` (float; ``eta.values`` for a spectrum, ``eta.data``
+     for a bitmap); differentiable, discontinuous
  * - material
    - string
    - (none)
    - a named metal from Mitsuba's ``data/ior`` tables ("Au", "Al", "Cu", "Ag", ...);
-     alternative to eta/k.  RGB variants convert the spectra to unbounded sRGB and
-     mono variants to luminance, as Mitsuba's own conductors do
-   - as eta, k
+     alternative to eta/k.  Spectral variants use the tabulated spectrum, RGB
+     variants its unbounded sRGB, mono variants its luminance, as Mitsuba's own
+     conductors do
+   - ``eta.values`` + ``eta.wavelengths`` (spectral), ``eta.value`` (RGB: a Color3f;
+     mono: a Float); the same under ``k.``; differentiable
+ * - specular_reflectance
+   - float, spectrum or texture
+   - 1.0
+   - multiplier of the whole BSDF (specular lobe and diffuse term), as roughconductor's;
+     not physical: keep it 1 for the paper's model
+   - ``specular_reflectance.value`` / ``.data``; differentiable
+ * - distribution
+   - string
+   - "beckmann"
+   - only "beckmann": the paper's model is Beckmann and isotropic ("ggx", alpha_u / alpha_v
+     are refused with that reason)
+   - no
  * - shadowing
    - string
    - "vgroove"
@@ -77,10 +102,20 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
      "none" = specular lobe only
    - no
  * - sample_visible
-   - bool
+   - bool ("true"/"false" strings are parsed)
    - true
    - sample the specular lobe from the visible Beckmann normals (Heitz & d'Eon 2014)
    - no
+
+Validation.  The constructor and every ``params.update()`` (``parameters_changed``)
+apply the same checks: roughness values (the float, or every texel / value of the
+texture's data: ``value``, ``data``, ``values`` entries) finite and in range,
+eta and k of spatially uniform textures >= 0 and not both 0 (checked at 48
+wavelengths 360-830 nm in spectral variants), no NaN in any texture datum.  Values
+that cannot be read back (a ``mesh_attribute`` texture) are clamped to the
+accepted range at eval.  Where a spectrum is 0 (outside the wavelength range it
+is defined on, Mitsuba's rule) and k is 0 as well, the index is taken as 1
+(no reflection) rather than producing 0/0.
 
 Model.  f = D(h) M(beta; eta) G / (4 cos theta_i cos theta_o)  +  diffuse (paper
 Eqs. 6, 8, 11, 12, 13, 17), where D is the Beckmann distribution with
@@ -122,14 +157,17 @@ with the facet normal fall back to the x axis, as in roughconductor.
 
 Index.  Textures of eta and k are evaluated per wavelength (spectral), per RGB
 channel (unbounded sRGB) or as luminance (mono); like Mitsuba, |k| is used.
+Roughness textures are evaluated once per call (``eval_1``) and the DHR lookup of
+the diffuse term is done at that per-point roughness.
 
 DHR lookup.  1 - rho^{s,PEC} is resampled from the table's bicubic ``__call__``
-onto 2049 nodes in x = 1 - sqrt(cos theta) times 640 per decade of rms_slope over
-[0.01, 3] and read with a linear ``mi.Texture2f`` (differentiable in rms_slope);
-its deviation from the evaluator's lookup is < 3e-6 absolute for theta <= 89 deg,
-two orders below the table's own quadrature accuracy.  With a diffuse term
-rms_slope must lie in [0.01, 3]; 1 - rho is clipped at 0 (rho > 1 happens
-without shadowing near grazing).
+onto 2049 nodes in x = 1 - sqrt(cos theta) times 256 per decade of rms_slope over
+the table's whole range [1e-4, 100] and read with a linear ``mi.Texture2f``
+(differentiable in rms_slope), at each shading point's own roughness.  Its
+deviation from the table is <= 1.5e-5 (vgroove, smith) and <= 6e-5 (none)
+absolute for theta <= 89 deg, rms_slope in [1e-4, 50] (measured by
+``validation/plugin_checks.py``, "DHR texture interpolation error").  1 - rho is
+clipped at 0 (rho > 1 happens without shadowing near grazing).
 
 Sampling.  With probability p_spec the specular lobe is sampled from the
 (visible) Beckmann normals (``mi.MicrofacetDistribution``), otherwise a cosine
@@ -142,15 +180,27 @@ Components: 0 = glossy reflection (specular lobe), 1 = diffuse reflection.
 """
 
 
-def _read_float(props, name):
+def _read_float(props, name, hint=""):
     value = props.get(name)
     try:
         value = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"hyde: parameter '{name}' must be a number, got {value!r}") from None
+        raise ValueError(f"hyde: parameter '{name}' must be a number{hint}, got {value!r}") from None
     if not math.isfinite(value):
         raise ValueError(f"hyde: parameter '{name}' must be finite, got {value!r}")
     return value
+
+
+def _read_bool(props, name, default):
+    """A boolean property; the strings "true"/"false" (any case) are parsed, others refused."""
+    if name not in props:
+        return default
+    value = props.get(name)
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, str) and value.strip().lower() in ("true", "false"):
+        return value.strip().lower() == "true"
+    raise ValueError(f"hyde: parameter '{name}' must be a boolean (true or false), got {value!r}")
 
 
 def _ior_texture(path):
@@ -178,6 +228,103 @@ def _known_materials():
     return names
 
 
+# ---------------------------------------------------------------- texture checks
+#: traverse keys of a texture whose values are the texture's own values (not spectral coefficients)
+_DATA_KEYS = ("value", "data", "values")
+
+
+def _texture_data(tex):
+    """{key: float64 array} of a texture's traversable data (all floating-point leaves)."""
+    import numpy as np
+
+    out = {}
+    params = mi.traverse(tex)
+    for key in params.keys():
+        value = params[key]
+        if isinstance(value, (str, bool)) or key.endswith("to_uv") or key.endswith("range"):
+            continue
+        try:
+            arr = np.asarray(value, dtype=float).ravel()
+        except (TypeError, ValueError):
+            continue
+        out[key] = arr
+    return out
+
+
+def _check_finite(name, tex):
+    import numpy as np
+
+    for key, arr in _texture_data(tex).items():
+        if not np.isfinite(arr).all():
+            raise ValueError(f"hyde: parameter '{name}' ({name}.{key}) contains NaN or infinite values")
+
+
+def _check_roughness(name, tex, scale):
+    """Every roughness datum finite and rms = datum * scale within RMS_RANGE (named by the user's key)."""
+    import numpy as np
+
+    lo, hi = (RMS_RANGE if scale == 1.0 else ALPHA_RANGE)
+    for key, arr in _texture_data(tex).items():
+        if key.split(".")[-1] not in _DATA_KEYS or arr.size == 0:
+            continue
+        bad = ~np.isfinite(arr) | (arr * scale < RMS_RANGE[0] * (1 - 1e-6)) | (arr * scale > RMS_RANGE[1] * (1 + 1e-6))
+        if bad.any():
+            worst = arr[bad][0]
+            raise ValueError(f"hyde: {name} must be a finite number in the accepted range "
+                             f"[{lo:.4g}, {hi:.4g}]" + ("" if scale == 1.0 else f" (rms_slope "
+                             f"[{RMS_RANGE[0]:g}, {RMS_RANGE[1]:g}])") + f", got {name}.{key} = {float(worst)!r}" + ("" if arr.size == 1 else f" ({int(bad.sum())} of {arr.size} values)"))
+
+
+def _describe(tex):
+    """A constant texture's value as a number (e.g. ``0.3``), else the texture's own string."""
+    data = _texture_data(tex)
+    if list(data) == ["value"] and data["value"].size == 1:
+        return f"{float(data['value'][0]):.6g}"
+    return str(tex)
+
+
+def _probe(tex):
+    """Values of a spatially uniform spectrum texture (float64 array), None if it varies over the surface.
+
+    Spectral variants: at 48 wavelengths 360-830 nm; RGB: the three channels; mono: one value.
+    """
+    import numpy as np
+
+    if tex.is_spatially_varying():
+        return None
+    wl = np.linspace(360.0, 830.0, 48)
+    if dr.is_jit_v(mi.Float):
+        si = dr.zeros(mi.SurfaceInteraction3f, 12)
+        si.uv = mi.Point2f(0.5, 0.5)
+        if mi.is_spectral:
+            si.wavelengths = mi.UnpolarizedSpectrum(*(mi.Float(wl[j::4]) for j in range(4)))
+        return np.asarray(tex.eval(si), dtype=float).ravel()
+    out = []
+    for j in range(12 if mi.is_spectral else 1):
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        si.uv = mi.Point2f(0.5, 0.5)
+        if mi.is_spectral:
+            si.wavelengths = mi.UnpolarizedSpectrum(*map(float, wl[4 * j:4 * j + 4]))
+        out.append(np.asarray(tex.eval(si), dtype=float).ravel())
+    return np.concatenate(out)
+
+
+def _check_index(eta, k):
+    """eta, k >= 0 and not both 0 where they can be read (spatially uniform textures)."""
+    import numpy as np
+
+    _check_finite("eta", eta)
+    _check_finite("k", k)
+    pe, pk = _probe(eta), _probe(k)
+    for name, p in (("eta", pe), ("k", pk)):
+        if p is not None and (p < 0).any():
+            raise ValueError(f"hyde: parameter '{name}' must be >= 0 (index n + i k with k >= 0), "
+                             f"got {p[p < 0][0]:g}")
+    if pe is not None and pk is not None and np.all(pe == 0) and np.all(pk == 0):
+        raise ValueError("hyde: eta and k cannot both be 0 (no material has index 0); "
+                         "a dielectric has k = 0 and eta > 0")
+
+
 _DHR_CACHE: dict = {}
 
 
@@ -191,8 +338,8 @@ def _dhr_lookup(shadowing):
     return _DHR_CACHE[key]
 
 
-_PARAMS = ("rms_slope", "alpha", "sigma_h", "ell", "eta", "k", "material",
-           "shadowing", "diffuse", "sample_visible")
+_PARAMS = ("rms_slope", "alpha", "sigma_h", "ell", "eta", "k", "material", "specular_reflectance",
+           "distribution", "shadowing", "diffuse", "sample_visible")
 
 
 def _make_class():
@@ -204,6 +351,16 @@ def _make_class():
         def __init__(self, props):
             mi.BSDF.__init__(self, props)
 
+            # ---- outside the paper's model: refuse with the reason
+            distribution = str(props.get("distribution", "beckmann")).lower()
+            if distribution != "beckmann":
+                raise ValueError(f"hyde: distribution={distribution!r} is not supported: the paper's "
+                                 f"model uses the Beckmann distribution only (isotropic)")
+            aniso = [x for x in ("alpha_u", "alpha_v") if x in props]
+            if aniso:
+                raise ValueError(f"hyde: {'/'.join(aniso)} (anisotropic roughness) is not supported: the "
+                                 f"paper's model is isotropic Beckmann; give one alpha or rms_slope")
+
             # ---- roughness: exactly one of rms_slope / alpha / (sigma_h, ell)
             groups = [g for g, names in (("rms_slope", ("rms_slope",)), ("alpha", ("alpha",)),
                                          ("sigma_h+ell", ("sigma_h", "ell")))
@@ -211,24 +368,29 @@ def _make_class():
             if len(groups) > 1:
                 raise ValueError(f"hyde: give the roughness as exactly one of rms_slope, alpha or "
                                  f"sigma_h+ell; got conflicting {', '.join(groups)}")
-            if "alpha" in props:
-                rms = _read_float(props, "alpha") / SQRT2
-                src = "alpha"
-            elif "sigma_h" in props or "ell" in props:
+            if "sigma_h" in props or "ell" in props:
                 missing = [x for x in ("sigma_h", "ell") if x not in props]
                 if missing:
                     raise ValueError(f"hyde: sigma_h and ell must be given together; missing {missing[0]}")
-                sh, ell = _read_float(props, "sigma_h"), _read_float(props, "ell")
+                hint = " (sigma_h and ell are scalars; give rms_slope or alpha for a texture)"
+                sh, ell = _read_float(props, "sigma_h", hint), _read_float(props, "ell", hint)
                 if sh <= 0 or ell <= 0:
                     raise ValueError(f"hyde: sigma_h and ell must be > 0, got sigma_h={sh}, ell={ell}")
                 rms = SQRT2 * sh / ell
-                src = "sigma_h/ell"
+                if not (RMS_RANGE[0] <= rms <= RMS_RANGE[1]):
+                    raise ValueError(f"hyde: sigma_h/ell give rms_slope = sqrt(2) sigma_h/ell = {rms:g}; "
+                                     f"the accepted range is [{RMS_RANGE[0]:g}, {RMS_RANGE[1]:g}]")
+                key = "rms_slope"
+                self.m_rough = props.get_texture("rms_slope", rms)
             else:
-                rms = _read_float(props, "rms_slope") if "rms_slope" in props else 0.3
-                src = "rms_slope"
-            if not (0.0 < rms <= 50.0):
-                raise ValueError(f"hyde: roughness from {src} gives rms_slope={rms:g}; "
-                                 f"the accepted range is (0, 50]")
+                key = "alpha" if "alpha" in props else "rms_slope"
+                if key in props and props.type(key) == mi.Properties.Type.Float:
+                    _read_float(props, key)  # finite number (the range check follows)
+                self.m_rough = props.get_texture(key, 0.3)
+            self.m_rough_key = key
+            # alpha = sqrt(2) rms_slope: eval converts the texture's alpha into rms_slope
+            self.m_rough_scale = 1.0 / SQRT2 if key == "alpha" else 1.0
+            _check_roughness(key, self.m_rough, self.m_rough_scale)
 
             # ---- index: eta/k or material
             if "material" in props:
@@ -245,18 +407,15 @@ def _make_class():
                 self.m_k = _ior_texture(str(path).replace(".eta.spd", ".k.spd"))
                 self.m_material = material
             else:
-                consts = {}
                 for name in ("eta", "k"):
                     if name in props and props.type(name) == mi.Properties.Type.Float:
-                        consts[name] = _read_float(props, name)
-                        if consts[name] < 0:
-                            raise ValueError(f"hyde: parameter '{name}' must be >= 0 "
-                                             f"(index n + i k with k >= 0), got {consts[name]}")
-                if consts.get("eta", 0.0) == 0.0 and consts.get("k", 1.0) == 0.0:
-                    raise ValueError("hyde: eta and k cannot both be 0 (no material has index 0)")
+                        _read_float(props, name)
                 self.m_eta = props.get_unbounded_texture("eta", 0.0)
                 self.m_k = props.get_unbounded_texture("k", 1.0)
                 self.m_material = None
+            _check_index(self.m_eta, self.m_k)
+            self.m_specular_reflectance = props.get_texture("specular_reflectance", 1.0)
+            _check_finite("specular_reflectance", self.m_specular_reflectance)
 
             # ---- model switches (Python constants: branching on them is fine)
             shadowing = str(props.get("shadowing", "vgroove")).lower()
@@ -274,7 +433,7 @@ def _make_class():
                                  "(with shadowing='none' the specular albedo average is >= 1)")
             self.m_shadowing = shadowing
             self.m_diffuse = diffuse
-            self.m_sample_visible = bool(props.get("sample_visible", True))
+            self.m_sample_visible = _read_bool(props, "sample_visible", True)
 
             unknown = [x for x in props.unqueried() if x not in _PARAMS]
             if unknown:
@@ -282,12 +441,7 @@ def _make_class():
                                  f"accepted: {', '.join(_PARAMS)}")
 
             self.m_polarized = bool(mi.is_polarized)
-            self.m_rms_slope = mi.Float(rms)
             self.m_dhr = _dhr_lookup(shadowing) if diffuse != "none" else None
-            if self.m_dhr is not None and not (self.m_dhr.rms_lo <= rms <= self.m_dhr.rms_hi):
-                raise ValueError(f"hyde: rms_slope={rms:g} is outside the DHR table range "
-                                 f"[{self.m_dhr.rms_lo:g}, {self.m_dhr.rms_hi:g}] needed by "
-                                 f"diffuse={diffuse!r}")
 
             glossy = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
             comps = [glossy]
@@ -300,58 +454,56 @@ def _make_class():
             self.m_flags = flags
 
         # ------------------------------------------------------------------
-        # Nothing derived from rms_slope is cached: alpha, the DHR texture coordinate and
-        # 1 - rho_avg are recomputed at every call, so each AD pass sees a fresh graph edge
-        # from rms_slope (a copy derived once would lose its gradient after the first
-        # dr.backward, which consumes the graph).
-        @property
-        def m_alpha(self):
-            return SQRT2 * self.m_rms_slope
-
-        @property
-        def m_u_slope(self):
-            return self.m_dhr.slope_coord(self.m_rms_slope)
-
-        @property
-        def m_one_minus_avg(self):
-            # without shadowing rho_avg can reach 1: keep the division finite
-            return dr.maximum(self.m_dhr.one_minus_rho_avg(self.m_u_slope), 1e-30)
-
+        # Nothing derived from the roughness is cached: alpha, the DHR texture coordinate and
+        # 1 - rho_avg are computed at every call from one texture lookup, so each AD pass sees a
+        # fresh graph edge from the texture's data (a copy derived once would lose its gradient
+        # after the first dr.backward, which consumes the graph).
         def traverse(self, callback):
             flags = mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous
-            callback.put("rms_slope", self.m_rms_slope, flags)
+            # the user's spelling: "alpha" holds Beckmann alpha (roughconductor's meaning)
+            callback.put(self.m_rough_key, self.m_rough, flags)
             callback.put("eta", self.m_eta, flags)
             callback.put("k", self.m_k, flags)
+            callback.put("specular_reflectance", self.m_specular_reflectance, +mi.ParamFlags.Differentiable)
 
         def parameters_changed(self, keys=[]):
-            """Validate an updated rms_slope (alpha and the DHR coordinate follow it at every call).
-
-            Outside the DHR texture's rms_slope range the diffuse term uses the
-            nearest tabulated roughness (clamped texture lookup).
-            """
-            import numpy as np
-
-            value = float(np.asarray(self.m_rms_slope, dtype=float).ravel()[0])
-            if not (math.isfinite(value) and value > 0.0):
-                raise ValueError(f"hyde: rms_slope must be a finite number > 0, got {value!r}")
-            if dr.is_jit_v(type(self.m_rms_slope)):
-                dr.make_opaque(self.m_rms_slope)
+            """Validate updated values exactly as the constructor does (ValueError naming the key)."""
+            _check_roughness(self.m_rough_key, self.m_rough, self.m_rough_scale)
+            _check_index(self.m_eta, self.m_k)
+            _check_finite("specular_reflectance", self.m_specular_reflectance)
 
         def to_string(self):
             index = (f"material={self.m_material!r}" if self.m_material else
                      f"eta={self.m_eta}, k={self.m_k}")
-            return (f"HydeBSDF[rms_slope={self.m_rms_slope}, {index}, shadowing={self.m_shadowing!r}, "
+            return (f"HydeBSDF[{self.m_rough_key}={_describe(self.m_rough)}, {index}, "
+                    f"specular_reflectance={self.m_specular_reflectance}, shadowing={self.m_shadowing!r}, "
                     f"diffuse={self.m_diffuse!r}, sample_visible={self.m_sample_visible}]")
 
         # ------------------------------------------------------------------
-        def _distr(self):
-            return mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, self.m_alpha,
-                                             self.m_sample_visible)
+        def _rough(self, si, active):
+            """Roughness at the shading point: one texture lookup per call, shared by all terms.
+
+            Returns (alpha, rms_slope).  An ``alpha`` texture's value is used as the Beckmann
+            alpha unchanged (bit-identical to roughconductor's), rms_slope = alpha / sqrt(2).
+            """
+            r = self.m_rough.eval_1(si, active)
+            # values were range-checked at load/update where readable (mesh attributes are not)
+            if self.m_rough_key == "alpha":
+                alpha = dr.clip(r, ALPHA_RANGE[0], ALPHA_RANGE[1])
+                return alpha, alpha * (1.0 / SQRT2)
+            rms = dr.clip(r, RMS_RANGE[0], RMS_RANGE[1])
+            return SQRT2 * rms, rms
+
+        def _distr(self, rough):
+            return mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, rough[0], self.m_sample_visible)
 
         def _index(self, si, active):
             n = self.m_eta.eval(si, active)
             # Mitsuba's polarized Fresnel uses |k| (it conjugates n + ik into n - ik)
             k = dr.abs(self.m_k.eval(si, active))
+            # a spectrum is 0 outside its wavelength range: index 0 would give 0/0 at normal
+            # incidence; take it as 1 there (no interface, no reflection)
+            n = dr.select((n == 0) & (k == 0), 1.0, n)
             return n, k
 
         def _shadowing(self, distr, wi, wo, h):
@@ -362,20 +514,23 @@ def _make_class():
             # "none": G = 1, but still only facets seen from the front by both directions
             return dr.select((dr.dot(wi, h) > 0) & (dr.dot(wo, h) > 0), 1.0, 0.0)
 
-        def _one_minus_rho(self, cos_theta):
-            return self.m_dhr.one_minus_rho(cos_theta, self.m_u_slope)
+        def _one_minus_rho(self, cos_theta, u):
+            return self.m_dhr.one_minus_rho(cos_theta, u)
 
-        def _diffuse_factor(self, ctx, si, wo):
+        def _diffuse_factor(self, ctx, si, wo, rough):
             """(1/pi)(1 - rho(theta_in)) [paper, Eq. 17] or its reciprocal form; no M00, no cos."""
             # rho > 1 is possible without shadowing (Priest-Germer); 1 - rho is clipped at 0
+            u = self.m_dhr.slope_coord(rough[1])
             if self.m_diffuse == "paper":
                 wo_hat_z = wo.z if ctx.mode == mi.TransportMode.Radiance else si.wi.z
-                return dr.maximum(self._one_minus_rho(wo_hat_z), 0.0) * dr.inv_pi
-            one_minus_i = dr.maximum(self._one_minus_rho(si.wi.z), 0.0)
-            one_minus_o = dr.maximum(self._one_minus_rho(wo.z), 0.0)
-            return one_minus_i * one_minus_o * dr.inv_pi / self.m_one_minus_avg
+                return dr.maximum(self._one_minus_rho(wo_hat_z, u), 0.0) * dr.inv_pi
+            one_minus_i = dr.maximum(self._one_minus_rho(si.wi.z, u), 0.0)
+            one_minus_o = dr.maximum(self._one_minus_rho(wo.z, u), 0.0)
+            # without shadowing rho_avg can reach 1: keep the division finite
+            one_minus_avg = dr.maximum(self.m_dhr.one_minus_rho_avg(u), 1e-30)
+            return one_minus_i * one_minus_o * dr.inv_pi / one_minus_avg
 
-        def _p_spec(self, ctx, si):
+        def _p_spec(self, ctx, si, rough):
             """Probability of sampling the specular lobe (a Python constant or a Float)."""
             spec_on = ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
             diff_on = self.m_diffuse != "none" and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
@@ -386,7 +541,7 @@ def _make_class():
             if not (spec_on or diff_on):
                 return None
             # ratio of the lobe albedos rho F : (1 - rho) F (F common to both)
-            return dr.clip(1.0 - self._one_minus_rho(si.wi.z), 0.05, 0.95)
+            return dr.clip(1.0 - self._one_minus_rho(si.wi.z, self.m_dhr.slope_coord(rough[1])), 0.05, 0.95)
 
         def _mueller(self, ctx, si, wo, h, n, k, spec, diff):
             """Fresnel(h) * spec + M00(h) * diff as a Spectrum (Mueller matrix if polarized).
@@ -429,7 +584,7 @@ def _make_class():
                 F[0, 0] = F[0, 0] + a * diff
             return F
 
-        def _value(self, ctx, si, wo, active):
+        def _value(self, ctx, si, wo, active, rough):
             """f cos(theta_o) as a Spectrum (Mueller matrix in polarized variants)."""
             spec_on = ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
             diff_on = self.m_diffuse != "none" and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
@@ -440,16 +595,17 @@ def _make_class():
             active = active & (cos_i > 0) & (cos_o > 0)
             h = dr.normalize(wo + si.wi)
             n, k = self._index(si, active)
+            scale = self.m_specular_reflectance.eval(si, active)
             spec = 0.0
             if spec_on:
-                distr = self._distr()
+                distr = self._distr(rough)
                 # D G / (4 cos_i) = (Eq. 13 without M) * cos_o
-                spec = distr.eval(h) * self._shadowing(distr, si.wi, wo, h) / (4.0 * cos_i)
-            diff = self._diffuse_factor(ctx, si, wo) * cos_o if diff_on else 0.0
+                spec = distr.eval(h) * self._shadowing(distr, si.wi, wo, h) / (4.0 * cos_i) * scale
+            diff = self._diffuse_factor(ctx, si, wo, rough) * cos_o * scale if diff_on else 0.0
             return dr.select(active, self._mueller(ctx, si, wo, h, n, k, spec, diff), 0.0)
 
-        def _pdf(self, ctx, si, wo, active):
-            p_spec = self._p_spec(ctx, si)
+        def _pdf(self, ctx, si, wo, active, rough):
+            p_spec = self._p_spec(ctx, si, rough)
             if p_spec is None:
                 return mi.Float(0.0)
             cos_i = mi.Frame3f.cos_theta(si.wi)
@@ -459,7 +615,7 @@ def _make_class():
             pdf_spec = 0.0
             if not (isinstance(p_spec, float) and p_spec == 0.0):
                 spec_ok = active & (dr.dot(si.wi, h) > 0) & (dr.dot(wo, h) > 0)
-                distr = self._distr()
+                distr = self._distr(rough)
                 if self.m_sample_visible:
                     pdf_spec = distr.eval(h) * distr.smith_g1(si.wi, h) / (4.0 * cos_i)
                 else:
@@ -472,22 +628,24 @@ def _make_class():
 
         # ------------------------------------------------------------------
         def eval(self, ctx, si, wo, active=True):
-            return self._value(ctx, si, wo, active)
+            return self._value(ctx, si, wo, active, self._rough(si, active))
 
         def pdf(self, ctx, si, wo, active=True):
-            return self._pdf(ctx, si, wo, active)
+            return self._pdf(ctx, si, wo, active, self._rough(si, active))
 
         def eval_pdf(self, ctx, si, wo, active=True):
-            return self._value(ctx, si, wo, active), self._pdf(ctx, si, wo, active)
+            rough = self._rough(si, active)
+            return self._value(ctx, si, wo, active, rough), self._pdf(ctx, si, wo, active, rough)
 
         def sample(self, ctx, si, sample1, sample2, active=True):
             bs = dr.zeros(mi.BSDFSample3f)
             cos_i = mi.Frame3f.cos_theta(si.wi)
             active = active & (cos_i > 0)
-            p_spec = self._p_spec(ctx, si)
+            rough = self._rough(si, active)
+            p_spec = self._p_spec(ctx, si, rough)
             if p_spec is None:
                 return bs, dr.zeros(mi.Spectrum)
-            distr = self._distr()
+            distr = self._distr(rough)
 
             if isinstance(p_spec, float) and p_spec == 1.0:
                 # specular lobe only: exactly roughconductor's sampling routine
@@ -507,6 +665,7 @@ def _make_class():
                     g_ratio = (self._shadowing(distr, si.wi, bs.wo, m) * dr.dot(si.wi, m)
                                / (cos_i * mi.Frame3f.cos_theta(m)))
                 n, k = self._index(si, active)
+                g_ratio = g_ratio * self.m_specular_reflectance.eval(si, active)
                 weight = self._mueller(ctx, si, bs.wo, m, n, k, g_ratio, 0.0)
                 bs.pdf = dr.select(active, bs.pdf, 0.0)
                 return bs, dr.select(active, weight, 0.0)
@@ -525,7 +684,8 @@ def _make_class():
             bs.sampled_type = dr.select(choose_spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
                                         mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
             active = active & (mi.Frame3f.cos_theta(bs.wo) > 0)
-            value, bs.pdf = self.eval_pdf(ctx, si, bs.wo, active)
+            value = self._value(ctx, si, bs.wo, active, rough)
+            bs.pdf = self._pdf(ctx, si, bs.wo, active, rough)
             ok = active & (bs.pdf > 0)
             bs.pdf = dr.select(ok, bs.pdf, 0.0)
             weight = value / dr.select(ok, bs.pdf, 1.0)

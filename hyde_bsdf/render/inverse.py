@@ -153,11 +153,11 @@ def load_scene(path=None, **kwargs):
 def parameter_keys(params, names=PARAMETERS, prefix: str | None = None) -> dict:
     """Map plugin parameter names to ``mi.traverse`` keys of the one target BSDF.
 
-    Looks for keys ending in ``.rms_slope`` (``hyde``; ``.alpha.value`` for
+    Looks for keys ending in ``.rms_slope.value`` (``hyde``; ``.alpha.value`` for
     roughconductor), ``.eta.value`` and ``.k.value``; ``prefix`` (e.g. ``"sphere.bsdf"``)
     picks one BSDF when the scene has several.
     """
-    suffix = {"rms_slope": (".rms_slope", ".alpha.value"), "eta": (".eta.value",), "k": (".k.value",)}
+    suffix = {"rms_slope": (".rms_slope.value", ".alpha.value"), "eta": (".eta.value",), "k": (".k.value",)}
     out = {}
     for name in names:
         if name not in suffix:
