@@ -5,7 +5,7 @@ Public entry points
 ``pbrdf``              NumPy evaluator of the full 4x4 Mueller pBRDF (paper Eqs. 6-17).
 ``dhr_specular_pec``   directional-hemispherical reflectance of the specular lobe (Eqs. 14-16).
 ``rms_slope_from``     the paper's roughness sqrt(2)*sigma_h/ell from (sigma_h, ell).
-``register``           register the ``hyde`` BSDF with Mitsuba for the current variant.
+``register``           register the ``hyde`` BSDF with Mitsuba (every usable variant).
 
 Subpackages (the dependency direction is model -> mitsuba / mom / fit -> render -> report):
 
@@ -49,12 +49,13 @@ def __getattr__(name):
     raise AttributeError(f"module 'hyde_bsdf' has no attribute {name!r}")
 
 
-def register(variant: str | None = None) -> None:
-    """Register the ``hyde`` BSDF plugin for the current (or the given) Mitsuba variant.
+def register(variant: str | None = None) -> list:
+    """Register the ``hyde`` BSDF plugin with Mitsuba; returns the variants registered.
 
-    Idempotent; call it again after every ``mi.set_variant``.  See
-    :mod:`hyde_bsdf.mitsuba.plugin` for the parameter table.
+    With no argument: in every variant usable on this machine (so any later
+    ``mi.set_variant`` finds it; ``cuda_*`` only with a GPU); with a name: in that one.
+    Idempotent.  See :mod:`hyde_bsdf.mitsuba.plugin` for the parameter table.
     """
     from hyde_bsdf.mitsuba.plugin import register as _register
 
-    _register(variant)
+    return _register(variant)

@@ -2,7 +2,8 @@
 
 Call :func:`register` (also exposed as ``hyde_bsdf.register()``): with no argument it
 registers ``hyde`` in every usable variant (set the variant before or after), with a
-variant name only in that one.  Then ``{'type': 'hyde', ...}`` / ``<bsdf type="hyde">``
+variant name only in that one (an unusable variant, e.g. ``cuda_*`` without a GPU,
+raises an error naming the ``llvm_*`` variant to use instead).  Then ``{'type': 'hyde', ...}`` / ``<bsdf type="hyde">``
 works.  The parameter table and the conventions are in :data:`DOC` (which is also the
 class docstring).
 """
@@ -708,23 +709,42 @@ def plugin_class():
     return _CLASSES[variant]
 
 
-def register(variant: str | None = None) -> None:
-    """Register the ``hyde`` BSDF with Mitsuba for ``variant`` (default: the current one).
+def register(variant: str | None = None) -> list[str]:
+    """Register the ``hyde`` BSDF with Mitsuba; returns the variants it was registered in.
 
-    Registration is per variant: call it after ``mi.set_variant`` (or pass the
-    variant; the current variant is then restored).  Calling it again is harmless.
+    Registration is per variant in Mitsuba.  With no argument ``hyde`` is registered in
+    every variant usable here (:func:`hyde_bsdf.mitsuba.variants.usable_variants`: the
+    ``llvm_*`` ones only with a libLLVM >= 16, the ``cuda_*`` ones only with a CUDA
+    device), so a later ``mi.set_variant`` of any of them finds it.  With a variant name,
+    only that one; an unusable one raises
+    :class:`hyde_bsdf.mitsuba.variants.VariantUnavailable` (a ``RuntimeError``) that says
+    which variant to use instead.  The current variant is restored (if none was set, the
+    last registered one stays selected: call ``mi.set_variant`` before use).  Calling it
+    again is harmless.
     """
+    from hyde_bsdf.mitsuba.variants import VariantUnavailable, _cpu_twin, usable_variant, usable_variants
+
     current = mi.variant()
     if variant is None:
-        if current is None:
-            raise RuntimeError("hyde: no Mitsuba variant is set; call mi.set_variant(...) "
-                               "(or hyde_bsdf.mitsuba.variants.set_variant) before register()")
-        variant = current
-    if variant != current:
-        mi.set_variant(variant)
+        targets = usable_variants()
+    else:
+        usable_variant(variant, fallback=False)   # raises, naming the alternative, if unusable
+        targets = [variant]
+    done = []
     try:
-        cls = plugin_class()
-        mi.register_bsdf("hyde", lambda props: cls(props))
+        for v in targets:
+            try:
+                if mi.variant() != v:
+                    mi.set_variant(v)
+            except ImportError as exc:   # a CUDA device present but not usable
+                if variant is not None:
+                    raise VariantUnavailable(f"variant={v!r} cannot be initialised here ({exc}); "
+                                             f"use {_cpu_twin(v)!r} instead") from exc
+                continue
+            cls = plugin_class()
+            mi.register_bsdf("hyde", lambda props, cls=cls: cls(props))
+            done.append(v)
     finally:
-        if current is not None and variant != current:
+        if current is not None and mi.variant() != current:
             mi.set_variant(current)
+    return done
