@@ -210,9 +210,14 @@ class DHRLookup:
     ``__call__``: ``validation/plugin_checks.py`` ("DHR texture interpolation error").
     """
 
-    def __init__(self, table):
+    #: makes the textures visible to Dr.Jit's traversal (dr.freeze collects them as inputs)
+    DRJIT_STRUCT = {"tex": mi.Texture2f, "tex_avg": mi.Texture1f}
+
+    def __init__(self, table=None):
         import numpy as np
 
+        if table is None:   # Dr.Jit's traversal may construct an empty instance
+            return
         lo, hi, one_minus, one_minus_avg, _ = _fine_grid(table)
         self.log_lo, self.log_hi = lo, hi
         self.rms_lo, self.rms_hi = dhr_rms_range(table)

@@ -468,7 +468,13 @@ def _make_class():
             callback.put("specular_reflectance", self.m_specular_reflectance, +mi.ParamFlags.Differentiable)
 
         def parameters_changed(self, keys=[]):
-            """Validate updated values exactly as the constructor does (ValueError naming the key)."""
+            """Validate updated values exactly as the constructor does (ValueError naming the key).
+
+            Inside a ``dr.freeze`` recording values cannot be read back: the checks are skipped
+            there (call ``params.update()`` outside the frozen function to keep them).
+            """
+            if dr.flag(dr.JitFlag.FreezingScope):
+                return
             _check_roughness(self.m_rough_key, self.m_rough, self.m_rough_scale)
             _check_index(self.m_eta, self.m_k)
             _check_finite("specular_reflectance", self.m_specular_reflectance)
