@@ -55,7 +55,9 @@ import numpy as np
 __all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "prepare", "scene_dict", "load_scene",
            "parameter_keys", "stokes_images", "interior_mask", "StokesLoss", "render_reference",
            "InversionResult", "invert", "loss_and_gradient", "finite_difference_gradient",
-           "plot_history", "write_history", "cli_main"]
+           "plot_history", "write_history", "MAP_PARAMETERS", "MAP_VARIANT", "map_keys", "render_stokes",
+           "render_stokes_np", "Observation", "texel_coverage", "smoothness", "MapInversionResult",
+           "invert_maps", "example_maps", "plane_scene_dict", "cli_main"]
 
 VARIANT = "llvm_ad_spectral_polarized"
 #: optimizable BSDF parameters (the plugin's names)
@@ -469,6 +471,437 @@ def plot_history(results: dict, path, title: str = "") -> Path:
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+# ---------------------------------------------------------------------------
+# texture-valued (SVBRDF) inversion: roughness map, optionally index maps, from several images
+
+#: texture-valued parameters: name -> (traverse-key suffixes, accepted range).  ``alpha`` is the
+#: Beckmann alpha (roughconductor's meaning and key; hyde's ``alpha`` texture), ``rms_slope`` hyde's
+#: own roughness texture (alpha = sqrt(2) rms_slope), ``eta``, ``k`` the index (Mitsuba's n + ik).
+MAP_PARAMETERS = {
+    "alpha": ((".alpha.data", ".alpha.value"), (SQRT2 * 0.011, SQRT2 * 2.9)),
+    "rms_slope": ((".rms_slope.data", ".rms_slope.value", ".rms_slope"), RANGES["rms_slope"]),
+    "eta": ((".eta.data", ".eta.value"), RANGES["eta"]),
+    "k": ((".k.data", ".k.value"), (1e-4, RANGES["k"][1])),
+}
+#: the variant of the SVBRDF validation, tests and benchmark: monochromatic polarized.  The
+#: scenes there have white lights and a wavelength-independent index, so one wavelength holds
+#: all the information; the spectral variant only adds wavelength-sampling noise and 2x time.
+MAP_VARIANT = "llvm_ad_mono_polarized"
+
+
+def map_keys(params, names=("alpha",), prefix: str | None = None) -> dict:
+    """Map texture parameter names (:data:`MAP_PARAMETERS`) to ``mi.traverse`` keys.
+
+    A texture-valued parameter (``<texture type="bitmap">``) has the key ``...NAME.data``
+    (a TensorXf of shape (rows, columns, 1); row r holds v in [r, r + 1) / rows), a constant one
+    ``...NAME.value``.  ``prefix`` (e.g. ``"plane.bsdf"``) picks one BSDF when the scene has several.
+    """
+    out = {}
+    for name in names:
+        if name not in MAP_PARAMETERS:
+            raise ValueError(f"parameter names must be from {tuple(MAP_PARAMETERS)}, got {name!r}")
+        for suffix in MAP_PARAMETERS[name][0]:
+            found = [key for key in params.keys() if key.endswith(suffix)
+                     and (prefix is None or key.startswith(prefix + "."))]
+            if found:
+                break
+        if len(found) != 1:
+            raise ValueError(f"need exactly one BSDF parameter for {name!r} (keys ending in "
+                             f"{' or '.join(MAP_PARAMETERS[name][0])}"
+                             f"{'' if prefix is None else ' under ' + repr(prefix)}); found {found}"
+                             f"{'; name the BSDF with prefix= (CLI: --target)' if len(found) > 1 else ''}")
+        out[name] = found[0]
+    return out
+
+
+def render_stokes(scene, sensor: int = 0, spp: int = 16, seed: int = 0, params=None) -> list:
+    """Luminance S0..S3 tensors (H, W) of one sensor's render (differentiable when ``params`` given)."""
+    import mitsuba as mi
+
+    img = (mi.render(scene, params, sensor=int(sensor), spp=int(spp), seed=int(seed)) if params is not None
+           else mi.render(scene, sensor=int(sensor), spp=int(spp), seed=int(seed)))
+    names = [f.name for f in scene.sensors()[int(sensor)].film().bitmap().struct_()]
+    return stokes_images(img, names)
+
+
+def render_stokes_np(scene, sensor: int = 0, spp: int = 64, seed: int = 0) -> np.ndarray:
+    """:func:`render_stokes` as a float64 array (4, H, W) (references)."""
+    return np.array([np.asarray(s, dtype=np.float64) for s in render_stokes(scene, sensor, spp, seed)])
+
+
+@dataclass
+class Observation:
+    """One reference image: a scene, the index of its sensor, the reference Stokes images.
+
+    ``reference``: luminance S0..S3, shape (4, H, W) (:func:`render_stokes_np` or a Stokes EXR
+    through ``Y_WEIGHTS``).  ``mask``: bool (H, W) of the pixels the loss uses (default
+    :func:`interior_mask` of S0: lit pixels away from silhouettes).  ``weight``: this image's
+    share of the data loss.  Several observations may share a scene (one per sensor) or use
+    different scenes (e.g. one per light: one light per render avoids the light-selection noise
+    of a scene with several lights); the fitted textures are written into every scene.
+    """
+
+    scene: object
+    reference: np.ndarray
+    sensor: int = 0
+    mask: np.ndarray | None = None
+    weight: float = 1.0
+
+
+def texel_coverage(obs: Observation, shape, prefix: str | None = None, sub: int = 4) -> np.ndarray:
+    """Samples per texel of a (rows, columns) map on the target shape that ``obs``'s masked pixels see.
+
+    Casts ``sub`` x ``sub`` camera rays per pixel of the loss mask (what the loss uses), keeps those
+    whose first hit is the shape carrying the target BSDF (``prefix``, default: the one shape whose
+    BSDF has a texture parameter) and bins their UV into texels as the nearest-neighbour bitmap
+    lookup does (column = floor(u W), row = floor(v H); ``to_uv`` is assumed identity).
+    Returns counts (rows, columns); a texel with 0 is never seen, so it carries no information.
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    scene = obs.scene
+    sensor = scene.sensors()[int(obs.sensor)]
+    W, H = sensor.film().crop_size()
+    mask = _obs_mask(obs)
+    ys, xs = np.nonzero(mask)
+    o = (np.arange(sub) + 0.5) / sub
+    ox, oy = np.meshgrid(o, o)
+    px = (xs[:, None] + ox.ravel()[None, :]).ravel() / W
+    py = (ys[:, None] + oy.ravel()[None, :]).ravel() / H
+    target = _target_shape(scene, prefix)
+    ray, _ = sensor.sample_ray(mi.Float(0.0), mi.Float(0.5), mi.Point2f(mi.Float(px), mi.Float(py)),
+                               mi.Point2f(0.5, 0.5))
+    si = scene.ray_intersect(ray)
+    hit = np.asarray(si.is_valid() & (si.shape == mi.ShapePtr(target)))
+    uv = np.array([np.asarray(si.uv.x), np.asarray(si.uv.y)])
+    rows, cols = shape
+    c = np.clip(np.floor(uv[0][hit] * cols).astype(int), 0, cols - 1)
+    r = np.clip(np.floor(uv[1][hit] * rows).astype(int), 0, rows - 1)
+    counts = np.zeros((rows, cols), int)
+    np.add.at(counts, (r, c), 1)
+    dr.eval()
+    return counts
+
+
+def _target_shape(scene, prefix):
+    """The shape whose BSDF is the target (``prefix`` "ID.bsdf" names it; default: the only textured one)."""
+    shapes = list(scene.shapes())
+    if prefix is not None:
+        sid = prefix.split(".")[0]
+        found = [s for s in shapes if s.id() == sid]
+    else:
+        import mitsuba as mi
+
+        params = mi.traverse(scene)
+        owners = {k.split(".")[0] for k in params.keys() if k.endswith(".data") and ".bsdf." in k}
+        found = [s for s in shapes if s.id() in owners]
+    if len(found) != 1:
+        raise ValueError(f"need exactly one shape carrying the textured BSDF"
+                         f"{'' if prefix is None else ' ' + repr(prefix)}; found "
+                         f"{[s.id() for s in found]} (name it with prefix='ID.bsdf')")
+    return found[0]
+
+
+def _obs_mask(obs: Observation) -> np.ndarray:
+    ref = np.asarray(obs.reference, dtype=np.float64)
+    mask = interior_mask(ref[0]) if obs.mask is None else np.asarray(obs.mask, bool)
+    if mask.shape != ref.shape[1:]:
+        raise ValueError(f"mask shape {mask.shape} differs from the reference's {ref.shape[1:]}")
+    return mask
+
+
+def smoothness(x, kind: str = "tv", eps: float = 1e-3):
+    """Mean over the horizontal and vertical neighbour pairs of a map ``x`` (TensorXf (H, W, 1)).
+
+    ``kind="tv"``: sqrt(d^2 + eps^2) - eps (total variation, smoothed at |d| < eps so it is
+    differentiable; keeps sharp edges: a step costs its height once).  ``kind="l2"``: d^2
+    (squared gradient; smooths noise and rounds edges).  d is the difference of the map's values
+    (for alpha: dimensionless), so the regulariser has the units of d (tv) or d^2 (l2).
+    """
+    import drjit as dr
+
+    H, W = x.shape[0], x.shape[1]
+    terms = []
+    if W > 1:
+        terms.append((x[:, 1:, :] - x[:, :-1, :], H * (W - 1)))
+    if H > 1:
+        terms.append((x[1:, :, :] - x[:-1, :, :], (H - 1) * W))
+    if kind not in ("tv", "l2"):
+        raise ValueError(f"regularizer must be 'tv' or 'l2', got {kind!r}")
+    total, n = 0.0, 0
+    for d, count in terms:
+        pen = dr.sqrt(dr.square(d) + eps * eps) - eps if kind == "tv" else dr.square(d)
+        total = total + dr.sum(pen, axis=None)
+        n += count
+    return total / max(n, 1)
+
+
+@dataclass
+class MapInversionResult:
+    """Outcome of :func:`invert_maps`: final maps/values (NumPy), per-iteration history, texel mask."""
+
+    fitted: tuple
+    final: dict                      # name -> ndarray (rows, cols) for maps, float for constants
+    start: dict
+    components: str
+    seen: np.ndarray | None = None   # bool (rows, cols): texels some observation sees
+    truth: dict | None = None
+    history: list = field(default_factory=list)  # iteration, loss, data_loss, regularizer, seconds, [errors]
+    seconds_per_iteration: float = float("nan")
+    first_iteration_seconds: float = float("nan")
+
+    def texel_errors(self, name: str = "alpha") -> np.ndarray:
+        """|final / truth - 1| over the seen texels of map ``name`` (1-D array)."""
+        if not self.truth or name not in self.truth:
+            raise ValueError(f"no truth for {name!r}")
+        rel = np.abs(np.asarray(self.final[name]) / np.asarray(self.truth[name]) - 1.0)
+        return rel[self.seen] if self.seen is not None and rel.shape == self.seen.shape else rel.ravel()
+
+
+def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 100, lr: float = 0.05,
+                spp: int = 4, seed: int = 0, components: str = "stokes", regularizer: str | None = None,
+                weight: float = 0.0, truth: dict | None = None, prefix: str | None = None,
+                average_last: int | None = None, progress: bool = True,
+                seen: np.ndarray | None = None) -> MapInversionResult:
+    """Optimise texture-valued BSDF parameters (a roughness map, optionally index maps) to match
+    one or more reference Stokes images.
+
+    ``observations``: list of :class:`Observation`.  ``start``: name -> start value, a float
+    (a constant map) or an array (rows, cols) for texture parameters; a parameter named in
+    ``start`` but not in ``fit`` is set and held fixed.  ``fit``: names from
+    :data:`MAP_PARAMETERS` (texture keys ``NAME.data`` are fitted per texel, constants
+    ``NAME.value`` as one number).  Loss::
+
+        L = sum_i w_i L_i / sum_i w_i  +  weight * R(map)
+
+    with L_i the :class:`StokesLoss` of observation i (``components`` "stokes" or "s0") and R the
+    :func:`smoothness` of each fitted map (``regularizer`` "tv" or "l2"; off when None or
+    ``weight`` = 0).  L_i is dimensionless (1 = a render as far from the reference as black is);
+    R is in map units (tv) or their square (l2), so ``weight`` converts map differences into loss:
+    a texel-to-texel step d costs about ``weight * d`` (tv) over the mean of all neighbour pairs.
+    Useful: tv 1e-3..1e-2 damps per-texel Monte-Carlo jitter and fills texels the images barely
+    constrain; 1e-1 and above flattens real structure.
+
+    Adam on log(value) per texel (values stay positive; one learning rate fits every texel),
+    clamped to :data:`MAP_PARAMETERS`' ranges; lr constant for the first half, then decaying
+    geometrically to lr/10; iteration i renders observation j with seed
+    ``seed + 1 + i * len(observations) + j``.  The final maps are the mean of the iterates over
+    the last ``average_last`` iterations (default: a quarter; Polyak averaging).  ``seen`` (or,
+    by default, the union of :func:`texel_coverage` over the observations) marks the texels that
+    the images see; with ``truth`` the history records the median and 90th-percentile relative
+    error of each fitted map over them.
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    observations = list(observations)
+    if not observations:
+        raise ValueError("observations must hold at least one Observation")
+    fit = tuple(fit)
+    if not fit:
+        raise ValueError(f"fit must name at least one of {tuple(MAP_PARAMETERS)}")
+    for name in fit:
+        if name not in MAP_PARAMETERS:
+            raise ValueError(f"fit: unknown parameter {name!r}; use {', '.join(MAP_PARAMETERS)}")
+        if name not in start:
+            raise ValueError(f"start must give a value for every fitted parameter; missing {name!r}")
+    if not (isinstance(iterations, int) and iterations >= 1):
+        raise ValueError(f"iterations must be an integer >= 1, got {iterations!r}")
+    if regularizer not in (None, "tv", "l2"):
+        raise ValueError(f"regularizer must be None, 'tv' or 'l2', got {regularizer!r}")
+    if not (math.isfinite(weight) and weight >= 0):
+        raise ValueError(f"weight must be a finite number >= 0, got {weight!r}")
+    for o in observations:
+        ref = np.asarray(o.reference)
+        if ref.ndim != 3 or ref.shape[0] != 4:
+            raise ValueError(f"reference must have shape (4, H, W), got {ref.shape}")
+        W, H = o.scene.sensors()[int(o.sensor)].film().crop_size()
+        if ref.shape[1:] != (H, W):
+            raise ValueError(f"reference is {ref.shape[2]}x{ref.shape[1]} pixels but sensor {o.sensor}'s "
+                             f"film is {W}x{H}")
+        if not np.isfinite(ref).all():
+            raise ValueError("reference contains NaN or infinite pixels")
+    losses = [StokesLoss(o.reference, mask=_obs_mask(o), components=components) for o in observations]
+    wsum = float(sum(o.weight for o in observations))
+    if not wsum > 0:
+        raise ValueError("the observations' weights must sum to > 0")
+
+    scenes = []
+    for o in observations:
+        if all(o.scene is not s for s in scenes):
+            scenes.append(o.scene)
+    all_params = [mi.traverse(s) for s in scenes]
+    names = tuple(dict.fromkeys(list(fit) + [n for n in start if n not in fit]))
+    keys = [map_keys(p, names, prefix) for p in all_params]
+    shapes = {}
+    for name in names:
+        cur = all_params[0][keys[0][name]]
+        shapes[name] = tuple(cur.shape) if isinstance(cur, mi.TensorXf) else None
+
+    def as_value(name, v):
+        lo, hi = MAP_PARAMETERS[name][1]
+        if shapes[name] is None:
+            return mi.Float(float(np.clip(float(np.mean(v)), lo, hi)))
+        arr = np.broadcast_to(np.asarray(v, np.float64).reshape(shapes[name][:2] + (1,))
+                              if np.ndim(v) else np.asarray(v, np.float64), shapes[name])
+        return mi.TensorXf(np.clip(arr, lo, hi).astype(np.float32))
+
+    for name in names:
+        try:
+            value = as_value(name, start[name])
+        except ValueError:
+            raise ValueError(f"start[{name!r}] must be a number or an array of the texture's shape "
+                             f"{shapes[name][:2]}") from None
+        for p, k in zip(all_params, keys):
+            p[k[name]] = value
+    for p in all_params:
+        p.update()
+
+    # beta_2 = 0.9 (not Adam's 0.999): a texel's gradient falls by orders of magnitude as it
+    # converges, and a long memory of the early large gradients stalls it (measured: with 0.999 the
+    # alpha = 0.6 square of the validation map sat 11 % high after 60 iterations; with 0.9, < 1 %);
+    # beta_1 = 0.8: less momentum, less overshoot of the texels that move far
+    opt = mi.ad.Adam(lr=lr, beta_1=0.8, beta_2=0.9)
+    for name in fit:
+        opt[name] = dr.log(as_value(name, start[name]))
+    if seen is None:
+        map_shape = next((shapes[n][:2] for n in fit if shapes[n] is not None), None)
+        if map_shape is not None:
+            cover = sum(texel_coverage(o, map_shape, prefix) for o in observations)
+            seen = cover > 0
+    truth_np = {n: np.asarray(v, np.float64) for n, v in (truth or {}).items()}
+
+    def snapshot(name):
+        v = np.exp(np.asarray(opt[name], dtype=np.float64))
+        return v[..., 0] if shapes[name] is not None else float(v.ravel()[0])
+
+    history, sums, n_avg = [], {}, 0
+    average_last = max(1, iterations // 4) if average_last is None else max(1, int(average_last))
+    t0 = time.perf_counter()
+    t_first = None
+    n_obs = len(observations)
+    for it in range(iterations):
+        t_it = time.perf_counter()
+        if it >= iterations // 2:
+            # geometric decay from lr (half-way) to lr/10 (last iteration)
+            span = max(1, iterations - 1 - iterations // 2)
+            opt.set_learning_rate(lr * 0.1 ** ((it - iterations // 2) / span))
+        values = {}
+        for name in fit:
+            lo, hi = MAP_PARAMETERS[name][1]
+            opt[name] = dr.clip(opt[name], math.log(lo), math.log(hi))
+            values[name] = dr.exp(opt[name])
+        for p, k in zip(all_params, keys):
+            for name in fit:
+                p[k[name]] = values[name]
+            p.update()
+        data = 0.0
+        for j, (o, fn) in enumerate(zip(observations, losses)):
+            params = all_params[next(i for i, s in enumerate(scenes) if s is o.scene)]
+            S = render_stokes(o.scene, o.sensor, spp, seed + 1 + it * n_obs + j, params=params)
+            data = data + (o.weight / wsum) * fn(S)
+        reg = 0.0
+        if regularizer is not None and weight > 0:
+            for name in fit:
+                if shapes[name] is not None:
+                    reg = reg + weight * smoothness(values[name], regularizer)
+        loss = data + reg
+        dr.backward(loss)
+        row = {"iteration": it, "loss": float(np.asarray(loss).ravel()[0]),
+               "data_loss": float(np.asarray(data).ravel()[0]),
+               "regularizer": float(np.asarray(reg).ravel()[0]) if not isinstance(reg, float) else 0.0}
+        if not math.isfinite(row["loss"]):
+            raise FloatingPointError(f"the loss became {row['loss']} at iteration {it}")
+        current = {n: snapshot(n) for n in fit}
+        for n in truth_np:
+            if n in current and np.ndim(current[n]) == 2:
+                rel = np.abs(current[n] / truth_np[n] - 1.0)
+                rel = rel[seen] if seen is not None else rel.ravel()
+                row[f"{n}_median_error"] = float(np.median(rel))
+                row[f"{n}_p90_error"] = float(np.percentile(rel, 90))
+        opt.step()
+        if it >= iterations - average_last:
+            for n in fit:
+                sums[n] = sums.get(n, 0.0) + current[n]
+            n_avg += 1
+        dt = time.perf_counter() - t_it
+        if t_first is None:
+            t_first = dt
+        row["seconds"] = time.perf_counter() - t0
+        history.append(row)
+        if progress:
+            err = "".join(f"  {n} median err {100 * row[n + '_median_error']:.1f} %" for n in fit
+                          if n + "_median_error" in row)
+            _log(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.4e}{err}  ({row['seconds']:.1f} s)")
+    final = {n: sums[n] / n_avg for n in fit}
+    for n in names:
+        if n not in fit:
+            final[n] = np.asarray(start[n], np.float64) if np.ndim(start[n]) else float(start[n])
+    per_it = ((history[-1]["seconds"] - history[0]["seconds"]) / (len(history) - 1)
+              if len(history) > 1 else float("nan"))
+    return MapInversionResult(fitted=fit, final=final, start=dict(start), components=components, seen=seen,
+                              truth=truth, history=history, seconds_per_iteration=per_it,
+                              first_iteration_seconds=t_first)
+
+
+# the SVBRDF scene: a textured plane, three views in one batch sensor, one point light per scene
+
+def example_maps(n: int = 32) -> np.ndarray:
+    """The validation's Beckmann alpha map (n x n): a smooth gradient 0.15 -> 0.45 along u plus a
+    sharp-edged square (alpha 0.6) at u in [0.2, 0.5), v in [0.45, 0.75)."""
+    u = (np.arange(n) + 0.5) / n
+    U, V = np.meshgrid(u, u)
+    alpha = 0.15 + 0.3 * U + 0.05 * np.sin(2 * np.pi * V)
+    alpha[(U >= 0.2) & (U < 0.5) & (V >= 0.45) & (V < 0.75)] = 0.6
+    return alpha
+
+
+def _orbit(azimuth_deg, elevation_deg, distance):
+    az, el = math.radians(azimuth_deg), math.radians(elevation_deg)
+    return [distance * math.cos(el) * math.cos(az), distance * math.cos(el) * math.sin(az),
+            distance * math.sin(el)]
+
+
+#: camera azimuths (deg) of the three views (elevation 55 deg, 4 units from the plane's centre)
+VIEW_AZIMUTHS = (0.0, 120.0, 240.0)
+#: point lights (azimuth, elevation deg, distance), one per scene
+LIGHTS = ((60.0, 60.0, 5.0), (240.0, 60.0, 5.0))
+
+
+def plane_scene_dict(alpha, *, bsdf: str = "hyde", eta: float = 1.5, k: float = 3.0, light: int = 0,
+                     res: int = 96, spp: int = 4, diffuse: str = "paper", views=VIEW_AZIMUTHS) -> dict:
+    """A 2 x 2 plane (shape id ``plane``, UV = (x + 1, y + 1) / 2) with the roughness map ``alpha``
+    (Beckmann alpha, rows along v, nearest-neighbour lookup) and a constant index, seen by
+    ``len(views)`` cameras side by side in one ``batch`` sensor (film ``len(views) * res`` x ``res``),
+    lit by point light ``LIGHTS[light]``.  ``bsdf``: ``hyde`` or ``roughconductor`` (Beckmann,
+    the same alpha, eta, k).  Direct light only (``stokes`` around ``path``, max_depth 2)."""
+    import mitsuba as mi
+
+    tex = {"type": "bitmap", "bitmap": mi.Bitmap(np.asarray(alpha, np.float32)[..., None]), "raw": True,
+           "filter_type": "nearest"}
+    if bsdf == "hyde":
+        material = {"type": "hyde", "alpha": tex, "eta": float(eta), "k": float(k), "diffuse": diffuse}
+    elif bsdf == "roughconductor":
+        material = {"type": "roughconductor", "distribution": "beckmann", "alpha": tex,
+                    "eta": float(eta), "k": float(k)}
+    else:
+        raise ValueError(f"bsdf must be 'hyde' or 'roughconductor', got {bsdf!r}")
+    film = lambda w: {"type": "hdrfilm", "width": int(w), "height": int(res), "rfilter": {"type": "box"}}
+    cams = {f"view{i}": {"type": "perspective", "fov": 40, "film": film(res),
+                         "to_world": mi.ScalarTransform4f().look_at(origin=_orbit(az, 55.0, 4.0),
+                                                                    target=[0, 0, 0], up=[0, 0, 1])}
+            for i, az in enumerate(views)}
+    la, le, ld = LIGHTS[light]
+    return {"type": "scene",
+            "integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": 2}},
+            "sensor": {"type": "batch", **cams, "film": film(len(views) * res),
+                       "sampler": {"type": "multijitter", "sample_count": int(spp)}},
+            "plane": {"type": "rectangle", "bsdf": material},
+            "light": {"type": "point", "position": _orbit(la, le, ld),
+                      "intensity": {"type": "spectrum", "value": 30.0}}}
 
 
 # ---------------------------------------------------------------------------
