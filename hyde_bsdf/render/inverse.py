@@ -680,10 +680,14 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     with L_i the :class:`StokesLoss` of observation i (``components`` "stokes" or "s0") and R the
     :func:`smoothness` of each fitted map (``regularizer`` "tv" or "l2"; off when None or
     ``weight`` = 0).  L_i is dimensionless (1 = a render as far from the reference as black is);
-    R is in map units (tv) or their square (l2), so ``weight`` converts map differences into loss:
-    a texel-to-texel step d costs about ``weight * d`` (tv) over the mean of all neighbour pairs.
-    Useful: tv 1e-3..1e-2 damps per-texel Monte-Carlo jitter and fills texels the images barely
-    constrain; 1e-1 and above flattens real structure.
+    R is in map units (tv) or their square (l2), so ``weight`` converts map differences into loss
+    units: a step of height d between two neighbours costs ``weight * d / n_pairs`` (tv) or
+    ``weight * d**2 / n_pairs`` (l2).  Both terms scale alike with the map's and the images'
+    resolution, so the weight carries over.  Measured on an 8 x 8 alpha map (gradient + a step,
+    2 views x 2 lights, 24 iterations; "flatness" = the fit's mean neighbour difference / the
+    truth's): tv 0.01 -> 1.03 (no effect), 0.1 -> 0.96, 1 -> 0.60, 10 -> 0.36 (over-smoothed,
+    median error 1.5 % -> 8 %); l2 0.1 -> 1.02, 1 -> 0.87, 10 -> 0.63, 100 -> 0.48.  Use it to
+    fill texels that the images barely constrain (tv ~ 0.1 keeps edges; l2 rounds them).
 
     Adam on log(value) per texel (values stay positive; one learning rate fits every texel),
     clamped to :data:`MAP_PARAMETERS`' ranges; lr constant for the first half, then decaying
