@@ -13,7 +13,19 @@ diffuse term and uses Smith shadowing, so it is the cost floor of a conductor lo
 The multijitter sampler rounds sample counts to a product of two near-equal integers
 (16 stays 16; 32 becomes 35): prefer squares.
 
-    python benchmarks/bench_inverse.py [--res 64] [--spp 16] [--iterations 40] [--csv out/bench_inverse.csv]
+    python benchmarks/bench_inverse.py --scalar [--res 64] [--spp 16] [--iterations 40] [--csv out/bench_inverse.csv]
+
+Default (``--maps``): the SVBRDF inversion (hyde_bsdf.render.inverse.invert_maps) of the
+validation's textured plane (validation/svbrdf_inverse.py: a 32 x 32 Beckmann alpha bitmap,
+3 views in one batch sensor x 2 point lights, llvm_ad_mono_polarized, 4 spp), with ``hyde``
+(diffuse "paper" and "none") against ``roughconductor`` given the same ``alpha`` texture, eta, k
+(its key ``alpha.data`` is hyde's).  All in one process: the scenes are built and JIT-warmed,
+then ``--rounds`` rounds each run ``--iterations`` iterations of every material, in an order
+rotated per round (interleaved, so the machine's load drifts alike over all); the figure is the
+median over all timed iterations (the first of each call, which builds the optimiser, excluded)
+and the ratio of medians to roughconductor's.
+
+    python benchmarks/bench_inverse.py [--res 80] [--rounds 7] [--iterations 6] [--variant V] [--csv F]
 """
 from __future__ import annotations
 
@@ -62,14 +74,92 @@ def run_one(name, res, spp, iterations):
             "final_loss": r.history[-1]["loss"]}
 
 
+MAP_CONFIGS = {
+    "hyde": {"bsdf": "hyde", "diffuse": "paper"},
+    "hyde (diffuse none)": {"bsdf": "hyde", "diffuse": "none"},
+    "roughconductor": {"bsdf": "roughconductor", "diffuse": "paper"},
+}
+
+
+def bench_maps(res=80, rounds=7, iterations=6, variant=None, spp=4, csv_path=None):
+    """Interleaved per-iteration times of invert_maps for each of MAP_CONFIGS; prints the ratios."""
+    import mitsuba as mi
+    import numpy as np
+
+    from hyde_bsdf.render import inverse as inv
+
+    variant = inv.prepare(variant or inv.MAP_VARIANT)
+    truth = inv.example_maps(32)
+    setups = {}
+    for name, cfg in MAP_CONFIGS.items():
+        obs = []
+        for light in range(len(inv.LIGHTS)):
+            scene = mi.load_dict(inv.plane_scene_dict(truth, bsdf=cfg["bsdf"], diffuse=cfg["diffuse"],
+                                                      light=light, res=res, spp=spp))
+            obs.append(inv.Observation(scene, inv.render_stokes_np(scene, 0, 4 * spp, seed=0)))
+        seen = sum(inv.texel_coverage(o, truth.shape) for o in obs) > 0
+        setups[name] = (obs, seen)
+    times = {name: [] for name in MAP_CONFIGS}
+
+    def run(name, n, seed):
+        obs, seen = setups[name]
+        r = inv.invert_maps(obs, {"alpha": 0.3}, iterations=n, spp=spp, seed=seed, seen=seen, progress=False)
+        return list(np.diff([0.0] + [h["seconds"] for h in r.history]))[1:]
+
+    names = list(MAP_CONFIGS)
+    for name in names:                      # JIT warm-up: compile every kernel once
+        run(name, 2, 0)
+    for k in range(rounds):
+        order = names[k % len(names):] + names[:k % len(names)]
+        for name in order:
+            times[name] += run(name, iterations + 1, 1000 * (k + 1))
+        print(f"[bench] round {k + 1}/{rounds}", file=sys.stderr, flush=True)
+    base = float(np.median(times["roughconductor"]))
+    print(f"SVBRDF inversion iteration (32x32 alpha bitmap, 2 renders of 3 views x {res}x{res} px, {spp} spp, "
+          f"{variant}, {os.cpu_count()} CPU threads): median of {rounds} interleaved rounds x {iterations} "
+          f"iterations")
+    print(f"{'config':22s} {'median it s':>12s} {'IQR s':>14s} {'ratio to roughconductor':>24s}")
+    rows = []
+    for name in names:
+        t = np.array(times[name])
+        med = float(np.median(t))
+        q1, q3 = np.percentile(t, [25, 75])
+        rows.append({"config": name, "variant": variant, "res": res, "spp": spp, "samples": len(t),
+                     "median_iteration_s": med, "q1_s": float(q1), "q3_s": float(q3), "ratio": med / base})
+        print(f"{name:22s} {med:12.4f} {q1:6.4f}-{q3:6.4f} {med / base:24.3f}")
+    if csv_path:
+        import csv
+
+        from hyde_bsdf.atomic import atomic_open
+
+        os.makedirs(os.path.dirname(os.path.abspath(csv_path)), exist_ok=True)
+        with atomic_open(csv_path, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+            w.writeheader()
+            w.writerows(rows)
+    return rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--res", type=int, default=64)
-    ap.add_argument("--spp", type=int, default=16)
-    ap.add_argument("--iterations", type=int, default=40)
+    ap.add_argument("--scalar", action="store_true", help="the scalar-parameter benchmark (one process per "
+                    "material, with peak memory) instead of the SVBRDF one")
+    ap.add_argument("--res", type=int, default=None, help="pixels (default 64 scalar, 80 per view SVBRDF)")
+    ap.add_argument("--spp", type=int, default=None, help="samples per pixel (default 16 scalar, 4 SVBRDF)")
+    ap.add_argument("--iterations", type=int, default=None,
+                    help="iterations (default 40 scalar; per material and round SVBRDF: 6)")
+    ap.add_argument("--rounds", type=int, default=7, help="SVBRDF: interleaved rounds")
+    ap.add_argument("--variant", default=None, help="SVBRDF: Mitsuba variant (default llvm_ad_mono_polarized)")
     ap.add_argument("--csv", default=None, help="also write the table here")
     ap.add_argument("--one", default=None, help=argparse.SUPPRESS)   # child process: one config
     args = ap.parse_args(argv)
+    if not args.scalar and not args.one:
+        bench_maps(res=args.res or 80, rounds=args.rounds, iterations=args.iterations or 6,
+                   variant=args.variant, spp=args.spp or 4, csv_path=args.csv)
+        return 0
+    args.res = args.res or 64
+    args.spp = args.spp or 16
+    args.iterations = args.iterations or 40
     if args.one:
         print(json.dumps(run_one(args.one, args.res, args.spp, args.iterations)))
         return 0
