@@ -1,0 +1,149 @@
+"""``hyde-bsdf invert`` on bad input and interruption (through ``hyde_bsdf.cli.main``), and its
+texture-valued mode end to end.
+
+Behaviour checked: every user mistake is one line on stderr naming the parameter or file, exit 2,
+no traceback, and is found before any rendering (a bad output folder is refused before the
+optimisation, not after it); a memory estimate above the free memory is refused with the flag that
+lowers it; progress is one stderr line per iteration; Ctrl-C (SIGINT) ends with a short message
+and exit 130; outputs appear complete (atomic, no temporary files left).
+"""
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hyde_bsdf.cli import main
+from hyde_bsdf.render import inverse as inv
+
+TINY = ["--res", "16", "--spp", "4", "--spp-ref", "16"]
+
+
+def _exr(path, h, w, nan=False):
+    """A Stokes EXR (channels R, G, B, S0.R ... S3.B) of h x w pixels, optionally with one NaN."""
+    import OpenEXR
+
+    rng = np.random.default_rng(0)
+    names = ["R", "G", "B"] + [f"S{i}.{c}" for i in range(4) for c in "RGB"]
+    ch = {n: rng.uniform(0.1, 1.0, (h, w)).astype(np.float32) for n in names}
+    if nan:
+        ch["S1.G"][h // 2, w // 3] = np.nan
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, ch).write(str(path))
+    return str(path)
+
+
+def _run(capsys, argv):
+    rc = main(["invert"] + argv)
+    cap = capsys.readouterr()
+    assert "Traceback" not in cap.err and "Traceback" not in cap.out
+    return rc, cap.out, cap.err
+
+
+def _one_error_line(err):
+    lines = [line for line in err.splitlines() if line.startswith("hyde-bsdf invert")]
+    assert len(lines) == 1, err
+    return lines[0]
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--seed", "-5"], ["--seed", ">= 0", "-5"]),
+    (["--seed", "x"], ["--seed", "invalid int"]),
+    (["--iterations", "0"], ["--iterations", ">= 1"]),
+    (["--lr", "nan"], ["--lr", "> 0"]),
+    (["--start", "rms_slope=abc"], ["--start", "not a number"]),
+    (["--start", "rms_slope=9"], ["--start", "outside the accepted range"]),
+    (["--fit", "sigma"], ["--fit", "rms_slope, eta, k"]),
+    (["--regularizer", "tv"], ["--regularizer", "--maps"]),
+    (["--maps", "--regularizer", "tikhonov"], ["--regularizer", "invalid choice"]),
+    (["--maps", "--weight", "-1"], ["--weight", ">= 0"]),
+    (["--maps", "--fit", "alpha,rms_slope"], ["--fit", "same roughness"]),
+    (["--reference", "/nonexistent/ref.exr"], ["/nonexistent/ref.exr", "not an existing file"]),
+    (["--maps", "--scene", "scenes/inverse.xml"], ["--reference per scene"]),
+])
+def test_usage_errors_are_one_line_exit_2(capsys, argv, words):
+    rc, _, err = _run(capsys, argv)
+    assert rc == 2
+    line = _one_error_line(err)
+    for w in words:
+        assert w in line, (w, line)
+
+
+def test_reference_of_wrong_size_and_with_nan(capsys, tmp_path):
+    t0 = time.perf_counter()
+    rc, _, err = _run(capsys, TINY + ["--reference", _exr(tmp_path / "small.exr", 10, 12), "-o", str(tmp_path)])
+    assert rc == 2
+    line = _one_error_line(err)
+    assert "--reference" in line and "small.exr" in line and "12x10 pixels" in line and "16x16" in line
+    rc, _, err = _run(capsys, TINY + ["--reference", _exr(tmp_path / "nan.exr", 16, 16, nan=True),
+                                      "-o", str(tmp_path)])
+    assert rc == 2
+    line = _one_error_line(err)
+    assert "--reference" in line and "nan.exr" in line and "1 pixel(s) with NaN" in line
+    assert "[invert] it" not in err                # refused before any optimisation step
+    assert not list(tmp_path.glob("invert*"))
+    assert time.perf_counter() - t0 < 60
+
+
+def test_bad_output_path_refused_before_optimising(capsys, tmp_path):
+    blocker = tmp_path / "file.txt"
+    blocker.write_text("x")
+    for out in (blocker / "sub", blocker):
+        rc, _, err = _run(capsys, TINY + ["--iterations", "50", "-o", str(out)])
+        assert rc == 2
+        line = _one_error_line(err)
+        assert "-o/--output" in line and "file.txt" in line
+        assert "[invert]" not in err               # nothing rendered
+
+
+def test_memory_estimate_refused_with_the_flag(capsys, monkeypatch, tmp_path):
+    monkeypatch.setattr(inv, "_mem_available", lambda: 64 * 2**20)
+    rc, _, err = _run(capsys, TINY + ["-o", str(tmp_path)])
+    assert rc == 2
+    line = _one_error_line(err)
+    assert "needs about" in line and "0.1 GiB is available" in line and "--spp" in line and "--res" in line
+    rc, _, err = _run(capsys, ["--maps"] + TINY + ["-o", str(tmp_path)])
+    assert rc == 2 and "--spp" in _one_error_line(err)
+    assert inv.estimate_memory(64, 64, 16) == inv.AD_BYTES_FIXED + inv.AD_BYTES_PER_SAMPLE * 64 * 64 * 16
+
+
+def test_maps_mode_end_to_end_progress_and_atomic_outputs(capsys, tmp_path):
+    rc, out, err = _run(capsys, ["--maps", "--map-size", "8", "--iterations", "3", "--regularizer", "tv",
+                                 "--weight", "0.1"] + TINY + ["-o", str(tmp_path)])
+    assert rc == 0
+    # one progress line per iteration on stderr
+    assert [line.split()[2] for line in err.splitlines() if line.startswith("[invert] it")] == ["1/3", "2/3", "3/3"]
+    alpha = np.load(tmp_path / "alpha.npy")
+    assert alpha.shape == (8, 8) and np.isfinite(alpha).all()
+    assert "per-texel error over the" in out and "texels seen by the images" in out
+    rows = (tmp_path / "invert_maps_history.csv").read_text().splitlines()
+    assert rows[0].startswith("iteration,loss,data_loss,regularizer") and len(rows) == 1 + 3
+    assert (tmp_path / "invert_maps.png").stat().st_size > 5_000 and (tmp_path / "alpha.exr").stat().st_size > 0
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]     # no temporary files left
+
+
+def test_ctrl_c_exits_130_with_a_short_message(tmp_path):
+    code = ("import sys; from hyde_bsdf.cli import main; "
+            f"sys.exit(main(['invert', '--res', '16', '--spp', '4', '--spp-ref', '16', '--iterations', '100000', "
+            f"'-o', {str(tmp_path)!r}]))")
+    proc = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE, stdout=subprocess.PIPE,
+                            text=True, cwd=Path(__file__).resolve().parents[1])
+    lines = []
+    deadline = time.time() + 120
+    for line in proc.stderr:                       # wait until the work has begun (reference render,
+        lines.append(line)                         # then the JIT compilation and the optimisation)
+        if line.startswith("[invert]") or time.time() > deadline:
+            break
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGINT)
+    try:
+        _, rest = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    err = "".join(lines) + rest
+    assert proc.returncode == 130, err
+    assert "hyde-bsdf invert: interrupted" in err and "Traceback" not in err
+    assert not (tmp_path / "invert_history.csv").exists()
