@@ -175,6 +175,7 @@ def dhr_rms_range(table):
 
 
 _FINE_CACHE: dict = {}
+_LOOKUP_CLASSES: dict = {}
 
 
 def _fine_grid(table):
@@ -210,8 +211,19 @@ class DHRLookup:
     ``__call__``: ``validation/plugin_checks.py`` ("DHR texture interpolation error").
     """
 
-    #: makes the textures visible to Dr.Jit's traversal (dr.freeze collects them as inputs)
-    DRJIT_STRUCT = {"tex": mi.Texture2f, "tex_avg": mi.Texture1f}
+    def __new__(cls, table=None):
+        # Each variant gets a subclass whose DRJIT_STRUCT names that variant's texture types:
+        # it makes the textures visible to Dr.Jit's traversal, so dr.freeze collects them as
+        # inputs of a frozen function (without it: "virtual function call ... no such object
+        # instance was found").  Built lazily: importing this module needs no variant.
+        if "DRJIT_STRUCT" not in cls.__dict__:
+            variant = mi.variant()
+            if variant not in _LOOKUP_CLASSES:
+                _LOOKUP_CLASSES[variant] = type(cls.__name__, (cls,), {
+                    "DRJIT_STRUCT": {"tex": mi.Texture2f, "tex_avg": mi.Texture1f},
+                    "__module__": cls.__module__})
+            cls = _LOOKUP_CLASSES[variant]
+        return object.__new__(cls)
 
     def __init__(self, table=None):
         import numpy as np

@@ -116,7 +116,8 @@ wavelengths 360-830 nm in spectral variants), no NaN in any texture datum.  Valu
 that cannot be read back (a ``mesh_attribute`` texture) are clamped to the
 accepted range at eval.  Where a spectrum is 0 (outside the wavelength range it
 is defined on, Mitsuba's rule) and k is 0 as well, the index is taken as 1
-(no reflection) rather than producing 0/0.
+(no reflection) rather than producing 0/0, with a warning at load (spectral variants:
+give eta over 360-830 nm).
 
 Model.  f = D(h) M(beta; eta) G / (4 cos theta_i cos theta_o)  +  diffuse (paper
 Eqs. 6, 8, 11, 12, 13, 17), where D is the Beckmann distribution with
@@ -276,6 +277,16 @@ def _check_roughness(name, tex, scale):
                              f"[{RMS_RANGE[0]:g}, {RMS_RANGE[1]:g}])") + f", got {name}.{key} = {float(worst)!r}" + ("" if arr.size == 1 else f" ({int(bad.sum())} of {arr.size} values)"))
 
 
+def _texture(props, name, default):
+    """``props.get_unbounded_texture`` with Mitsuba's own refusal as a one-line ValueError."""
+    try:
+        return props.get_unbounded_texture(name, default)
+    except RuntimeError as exc:   # e.g. an all-zero spectrum: "no probability mass found"
+        last = str(exc).strip().splitlines()[-1]
+        raise ValueError(f"hyde: parameter '{name}' is refused by Mitsuba ({last}); an index with "
+                         f"eta and k both 0 is not a material") from None
+
+
 def _describe(tex):
     """A constant texture's value as a number (e.g. ``0.3``), else the texture's own string."""
     data = _texture_data(tex)
@@ -299,7 +310,9 @@ def _probe(tex):
         si.uv = mi.Point2f(0.5, 0.5)
         if mi.is_spectral:
             si.wavelengths = mi.UnpolarizedSpectrum(*(mi.Float(wl[j::4]) for j in range(4)))
-        return np.asarray(tex.eval(si), dtype=float).ravel()
+        # a constant texture returns one lane: broadcast it to the 12 probed lanes
+        # (channels, lanes) -> lane-major, i.e. wavelength order wl[4 * lane + channel]
+        return np.asarray(tex.eval(si) * dr.full(mi.Float, 1.0, 12), dtype=float).T.ravel()
     out = []
     for j in range(12 if mi.is_spectral else 1):
         si = dr.zeros(mi.SurfaceInteraction3f)
@@ -321,9 +334,25 @@ def _check_index(eta, k):
         if p is not None and (p < 0).any():
             raise ValueError(f"hyde: parameter '{name}' must be >= 0 (index n + i k with k >= 0), "
                              f"got {p[p < 0][0]:g}")
-    if pe is not None and pk is not None and np.all(pe == 0) and np.all(pk == 0):
-        raise ValueError("hyde: eta and k cannot both be 0 (no material has index 0); "
-                         "a dielectric has k = 0 and eta > 0")
+    if pe is not None and pk is not None:
+        zero = (pe == 0) & (pk == 0)
+        if zero.all():
+            raise ValueError("hyde: eta and k cannot both be 0 (no material has index 0); "
+                             "a dielectric has k = 0 and eta > 0")
+        if zero.any() and mi.is_spectral and pe.size == pk.size == 48:
+            import warnings
+
+            wl = np.linspace(360.0, 830.0, 48)
+            runs, start = [], None
+            for i, z in enumerate(list(zero) + [False]):
+                if z and start is None:
+                    start = i
+                elif not z and start is not None:
+                    runs.append(f"{wl[start]:.0f}-{wl[i - 1]:.0f} nm")
+                    start = None
+            warnings.warn(f"hyde: eta and k are both 0 at {', '.join(runs)} (a spectrum "
+                          f"is 0 outside the wavelengths it is given at); the index is taken as 1 "
+                          f"there (no reflection): give eta over 360-830 nm", RuntimeWarning, stacklevel=2)
 
 
 _DHR_CACHE: dict = {}
@@ -337,6 +366,15 @@ def _dhr_lookup(shadowing):
 
         _DHR_CACHE[key] = po.DHRLookup(load_table(shadowing))
     return _DHR_CACHE[key]
+
+
+def _pos(x):
+    """A denominator that is > 0 on every lane whose result is kept: 1 elsewhere.
+
+    Those lanes are masked out afterwards; the guard keeps them from producing Inf/NaN
+    (which would leak into gradients) and scalar variants from raising ZeroDivisionError.
+    """
+    return dr.select(x > 0, x, 1.0)
 
 
 _PARAMS = ("rms_slope", "alpha", "sigma_h", "ell", "eta", "k", "material", "specular_reflectance",
@@ -411,8 +449,8 @@ def _make_class():
                 for name in ("eta", "k"):
                     if name in props and props.type(name) == mi.Properties.Type.Float:
                         _read_float(props, name)
-                self.m_eta = props.get_unbounded_texture("eta", 0.0)
-                self.m_k = props.get_unbounded_texture("k", 1.0)
+                self.m_eta = _texture(props, "eta", 0.0)
+                self.m_k = _texture(props, "k", 1.0)
                 self.m_material = None
             _check_index(self.m_eta, self.m_k)
             self.m_specular_reflectance = props.get_texture("specular_reflectance", 1.0)
@@ -509,8 +547,10 @@ def _make_class():
             # Mitsuba's polarized Fresnel uses |k| (it conjugates n + ik into n - ik)
             k = dr.abs(self.m_k.eval(si, active))
             # a spectrum is 0 outside its wavelength range: index 0 would give 0/0 at normal
-            # incidence; take it as 1 there (no interface, no reflection)
-            n = dr.select((n == 0) & (k == 0), 1.0, n)
+            # incidence; take it as 1 there (no interface, no reflection).  A tiny nonzero index
+            # (|eta| < 1e-6, eta^2 underflows) is floored at n = 1e-6: the mirror limit of eta -> 0
+            tiny = (n < 1e-6) & (k < 1e-6)
+            n = dr.select(tiny, dr.select((n == 0) & (k == 0), 1.0, 1e-6), n)
             return n, k
 
         def _shadowing(self, distr, wi, wo, h):
@@ -607,7 +647,7 @@ def _make_class():
             if spec_on:
                 distr = self._distr(rough)
                 # D G / (4 cos_i) = (Eq. 13 without M) * cos_o
-                spec = distr.eval(h) * self._shadowing(distr, si.wi, wo, h) / (4.0 * cos_i) * scale
+                spec = distr.eval(h) * self._shadowing(distr, si.wi, wo, h) / (4.0 * _pos(cos_i)) * scale
             diff = self._diffuse_factor(ctx, si, wo, rough) * cos_o * scale if diff_on else 0.0
             return dr.select(active, self._mueller(ctx, si, wo, h, n, k, spec, diff), 0.0)
 
@@ -624,9 +664,9 @@ def _make_class():
                 spec_ok = active & (dr.dot(si.wi, h) > 0) & (dr.dot(wo, h) > 0)
                 distr = self._distr(rough)
                 if self.m_sample_visible:
-                    pdf_spec = distr.eval(h) * distr.smith_g1(si.wi, h) / (4.0 * cos_i)
+                    pdf_spec = distr.eval(h) * distr.smith_g1(si.wi, h) / (4.0 * _pos(cos_i))
                 else:
-                    pdf_spec = distr.pdf(si.wi, h) / (4.0 * dr.dot(wo, h))
+                    pdf_spec = distr.pdf(si.wi, h) / (4.0 * _pos(dr.dot(wo, h)))
                 pdf_spec = dr.select(spec_ok, pdf_spec, 0.0)
             if isinstance(p_spec, float) and p_spec == 1.0:
                 return dr.select(active, pdf_spec, 0.0)
@@ -662,15 +702,15 @@ def _make_class():
                 bs.sampled_component = mi.UInt32(0)
                 bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
                 active = active & (pdf != 0) & (mi.Frame3f.cos_theta(bs.wo) > 0)
-                bs.pdf = pdf / (4.0 * dr.dot(bs.wo, m))
+                bs.pdf = pdf / (4.0 * _pos(dr.dot(bs.wo, m)))
                 # weight = f cos_o / pdf, written with the sampled m like roughconductor
                 if self.m_shadowing == "smith" and self.m_sample_visible:
                     g_ratio = distr.smith_g1(bs.wo, m)
                 elif self.m_sample_visible:
-                    g_ratio = self._shadowing(distr, si.wi, bs.wo, m) / distr.smith_g1(si.wi, m)
+                    g_ratio = self._shadowing(distr, si.wi, bs.wo, m) / _pos(distr.smith_g1(si.wi, m))
                 else:
                     g_ratio = (self._shadowing(distr, si.wi, bs.wo, m) * dr.dot(si.wi, m)
-                               / (cos_i * mi.Frame3f.cos_theta(m)))
+                               / _pos(cos_i * mi.Frame3f.cos_theta(m)))
                 n, k = self._index(si, active)
                 g_ratio = g_ratio * self.m_specular_reflectance.eval(si, active)
                 weight = self._mueller(ctx, si, bs.wo, m, n, k, g_ratio, 0.0)
