@@ -29,39 +29,75 @@ twice the nodes, doubled.
 
 The table
 ---------
-:func:`load_table` builds rho on a uniform grid of x = 1 - sqrt(cos theta_i) in
-[0, 1] and of ln(rms_slope) in [ln 1e-4, ln 100] once (x crowds the nodes
-towards grazing incidence, where rho changes over a range of cos theta_i of the
-order of rms_slope; rho is a smooth function of x at both ends), caches it as .npz under
-``$HYDE_BSDF_CACHE`` (default ``~/.cache/hyde-bsdf``) and interpolates it with
-bicubic splines.  Measured build time and interpolation error: see README.
+:func:`load_table` builds rho once on a grid of x = 1 - sqrt(cos theta_i) in [0, 1]
+and of ln(rms_slope) in [ln 1e-4, ln 100] (uniform in ln rms_slope, 20 nodes per
+decade) and interpolates it with bicubic splines.  x crowds the nodes towards
+grazing incidence, where rho changes over a range of cos theta_i of the order of
+rms_slope; rho is a smooth function of x at both ends.  The x nodes are uniform
+(step 1/128) up to x = 15/16 and four times denser (step 1/512) above it: for a
+near-mirror surface (rms_slope ~1e-4) the grazing dip of rho lies within
+1 - x ~ sqrt(rms_slope) ~ 0.01 of the end, which the uniform step resolved only
+to 7.5e-3 (measured); with the refined end the interpolation error is below
+2e-4 over the whole table (``validation/dhr_convergence.py`` charts it).
+
+The disk cache
+--------------
+The table is cached as ``dhr_<shadowing>_<key>.npz`` in ``$HYDE_BSDF_CACHE``
+(unset or empty: ``~/.cache/hyde-bsdf``).  The file stores, besides the arrays, its
+build parameters (grid, quadrature order, shadowing), a code version (a hash of
+the quadrature's source) and a SHA-256 checksum of the arrays.  A file is used only
+if all of these match, its arrays have the grid's shapes and are finite, rho_avg is
+the average of rho, and a few nodes re-integrated on the spot with
+:func:`dhr_quadrature` agree with the stored rho to 1e-9; otherwise a
+:class:`DHRCacheWarning` names the file and the reason, and the table is rebuilt
+and written back atomically (:mod:`hyde_bsdf.atomic`: no partial or temporary file
+is left behind).  A cache that cannot be written (read-only, a directory in the
+way) only costs the rebuild, with a one-line note on stderr.
 """
 from __future__ import annotations
 
 import hashlib
+import inspect
+import json
 import math
 import os
 import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
+from hyde_bsdf.atomic import atomic_open
+from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
+from hyde_bsdf.model import shadowing as _shadowing_module
 from hyde_bsdf.model.shadowing import SHADOWING, g1_smith_beckmann
 
 __all__ = ["dhr_specular_pec", "dhr_quadrature", "DHRTable", "load_table", "build_table",
-           "x_of_theta", "theta_of_x",
+           "x_of_theta", "theta_of_x", "table_x_nodes", "cache_dir", "cache_path", "DHRCacheWarning",
            "TABLE_THETA_POINTS", "TABLE_SLOPE_POINTS", "TABLE_SLOPE_RANGE"]
 
 _K = 8.5                       # Gaussian clipped at K sigma: exp(-K^2/2) < 2e-16
 _THETA_MAX = 0.5 * math.pi - 1e-9   # cos(theta) kept > 0; rho is continuous up to pi/2
 
-TABLE_THETA_POINTS = 129       # uniform in x = 1 - sqrt(cos theta)
+#: x = 1 - sqrt(cos theta) nodes: step 1/TABLE_X_STEPS up to TABLE_X_REFINE_FROM, then
+#: TABLE_X_REFINE times finer up to 1 (the grazing dip of near-mirror surfaces; module docstring)
+TABLE_X_STEPS = 128
+TABLE_X_REFINE_FROM = 15 / 16
+TABLE_X_REFINE = 4
+TABLE_THETA_POINTS = (round(TABLE_X_REFINE_FROM * TABLE_X_STEPS)          # 120 coarse nodes
+                      + round((1 - TABLE_X_REFINE_FROM) * TABLE_X_STEPS * TABLE_X_REFINE) + 1)  # + 33 fine
 TABLE_SLOPE_POINTS = 121       # 20 per decade over 6 decades
 TABLE_SLOPE_RANGE = (1e-4, 100.0)
-_TABLE_VERSION = 6             # bump when the quadrature or the grid changes
+_TABLE_VERSION = 7             # bump when the quadrature or the grid changes
+#: stored rho and rho re-integrated at load must agree to this (same rule, same nodes)
+_SPOT_TOL = 1e-9
+#: (x index, slope index) of the nodes re-integrated at every load: the corners, the
+#: grazing end, the middle; plus _SPOT_RANDOM nodes drawn afresh at each load
+_SPOT_NODES = ((0, 0), (0, -1), (-1, 0), (-1, -1), (-3, 2), (-9, 30), (76, 60), (40, 100), (140, 10))
+_SPOT_RANDOM = 4
 #: Gauss-Legendre nodes per piece (outer, inner) used for the table: the V-groove
 #: integrand is split at all its kinks and converges fastest; Smith's G1(theta_r)
 #: has a steep layer near the horizon that wants more nodes.
@@ -153,23 +189,35 @@ def dhr_quadrature(theta_i, rms_slope, shadowing="vgroove", n_outer=16, n_inner=
 
     Parameters
     ----------
-    theta_i : array_like, radians in [0, pi/2]
-    rms_slope : array_like, the paper's sqrt(2) sigma_h / l, > 0; broadcast with theta_i
+    theta_i : array_like of real numbers, radians in [0, pi/2]
+    rms_slope : array_like, the paper's sqrt(2) sigma_h / l, in [1e-4, 100]; broadcast with theta_i
     shadowing : "vgroove" (paper Eq. 12) | "smith" | "none"
     n_outer, n_inner : Gauss-Legendre nodes per smooth piece
     error_estimate : also return 2 |rho(n) - rho(2n)|, an upper estimate of the error
 
-    Returns rho (and the error estimate) with the broadcast shape.
+    Returns rho (and the error estimate) with the broadcast shape.  A complex, string or
+    boolean argument raises TypeError, a non-finite, out-of-range or non-broadcastable one
+    ValueError, each naming the parameter.
     """
-    if shadowing not in SHADOWING:
+    if not isinstance(shadowing, str) or shadowing not in SHADOWING:
         raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
-    t, s = np.broadcast_arrays(np.asarray(theta_i, float), np.asarray(rms_slope, float))
+    t = real_array("theta_i", theta_i, "radians in [0, pi/2]")
+    s = real_array("rms_slope", rms_slope, f"in [{TABLE_SLOPE_RANGE[0]:g}, {TABLE_SLOPE_RANGE[1]:g}]")
+    broadcast_named(theta_i=t, rms_slope=s)
+    t, s = np.broadcast_arrays(t, s)
     shape = t.shape
     t, s = t.ravel(), s.ravel()
-    if np.any(~np.isfinite(t)) or np.any((t < 0) | (t > 0.5 * math.pi)):
-        raise ValueError("theta_i must be finite and in [0, pi/2] radians")
-    if np.any(~np.isfinite(s)) or np.any(s <= 0):
-        raise ValueError("rms_slope must be finite and > 0")
+    if np.any((t < 0) | (t > 0.5 * math.pi)):
+        raise ValueError("theta_i must be in [0, pi/2] radians")
+    lo, hi = TABLE_SLOPE_RANGE[0] * (1 - 1e-12), TABLE_SLOPE_RANGE[1] * (1 + 1e-12)  # exp(log(100))
+    if np.any((s < lo) | (s > hi)):
+        # the evaluator's range; far below it the clipped Gaussian misses the disk (rho -> 0
+        # instead of 1 at rms_slope 1e-30), far above it g underflows and overflows
+        raise ValueError(f"rms_slope must be in [{TABLE_SLOPE_RANGE[0]:g}, {TABLE_SLOPE_RANGE[1]:g}]")
+    for name, v in (("n_outer", n_outer), ("n_inner", n_inner)):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 512:
+            raise ValueError(f"{name} must be an integer in [1, 512], got {v!r}")
+    check_bool("error_estimate", error_estimate)
     rho = np.empty_like(t)
     err = np.empty_like(t) if error_estimate else None
     step = max(1, chunk * 48 * 24 // (n_outer * n_inner))
@@ -189,7 +237,7 @@ def dhr_quadrature(theta_i, rms_slope, shadowing="vgroove", n_outer=16, n_inner=
 class DHRTable:
     """rho^{s,PEC} on a uniform (x, ln rms_slope) grid, x = 1 - sqrt(cos theta), bicubic.
 
-    Attributes: ``x`` (uniform on [0, 1]), ``theta`` = arccos((1 - x)^2) (radians,
+    Attributes: ``x`` (increasing on [0, 1], :func:`table_x_nodes`: not uniform), ``theta`` = arccos((1 - x)^2) (radians,
     the same nodes), ``log_slope`` (uniform in ln rms_slope),
     ``rho[len(x), len(log_slope)]``, ``rho_avg[len(log_slope)]``
     = 2 int_0^{pi/2} rho cos(t) sin(t) dt (the albedo average the reciprocal diffuse
@@ -252,8 +300,17 @@ def theta_of_x(x):
     return np.arccos((1.0 - np.asarray(x, float)) ** 2)
 
 
+def table_x_nodes():
+    """The table's x nodes: uniform steps of 1/128 to 15/16, then steps of 1/512 to 1."""
+    coarse = np.arange(round(TABLE_X_REFINE_FROM * TABLE_X_STEPS)) / TABLE_X_STEPS
+    fine_steps = TABLE_X_STEPS * TABLE_X_REFINE
+    start = round(TABLE_X_REFINE_FROM * fine_steps)
+    fine = np.arange(start, fine_steps + 1) / fine_steps
+    return np.concatenate([coarse, fine])
+
+
 def _grid():
-    x = np.linspace(0.0, 1.0, TABLE_THETA_POINTS)
+    x = table_x_nodes()
     log_slope = np.linspace(math.log(TABLE_SLOPE_RANGE[0]), math.log(TABLE_SLOPE_RANGE[1]), TABLE_SLOPE_POINTS)
     return x, log_slope
 
@@ -289,43 +346,148 @@ def build_table(shadowing="vgroove", progress=True) -> DHRTable:
                     time.perf_counter() - t0)
 
 
+class DHRCacheWarning(UserWarning):
+    """A cached DHR table was refused (the message names the file and why); it is rebuilt."""
+
+
 def cache_dir() -> Path:
-    return Path(os.environ.get("HYDE_BSDF_CACHE", Path.home() / ".cache" / "hyde-bsdf"))
+    """``$HYDE_BSDF_CACHE``, or ``~/.cache/hyde-bsdf`` when it is unset or empty."""
+    value = os.environ.get("HYDE_BSDF_CACHE", "").strip()
+    return Path(value).expanduser() if value else Path.home() / ".cache" / "hyde-bsdf"
 
 
-def _cache_path(shadowing):
-    key = f"{_TABLE_VERSION}-{TABLE_THETA_POINTS}-{TABLE_SLOPE_POINTS}-{TABLE_SLOPE_RANGE}-{shadowing}"
+def _code_version() -> str:
+    """Hash of the source that determines the table's values (quadrature, shadowing, grid)."""
+    parts = [str(_TABLE_VERSION)]
+    for obj in (_weight, _chi_of_p, _dhr_batch, table_x_nodes, _grid, _rho_average, _shadowing_module):
+        try:
+            parts.append(inspect.getsource(obj))
+        except (OSError, TypeError):       # no source (frozen install): the version number alone
+            parts.append(getattr(obj, "__name__", "?"))
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
+
+
+def _build_params(shadowing) -> dict:
+    """Everything the table's values depend on; stored in the cache file and compared at load."""
+    return {"format": 1, "table_version": _TABLE_VERSION, "code_version": _code_version(),
+            "shadowing": shadowing, "x_steps": TABLE_X_STEPS, "x_refine_from": TABLE_X_REFINE_FROM,
+            "x_refine": TABLE_X_REFINE, "theta_points": TABLE_THETA_POINTS,
+            "slope_points": TABLE_SLOPE_POINTS, "slope_range": list(TABLE_SLOPE_RANGE),
+            "order": list(_TABLE_ORDER[shadowing])}
+
+
+_ARRAYS = ("x", "theta", "log_slope", "rho", "rho_avg")
+
+
+def _checksum(meta_json: str, arrays: dict) -> str:
+    h = hashlib.sha256(meta_json.encode())
+    for name in _ARRAYS:
+        a = np.ascontiguousarray(arrays[name], dtype="<f8")
+        h.update(f"{name}{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def cache_path(shadowing) -> Path:
+    """The cache file of the table for ``shadowing`` (the name encodes the build parameters)."""
+    key = json.dumps(_build_params(shadowing), sort_keys=True)
     return cache_dir() / f"dhr_{shadowing}_{hashlib.sha1(key.encode()).hexdigest()[:10]}.npz"
+
+
+_cache_path = cache_path   # old private name
+
+
+def _save_table(path: Path, table: DHRTable) -> None:
+    arrays = {name: getattr(table, name) for name in _ARRAYS}
+    meta = json.dumps(_build_params(table.shadowing), sort_keys=True)
+    with atomic_open(path, "wb") as fh:
+        np.savez(fh, meta=np.array(meta), checksum=np.array(_checksum(meta, arrays)),
+                 build_seconds=np.array(table.build_seconds), **arrays)
+
+
+def _read_table(path: Path, shadowing) -> DHRTable:
+    """Load and verify a cache file; ValueError (the reason) if it must not be used."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            stored = {name: np.array(z[name]) for name in z.files}
+    except Exception as exc:         # not an .npz, truncated, a directory, unreadable
+        raise ValueError(f"cannot be read as a table ({type(exc).__name__}: {exc})") from None
+    missing = [n for n in ("meta", "checksum", "build_seconds", *_ARRAYS) if n not in stored]
+    if missing:
+        raise ValueError(f"lacks {', '.join(missing)} (written by an older version)")
+    try:
+        meta_json = str(stored["meta"][()])
+        meta = json.loads(meta_json)
+    except (ValueError, TypeError):
+        raise ValueError("its build parameters are not readable") from None
+    want = json.loads(json.dumps(_build_params(shadowing)))
+    if meta != want:
+        diff = sorted(k for k in set(meta) | set(want) if meta.get(k) != want.get(k))
+        raise ValueError(f"was built with other parameters or code ({', '.join(diff)} differ)")
+    arrays = {name: stored[name] for name in _ARRAYS}
+    x, log_slope = _grid()
+    shapes = {"x": x.shape, "theta": x.shape, "log_slope": log_slope.shape,
+              "rho": (x.size, log_slope.size), "rho_avg": log_slope.shape}
+    for name, shape in shapes.items():
+        a = arrays[name]
+        if a.shape != shape or a.dtype.kind != "f":
+            raise ValueError(f"{name} has shape {a.shape} and dtype {a.dtype}, expected {shape} float")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} has non-finite values")
+    if str(stored["checksum"][()]) != _checksum(meta_json, arrays):
+        raise ValueError("its checksum does not match its contents (modified or corrupt)")
+    if not (np.array_equal(arrays["x"], x) and np.array_equal(arrays["log_slope"], log_slope)
+            and np.array_equal(arrays["theta"], theta_of_x(x))):
+        raise ValueError("its grid is not the table's grid")
+    rho = arrays["rho"]
+    if not np.allclose(arrays["rho_avg"], _rho_average(x, rho), rtol=0.0, atol=1e-12):
+        raise ValueError("rho_avg is not the average of rho")
+    # a few nodes re-integrated now, the fixed ones and some drawn at random
+    rng = np.random.default_rng()
+    nodes = list(_SPOT_NODES) + [(int(rng.integers(x.size)), int(rng.integers(log_slope.size)))
+                                 for _ in range(_SPOT_RANDOM)]
+    ix = np.array([i for i, _ in nodes])
+    js = np.array([j for _, j in nodes])
+    fresh = dhr_quadrature(theta_of_x(x[ix]), np.exp(log_slope[js]), shadowing, *_TABLE_ORDER[shadowing])
+    bad = np.abs(fresh - rho[ix, js]) > _SPOT_TOL
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"rho at theta_i = {math.degrees(theta_of_x(x[ix[i]])):.4g} deg, rms_slope = "
+                         f"{math.exp(log_slope[js[i]]):.4g} is {rho[ix[i], js[i]]:.10g}, re-integrated "
+                         f"{fresh[i]:.10g}")
+    return DHRTable(arrays["x"], arrays["theta"], arrays["log_slope"], rho, arrays["rho_avg"], shadowing,
+                    float(stored["build_seconds"]))
 
 
 _TABLES: dict[str, DHRTable] = {}
 
 
 def load_table(shadowing="vgroove") -> DHRTable:
-    """The DHR table for a shadowing model: from memory, from the disk cache, or built now."""
-    if shadowing not in SHADOWING:
+    """The DHR table for a shadowing model: from memory, from the verified disk cache, or built now.
+
+    A cache file that fails any check (module docstring, "The disk cache") is reported with a
+    :class:`DHRCacheWarning` naming it and rebuilt; the new file replaces it atomically.
+    """
+    if not isinstance(shadowing, str) or shadowing not in SHADOWING:
         raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
     if shadowing in _TABLES:
         return _TABLES[shadowing]
-    path = _cache_path(shadowing)
+    path = cache_path(shadowing)
     table = None
-    if path.exists():
+    if path.exists() or path.is_symlink():
         try:
-            with np.load(path) as z:
-                table = DHRTable(z["x"], z["theta"], z["log_slope"], z["rho"], z["rho_avg"], shadowing,
-                                 float(z["build_seconds"]))
-        except Exception:            # a corrupt or partial cache file is rebuilt
-            table = None
+            table = _read_table(path, shadowing)
+        except ValueError as exc:
+            warnings.warn(f"DHR table cache {str(path)!r} {exc}; rebuilding it", DHRCacheWarning,
+                          stacklevel=2)
     if table is None:
         table = build_table(shadowing)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
-            np.savez(tmp, x=table.x, theta=table.theta, log_slope=table.log_slope, rho=table.rho,
-                     rho_avg=table.rho_avg, build_seconds=table.build_seconds)
-            os.replace(tmp, path)
-        except OSError as exc:       # read-only home: keep the table in memory only
-            print(f"[hyde-bsdf] could not cache the DHR table at {path}: {exc}", file=sys.stderr)
+            _save_table(path, table)
+        except OSError as exc:       # read-only cache, a directory in the way: memory only
+            print(f"[hyde-bsdf] could not cache the DHR table at {str(path)!r}: "
+                  f"{exc.strerror or exc}; it is kept in memory for this run", file=sys.stderr)
     _TABLES[shadowing] = table
     return table
 

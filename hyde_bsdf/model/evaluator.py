@@ -42,6 +42,7 @@ import math
 
 import numpy as np
 
+from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array, real_scalar
 from hyde_bsdf.model.dhr import load_table, x_of_theta
 from hyde_bsdf.model.facet_geometry import angle_trig, cos_alpha_beta, rotation_terms
 from hyde_bsdf.model.fresnel import fresnel_mueller_terms
@@ -59,33 +60,38 @@ INDEX_MIN = 1e-6
 
 
 def _check_angles(name, value, hi):
-    a = np.asarray(value, dtype=float)
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} must be finite (radians), got non-finite values")
+    a = real_array(name, value, "radians")
     if hi is not None and np.any((a < 0.0) | (a > hi)):
         raise ValueError(f"{name} must be in [0, pi] radians (polar angle; > pi/2 is below the horizon)")
     return a
 
 
 def _check_index(n, k, pec):
-    if pec:
+    if check_bool("pec", pec):
         if n is not None:
             raise ValueError("give either n (and k) or pec=True, not both")
         return None, None
     if n is None:
         raise ValueError("n is required (eta = n - jk) unless pec=True")
-    out = []
-    for name, v in (("n", n), ("k", k)):
-        try:
-            v = float(v)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} must be a real number in [0, {INDEX_MAX:g}], got {v!r}") from None
-        if not math.isfinite(v) or not (0.0 <= v <= INDEX_MAX):
-            raise ValueError(f"{name} must be a real number in [0, {INDEX_MAX:g}], got {v!r}")
-        out.append(v)
+    out = [real_scalar(name, v, 0.0, INDEX_MAX) for name, v in (("n", n), ("k", k))]
     if math.hypot(*out) < INDEX_MIN:       # eta^2 would underflow in the Fresnel terms
         raise ValueError(f"n and k: |eta| = sqrt(n^2 + k^2) must be >= {INDEX_MIN:g}, got n={out[0]!r}, k={out[1]!r}")
     return out
+
+
+def _check_shadowing(shadowing):
+    if not isinstance(shadowing, str) or shadowing not in SHADOWING:
+        raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+    return shadowing
+
+
+def _check_all_angles(theta_i, theta_r, phi):
+    """The three angles checked (real, finite, polar angles in [0, pi]) and broadcastable."""
+    theta_i = _check_angles("theta_i", theta_i, math.pi)
+    theta_r = _check_angles("theta_r", theta_r, math.pi)
+    phi = _check_angles("phi", phi, None)
+    broadcast_named(theta_i=theta_i, theta_r=theta_r, phi=phi)
+    return theta_i, theta_r, phi
 
 
 def _check_diffuse(diffuse):
@@ -106,11 +112,8 @@ def specular_pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False
     """
     s = check_rms_slope(rms_slope, *RMS_SLOPE_RANGE)
     nk = _check_index(n, k, pec)
-    if shadowing not in SHADOWING:
-        raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
-    theta_i = _check_angles("theta_i", theta_i, math.pi)
-    theta_r = _check_angles("theta_r", theta_r, math.pi)
-    phi = _check_angles("phi", phi, None)
+    _check_shadowing(shadowing)
+    theta_i, theta_r, phi = _check_all_angles(theta_i, theta_r, phi)
     return _specular(theta_i, theta_r, phi, s, nk, pec, shadowing)[0]
 
 
@@ -202,22 +205,20 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
     s = check_rms_slope(rms_slope, *RMS_SLOPE_RANGE)
     nk = _check_index(n, k, pec)
     mode = _check_diffuse(diffuse)
-    if shadowing not in SHADOWING:
-        raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+    _check_shadowing(shadowing)
     if mode == "reciprocal" and shadowing == "none":
         # without shadowing rho^{s,PEC} exceeds 1 at grazing incidence, so the reciprocal
         # normalisation 1 - rho_avg is not positive (the plugin refuses the same pair)
         raise ValueError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'; with shadowing='none' "
                          "the specular DHR exceeds 1 and (1 - rho_avg) is not positive")
-    theta_i = _check_angles("theta_i", theta_i, math.pi)
-    theta_r = _check_angles("theta_r", theta_r, math.pi)
-    phi = _check_angles("phi", phi, None)
+    theta_i, theta_r, phi = _check_all_angles(theta_i, theta_r, phi)
     out, A, above = _specular(theta_i, theta_r, phi, s, nk, pec, shadowing)
     if mode != "none":
         ti, tr = np.broadcast_arrays(theta_i, theta_r)
         out[..., 0, 0] += np.where(above, diffuse_pbrdf(ti, tr, A, s, mode, shadowing), 0.0)
     if not np.isfinite(out).all():   # never hand back NaN silently
-        bad = np.argwhere(~np.isfinite(out.reshape(out.shape[:-2] + (16,))).any(-1))[:1]
-        raise FloatingPointError(f"pbrdf produced a non-finite value at index {bad.tolist()} "
+        bad = np.argwhere((~np.isfinite(out.reshape(out.shape[:-2] + (16,)))).any(-1))[:1]
+        where = bad[0].tolist() if bad.size else []
+        raise FloatingPointError(f"pbrdf produced a non-finite value at index {where} "
                                  f"(rms_slope={s}, n={n}, k={k}, pec={pec}); please report it")
     return out

@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from hyde_bsdf.model.checks import real_scalar
+
 __all__ = ["rms_slope_from", "alpha_from_rms_slope", "rms_slope_from_alpha", "check_rms_slope"]
 
 SQRT2 = math.sqrt(2.0)
@@ -40,11 +42,8 @@ def rms_slope_from_alpha(alpha):
 
 
 def check_rms_slope(rms_slope, lo: float = 1e-4, hi: float = 50.0) -> float:
-    """Validate a scalar rms slope, naming the parameter and the accepted range."""
-    try:
-        value = float(rms_slope)
-    except (TypeError, ValueError):
-        raise ValueError(f"rms_slope must be a real number in [{lo:g}, {hi:g}], got {rms_slope!r}") from None
-    if not math.isfinite(value) or not (lo <= value <= hi):
-        raise ValueError(f"rms_slope must be a finite number in [{lo:g}, {hi:g}], got {rms_slope!r}")
-    return value
+    """Validate a scalar rms slope, naming the parameter and the accepted range.
+
+    TypeError for a complex, string, boolean or array value; ValueError for NaN, infinity
+    or a value outside [lo, hi]."""
+    return real_scalar("rms_slope", rms_slope, lo, hi)
