@@ -213,3 +213,118 @@ def test_cli_reports_bad_file_with_exit_code_2(tmp_path, capsys):
     assert cli_main([str(p)]) == 2
     assert "line 2, column 'M01'" in capsys.readouterr().err
     assert cli_main([str(p), "--fit", "n,q"]) == 2
+
+
+# ---------------------------------------------------------------------------- issue 10: input checks
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(measured={"M22": np.full(TH.size, 50.0)}), ValueError, r"measured\['M22'\] must be normalized by M00"),
+    (dict(measured={"M22": np.full(TH.size, -0.7 + 0.1j)}), TypeError, r"measured\['M22'\] must be real"),
+    (dict(measured={"M22": ["a"] * TH.size}), TypeError, r"measured\['M22'\] must be real"),
+    (dict(measured={"M22": np.full(3, -0.7)}), ValueError, r"measured\['M22'\] has shape \(3,\)"),
+    (dict(sigma={"M22": np.full(TH.size, 1e-300)}), ValueError, r"sigma\['M22'\] must be in \[1e-12, 1000\]"),
+    (dict(sigma={"M22": np.full(TH.size, 1e6)}), ValueError, r"sigma\['M22'\] must be in \[1e-12, 1000\]"),
+    (dict(sigma={"M22": np.full(TH.size, 0.01 + 0j)}), TypeError, r"sigma\['M22'\] must be real"),
+    (dict(sigma=[0.01]), TypeError, r"sigma must be None or a dict"),
+    (dict(n0="1.0"), TypeError, r"n0 must be a real number"),
+    (dict(k0=7 + 1j), TypeError, r"k0 must be a real number"),
+    (dict(rms_slope=True), TypeError, r"rms_slope must be a real number"),
+    (dict(rms_slope=1e-9), ValueError, r"rms_slope must be in \[0.0001, 100\]"),
+    (dict(shadowing=["vgroove"]), ValueError, r"shadowing must be"),
+    (dict(progress="yes"), TypeError, r"progress must be True, False or None"),
+    (dict(theta_i=TH + 0j), TypeError, r"theta_i must be real"),
+    (dict(theta_r=TH[:3]), ValueError, r"theta_i, theta_r, phi must broadcast"),
+], ids=lambda v: v if isinstance(v, str) else None)
+def test_fit_mueller_refuses_bad_input_naming_the_parameter(kwargs, exc, match):
+    """Issue 10: unnormalized values (50) used to 'succeed' with chi^2 6e8; sigma = 1e-300 gave a
+    SciPy error; complex values silently lost their imaginary part.  Each is refused, named."""
+    args = dict(theta_i=TH, theta_r=TH, phi=np.pi, measured={"M22": exact(GOLD, ("M22",))["M22"]},
+                sigma=None)
+    args.update(kwargs)
+    with pytest.raises(exc, match=match):
+        fit_mueller(args.pop("theta_i"), args.pop("theta_r"), args.pop("phi"), args.pop("measured"),
+                    fit=("n", "k"), **args)
+
+
+@pytest.mark.parametrize("cell, match", [
+    ("1_0", r"'1_0' is not a number \(no digit separators\)"),
+    ("inf", r"'inf' is not a finite number"),
+    ("nan", r"'nan' is not a finite number"),
+    ("0x10", r"'0x10' is not a number"),
+    ("\u0661", r".\u0661. is not a number"),           # an Arabic-Indic digit: float() takes it
+    ("1e", r"'1e' is not a number"),
+    ("", r"'' is not a number"),
+    ("1.2.3", r"'1.2.3' is not a number"),
+])
+def test_csv_cells_must_be_plain_decimal_numbers(tmp_path, cell, match):
+    """Python's float() reads '1_0' as 10; the reader refuses it with file, line and column,
+    whichever parser (fast block or careful line-by-line) sees the cell first."""
+    rows = ["10,10,180,0.0,0.01,-0.7,0.02"] * 5 + [f"20,20,180,{cell},0.01,-0.7,0.02"]
+    p = write(tmp_path, "\n".join([HEADER] + rows) + "\n")
+    with pytest.raises(MeasurementFileError, match=fr"{p}, line 7, column 'M01': {match}"):
+        read_measurements(p)
+
+
+def test_fast_and_careful_parsers_read_the_same_values(tmp_path):
+    """The block parser (plain numbers only) and the line-by-line one (comments, blank lines,
+    quotes, CRLF) give identical arrays and line numbers in messages."""
+    meas = synthetic_measurements(TH, TH, np.pi, ELEMENTS, **GOLD, rng=11)
+    plain = write_measurements(tmp_path / "plain.csv", meas)
+    lines = plain.read_text().splitlines()
+    messy = [lines[0], lines[1], "", "# a comment between data lines", f'"{lines[2].split(",")[0]}",'
+             + ",".join(lines[2].split(",")[1:])] + lines[3:]
+    other = write(tmp_path, "\r\n".join(messy) + "\r\n\r\n", "messy.csv")
+    a, b = read_measurements(plain), read_measurements(other)
+    for e in ELEMENTS:
+        np.testing.assert_array_equal(a.values[e], b.values[e])
+        np.testing.assert_array_equal(a.sigma[e], b.sigma[e])
+    np.testing.assert_array_equal(a.theta_i, b.theta_i)
+    assert b.comments == ["a comment between data lines"]
+    bad = messy[:-1] + [messy[-1].replace(messy[-1].split(",")[3], "99", 1)]
+    p = write(tmp_path, "\n".join(bad) + "\n", "bad.csv")
+    with pytest.raises(MeasurementFileError, match=fr"line {len(bad)}, column 'M01': 99 is not a normalized"):
+        read_measurements(p)
+
+
+def test_a_1e5_row_file_reads_and_fits(tmp_path):
+    """10^5 random geometries (the large-data path: a search on 4000, then all rows refined):
+    the fitted n, k, rms_slope are within 4 standard errors of the truth and chi^2/dof ~ 1."""
+    rng = np.random.default_rng(2)
+    N = 100_000
+    ti, tr = np.radians(rng.uniform(5, 80, (2, N)))
+    ph = np.radians(rng.uniform(0, 360, N))
+    truth = mueller_elements(ti, tr, ph, ELEMENTS, **GOLD)
+    cols = [np.degrees(ti), np.degrees(tr), np.degrees(ph)]
+    header = "theta_i_deg,theta_r_deg,phi_deg"
+    for e in ELEMENTS:
+        cols += [truth[e] + 0.02 * rng.standard_normal(N), np.full(N, 0.02)]
+        header += f",{e},{e}_sigma"
+    p = tmp_path / "big.csv"
+    np.savetxt(p, np.column_stack(cols), delimiter=",", fmt="%.9g", header=header, comments="")
+    meas = read_measurements(p)
+    assert len(meas) == N
+    np.testing.assert_allclose(meas.values["M22"], cols[7], rtol=1e-8)
+    r = fit_measurements(meas, fit="n,k,rms_slope", rms_slope=0.3, n0=0.5, k0=6.0, progress=False)
+    assert r.success and not r.warnings
+    for q in ("n", "k", "rms_slope"):
+        assert abs(r.params[q] - GOLD[q]) < 4 * r.stderr[q], (q, r.params[q], r.stderr[q])
+    assert r.reduced_chi2 == pytest.approx(1.0, abs=0.02)
+
+
+def test_cli_checks_the_output_path_before_reading_and_exits_2_in_one_line(tmp_path, capsys, monkeypatch):
+    from hyde_bsdf.fit import mueller_fit
+    p = write(tmp_path, HEADER + "\n10,10,180,0.0,0.01,-0.7,0.02\n20,20,180,0.0,0.01,-0.7,0.02\n")
+    monkeypatch.setattr(mueller_fit, "read_measurements",
+                        lambda *a, **k: pytest.fail("read the data before checking the options"))
+    for argv, match in [([str(p), "-o", str(tmp_path)], "is a directory"),
+                        ([str(p), "-o", str(tmp_path / "plot.xyz")], "extension must be one of"),
+                        ([str(p), "--rms-slope", "nan"], "rms_slope must be in"),
+                        ([str(p), "--n0", "-1"], "n0 must be in"),
+                        ([str(p), "--fit", "n,q"], "fit must be")]:
+        assert cli_main(argv) == 2
+        err = capsys.readouterr().err
+        assert match in err and err.count("\n") == 1, err
+    with pytest.raises(SystemExit) as info:
+        cli_main([str(p), "--rms-slope", "abc"])
+    err = capsys.readouterr().err
+    assert info.value.code == 2 and "--rms-slope" in err and err.count("\n") == 1, err
