@@ -41,10 +41,9 @@ def real_array(name: str, value, accepted: str) -> np.ndarray:
     except (ValueError, TypeError) as exc:           # ragged nested lists
         raise ValueError(f"{name} must be an array of real numbers ({accepted}): {exc}") from None
     if a.dtype.kind == "O":                          # e.g. a list mixing numbers and None
-        try:
-            a = np.asarray(value, dtype=float)
-        except (ValueError, TypeError):
-            raise TypeError(f"{name} must be real numbers ({accepted}), got non-numeric values") from None
+        if not all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)) for v in a.flat):
+            raise TypeError(f"{name} must be real numbers ({accepted}), got non-numeric values")
+        a = a.astype(float)
     if a.dtype.kind not in "iuf":
         raise TypeError(f"{name} must be real numbers ({accepted}), got {_kind_name(value)} values"
                         + (" (give the real and imaginary parts as separate parameters)"

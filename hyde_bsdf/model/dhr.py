@@ -145,7 +145,7 @@ def _dhr_batch(theta, slope, shadowing, n_outer, n_inner):
     # meets q = 0 where t p^3 - 3 p^2 - 3 t p + 1 = 0, i.e. p = tan((pi/2 - ti + m pi)/3).
     splits = [c * slope for c in (-5.0, -2.5, 0.0, 2.5, 5.0)]
     if shadowing == "vgroove":
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", over="ignore"):    # theta_i = 0 or subnormal: -inf, clipped
             splits += [-ci / si, -tan]
         splits += [np.tan((0.5 * math.pi - theta + m * math.pi) / 3.0) for m in (-1, 0, 1)]
     chis = np.sort(np.stack([np.clip(_chi_of_p(k, pe, ci), chi_a, chi_b) for k in splits]), axis=0)
