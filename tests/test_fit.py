@@ -101,7 +101,7 @@ def test_fitted_material_loads_into_mitsuba():
         p = mi.traverse(bsdf)
         assert p["eta.value"] == pytest.approx(0.285, rel=1e-4)
         assert p["k.value"] == pytest.approx(7.3523, rel=1e-4)
-        assert p["rms_slope"] == pytest.approx(0.44, rel=1e-6)
+        assert p["rms_slope.value"] == pytest.approx(0.44, rel=1e-6)   # a texture-valued parameter
         mi.load_string(f'<scene version="3.0.0"><shape type="sphere">{r.plugin_xml()}</shape></scene>')
     finally:
         if previous is not None:
