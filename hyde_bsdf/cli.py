@@ -3,10 +3,24 @@
 Each sub-command lives in the module that does the work, as a function
 ``cli_main(argv) -> int``; this file only dispatches, so that importing the
 package stays cheap and no sub-command drags in Mitsuba unless it needs it.
+
+What happens when things go wrong, for every sub-command (handled once here):
+
+* a user mistake (:class:`hyde_bsdf.errors.UsageError`: bad argument, input file, output path,
+  scene, variant) -- one line ``hyde-bsdf COMMAND: error: MESSAGE`` on stderr, exit 2;
+* an operating-system error on a file (missing, no permission, disk full, ...) -- one line, exit 2;
+* a missing optional Python package -- one line naming it, exit 2;
+* Ctrl-C -- ``hyde-bsdf COMMAND: interrupted``, exit 130 (outputs are atomic: the old files stay);
+* a closed output pipe (``hyde-bsdf fit data.csv | head``) -- quiet, exit 141 (as for SIGPIPE);
+* anything else is a bug and keeps its Python traceback (exit 1).
+
+Documented exit codes of the commands themselves stay: 1 for "fit did not converge" and for
+"a validation check failed".
 """
 from __future__ import annotations
 
 import importlib
+import os
 import sys
 
 #: sub-command -> (module, one-line help)
@@ -18,16 +32,63 @@ COMMANDS = {
     "validate": ("hyde_bsdf.report.build", "run the validation report"),
 }
 
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+EXIT_BROKEN_PIPE = 141
+
+
+def _quiet_stdout() -> None:
+    """After EPIPE: point stdout at /dev/null so that the interpreter's final flush is silent."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+
+
+def _error(command: str, message: str) -> None:
+    try:
+        print(f"hyde-bsdf {command}: {message}", file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
+
 
 def main(argv: list[str] | None = None) -> int:
+    from hyde_bsdf.errors import UsageError, one_line
+
     argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
-        print("usage: hyde-bsdf COMMAND [options]\n\ncommands:")
-        for name, (_, text) in COMMANDS.items():
-            print(f"  {name:10s} {text}")
-        return 0 if argv and argv[0] in ("-h", "--help") else 2
-    module = importlib.import_module(COMMANDS[argv[0]][0])
-    return int(module.cli_main(argv[1:]) or 0)
+    command = argv[0] if argv else ""
+    try:
+        if not argv or command in ("-h", "--help") or command not in COMMANDS:
+            print("usage: hyde-bsdf COMMAND [options]\n\ncommands:")
+            for name, (_, text) in COMMANDS.items():
+                print(f"  {name:10s} {text}")
+            if argv and command not in ("-h", "--help"):
+                _error(command, f"error: unknown command {command!r}; one of {', '.join(COMMANDS)}")
+            return 0 if argv and command in ("-h", "--help") else EXIT_USAGE
+        module = importlib.import_module(COMMANDS[command][0])
+        code = int(module.cli_main(argv[1:]) or 0)
+        sys.stdout.flush()        # a closed pipe shows up here, inside the handler below
+        return code
+    except KeyboardInterrupt:
+        _error(command, "interrupted")
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
+    except UsageError as exc:
+        _error(command, f"error: {one_line(exc)}")
+        return EXIT_USAGE
+    except ModuleNotFoundError as exc:
+        if exc.name is None or exc.name.split(".")[0] == "hyde_bsdf":
+            raise                 # our own module missing: a packaging bug, keep the traceback
+        _error(command, f"error: the Python package {exc.name!r} is needed and not installed "
+                        f"(pip install {exc.name.split('.')[0]})")
+        return EXIT_USAGE
+    except OSError as exc:
+        where = f": {exc.filename!r}" if getattr(exc, "filename", None) else ""
+        _error(command, f"error: {exc.strerror or one_line(exc)}{where}")
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":

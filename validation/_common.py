@@ -22,19 +22,27 @@ def cli(validate, doc):
 
 
 def write_csv(path, header, rows):
-    """Write the numbers behind a figure: one header row, then ``rows``."""
+    """Write the numbers behind a figure: one header row, then ``rows`` (atomically: a temporary
+    file beside ``path``, renamed over it once complete)."""
     import csv
-    with open(path, "w", newline="") as f:
+
+    from hyde_bsdf.atomic import atomic_open
+    with atomic_open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(header)
         w.writerows(rows)
 
 
 def save_figure(fig, path, dpi=130):
-    """Save a matplotlib figure as PNG and close it."""
+    """Save a matplotlib figure as PNG (atomically) and close it."""
     import matplotlib.pyplot as plt
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+
+    from hyde_bsdf.atomic import atomic_path
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, format="png")
+    finally:
+        plt.close(fig)
 
 
 def stability_chart(panels, path, title, err_label="rel. err", err_ylim=(1e-17, 1.0), text_errors=False):

@@ -14,6 +14,10 @@ and writes into the output folder:
 ``demo_rgb.png``        the colour picture
 ``demo_overview.png``   the colour picture, DoLP, AoLP and DoCP side by side
 
+With an unpolarized ``--variant`` (``llvm_ad_rgb``, ...) only ``demo.exr`` (R, G, B) and
+``demo_rgb.png`` are written.  The output folder and every file in it are checked before the
+render starts; each file is written atomically (:mod:`hyde_bsdf.atomic`).
+
 The default (448 x 280 pixels, 96 spp) takes ~15-20 s on 2 cores with the LLVM
 variant; ``--width/--height/--spp`` raise it.  On the scalar fallback (one
 Python call per BSDF query, ~3000 samples/s) the defaults drop to 128 x 80
@@ -28,8 +32,11 @@ from pathlib import Path
 
 import numpy as np
 
+from hyde_bsdf.atomic import atomic_path, check_output_dir, check_output_path
+from hyde_bsdf.errors import UsageError
 from hyde_bsdf.render.renderer import DEFAULT_VARIANT, _positive_int, prepare_variant, render_stokes
-from hyde_bsdf.render.stokes_io import polarization_quantities, save_polarization_pngs, write_stokes_exr, _tonemap
+from hyde_bsdf.render.stokes_io import (_tonemap, polarization_png_paths, polarization_quantities,
+                                        save_polarization_pngs, save_rgb_png, write_stokes_exr)
 
 __all__ = ["DEMO_SCENE", "cli_main", "render_demo"]
 
@@ -54,12 +61,14 @@ def render_demo(outdir, width=None, height=None, spp=None, variant=DEFAULT_VARIA
     :data:`DEFAULTS_SCALAR` when the variant falls back to scalar.
     """
     if bsdf not in ("hyde", "roughconductor"):
-        raise ValueError(f"bsdf must be 'hyde' or 'roughconductor', got {bsdf!r}")
+        raise UsageError(f"bsdf must be 'hyde' or 'roughconductor', got {bsdf!r}")
     scene = Path(scene)
     if not scene.is_file():
-        raise ValueError(f"demo scene {str(scene)!r} not found (run from a checkout of the repository, "
+        raise UsageError(f"demo scene {str(scene)!r} not found (run from a checkout of the repository, "
                          f"or pass --scene)")
-    outdir = Path(outdir)
+    outdir = check_output_dir(outdir, "--outdir")
+    for path in demo_outputs(outdir, str(variant).endswith("_polarized")):
+        check_output_path(path, "output file")
     chosen = prepare_variant(variant)
     defaults = DEFAULTS_SCALAR if chosen.startswith("scalar_") else DEFAULTS_LLVM
     if chosen.startswith("scalar_") and None in (width, height, spp):
@@ -70,7 +79,7 @@ def render_demo(outdir, width=None, height=None, spp=None, variant=DEFAULT_VARIA
         import mitsuba as mi
 
         if "hyde" not in _registered_plugins(mi):
-            raise ValueError("the 'hyde' BSDF plugin is not available in this installation "
+            raise UsageError("the 'hyde' BSDF plugin is not available in this installation "
                              "(hyde_bsdf/plugin.py); use --bsdf roughconductor to render the scene "
                              "with Mitsuba's microfacet conductor instead")
     _log(f"rendering {scene.name} with the '{bsdf}' BSDF, {width}x{height} px, {spp} spp, "
@@ -80,10 +89,20 @@ def render_demo(outdir, width=None, height=None, spp=None, variant=DEFAULT_VARIA
     meta = dict(result["meta"], bsdf=bsdf, scene=scene.name)
     paths = {"exr": write_stokes_exr(outdir / "demo.exr", result, metadata=meta)}
     title = f"demo ({bsdf})"
-    paths.update(save_polarization_pngs(result, outdir / "demo", title=title))
-    paths["overview"] = _overview(result, outdir / "demo_overview.png", title)
+    if meta["polarized"]:
+        paths.update(save_polarization_pngs(result, outdir / "demo", title=title))
+        paths["overview"] = _overview(result, outdir / "demo_overview.png", title)
+    else:
+        paths["rgb"] = save_rgb_png(result["RGB"], outdir / "demo_rgb.png", title)
     _log(f"{meta['spp']} spp in {meta['seconds']:.1f} s; wrote " + ", ".join(str(p) for p in paths.values()))
     return paths
+
+
+def demo_outputs(outdir, polarized: bool = True) -> list[Path]:
+    """The files :func:`render_demo` writes into ``outdir``."""
+    outdir = Path(outdir)
+    files = [outdir / "demo.exr", *polarization_png_paths(outdir / "demo", polarized).values()]
+    return files + ([outdir / "demo_overview.png"] if polarized else [])
 
 
 def _registered_plugins(mi) -> set:
@@ -128,8 +147,11 @@ def _overview(stokes: dict, path: Path, title: str) -> Path:
         ax.set_yticks([])
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png")
+    finally:
+        plt.close(fig)
     return path
 
 
@@ -147,7 +169,8 @@ def cli_main(argv=None) -> int:
                    help="samples per pixel (default %d; %d on the scalar fallback)"
                    % (DEFAULTS_LLVM[2], DEFAULTS_SCALAR[2]))
     p.add_argument("--variant", default=DEFAULT_VARIANT,
-                   help=f"polarized Mitsuba variant (default {DEFAULT_VARIANT})")
+                   help=f"Mitsuba variant (default {DEFAULT_VARIANT}; an unpolarized one writes "
+                        "the colour image only)")
     p.add_argument("--seed", type=int, default=0, help="random seed 0..32767 (default 0)")
     p.add_argument("--bsdf", choices=("hyde", "roughconductor"), default="hyde",
                    help="BSDF of the metals and the floor (default hyde; roughconductor to compare)")
@@ -160,7 +183,7 @@ def cli_main(argv=None) -> int:
     try:
         render_demo(args.outdir, args.width, args.height, args.spp, args.variant, args.seed,
                     args.bsdf, args.scene)
-    except ValueError as exc:
+    except UsageError as exc:
         print(f"hyde-bsdf demo: error: {exc}", file=sys.stderr)
         return 2
     _log(f"done in {time.perf_counter() - t0:.1f} s")

@@ -4,13 +4,22 @@
 Mitsuba's ``stokes`` integrator (the scene's own integrator is wrapped in one if
 it is not already) in ``spp`` chunks, showing a progress line on stderr, and
 returns the mean image and, from the spread between chunks, its Monte-Carlo
-standard error.
+standard error.  In an *unpolarized* variant (``llvm_ad_rgb``, ``scalar_rgb``, ...) it
+renders the ordinary colour image instead (a ``stokes`` wrapper in the scene is dropped).
 
 Stokes basis of the result: Mitsuba's sensor basis (see :mod:`hyde_bsdf.render.stokes_io`):
 for light travelling towards the camera, S1 > 0 is polarization along the image
 rows, S2 > 0 is at +45 deg counter-clockwise from image-right as seen by the
 viewer.  :func:`hyde_bsdf.render.sensor_to_paper_rotation` re-expresses it in
 the paper's (s, p, k) basis of a surface.
+
+Checked before rendering (a :class:`~hyde_bsdf.errors.UsageError`, exit 2 on the command line):
+the scene has a sensor and a *sampling* integrator (not ``ptracer``), the sampler's
+``sample_count`` and ``spp`` are >= 1, the film is at least 1 x 1 and holds fewer than 2^32
+values (Dr.Jit's array limit), and the estimated memory (:func:`estimate_memory`) fits in
+``MemAvailable``.  A render of more than :data:`MAX_SAMPLES_PER_PASS` samples is split into
+passes (Mitsuba's own limit is 2^32 samples per pass, src/render/integrator.cpp, and a pass of
+that size does not fit in memory).
 
 Command line::
 
@@ -19,24 +28,52 @@ Command line::
 
 writes ``OUT.exr`` (channels R, G, B, S0.R ... S3.B, float32) and
 ``OUT_intensity.png``, ``OUT_dolp.png``, ``OUT_aolp.png``, ``OUT_docp.png``,
-``OUT_rgb.png``.
+``OUT_rgb.png``; with an unpolarized variant ``OUT.exr`` (R, G, B) and ``OUT_rgb.png``.
+Every file is written atomically (:mod:`hyde_bsdf.atomic`) and every output path is checked
+before the render starts.
 """
 from __future__ import annotations
 
 import argparse
 import math
+import re
 import sys
 import time
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.render.stokes_io import STOKES_NAMES, save_polarization_pngs, write_stokes_exr
+from hyde_bsdf.atomic import check_output_path
+from hyde_bsdf.errors import UsageError, one_line
+from hyde_bsdf.render.stokes_io import (STOKES_NAMES, polarization_png_paths, save_polarization_pngs,
+                                        save_rgb_png, write_stokes_exr)
 
-__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "render_stokes",
-           "sensor_to_paper_rotation", "rotate_stokes", "cli_main"]
+__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "render_stokes", "estimate_memory",
+           "plan_passes", "sensor_to_paper_rotation", "rotate_stokes", "cli_main"]
 
 DEFAULT_VARIANT = "llvm_ad_spectral_polarized"
+
+#: Samples (pixels x spp) per ``mi.render`` call; more spp are split into passes.  Mitsuba's own
+#: limit is 2^32 per pass (it then splits by itself, dropping samples when spp does not divide,
+#: and divides by zero for films of >= 2^32 pixels); 2^26 keeps a pass to seconds.
+MAX_SAMPLES_PER_PASS = 2**26
+#: Chunk c of a render uses the Mitsuba seed ``seed * 2**16 + c``, so at most 2^16 passes.
+MAX_PASSES = 2**16
+#: Largest seed: ``seed * 2**16 + c`` must fit Mitsuba's 32-bit seed.
+MAX_SEED = 2**15 - 1
+#: Dr.Jit arrays hold fewer than 2^32 entries; the film holds pixels x channels floats.
+MAX_FILM_VALUES = 2**32 - 1
+#: Memory model of a whole ``hyde-bsdf render`` (peak RSS, ``/usr/bin/time -f %M``, on
+#: ``scenes/inverse.xml`` at res 300 and 900, 2 spp, EXR and PNGs written): 495 B per film pixel
+#: for a Stokes render (llvm_ad_spectral_polarized: 17 film channels in Mitsuba's film and image
+#: block, the float64 accumulators, the output arrays, the EXR and PNG writers), 159 B per pixel
+#: in llvm_ad_rgb, ~310 MB fixed (Python, Mitsuba, LLVM).  Rounded up ~10 %.  Samples per pixel
+#: add next to nothing (Mitsuba traces each pass in one fused kernel: 400^2 px at 16 spp and at
+#: 1 spp peaked within 1 %).
+BYTES_PER_PIXEL_STOKES = 550
+BYTES_PER_PIXEL_COLOUR = 180
+BYTES_FIXED = 400 * 2**20
 
 
 def _log(msg: str) -> None:
@@ -44,22 +81,28 @@ def _log(msg: str) -> None:
 
 
 def prepare_variant(variant: str = DEFAULT_VARIANT, fallback: bool = True) -> str:
-    """Select a *polarized* Mitsuba variant (LLVM checked, scalar fallback) and register ``hyde``.
+    """Select a Mitsuba variant (LLVM checked, scalar fallback) and register ``hyde`` for it.
 
-    Returns the variant actually set.  ValueError for an unknown or unpolarized variant.
+    Polarized variants (``*_polarized``) render Stokes images; the others render the colour
+    image only.  Returns the variant actually set.  :class:`~hyde_bsdf.errors.UsageError`
+    (a ValueError) for an unknown variant or one this machine cannot run (``cuda_*`` without a
+    CUDA GPU, ``llvm_*`` without a usable libLLVM and ``fallback=False``).
     """
     import mitsuba as mi
 
     from hyde_bsdf.mitsuba.variants import VariantUnavailable, set_variant
 
-    if not isinstance(variant, str) or not variant.endswith("_polarized"):
-        pol = [v for v in mi.variants() if v.endswith("_polarized")]
-        raise ValueError(f"variant must be a polarized Mitsuba variant (one of {', '.join(pol)}), "
+    if not isinstance(variant, str) or variant not in mi.variants():
+        raise UsageError(f"variant must be one of this Mitsuba's variants ({', '.join(mi.variants())}), "
                          f"got {variant!r}")
     try:
         chosen = set_variant(variant, fallback=fallback)
     except VariantUnavailable as exc:
-        raise ValueError(str(exc)) from None
+        raise UsageError(one_line(exc)) from None
+    except (ImportError, RuntimeError) as exc:  # cuda_* without a GPU: "CUDA backend hasn't been initialized"
+        usable = [v for v in mi.variants() if not v.startswith("cuda_")]
+        raise UsageError(f"variant {variant!r} cannot be used on this machine ({one_line(exc)[:160]}); "
+                         f"use one of {', '.join(usable)}") from None
     if chosen != variant:
         _log(f"no usable LLVM back end: falling back to the {chosen!r} variant (slower)")
     _register_hyde()
@@ -78,20 +121,127 @@ def _register_hyde() -> bool:
     return True
 
 
-def load_scene(path, params: dict | None = None):
-    """``mi.load_file`` with clear errors; ``params`` fill the XML's ``$name`` defaults."""
+_PARAM = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
+#: Mitsuba integrators that are not sampling integrators (the stokes integrator and
+#: ``mi.render``'s sampling path need one).
+_NON_SAMPLING_INTEGRATORS = {"ptracer"}
+
+
+class _SceneXML:
+    """What :func:`load_scene` checks in the XML before Mitsuba sees it (``$name`` resolved)."""
+
+    def __init__(self, path: Path, params: dict):
+        self.path = path
+        self.raw = {}   # "sample_count"/"width"/"height" -> raw attribute text of the first sensor
+        self.values = dict(params)
+        try:
+            text = path.read_text(encoding="utf-8", errors="replace")
+        except OSError as exc:
+            raise UsageError(f"scene {str(path)!r} cannot be read ({exc.strerror or exc})") from None
+        # Mitsuba's parser (pugixml) accepts "--" inside comments, ElementTree does not.
+        try:
+            root = ET.fromstring(re.sub(r"<!--.*?-->", "", text, flags=re.S))
+        except ET.ParseError:
+            self.tree = None     # leave the diagnosis to Mitsuba's parser
+            return
+        self.tree = ET.ElementTree(root)
+        if root.tag != "scene":
+            raise UsageError(f"scene {str(path)!r}: the root element is <{root.tag}>, expected <scene>")
+        self.values = {d.get("name"): d.get("value") for d in root.findall("default")}
+        self.values.update(params)
+        self.has_include = root.find(".//include") is not None
+        self.sensors = root.findall(".//sensor")
+        self.integrators = [e.get("type") for e in root.iter("integrator")]
+
+    def resolve(self, text: str) -> str:
+        return _PARAM.sub(lambda m: str(self.values.get(m.group(1), m.group(0))), text)
+
+    def hint(self, key: str) -> str:
+        """' (set by -D NAME=...)' when the first sensor's ``key`` is a plain ``$NAME``."""
+        m = _PARAM.fullmatch(self.raw.get(key, "") or "")
+        return f" (the scene's ${m.group(1)}; set it with -D {m.group(1)}=N)" if m else ""
+
+    def check(self) -> None:
+        if self.tree is None:
+            return
+        where = f"scene {str(self.path)!r}"
+        if not self.sensors and not self.has_include:
+            raise UsageError(f"{where} has no <sensor>: add a camera, e.g. <sensor type=\"perspective\"> "
+                             "with a <film> and a <sampler>")
+        bad = sorted({t for t in self.integrators if t in _NON_SAMPLING_INTEGRATORS})
+        if bad:
+            raise UsageError(f"{where}: integrator {bad[0]!r} is not supported by render -- it needs a "
+                             "sampling integrator (path, direct, volpath, ...), which Mitsuba's stokes "
+                             "integrator can wrap")
+        if not self.sensors:
+            return
+        sensor = self.sensors[0]
+        for tag, key, what in (("sampler", "sample_count", "the sampler's sample_count"),
+                               ("film", "width", "the film width"), ("film", "height", "the film height")):
+            el = sensor.find(f"{tag}/integer[@name='{key}']")
+            if el is None or el.get("value") is None:
+                continue
+            self.raw[key] = el.get("value")
+            try:
+                value = int(self.resolve(el.get("value")))
+            except ValueError:
+                continue                         # not a plain integer: Mitsuba's parser reports it
+            if value < 1:
+                raise UsageError(f"{where}: {what} is {value}; it must be an integer >= 1{self.hint(key)}")
+
+    def without_stokes(self) -> str | None:
+        """The scene's XML with a top-level ``stokes`` integrator replaced by the integrator it
+        wraps (``path`` if none): unpolarized variants refuse ``stokes``.  None if no change."""
+        if self.tree is None:
+            return None
+        root = self.tree.getroot()
+        for i, el in enumerate(list(root)):
+            if el.tag == "integrator" and el.get("type") == "stokes":
+                inner = el.find("integrator")
+                root.remove(el)
+                root.insert(i, inner if inner is not None else ET.Element("integrator", type="path"))
+                return ET.tostring(root, encoding="unicode")
+        return None
+
+
+def load_scene(path, params: dict | None = None, polarized: bool | None = None):
+    """``mi.load_file`` with the checks above and one-line errors; ``params`` fill the XML's
+    ``$name`` defaults.  ``polarized`` (default: the current variant's) False drops a
+    ``stokes`` integrator so that the scene loads in an unpolarized variant."""
+    return _load_scene(path, params, polarized)[0]
+
+
+def _load_scene(path, params=None, polarized=None):
+    """:func:`load_scene`, also returning the checked XML (for the -D hints in messages)."""
     import mitsuba as mi
 
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"scene file {str(path)!r} does not exist")
+        raise UsageError(f"scene file {str(path)!r} does not exist")
     if path.suffix.lower() != ".xml":
-        raise ValueError(f"scene must be a Mitsuba .xml file, got {str(path)!r}")
+        raise UsageError(f"scene must be a Mitsuba .xml file, got {str(path)!r}")
     kwargs = {str(k): str(v) for k, v in (params or {}).items()}
+    info = _SceneXML(path, kwargs)
+    info.check()
+    if polarized is None:
+        polarized = (mi.variant() or "").endswith("_polarized")
+    text = None if polarized else info.without_stokes()
     try:
-        return mi.load_file(str(path), **kwargs)
+        if text is None:
+            scene = mi.load_file(str(path), **kwargs)
+        else:
+            resolver = mi.file_resolver()
+            saved = [str(resolver[i]) for i in range(len(resolver))]
+            resolver.prepend(str(path.resolve().parent))   # relative mesh/texture paths
+            try:
+                scene = mi.load_string(text, **kwargs)
+            finally:
+                resolver.clear()
+                for folder in saved:
+                    resolver.append(folder)
     except Exception as exc:  # Mitsuba raises RuntimeError/Exception with its parser's message
-        raise ValueError(f"could not load scene {str(path)!r}: {exc}") from None
+        raise UsageError(f"could not load scene {str(path)!r}: {one_line(exc)}") from None
+    return scene, info
 
 
 def _stokes_integrator(scene):
@@ -104,6 +254,84 @@ def _stokes_integrator(scene):
     return mi.load_dict({"type": "stokes", "integrator": integrator})
 
 
+def mem_available() -> int | None:
+    """``MemAvailable`` of /proc/meminfo in bytes (None where there is no /proc/meminfo)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def estimate_memory(width: int, height: int, polarized: bool = True) -> int:
+    """Estimated peak memory (bytes) of rendering and writing a ``width`` x ``height`` film.
+
+    Linear model measured on this project's scenes (see :data:`BYTES_PER_PIXEL_STOKES`):
+    a fixed part plus a cost per pixel; samples per pixel barely count.
+    """
+    per_px = BYTES_PER_PIXEL_STOKES if polarized else BYTES_PER_PIXEL_COLOUR
+    return BYTES_FIXED + int(width) * int(height) * per_px
+
+
+def plan_passes(width: int, height: int, spp: int, chunks: int | None = None) -> list[int]:
+    """spp of each ``mi.render`` pass: ``chunks`` (default ``min(spp, 8)``) equal parts, or more
+    so that a pass has at most :data:`MAX_SAMPLES_PER_PASS` samples.  UsageError beyond
+    :data:`MAX_PASSES` passes."""
+    pixels = int(width) * int(height)
+    per_pass = max(1, MAX_SAMPLES_PER_PASS // max(pixels, 1))
+    need = -(-spp // per_pass)
+    n = max(min(spp, 8) if chunks is None else int(chunks), need)
+    if n > MAX_PASSES:
+        raise UsageError(f"spp={spp} on a {width}x{height} film needs {need} passes of at most {per_pass} "
+                         f"spp (at most {MAX_SAMPLES_PER_PASS} samples each); at most {MAX_PASSES} passes "
+                         f"are possible: lower --spp to <= {MAX_PASSES * per_pass}")
+    return [spp // n + (1 if c < spp % n else 0) for c in range(n)]
+
+
+def _check_film(scene, polarized: bool, info=None) -> tuple[int, int]:
+    """Film size >= 1 x 1, within Dr.Jit's array limit, and within the available memory."""
+    sensor = scene.sensors()[0]
+    film = sensor.film()
+    width, height = (int(v) for v in film.crop_size())
+    hint = (info.hint("width") or info.hint("height")) if info is not None else ""
+    if width < 1 or height < 1:
+        raise UsageError(f"the film is {width}x{height} pixels; width and height must be >= 1{hint}")
+    channels = 20 if polarized else 5        # R, G, B, A, W (+ 12 Stokes) and a margin
+    if width * height * channels > MAX_FILM_VALUES:
+        raise UsageError(f"the {width}x{height} film is too large: {width * height * channels:.3g} values, "
+                         f"Dr.Jit arrays hold at most 2^32 = {MAX_FILM_VALUES + 1:.3g}; at most "
+                         f"{MAX_FILM_VALUES // channels:.3g} pixels{hint}")
+    need, avail = estimate_memory(width, height, polarized), mem_available()
+    if avail is not None and need > avail:
+        per_px = BYTES_PER_PIXEL_STOKES if polarized else BYTES_PER_PIXEL_COLOUR
+        raise UsageError(f"rendering the {width}x{height} film needs about {need / 2**30:.1f} GiB of memory "
+                         f"(~{per_px} B/pixel), but only {avail / 2**30:.1f} GiB is available (MemAvailable); "
+                         f"lower the film's width and height{hint or ' (its <film> width/height, or -D)'}")
+    return width, height
+
+
+def _check_int(name, value, lo, hi=None):
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo or (
+            hi is not None and value > hi):
+        rng = f"an integer >= {lo}" if hi is None else f"an integer in [{lo}, {hi}]"
+        raise UsageError(f"{name} must be {rng}, got {value!r}")
+    return int(value)
+
+
+def _render_pass(mi, scene, n, seed, integrator):
+    try:
+        return mi.render(scene, spp=n, seed=seed, integrator=integrator)
+    except RuntimeError as exc:
+        cause, msgs = exc, []
+        while cause is not None:            # drjit.custom chains the real message as the cause
+            msgs.append(one_line(cause))
+            cause = cause.__cause__ or cause.__context__
+        raise UsageError("Mitsuba could not render the scene: " + " <- ".join(msgs[::-1])[:600]) from exc
+
+
 def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None = None,
                   seed: int = 0, chunks: int | None = None, params: dict | None = None,
                   progress: bool = True, fallback: bool = True) -> dict:
@@ -112,13 +340,16 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
     Parameters
     ----------
     scene_or_path : path of a Mitsuba XML scene, or an already loaded ``mi.Scene``
-        (then the current variant is used and must be polarized; ``variant`` is ignored).
-    variant : polarized Mitsuba variant for a path (default ``llvm_ad_spectral_polarized``;
-        with ``fallback`` an unusable LLVM back end falls back to ``scalar_*`` with a message).
+        (then the current variant is used; ``variant`` is ignored).
+    variant : Mitsuba variant for a path (default ``llvm_ad_spectral_polarized``; with
+        ``fallback`` an unusable LLVM back end falls back to ``scalar_*`` with a message).
+        An unpolarized variant (``llvm_ad_rgb``, ``scalar_rgb``, ...) renders the colour image
+        only (a ``stokes`` integrator in the scene is replaced by the one it wraps).
     spp : samples per pixel (default: the scene sampler's ``sample_count``).
-    seed : base seed; chunk ``c`` uses seed ``seed * 2**16 + c``.
-    chunks : number of equal spp chunks (default ``min(spp, 8)``); progress is reported
-        after each, and the spread between chunks gives the Monte-Carlo error.
+    seed : base seed in [0, 32767]; chunk ``c`` uses seed ``seed * 2**16 + c``.
+    chunks : number of equal spp chunks (default ``min(spp, 8)``; more when a chunk would
+        exceed :data:`MAX_SAMPLES_PER_PASS` samples); progress is reported after each, and the
+        spread between chunks gives the Monte-Carlo error.
     params : ``$name`` values for the XML scene.
 
     Returns
@@ -127,52 +358,56 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
     ``"RGB"``, ``"S0".."S3"`` (the mean over all samples, Stokes components in the
     sensor's basis), ``"S0_sem".."S3_sem"`` (standard error of the mean from the
     chunk-to-chunk spread; zeros when ``chunks == 1``), and ``"meta"``: a dict
-    (variant, spp, chunks, seed, seconds).
+    (variant, polarized, spp, chunks, seed, seconds).  Unpolarized: ``"RGB"``, ``"RGB_sem"``
+    and ``"meta"`` only.
+
+    Raises :class:`~hyde_bsdf.errors.UsageError` (a ValueError) for the mistakes listed in the
+    module docstring, before rendering.
     """
     import mitsuba as mi
 
     if isinstance(scene_or_path, (str, Path)):
         variant = prepare_variant(variant, fallback=fallback)
-        scene = load_scene(scene_or_path, params)
+        scene, info = _load_scene(scene_or_path, params)
     else:
+        info = None
         if not isinstance(scene_or_path, mi.Scene):
-            raise ValueError(f"scene_or_path must be an XML path or a mi.Scene, "
+            raise UsageError(f"scene_or_path must be an XML path or a mi.Scene, "
                              f"got {type(scene_or_path).__name__}")
         variant = mi.variant()
-        if not variant.endswith("_polarized"):
-            raise ValueError(f"rendering Stokes images needs a polarized variant; "
-                             f"the current one is {variant!r}")
         scene = scene_or_path
+    polarized = variant.endswith("_polarized")
+    if not scene.sensors():
+        raise UsageError("the scene has no sensor: add a camera, e.g. <sensor type=\"perspective\">")
+    if not isinstance(scene.integrator(), mi.SamplingIntegrator):
+        raise UsageError(f"the scene's integrator ({scene.integrator().class_().name()}) is not a sampling "
+                         "integrator; render needs path, direct, volpath, ... (or stokes around one)")
     sensor = scene.sensors()[0]
     if spp is None:
         spp = int(sensor.sampler().sample_count())
-    if isinstance(spp, bool) or not isinstance(spp, (int, np.integer)) or spp < 1:
-        raise ValueError(f"spp must be an integer >= 1, got {spp!r}")
-    spp = int(spp)
-    if chunks is None:
-        chunks = min(spp, 8)
-    if isinstance(chunks, bool) or not isinstance(chunks, (int, np.integer)) or not 1 <= chunks <= spp:
-        raise ValueError(f"chunks must be an integer in [1, spp={spp}], got {chunks!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**15:
-        raise ValueError(f"seed must be an integer in [0, 32767], got {seed!r}")
-    chunks = int(chunks)
-    integrator = _stokes_integrator(scene)
-    # Split spp as evenly as possible; chunk means are weighted by their spp.
-    sizes = [spp // chunks + (1 if c < spp % chunks else 0) for c in range(chunks)]
+    spp = _check_int("spp", spp, 1)
+    if chunks is not None:
+        chunks = _check_int("chunks", chunks, 1, spp)
+    seed = _check_int("seed", seed, 0, MAX_SEED)
+    width, height = _check_film(scene, polarized, info)
+    sizes = plan_passes(width, height, spp, chunks)
+    chunks = len(sizes)
+    integrator = _stokes_integrator(scene) if polarized else scene.integrator()
 
     t0 = time.perf_counter()
     names = None
     acc = acc2 = None
     done = 0
     for c, n in enumerate(sizes):
-        img = np.array(mi.render(scene, spp=n, seed=int(seed) * 2**16 + c, integrator=integrator),
-                       dtype=np.float64)
+        img = np.asarray(_render_pass(mi, scene, n, seed * 2**16 + c, integrator), dtype=np.float32)
         if names is None:
             names = [f.name for f in sensor.film().bitmap().struct_()]
-            acc = np.zeros_like(img)
-            acc2 = np.zeros_like(img)
-        acc += n * img
-        acc2 += n * img * img
+            acc = np.zeros(img.shape, np.float64)
+            acc2 = np.zeros(img.shape, np.float64)
+        acc += n * img                   # float64 accumulators; one float32 temporary at a time
+        img *= img
+        acc2 += n * img
+        del img
         done += n
         if progress:
             el = time.perf_counter() - t0
@@ -181,15 +416,21 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
             print(f"[render] {done:6d}/{spp} spp ({c + 1}/{chunks} chunks)  {el:6.1f} s elapsed, "
                   f"~{left:5.1f} s left", file=sys.stderr, end=end, flush=True)
     seconds = time.perf_counter() - t0
-    mean = acc / spp
+    mean = acc
+    mean /= spp
     if chunks > 1:
-        # Weighted spread of chunk means; a chunk of n samples has variance sigma^2 / n.
-        var_sample = np.maximum(acc2 / spp - mean**2, 0.0) * spp / (chunks - 1)
-        sem = np.sqrt(var_sample / spp)
+        # Weighted spread of chunk means; a chunk of n samples has variance sigma^2 / n:
+        # sem^2 = (E[x^2] - mean^2) / (chunks - 1), computed in place in acc2.
+        sem = acc2
+        sem /= spp
+        sem -= mean * mean
+        np.maximum(sem, 0.0, out=sem)
+        sem /= chunks - 1
+        np.sqrt(sem, out=sem)
     else:
         sem = np.zeros_like(mean)
     if not np.all(np.isfinite(mean)):
-        raise ValueError("the render produced non-finite pixel values (NaN/Inf) -- "
+        raise UsageError("the render produced non-finite pixel values (NaN/Inf) -- "
                          "a BSDF or emitter in the scene returned invalid values")
 
     index = {name: i for i, name in enumerate(names)}
@@ -197,12 +438,15 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
     # Mono variants write one luminance channel "Y" instead of R, G, B.
     rgb_idx = [index[c] for c in ("R", "G", "B")] if "R" in index else [index["Y"]] * 3
     out["RGB"] = mean[..., rgb_idx].astype(np.float32)
-    for s in STOKES_NAMES:
-        idx = [index[f"{s}.{c}"] for c in ("R", "G", "B")]
-        out[s] = mean[..., idx].astype(np.float32)
-        out[s + "_sem"] = sem[..., idx].astype(np.float32)
-    out["meta"] = {"variant": variant, "spp": spp, "chunks": chunks, "seed": int(seed),
-                   "seconds": round(seconds, 3)}
+    if polarized:
+        for s in STOKES_NAMES:
+            idx = [index[f"{s}.{c}"] for c in ("R", "G", "B")]
+            out[s] = mean[..., idx].astype(np.float32)
+            out[s + "_sem"] = sem[..., idx].astype(np.float32)
+    else:
+        out["RGB_sem"] = sem[..., rgb_idx].astype(np.float32)
+    out["meta"] = {"variant": variant, "polarized": polarized, "spp": spp, "chunks": chunks,
+                   "seed": int(seed), "seconds": round(seconds, 3)}
     return out
 
 
@@ -278,49 +522,71 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="hyde-bsdf render",
         description="Render a Mitsuba scene to a Stokes EXR (R,G,B,S0.R..S3.B, float32) and PNG "
-                    "charts of intensity, DoLP, AoLP and DoCP.  The scene may use the 'hyde' BSDF.")
+                    "charts of intensity, DoLP, AoLP and DoCP.  The scene may use the 'hyde' BSDF.  "
+                    "An unpolarized --variant writes the colour image only.")
     p.add_argument("scene", help="Mitsuba 3 scene (.xml)")
     p.add_argument("-o", "--output", required=True, help="output EXR path (must end in .exr)")
     p.add_argument("--variant", default=DEFAULT_VARIANT,
-                   help=f"polarized Mitsuba variant (default {DEFAULT_VARIANT}; falls back to "
-                        "scalar_spectral_polarized without a usable libLLVM)")
+                   help=f"Mitsuba variant (default {DEFAULT_VARIANT}; falls back to "
+                        "scalar_spectral_polarized without a usable libLLVM); unpolarized variants "
+                        "(llvm_ad_rgb, scalar_rgb, ...) write the colour image only")
     p.add_argument("--spp", type=_positive_int, default=None,
                    help="samples per pixel (default: the scene's sampler)")
-    p.add_argument("--seed", type=int, default=0, help="random seed, 0..32767 (default 0)")
+    p.add_argument("--seed", type=int, default=0, help=f"random seed, 0..{MAX_SEED} (default 0)")
     p.add_argument("--chunks", type=_positive_int, default=None,
-                   help="render in this many spp chunks (progress + error estimate; default min(spp, 8))")
+                   help="render in at least this many spp chunks (progress + error estimate; "
+                        "default min(spp, 8))")
     p.add_argument("-D", dest="define", action="append", type=_parse_define, default=[],
                    metavar="NAME=VALUE", help="set a $NAME default of the scene (repeatable)")
     p.add_argument("--no-png", action="store_true", help="write only the EXR")
     return p
 
 
-def cli_main(argv=None) -> int:
-    """``hyde-bsdf render``: returns 0 on success, 2 on bad arguments or a failed render."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse prints its message; hand back its code
-        return int(exc.code or 0)
-    out = Path(args.output)
+def check_outputs(out, polarized: bool, png: bool = True) -> list[Path]:
+    """Check, before rendering, every file ``render`` will write for ``out`` (UsageError)."""
+    out = Path(out)
     if out.suffix.lower() != ".exr":
-        print(f"hyde-bsdf render: error: --output must end in .exr, got {args.output!r}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--output must end in .exr, got {str(out)!r}")
+    paths = [check_output_path(out, "--output")]
+    if png:
+        paths += [check_output_path(p, "PNG output") for p in polarization_png_paths(out.with_suffix(""),
+                                                                                     polarized).values()]
+    return paths
+
+
+def _run(args) -> int:
+    out = Path(args.output)
+    polarized = str(args.variant).endswith("_polarized")
+    check_outputs(out, polarized, png=not args.no_png)
     if not Path(args.scene).is_file():
-        print(f"hyde-bsdf render: error: scene file {args.scene!r} does not exist", file=sys.stderr)
-        return 2
-    try:
-        result = render_stokes(args.scene, variant=args.variant, spp=args.spp, seed=args.seed,
-                               chunks=args.chunks, params=dict(args.define))
-    except ValueError as exc:
-        print(f"hyde-bsdf render: error: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(f"scene file {args.scene!r} does not exist")
+    result = render_stokes(args.scene, variant=args.variant, spp=args.spp, seed=args.seed,
+                           chunks=args.chunks, params=dict(args.define))
     meta = result["meta"]
     write_stokes_exr(out, result, metadata=meta)
     written = [out]
     if not args.no_png:
         stem = out.with_suffix("")
-        written += list(save_polarization_pngs(result, stem, title=Path(args.scene).stem).values())
+        title = Path(args.scene).stem
+        if meta["polarized"]:
+            written += list(save_polarization_pngs(result, stem, title=title).values())
+        else:
+            written.append(save_rgb_png(result["RGB"], polarization_png_paths(stem, False)["rgb"], title))
     _log(f"{meta['spp']} spp in {meta['seconds']:.1f} s ({meta['variant']}); wrote "
          + ", ".join(str(p) for p in written))
     return 0
+
+
+def cli_main(argv=None) -> int:
+    """``hyde-bsdf render``: returns 0 on success, 2 on bad arguments, inputs or output paths
+    (one line on stderr: ``hyde-bsdf render: error: ...``)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse prints its message; hand back its code
+        return int(exc.code or 0)
+    try:
+        return _run(args)
+    except UsageError as exc:
+        print(f"hyde-bsdf render: error: {exc}", file=sys.stderr)
+        return 2

@@ -38,6 +38,9 @@ from pathlib import Path
 
 import numpy as np
 
+from hyde_bsdf.atomic import atomic_path
+from hyde_bsdf.errors import UsageError
+
 __all__ = [
     "STOKES_NAMES",
     "COLOURS",
@@ -47,6 +50,8 @@ __all__ = [
     "luminance",
     "polarization_quantities",
     "save_polarization_pngs",
+    "save_rgb_png",
+    "polarization_png_paths",
 ]
 
 STOKES_NAMES = ("S0", "S1", "S2", "S3")
@@ -79,29 +84,38 @@ def _check_stokes(stokes: dict) -> tuple[int, int]:
 
 
 def write_stokes_exr(path, stokes: dict, metadata: dict | None = None) -> Path:
-    """Write a Stokes image to an OpenEXR file (float32 channels, ZIP compressed).
+    """Write a Stokes image to an OpenEXR file (float32 channels, ZIP compressed), atomically.
 
     Parameters
     ----------
     path : str or Path, must end in ``.exr``
-    stokes : dict with ``"S0".."S3"`` (and optionally ``"RGB"``), arrays (H, W, 3)
+    stokes : dict with ``"S0".."S3"`` (and optionally ``"RGB"``), arrays (H, W, 3); or, for a
+        render in an unpolarized variant, a dict with ``"RGB"`` only (then only R, G, B are written)
     metadata : optional dict of short strings stored as EXR header attributes
         (e.g. variant, spp); keys are prefixed ``hyde_bsdf.``.
 
     Channels: ``R, G, B`` (``RGB`` if given, else ``S0``) then ``S0.R ... S3.B``.
-    Non-finite values are refused (ValueError), so no NaN reaches a file silently.
+    Non-finite values are refused (ValueError), so no NaN reaches a file silently.  The file is
+    written to a temporary file beside ``path`` and renamed over it (:mod:`hyde_bsdf.atomic`):
+    an interrupted write leaves the previous file intact.
     """
     import OpenEXR
 
     path = Path(path)
     if path.suffix.lower() != ".exr":
-        raise ValueError(f"path must end in .exr, got {str(path)!r}")
-    _check_stokes(stokes)
-    rgb = np.asarray(stokes.get("RGB", stokes["S0"]), dtype=np.float32)
+        raise UsageError(f"path must end in .exr, got {str(path)!r}")
+    colour_only = isinstance(stokes, dict) and "RGB" in stokes and "S0" not in stokes
+    if colour_only:
+        shape = np.shape(stokes["RGB"])
+        if len(shape) != 3 or shape[2] != 3 or shape[0] < 1 or shape[1] < 1:
+            raise ValueError(f"stokes['RGB'] must have shape (H, W, 3), got {shape}")
+    else:
+        _check_stokes(stokes)
+    rgb = np.asarray(stokes.get("RGB", stokes.get("S0")), dtype=np.float32)
     channels: dict[str, np.ndarray] = {}
     for j, c in enumerate(COLOURS):
         channels[c] = np.ascontiguousarray(rgb[..., j])
-    for s in STOKES_NAMES:
+    for s in () if colour_only else STOKES_NAMES:
         arr = np.asarray(stokes[s], dtype=np.float32)
         for j, c in enumerate(COLOURS):
             channels[f"{s}.{c}"] = np.ascontiguousarray(arr[..., j])
@@ -109,12 +123,14 @@ def write_stokes_exr(path, stokes: dict, metadata: dict | None = None) -> Path:
     if bad:
         raise ValueError(f"stokes has non-finite values in channel(s) {bad}; refusing to write {path}")
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    header["hyde_bsdf.stokes_basis"] = (
-        "Mitsuba sensor basis: x = image right, y = image up, k = towards the viewer")
+    if not colour_only:
+        header["hyde_bsdf.stokes_basis"] = (
+            "Mitsuba sensor basis: x = image right, y = image up, k = towards the viewer")
     for key, value in (metadata or {}).items():
         header[f"hyde_bsdf.{key}"] = str(value)
     path.parent.mkdir(parents=True, exist_ok=True)
-    OpenEXR.File(header, channels).write(str(path))
+    with atomic_path(path) as tmp:
+        OpenEXR.File(header, channels).write(str(tmp))
     return path
 
 
@@ -235,8 +251,7 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
         cb.set_label(cbar_label)
         fig.tight_layout()
         out = Path(f"{stem}_{name}.png")
-        fig.savefig(out)
-        plt.close(fig)
+        _save_png(fig, out)
         paths[name] = out
 
     inten = q["intensity"]
@@ -257,15 +272,44 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
     chart("docp", np.ma.masked_where(~valid, docp), "RdBu_r", -lim, lim, "DoCP = S3 / S0",
           "degree of circular polarization")
 
-    rgb = np.asarray(stokes.get("RGB", stokes["S0"]))
+    paths["rgb"] = save_rgb_png(stokes.get("RGB", stokes["S0"]), Path(f"{stem}_rgb.png"), title)
+    return paths
+
+
+def polarization_png_paths(stem, polarized: bool = True) -> dict[str, Path]:
+    """The PNG files :func:`save_polarization_pngs` (or, unpolarized, :func:`save_rgb_png`)
+    writes for ``stem``: {name: path}, so a command can check them before rendering."""
+    names = ("intensity", "dolp", "aolp", "docp", "rgb") if polarized else ("rgb",)
+    return {name: Path(f"{stem}_{name}.png") for name in names}
+
+
+def _save_png(fig, path: Path) -> None:
+    """``fig.savefig`` as PNG through a temporary file (atomic), then close the figure."""
+    import matplotlib.pyplot as plt
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png")
+    finally:
+        plt.close(fig)
+
+
+def save_rgb_png(rgb, path, title: str = "") -> Path:
+    """The colour image (linear RGB (H, W, 3), clipped at 1, sRGB curve) as a PNG chart."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rgb = np.asarray(rgb)
+    h, w = rgb.shape[:2]
+    prefix = f"{title}: " if title else ""
     fig, ax = plt.subplots(figsize=(6.4, max(2.4, 6.4 * h / w * 0.85 + 0.6)), dpi=110)
     ax.imshow(_tonemap(rgb), interpolation="nearest")
     ax.set_title(prefix + "colour image (sRGB, clipped at 1)", fontsize=10)
     ax.set_xticks([])
     ax.set_yticks([])
     fig.tight_layout()
-    out = Path(f"{stem}_rgb.png")
-    fig.savefig(out)
-    plt.close(fig)
-    paths["rgb"] = out
-    return paths
+    path = Path(path)
+    _save_png(fig, path)
+    return path

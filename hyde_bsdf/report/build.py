@@ -6,7 +6,13 @@ module runs them in order (in this process, so each one's time is measured), col
 and the figures, and writes ``DIR/index.html`` (and ``DIR/checks.csv``): the machine, the time
 each script took, a table of every check with its number, tolerance and verdict, and the figures.
 A script that raises is reported as a failed check with its message; the report still completes.
-Exit status: 0 when every check passes, 1 otherwise.
+Exit status: 0 when every check passes, 1 otherwise, 2 for a usage error (an output folder that
+cannot be written or is not a report folder, no ``validation/`` scripts: not a source checkout).
+
+The report is built in a fresh hidden folder beside ``DIR`` and swapped in at the end
+(:func:`hyde_bsdf.atomic.atomic_dir`): an interrupted run (Ctrl-C, a kill) leaves the previous
+report as it was, never an old ``index.html`` beside new figures.  ``DIR`` must be new, empty, or
+an earlier report (it holds ``index.html`` or ``checks.csv``): the whole folder is replaced.
 """
 from __future__ import annotations
 
@@ -22,6 +28,9 @@ import time
 import traceback
 from pathlib import Path
 
+from hyde_bsdf.atomic import atomic_dir, atomic_open, check_output_dir
+from hyde_bsdf.errors import UsageError
+
 __all__ = ["SECTIONS", "build_report", "cli_main"]
 
 #: (section title, [validation script stems]) in report order
@@ -36,11 +45,38 @@ SECTIONS = [
 ]
 
 
+#: Where the validation scripts live: ``validation/`` of the source checkout this package is in.
+VALIDATION_DIR = Path(__file__).resolve().parents[2] / "validation"
+
+
 def validation_dir() -> Path:
-    here = Path(__file__).resolve().parents[2] / "validation"
-    if not here.is_dir():
-        raise FileNotFoundError(f"validation scripts not found at {here}: run from a source checkout")
+    """The validation scripts' folder; UsageError when this is not a source checkout."""
+    here = Path(VALIDATION_DIR)
+    missing = [f"{stem}.py" for _, names in SECTIONS for stem in names if not (here / f"{stem}.py").is_file()]
+    if not here.is_dir() or len(missing) == sum(len(n) for _, n in SECTIONS):
+        raise UsageError(f"validate needs the validation/ scripts of a source checkout, and {str(here)!r} "
+                         "has none (an installed package does not ship them): clone the repository and "
+                         "run 'pip install -e .' and 'hyde-bsdf validate' there")
     return here
+
+
+def check_report_dir(outdir) -> Path:
+    """Check before any work that ``outdir`` can take a report (UsageError otherwise)."""
+    out = Path(outdir)
+    if out.is_symlink():
+        out = out.resolve()
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--outdir {str(out)!r} is a regular file, not a folder")
+    here = Path.cwd().resolve()
+    if out.resolve() == here or out.resolve() in here.parents:
+        raise UsageError(f"--outdir {str(outdir)!r} is the current folder or one above it; the report "
+                         "replaces its folder as a whole: give a folder of its own (default out/report)")
+    if out.is_dir() and any(out.iterdir()) and not any((out / n).exists() for n in ("index.html", "checks.csv")):
+        raise UsageError(f"--outdir {str(out)!r} is a folder that is not a validation report (no index.html "
+                         "or checks.csv); the report replaces its folder as a whole: give a new or empty "
+                         "folder, or an earlier report's")
+    check_output_dir(out.parent, "--outdir's parent folder")
+    return out
 
 
 def machine_info() -> dict:
@@ -105,10 +141,19 @@ def _fmt(v):
 
 
 def build_report(outdir, quick=False, progress=True):
-    """Run all scripts into ``outdir``; return (all_passed, rows, seconds)."""
-    out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
+    """Run all scripts into ``outdir``; return (all_passed, rows, seconds).
+
+    The report is built in a fresh folder and replaces ``outdir`` only once complete (see the
+    module docstring); UsageError before any work for an unusable ``outdir`` or no scripts.
+    """
+    final = check_report_dir(outdir)
     vdir = validation_dir()
+    with atomic_dir(final) as out:
+        result = _build(out, vdir, quick, progress)
+    return result
+
+
+def _build(out: Path, vdir: Path, quick: bool, progress: bool):
     info = machine_info()
     t_start = time.perf_counter()
     rows, sections = [], []
@@ -134,7 +179,7 @@ def build_report(outdir, quick=False, progress=True):
     info["report run time"] = f"{total:.0f} s ({'quick' if quick else 'full'} mode)"
     all_passed = all(r["passed"] for r in rows)
     _write_html(out, info, sections, rows, all_passed, quick)
-    with open(out / "checks.csv", "w", newline="") as f:
+    with atomic_open(out / "checks.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=["script", "name", "value", "tolerance", "passed"])
         w.writeheader()
         w.writerows(rows)
@@ -175,7 +220,8 @@ def _write_html(out, info, sections, rows, all_passed, quick):
             for fig in figures:
                 parts.append(f"<img src='{html.escape(fig.name)}' alt='{html.escape(fig.stem)}'>")
     parts.append("</body></html>")
-    (out / "index.html").write_text("\n".join(parts), encoding="utf-8")
+    with atomic_open(out / "index.html", "w", encoding="utf-8") as f:
+        f.write("\n".join(parts))
 
 
 def cli_main(argv=None) -> int:
@@ -183,8 +229,15 @@ def cli_main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)")
     ap.add_argument("--quick", action="store_true", help="small sweeps; under 3 minutes on 2 cores")
-    a = ap.parse_args(argv)
-    ok, rows, seconds = build_report(a.outdir, quick=a.quick)
+    try:
+        a = ap.parse_args(argv)
+    except SystemExit as exc:  # argparse printed its message
+        return int(exc.code or 0)
+    try:
+        ok, rows, seconds = build_report(a.outdir, quick=a.quick)
+    except UsageError as exc:
+        print(f"hyde-bsdf validate: error: {exc}", file=sys.stderr)
+        return 2
     n_fail = sum(not r["passed"] for r in rows)
     print(f"{len(rows) - n_fail} of {len(rows)} checks pass in {seconds:.0f} s; report: {Path(a.outdir) / 'index.html'}")
     for r in rows:
