@@ -30,3 +30,58 @@ def test_validate_cli_reports_missing_output_folder_argument_errors(capsys):
     except SystemExit as exc:
         assert exc.code == 2
     assert "usage" in capsys.readouterr().err
+
+
+FAKE_SCRIPT = '''"""A stand-in validation script: one figure, one CSV, one check."""
+import os
+
+
+def validate(outdir, quick=False):
+    from _common import write_csv
+    if os.environ.get("HYDE_TEST_INTERRUPT") == "1":
+        open(os.path.join(outdir, "fake_new.png"), "wb").write(b"half")
+        raise KeyboardInterrupt
+    open(os.path.join(outdir, "fake.png"), "wb").write(b"\\x89PNG fake")
+    write_csv(os.path.join(outdir, "fake.csv"), ["x"], [[1]])
+    return [dict(name="fake check", value=1.0, tolerance="== 1", passed=True)]
+'''
+
+
+def _fake_validation(tmp_path, monkeypatch):
+    import shutil
+    from pathlib import Path
+
+    vdir = tmp_path / "validation"
+    vdir.mkdir()
+    (vdir / "fake_check.py").write_text(FAKE_SCRIPT)
+    shutil.copy(Path(__file__).resolve().parent.parent / "validation" / "_common.py", vdir / "_common.py")
+    monkeypatch.setattr("hyde_bsdf.report.build.VALIDATION_DIR", vdir)
+    monkeypatch.setattr("hyde_bsdf.report.build.SECTIONS", [("Fake", ["fake_check"])])
+    monkeypatch.setattr("hyde_bsdf.report.build.machine_info", lambda: {"CPU": "test"})
+
+
+def test_interrupted_report_keeps_previous_report(tmp_path, monkeypatch):
+    """Issue 10: the report is built in a fresh folder and swapped in at the end, so a run
+    interrupted half-way (Ctrl-C inside a script) leaves the previous report -- its index.html
+    and its figures -- exactly as it was, with no new figure beside it and no temporary folder."""
+    _fake_validation(tmp_path, monkeypatch)
+    out = tmp_path / "report"
+    ok, rows, _ = build_report(out, quick=True, progress=False)
+    assert ok and len(rows) == 1
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert set(before) == {"index.html", "checks.csv", "fake.png", "fake.csv"}
+    assert "1 of 1 checks pass" in before["index.html"].decode()
+    monkeypatch.setenv("HYDE_TEST_INTERRUPT", "1")
+    try:
+        build_report(out, quick=True, progress=False)
+    except KeyboardInterrupt:
+        pass
+    else:
+        raise AssertionError("the interrupt did not reach build_report's caller")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report", "validation"]
+    # A later complete run replaces the folder as a whole (no stale files survive).
+    monkeypatch.delenv("HYDE_TEST_INTERRUPT")
+    (out / "stale_from_old_run.png").write_bytes(b"old")
+    assert cli_main(["-o", str(out), "--quick"]) == 0
+    assert not (out / "stale_from_old_run.png").exists()

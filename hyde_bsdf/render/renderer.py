@@ -398,23 +398,28 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
     names = None
     acc = acc2 = None
     done = 0
-    for c, n in enumerate(sizes):
-        img = np.asarray(_render_pass(mi, scene, n, seed * 2**16 + c, integrator), dtype=np.float32)
-        if names is None:
-            names = [f.name for f in sensor.film().bitmap().struct_()]
-            acc = np.zeros(img.shape, np.float64)
-            acc2 = np.zeros(img.shape, np.float64)
-        acc += n * img                   # float64 accumulators; one float32 temporary at a time
-        img *= img
-        acc2 += n * img
-        del img
-        done += n
-        if progress:
-            el = time.perf_counter() - t0
-            left = el / done * (spp - done)
-            end = "\n" if c == chunks - 1 else "\r"
-            print(f"[render] {done:6d}/{spp} spp ({c + 1}/{chunks} chunks)  {el:6.1f} s elapsed, "
-                  f"~{left:5.1f} s left", file=sys.stderr, end=end, flush=True)
+    try:
+        for c, n in enumerate(sizes):
+            img = np.asarray(_render_pass(mi, scene, n, seed * 2**16 + c, integrator), dtype=np.float32)
+            if names is None:
+                names = [f.name for f in sensor.film().bitmap().struct_()]
+                acc = np.zeros(img.shape, np.float64)
+                acc2 = np.zeros(img.shape, np.float64)
+            acc += n * img                   # float64 accumulators; one float32 temporary at a time
+            img *= img
+            acc2 += n * img
+            del img
+            done += n
+            if progress:
+                el = time.perf_counter() - t0
+                left = el / done * (spp - done)
+                end = "\n" if c == chunks - 1 else "\r"
+                print(f"[render] {done:6d}/{spp} spp ({c + 1}/{chunks} chunks)  {el:6.1f} s elapsed, "
+                      f"~{left:5.1f} s left", file=sys.stderr, end=end, flush=True)
+    except KeyboardInterrupt:
+        if progress and done:
+            print(file=sys.stderr, flush=True)    # end the progress line before the message
+        raise
     seconds = time.perf_counter() - t0
     mean = acc
     mean /= spp
