@@ -82,7 +82,7 @@ CLI_ROWS = [
     ("render: unknown variant", ["render", "{tiny}", "-o", "{tmp}/a.exr", "--variant", "llvm_ad_rgbx"], 2,
      "variant must be one of", "in"),
     ("render: cuda variant without a GPU", ["render", "{tiny}", "-o", "{tmp}/a.exr", "--variant", "cuda_ad_rgb"], 2,
-     "variant 'cuda_ad_rgb' cannot be used on this machine", "cuda"),
+     "needs a CUDA GPU", "cuda"),
     ("render: Ctrl-C", ["render", "{tiny}", "-o", "{tmp}/sigint.exr", "--spp", "200000", "--chunks", "20000"], 130,
      "hyde-bsdf render: interrupted", "sigint"),
     # --- demo ---

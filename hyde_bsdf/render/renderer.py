@@ -35,10 +35,14 @@ before the render starts.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import re
+import signal
 import sys
+import threading
 import time
+import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -86,7 +90,8 @@ def prepare_variant(variant: str = DEFAULT_VARIANT, fallback: bool = True) -> st
     Polarized variants (``*_polarized``) render Stokes images; the others render the colour
     image only.  Returns the variant actually set.  :class:`~hyde_bsdf.errors.UsageError`
     (a ValueError) for an unknown variant or one this machine cannot run (``cuda_*`` without a
-    CUDA GPU, ``llvm_*`` without a usable libLLVM and ``fallback=False``).
+    CUDA GPU -- never moved to the CPU silently --, ``llvm_*`` without a usable libLLVM and
+    ``fallback=False``).
     """
     import mitsuba as mi
 
@@ -96,7 +101,11 @@ def prepare_variant(variant: str = DEFAULT_VARIANT, fallback: bool = True) -> st
         raise UsageError(f"variant must be one of this Mitsuba's variants ({', '.join(mi.variants())}), "
                          f"got {variant!r}")
     try:
-        chosen = set_variant(variant, fallback=fallback)
+        with warnings.catch_warnings():       # the fallback is reported below, in one line
+            warnings.simplefilter("ignore", RuntimeWarning)
+            # An explicit cuda_* request is not silently moved to the CPU: without a GPU it is
+            # refused, naming the llvm_* twin; only llvm_* falls back (to scalar_*).
+            chosen = set_variant(variant, fallback=fallback and not variant.startswith("cuda_"))
     except VariantUnavailable as exc:
         raise UsageError(one_line(exc)) from None
     except (ImportError, RuntimeError) as exc:  # cuda_* without a GPU: "CUDA backend hasn't been initialized"
@@ -321,12 +330,32 @@ def _check_int(name, value, lo, hi=None):
     return int(value)
 
 
+@contextlib.contextmanager
+def _ctrl_c_flag():
+    """Record Ctrl-C during a render instead of raising at once: a KeyboardInterrupt raised in
+    Python code that Mitsuba calls back (plugin constructors, BSDF tracing) can be lost inside
+    Mitsuba/Dr.Jit, and Mitsuba's own handler cancels a pass and returns a partial image.  The
+    caller checks the flag between steps.  Yields a function telling whether SIGINT arrived;
+    main thread only."""
+    flag = []
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: False
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: flag.append(signum))
+    try:
+        yield lambda: bool(flag)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _render_pass(mi, scene, n, seed, integrator):
     try:
         return mi.render(scene, spp=n, seed=seed, integrator=integrator)
     except RuntimeError as exc:
         cause, msgs = exc, []
         while cause is not None:            # drjit.custom chains the real message as the cause
+            if isinstance(cause, KeyboardInterrupt):
+                raise KeyboardInterrupt from None   # Ctrl-C inside mi.render's Python part
             msgs.append(one_line(cause))
             cause = cause.__cause__ or cause.__context__
         raise UsageError("Mitsuba could not render the scene: " + " <- ".join(msgs[::-1])[:600]) from exc
@@ -364,11 +393,23 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
     Raises :class:`~hyde_bsdf.errors.UsageError` (a ValueError) for the mistakes listed in the
     module docstring, before rendering.
     """
+    with _ctrl_c_flag() as interrupted:
+        return _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, fallback,
+                              interrupted)
+
+
+def _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, fallback, interrupted):
+    def check_interrupt():
+        if interrupted():
+            raise KeyboardInterrupt
+
     import mitsuba as mi
 
     if isinstance(scene_or_path, (str, Path)):
         variant = prepare_variant(variant, fallback=fallback)
+        check_interrupt()
         scene, info = _load_scene(scene_or_path, params)
+        check_interrupt()
     else:
         info = None
         if not isinstance(scene_or_path, mi.Scene):
@@ -401,6 +442,10 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
     try:
         for c, n in enumerate(sizes):
             img = np.asarray(_render_pass(mi, scene, n, seed * 2**16 + c, integrator), dtype=np.float32)
+            if interrupted() or integrator.should_stop():
+                # Mitsuba's own SIGINT handler cancels the pass and returns a partial image:
+                # never average that in; stop here.
+                raise KeyboardInterrupt
             if names is None:
                 names = [f.name for f in sensor.film().bitmap().struct_()]
                 acc = np.zeros(img.shape, np.float64)
