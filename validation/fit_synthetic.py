@@ -14,10 +14,12 @@
    angular range used (10 deg .. theta_max, 8 angles), with all four elements and
    with M01, M11 only (no phase information: the M22/M23 pair is what an
    ellipsometer uses); and "too few angles" cases (refused / warned).
+5. A large measurement file (10^6 random geometries, 4 elements, 100 MB; 10^5 in quick mode):
+   the time to read it and to fit n, k, rms_slope from the default multi-start.
 
 Writes to OUTDIR (default out/validation/): fit_synthetic_<material>.png/.csv (the
 measurement CSV in the reader's format), fit_synthetic.csv (fit results),
-fit_coverage.csv, fit_correlation.png/.csv, fit_too_few.csv.
+fit_coverage.csv, fit_correlation.png/.csv, fit_too_few.csv, fit_large.csv.
 
     python validation/fit_synthetic.py [-o OUTDIR] [--trials 200]
 """
@@ -49,10 +51,11 @@ def truth_of(m):
     return {q: MATERIALS[m][q] for q in PARAMS}
 
 
-def validate(outdir="out/validation", quick=False, trials=200):
-    """Run parts 1-4; write the PNG/CSV files; return the report's checks.
+def validate(outdir="out/validation", quick=False, trials=200, large_rows=None):
+    """Run parts 1-5; write the PNG/CSV files; return the report's checks.
 
-    ``quick``: 30 noise realizations instead of ``trials``, theta_max every 15 deg.
+    ``quick``: 30 noise realizations instead of ``trials``, theta_max every 15 deg, a large file
+    of 10^5 rows instead of ``large_rows`` (default 10^6).
     """
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
@@ -193,7 +196,62 @@ def validate(outdir="out/validation", quick=False, trials=200):
     for f, e in zip(few, expected):
         checks.append(dict(name=f"too few angles: {f['case']}", value=f["outcome"], tolerance=e,
                            passed=f["outcome"] == e))
+
+    # ---- 5. a large measurement file: read and fit time
+    large = large_file(out, rows=100_000 if quick else 1_000_000 if large_rows is None else large_rows)
+    r = large
+    checks.append(dict(name=f"large file: {r['rows']} geometries x 4 elements read + fitted (n, k, rms_slope, "
+                            f"default multi-start) in (s)",
+                       value=f"{r['total_seconds']:.1f} (read {r['read_seconds']:.1f}, fit {r['fit_seconds']:.1f})",
+                       tolerance="< 60", passed=r["total_seconds"] < 60))
+    checks.append(dict(name=f"large file: fitted parameters within 4 standard errors of the truth",
+                       value=f"max |pull| = {r['max_pull']:.2f}", tolerance="< 4", passed=r["max_pull"] < 4))
     return checks
+
+
+def large_file(out, rows=1_000_000, seed=4):
+    """Part 5: ``rows`` random geometries (theta 5-80 deg, any phi) of Infragold, M01, M11, M22, M23
+    with noise 0.01, written as a CSV in a temporary folder; time ``read_measurements`` and
+    ``fit_measurements`` (n, k, rms_slope from the default multi-start).  Writes fit_large.csv."""
+    import os
+    import tempfile
+    import time
+
+    from hyde_bsdf.fit import mueller_elements
+    from hyde_bsdf.fit.measurements import read_measurements
+
+    rng = np.random.default_rng(seed)
+    truth = truth_of("infragold")
+    ti, tr = np.radians(rng.uniform(5, 80, (2, rows)))
+    ph = np.radians(rng.uniform(0, 360, rows))
+    model = mueller_elements(ti, tr, ph, ELEMENTS, **truth)
+    cols = [np.degrees(ti), np.degrees(tr), np.degrees(ph)]
+    header = "theta_i_deg,theta_r_deg,phi_deg"
+    for e in ELEMENTS:
+        cols += [model[e] + 0.01 * rng.standard_normal(rows), np.full(rows, 0.01)]
+        header += f",{e},{e}_sigma"
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "large.csv")
+        np.savetxt(path, np.column_stack(cols), delimiter=",", fmt="%.9g", header=header, comments="")
+        del cols, model
+        size = os.path.getsize(path)
+        t0 = time.perf_counter()
+        meas = read_measurements(path, progress=True)
+        t1 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", IllPosedFitWarning)
+            res = fit_measurements(meas, fit=PARAMS, rms_slope=0.3)
+        t2 = time.perf_counter()
+    pulls = {q: (res.params[q] - truth[q]) / res.stderr[q] for q in PARAMS}
+    row = {"rows": rows, "file_mb": size / 1e6, "read_seconds": t1 - t0, "fit_seconds": t2 - t1,
+           "total_seconds": t2 - t0, "model_evaluations": res.nfev, "reduced_chi2": res.reduced_chi2,
+           **{f"{q}_fit": res.params[q] for q in PARAMS}, **{f"{q}_pull": pulls[q] for q in PARAMS},
+           "max_pull": max(abs(v) for v in pulls.values()), "load_average": os.getloadavg()[0]}
+    _write(out / "fit_large.csv", [row])
+    print(f"\nlarge file: {rows} rows ({size / 1e6:.0f} MB): read {t1 - t0:.1f} s, fit {t2 - t1:.1f} s "
+          f"(load average {row['load_average']:.1f}); pulls "
+          + ", ".join(f"{q} {v:+.2f}" for q, v in pulls.items()))
+    return row
 
 
 def main(argv=None):
@@ -201,8 +259,9 @@ def main(argv=None):
     ap.add_argument("-o", "--outdir", default="out/validation")
     ap.add_argument("--trials", type=int, default=200)
     ap.add_argument("--quick", action="store_true", help="the report's quick mode")
+    ap.add_argument("--large-rows", type=int, default=None, help="rows of the large-file timing (default 10^6)")
     args = ap.parse_args(argv)
-    checks = validate(args.outdir, quick=args.quick, trials=args.trials)
+    checks = validate(args.outdir, quick=args.quick, trials=args.trials, large_rows=args.large_rows)
     for c in checks:
         print(f"[{'pass' if c['passed'] else 'FAIL'}] {c['name']}: {c['value']} (tolerance {c['tolerance']})")
     return 0 if all(c["passed"] for c in checks) else 1
