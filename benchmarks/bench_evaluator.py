@@ -52,6 +52,18 @@ def main():
         rate = a.n / best
         rows.append([name, a.n, best, rate])
         print(f"  {name:40s} {rate / 1e6:6.2f} M evaluations/s  ({best * 1e3:.0f} ms)")
+    # the fit's residual: the same model as four normalized elements (hyde-bsdf fit's cost per
+    # evaluation; a 10^6-row fit makes ~70 such evaluations on all rows, ~400 on 4000 rows)
+    from hyde_bsdf.fit import mueller_elements
+    names = ("M01", "M11", "M22", "M23")
+    mueller_elements(ti[:10], tr[:10], ph[:10], names, rms_slope=0.44, n=0.285, k=7.3523)
+    best = float("inf")
+    for _ in range(a.repeat):
+        t0 = time.perf_counter()
+        mueller_elements(ti, tr, ph, names, rms_slope=0.44 + 1e-9 * _, n=0.285, k=7.3523)
+        best = min(best, time.perf_counter() - t0)
+    rows.append(["fit residual: M01, M11, M22, M23 / M00 (gold)", a.n, best, a.n / best])
+    print(f"  {rows[-1][0]:40s} {a.n / best / 1e6:6.2f} M geometries/s  ({best * 1e3:.0f} ms)")
     out = Path(a.outdir)
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "bench_evaluator.csv", "w", newline="") as f:

@@ -356,6 +356,7 @@ def cache_dir() -> Path:
     return Path(value).expanduser() if value else Path.home() / ".cache" / "hyde-bsdf"
 
 
+@lru_cache(maxsize=1)
 def _code_version() -> str:
     """Hash of the source that determines the table's values (quadrature, shadowing, grid)."""
     parts = [str(_TABLE_VERSION)]
