@@ -36,9 +36,13 @@ Command line::
 
     hyde-bsdf fit DATA.csv [--fit n,k,rms_slope] [--rms-slope X] [--n0 N] [--k0 K]
                   [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
-                  [--strict] [-o plot.png]
+                  [--strict] [-o plot.png] [-q]
 
-(CSV format: :mod:`hyde_bsdf.fit.measurements`.)
+(CSV format: :mod:`hyde_bsdf.fit.measurements`.)  Options and the ``-o`` path are checked
+before the file is read; a user error prints one line on stderr and exits 2; an ill-posed
+fit with ``--strict`` or a fit that did not converge exits 1.  Large files report reading
+and fitting progress on stderr every few seconds (``-q``: none); 10^6 rows read and fit in
+about 20-30 s on 2 cores (``validation/fit_synthetic.py``, part 5).
 """
 from __future__ import annotations
 

@@ -201,6 +201,13 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
     ndarray of shape broadcast(theta_i, theta_r, phi) + (4, 4), in the paper's
     s/p Stokes bases; ``F @ S_in * cos(theta_i) * d omega_i`` is the reflected
     Stokes radiance for incident Stokes radiance S_in.
+
+    Raises
+    ------
+    TypeError for a value of the wrong kind (complex, string or boolean angles or
+    parameters, an array rms_slope/n/k, ``pec`` other than True/False); ValueError for a
+    value out of range, non-finite, or angles that do not broadcast together.  Each
+    message names the parameter and what it accepts.
     """
     s = check_rms_slope(rms_slope, *RMS_SLOPE_RANGE)
     nk = _check_index(n, k, pec)
