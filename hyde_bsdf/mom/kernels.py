@@ -1,0 +1,333 @@
+"""Boundary integral operators of a 1-D surface y = f(x) for both polarisations and a finite index.
+
+Field and operators
+-------------------
+``psi`` is the z-component of the field that is continuous across the surface
+and invariant along z: ``E_z`` for s polarisation (TM_z), ``H_z`` for p (TE_z).
+``e^{+j w t}`` phasors, lengths in wavelengths (k0 = 2 pi), mean surface along
+x with +y up (region 0, vacuum, above; region 1, index eta = n - j kappa,
+below).  The 2-D Green's function of region i is
+
+    g_i(r, r') = -(j/4) H_0^(2)(k_i |r - r'|),     k_i = k0 eta_i  (Im k_1 <= 0: decays in the metal),
+
+which satisfies (nabla^2 + k_i^2) g_i = -delta.  With the upward normal
+n' = (-f', 1)/sqrt(1 + f'^2) and the unknowns sampled per unit x
+
+    u(x) = psi(x, f(x)),      v(x) = sqrt(1 + f'^2) d psi / d n  = -f' d_x psi + d_y psi,
+
+Green's second identity on either side of the surface gives, for a match point
+r on the surface (principal value; Tsang, Kong, Ding & Ao, *Scattering of
+Electromagnetic Waves: Numerical Simulations* (Wiley 2001), ch. 4, "two-region"
+1-D rough-surface equations):
+
+    (1/2) u - D_0 u + S_0 v      = psi_inc                (region 0, the vacuum side)
+    (1/2) u + D_1 u - rho S_1 v  = 0                      (region 1, the interior side)
+
+    S_i[v](r) = int g_i(r, r') v(x') dx',
+    D_i[u](r) = PV int  n'.grad' g_i(r, r') sqrt(1+f'^2) u(x') dx'
+              = PV int (j k_i / 4) H_1^(2)(k_i R) [(-f'(x'))(x' - x) + (y' - y)] / R  u(x') dx'.
+
+The interior boundary values follow from the continuity of tangential E and
+H: psi_1 = psi, d psi_1/dn = rho d psi/dn with rho = 1 (s: E_z and mu dH/dn
+continuous, non-magnetic) or rho = eps_1/eps_0 = eta^2 (p: H_z and
+(1/eps) dH_z/dn continuous).  A perfect conductor has u = 0 (s: the EFIE
+S_0 v = psi_inc, the paper's Eq. 18 with v = j k0 Z0 J sqrt(1+f'^2)) or v = 0
+(p: the MFIE (1/2) u - D_0 u = psi_inc, a second-kind equation).
+
+Discretisation (pulse basis, point matching at the segment centres)
+--------------------------------------------------------------------
+* far entries: midpoint rule times the exact integral of the phase (and, for a
+  lossy medium, of the decay) along the straight segment,
+  ``dx sinc(k dx (dX + dY f'_n) / (2 R))`` -- the same correction as the EFIE;
+* near entries (|m - n| <= ``near``): composite Gauss-Legendre over the
+  source segment, taken as the osculating parabola y_n + f'_n t + f''_n t^2/2,
+  with panels no longer than one decay length 1/|Im k| (the skin depth scale
+  of the metal's Green's function);
+* self terms: S_mm = -(j/4) [D (1 - j(2/pi) ln(gamma k D/(4e))) + smooth
+  remainder]/sqrt(1+f'^2) (the log singularity integrated analytically; D the
+  arc length), and the principal value D_mm = f'' / (4 pi (1 + f'^2)) int phi(k |t|
+  sqrt(1+f'^2)) dt, phi(z) = -(j pi/2) z H_1^(2)(z) (-> 1 at z = 0: the
+  curvature term of the double layer);
+* in a lossy medium the entries with Im(-k_1) R > 40 (e^-40 of the nearest ones)
+  are set to zero: the interior operators are banded.
+
+Far field and power (per unit incident |psi_inc|^2 / (2 Z) intensity)
+----------------------------------------------------------------------
+    psi_s(rho, theta) ~ -(j/4) sqrt(2/(pi k0 rho)) e^{-j(k0 rho - pi/4)} F(theta),
+    F(theta) = int [j k0 (-f' sin theta + cos theta) u - v] e^{j k0 (x sin theta + y cos theta)} dx,
+
+so 2 pi rho |psi_s|^2 = |F|^2 / (8 pi) (lambda = 1): the paper's Eq. 23 with
+F = -j k0 (Eq. 21's sum).  The same F for s and p makes F_p / F_s the ratio
+r_p / r_s of right-handed (s, p, k) bases sharing s = z (E_p = -Z0 H_z for
+incident and scattered wave alike), the convention of
+:mod:`hyde_bsdf.model.fresnel` (a PEC mirror: r_s = -1, r_p = +1).  The power
+flowing into region 1 through the surface (absorbed, or transmitted for a
+lossless dielectric) is, by Poynting's theorem on the vacuum side,
+
+    P_abs = -(1/k0) int Im(u v*) dx    [units of |psi_inc|^2/(2 Z) times length],
+
+identical for s (S.n = Im(E dE*/dn)/(2 w mu)) and p (S.n = Im(H dH*/dn)/(2 w eps)).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.special
+
+__all__ = ["hankel2", "layer_matrices", "far_field_uv", "absorbed_flux", "K0", "DECAY_CUTOFF"]
+
+K0 = 2.0 * math.pi
+EULER_GAMMA_EXP = math.exp(np.euler_gamma)
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
+#: interior entries with |Im k| R beyond this are below e^-40 of the near ones: dropped (banded operator)
+DECAY_CUTOFF = 40.0
+
+
+def hankel2(order, z):
+    """H_order^(2)(z) for order 0 or 1: Cephes J/Y for real z > 0 (fast), AMOS for complex z."""
+    if np.isrealobj(z) or not np.any(np.imag(z)):
+        z = np.real(z)
+        out = np.empty(z.shape, dtype=complex)
+        if order == 0:
+            out.real = scipy.special.j0(z)
+            out.imag = scipy.special.y0(z)
+        else:
+            out.real = scipy.special.j1(z)
+            out.imag = scipy.special.y1(z)
+        out.imag *= -1.0
+        return out
+    return scipy.special.hankel2(order, z)
+
+
+def _sinc(a):
+    """sin(a)/a for real or complex a (NumPy's sinc is sin(pi x)/(pi x))."""
+    return np.sinc(a / math.pi)
+
+
+def _panels(n_panels):
+    """Composite Gauss-Legendre on [-1/2, 1/2]: nodes and weights (summing to 1)."""
+    edges = np.linspace(-0.5, 0.5, n_panels + 1)
+    half = 0.5 * (edges[1] - edges[0])
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    t = (mid[:, None] + half * _GL_X[None, :]).ravel()
+    w = np.tile(half * _GL_W, n_panels)
+    return t, w
+
+
+def _decay_panels(k, dx, stretch):
+    """Panels per segment so that each spans at most one decay length 1/|Im k| (8 nodes each)."""
+    decay = abs(complex(k).imag) * dx * stretch
+    return max(1, int(math.ceil(decay)))
+
+
+def _lagrange3(t, h):
+    """Quadratic Lagrange weights at offset t from node n for the nodes n-1, n, n+1 (spacing h)."""
+    a = t / h
+    return 0.5 * a * (a - 1.0), 1.0 - a * a, 0.5 * a * (a + 1.0)
+
+
+def _scatter_weights(M, m, s, c, t, h):
+    """Add the cell integral sum_q c_q v(x_s + t_q), v interpolated quadratically from s-1, s, s+1, to M[m, .]."""
+    n = M.shape[0]
+    lm, l0, lp = _lagrange3(t, h)
+    wm, w0, wp = c @ lm, c @ l0, c @ lp
+    left = s - 1 >= 0
+    right = s + 1 < n
+    # guard: at the partition ends fall back to the constant (pulse) value for the missing neighbour
+    M[m, s] += w0 + np.where(left, 0.0, wm) + np.where(right, 0.0, wp)
+    M[m[left], s[left] - 1] += wm[left]
+    M[m[right], s[right] + 1] += wp[right]
+
+
+def _cell_moments(a):
+    """m_p = int_{-1/2}^{1/2} tau^p e^{-2 j a tau} d tau, p = 0, 1, 2 (a real or complex; series near 0).
+
+    m0 = sinc(a), m1 = (j/2) sinc'(a), m2 = -(1/4) sinc''(a): the cell integrals of
+    the kernel's linear phase e^{-j alpha t}, a = alpha dx / 2, against 1, t/dx, (t/dx)^2.
+    """
+    a = np.asarray(a)
+    small = np.abs(a) < 0.2
+    ag = np.where(small, 1.0, a)  # guard: the closed forms divide by a^3
+    sa, ca = np.sin(ag), np.cos(ag)
+    d1 = (ag * ca - sa) / ag**2
+    d2 = ((2.0 - ag * ag) * sa - 2.0 * ag * ca) / ag**3
+    m0 = sa / ag
+    a2 = a * a
+    # Taylor series to a^6 (error < 1e-9 for |a| < 0.2)
+    m0 = np.where(small, 1.0 - a2 / 6.0 + a2 * a2 / 120.0 - a2**3 / 5040.0, m0)
+    d1 = np.where(small, a * (-1.0 / 3.0 + a2 / 30.0 - a2 * a2 / 840.0), d1)
+    d2 = np.where(small, -1.0 / 3.0 + a2 / 10.0 - a2 * a2 / 168.0, d2)
+    return m0, 0.5j * d1, -0.25 * d2
+
+
+def _spread(M, r0, r1, c0, c1, K, m0, m1, m2):
+    """Add the far cells' weights to columns n-1, n, n+1 (quadratic interpolant; ends folded into the end column)."""
+    n = M.shape[1]
+    blk = M[r0:r1]
+    blk[:, c0:c1] += K * (m0 - m2)
+    cp = K * (0.5 * (m1 + m2))   # weight of v_{n+1}
+    cm = K * (0.5 * (m2 - m1))   # weight of v_{n-1}
+    hi = min(c1, n - 1)
+    blk[:, c0 + 1:hi + 1] += cp[:, :hi - c0]
+    if c1 == n:
+        blk[:, n - 1] += cp[:, n - 1 - c0]
+    lo = max(c0, 1)
+    blk[:, lo - 1:c1 - 1] += cm[:, lo - c0:]
+    if c0 == 0:
+        blk[:, 0] += cm[:, 0]
+
+
+def _near(x, y, fp, fpp, dx, k, offsets, need_S, need_D, S, D):
+    """Add the near cells (m, m + d), d in ``offsets``: quadrature over the osculating parabola of the
+    source cell, the unknowns interpolated quadratically from the three nearest samples."""
+    n = x.size
+    stretch = float(np.max(np.sqrt(1.0 + fp * fp)))
+    t, wq = _panels(_decay_panels(k, dx, stretch))
+    t = t * dx
+    wq = wq * dx
+    for d in offsets:
+        m = np.arange(max(0, -d), min(n, n - d))
+        s = m + d  # source cell
+        xs = x[s, None] + t
+        ys = y[s, None] + fp[s, None] * t + 0.5 * fpp[s, None] * t * t
+        ddx = xs - x[m, None]
+        ddy = ys - y[m, None]
+        R = np.hypot(ddx, ddy)
+        kr = k * R
+        if need_S:
+            _scatter_weights(S, m, s, (-0.25j) * hankel2(0, kr) * wq, t, dx)
+        if need_D:
+            num = -(fp[s, None] + fpp[s, None] * t) * ddx + ddy
+            _scatter_weights(D, m, s, (0.25j * k) * hankel2(1, kr) * num / R * wq, t, dx)
+
+
+def _self(x, y, fp, fpp, dx, k, need_S, need_D, S, D):
+    """Self cells: the log-singular single layer and the curvature term of the double layer.
+
+    S: the constant part of the interpolant uses the analytic log integral plus a
+    Gauss-Legendre remainder; the rest (t and t^2 terms, which vanish at t = 0)
+    is smooth enough for Gauss-Legendre on each half cell.
+    """
+    n = fp.size
+    m = np.arange(n)
+    stretch = np.sqrt(1.0 + fp * fp)
+    seg = dx * stretch  # arc length of the cell
+    tq, wq = _panels(_decay_panels(k, dx, float(np.max(stretch))))
+    # nodes on both half cells, (0, dx/2) and (-dx/2, 0)
+    half = (tq + 0.5) * (dx / 2.0)
+    t = np.concatenate([-half[::-1], half])
+    w = np.concatenate([wq[::-1], wq]) * (dx / 2.0)
+    ys = fp[:, None] * t + 0.5 * fpp[:, None] * t * t
+    R = np.hypot(t[None, :], ys)
+    kr = k * R
+    lm, l0, lp = _lagrange3(t, dx)
+    if need_S:
+        analytic = seg * (1.0 - 2j / math.pi * np.log(EULER_GAMMA_EXP * k * seg / (4.0 * math.e)))
+        z = k * (tq + 0.5)[None, :] * (seg[:, None] / 2.0)
+        remainder = hankel2(0, z) - (1.0 - 2j / math.pi * np.log(EULER_GAMMA_EXP * z / 2.0))
+        const = (-0.25j) * (analytic + 2.0 * (remainder @ wq) * (seg / 2.0)) / stretch
+        g = (-0.25j) * hankel2(0, kr) * w
+        # interpolant = 1 * v_m + (l0 - 1) v_m + lm v_{m-1} + lp v_{m+1}; (l0 - 1), lm, lp vanish at t = 0
+        _add_self(S, m, const + g @ (l0 - 1.0), g @ lm, g @ lp)
+    if need_D:
+        num = -(fp[:, None] + fpp[:, None] * t) * t + ys
+        with np.errstate(invalid="ignore", divide="ignore"):
+            kern = (0.25j * k) * hankel2(1, kr) * num / R
+        kern = np.where(R > 0, kern, fpp[:, None] / (4.0 * math.pi * stretch[:, None] ** 2))
+        c = kern * w
+        _add_self(D, m, c @ l0, c @ lm, c @ lp)
+
+
+def _add_self(M, m, w0, wm, wp):
+    n = M.shape[0]
+    left = m - 1 >= 0
+    right = m + 1 < n
+    M[m, m] += w0 + np.where(left, 0.0, wm) + np.where(right, 0.0, wp)
+    M[m[left], m[left] - 1] += wm[left]
+    M[m[right], m[right] + 1] += wp[right]
+
+
+def layer_matrices(x, y, fp, fpp, dx, k=K0, need_S=True, need_D=True, near=4, block=256, pulse=True):
+    """The single- and double-layer matrices S, D of the module docstring on the pulse grid.
+
+    Parameters
+    ----------
+    x, y, fp, fpp : ndarray [N], the segment centres, heights, slopes f' and curvatures f''
+        (wavelengths); dx : float, the x-width of every segment.
+    k : float or complex, the wavenumber k0 eta of the region (Im k <= 0).
+    need_S, need_D : which matrices to fill (the PEC s case needs only S, p only D).
+
+    Returns
+    -------
+    (S, D, bandwidth): complex [N, N] arrays (None where not asked) and the number of
+    off-diagonals kept (N - 1 for a lossless region, fewer in a metal).
+    """
+    n = x.size
+    k = complex(k) if complex(k).imag else float(np.real(k))
+    decay = abs(complex(k).imag)
+    if decay > 0.0:
+        band = min(n - 1, int(math.ceil(DECAY_CUTOFF / (decay * dx))))
+    else:
+        band = n - 1
+    S = np.zeros((n, n), complex) if need_S else None
+    D = np.zeros((n, n), complex) if need_D else None
+    # far cells, by row blocks over the band: the kernel's phase (and decay) along the source cell
+    # integrated exactly against the quadratic interpolant of the samples (_cell_moments)
+    for r0 in range(0, n, block):
+        r1 = min(n, r0 + block)
+        c0, c1 = max(0, r0 - band), min(n, r1 + band)
+        ddx = x[None, c0:c1] - x[r0:r1, None]   # r' - r (source minus match point)
+        ddy = y[None, c0:c1] - y[r0:r1, None]
+        R = np.hypot(ddx, ddy)
+        sep = np.abs(np.arange(r0, r1)[:, None] - np.arange(c0, c1)[None, :])
+        inside = (sep > near) & (sep <= band)
+        Rg = np.where(inside, R, 1.0)  # guard: near/self cells are integrated below; avoid Y(0)
+        kr = k * Rg
+        # R(t) ~ R + t (ddx + ddy f'_n) / R along the source cell
+        m0, m1, m2 = _cell_moments((0.5 * k * dx) * (ddx + ddy * fp[None, c0:c1]) / Rg)
+        if need_S:
+            K = np.where(inside, (-0.25j * dx) * hankel2(0, kr), 0.0)
+            _spread(S, r0, r1, c0, c1, K, m0, m1, m2)
+        if need_D:
+            num = -fp[None, c0:c1] * ddx + ddy
+            K = np.where(inside, (0.25j * k * dx) * hankel2(1, kr) * num / Rg, 0.0)
+            _spread(D, r0, r1, c0, c1, K, m0, m1, m2)
+    offsets = [d for d in range(-near, near + 1) if d != 0 and abs(d) < n]
+    _near(x, y, fp, fpp, dx, k, offsets, need_S, need_D, S, D)
+    _self(x, y, fp, fpp, dx, k, need_S, need_D, S, D)
+    return S, D, band
+
+
+def far_field_uv(x, y, fp, dx, u, v, theta, k=K0, chunk=512, pulse_u=False, pulse_v=True):
+    """F(theta) of the module docstring for surface fields u, v [N, n_ti] (pulses, exact per segment).
+
+    ``u`` or ``v`` may be None (zero: a PEC).  Returns [n_ti, n_theta] complex.
+    Angles are processed in chunks so no array exceeds chunk x N.
+    """
+    theta = np.atleast_1d(theta)
+    n_ti = (u if u is not None else v).shape[1]
+    out = np.empty((n_ti, theta.size), complex)
+    for c0 in range(0, theta.size, chunk):
+        th = theta[c0:c0 + chunk]
+        sn, cs = np.sin(th)[:, None], np.cos(th)[:, None]
+        kern = np.exp(1j * k * (sn * x[None, :] + cs * y[None, :])) * dx
+        stair = _sinc((0.5 * k * dx) * (sn + cs * fp[None, :]))
+        acc = np.zeros((th.size, n_ti), complex)
+        if u is not None:
+            ku = kern * (1j * k * (cs - sn * fp[None, :]))
+            acc += (ku * stair if pulse_u else ku) @ u
+        if v is not None:
+            acc -= (kern * stair if pulse_v else kern) @ v
+        out[:, c0:c0 + chunk] = acc.T
+    return out
+
+
+def absorbed_flux(u, v, window, dx, k=K0):
+    """Power into region 1 through the windowed surface: -(1/k) sum W^2 Im(u v*) dx, per theta_i [n_ti].
+
+    In units of |psi_inc|^2 / (2 Z) times wavelengths, like the incident flux of
+    :func:`hyde_bsdf.mom.solver.incident_flux`, so their ratio is the absorbed fraction.
+    """
+    w2 = (window * window * dx)[:, None]
+    return -(np.imag(u * np.conj(v)) * w2).sum(axis=0) / k
