@@ -248,7 +248,7 @@ def _add_self(M, m, w0, wm, wp):
     M[m[right], m[right] + 1] += wp[right]
 
 
-def layer_matrices(x, y, fp, fpp, dx, k=K0, need_S=True, need_D=True, near=4, block=256, pulse=True):
+def layer_matrices(x, y, fp, fpp, dx, k=K0, need_S=True, need_D=True, near=4, block=256):
     """The single- and double-layer matrices S, D of the module docstring on the pulse grid.
 
     Parameters
@@ -284,22 +284,28 @@ def layer_matrices(x, y, fp, fpp, dx, k=K0, need_S=True, need_D=True, near=4, bl
         inside = (sep > near) & (sep <= band)
         Rg = np.where(inside, R, 1.0)  # guard: near/self cells are integrated below; avoid Y(0)
         kr = k * Rg
-        # R(t) ~ R + t (ddx + ddy f'_n) / R along the source cell
-        m0, m1, m2 = _cell_moments((0.5 * k * dx) * (ddx + ddy * fp[None, c0:c1]) / Rg)
+        # along the source cell R(t) ~ R + t dR/dt, dR/dt = (ddx + ddy f'_n) / R, and the kernel varies as
+        # e^{lambda t}, lambda = dR/dt d(ln K)/dR: phase, decay and the Hankel amplitude's slope in one
+        # (the moments take a = j lambda dx / 2; for the far-field phase alone a = k dx dR/dt / 2)
+        drdt = (0.5j * dx) * (ddx + ddy * fp[None, c0:c1]) / Rg
+        h0 = hankel2(0, kr)
+        h1 = hankel2(1, kr)
         if need_S:
-            K = np.where(inside, (-0.25j * dx) * hankel2(0, kr), 0.0)
-            _spread(S, r0, r1, c0, c1, K, m0, m1, m2)
+            K = np.where(inside, (-0.25j * dx) * h0, 0.0)
+            # d ln H0(kR) / dR = -k H1 / H0
+            _spread(S, r0, r1, c0, c1, K, *_cell_moments(drdt * (-k) * h1 / h0))
         if need_D:
-            num = -fp[None, c0:c1] * ddx + ddy
-            K = np.where(inside, (0.25j * k * dx) * hankel2(1, kr) * num / Rg, 0.0)
-            _spread(D, r0, r1, c0, c1, K, m0, m1, m2)
+            num = -fp[None, c0:c1] * ddx + ddy   # constant along a straight cell
+            K = np.where(inside, (0.25j * k * dx) * h1 * num / Rg, 0.0)
+            # d ln(H1(kR)/R) / dR = k H0 / H1 - 2 / R
+            _spread(D, r0, r1, c0, c1, K, *_cell_moments(drdt * (k * h0 / h1 - 2.0 / Rg)))
     offsets = [d for d in range(-near, near + 1) if d != 0 and abs(d) < n]
     _near(x, y, fp, fpp, dx, k, offsets, need_S, need_D, S, D)
     _self(x, y, fp, fpp, dx, k, need_S, need_D, S, D)
     return S, D, band
 
 
-def far_field_uv(x, y, fp, dx, u, v, theta, k=K0, chunk=512, pulse_u=False, pulse_v=True):
+def far_field_uv(x, y, fp, dx, u, v, theta, k=K0, chunk=512):
     """F(theta) of the module docstring for surface fields u, v [N, n_ti] (pulses, exact per segment).
 
     ``u`` or ``v`` may be None (zero: a PEC).  Returns [n_ti, n_theta] complex.
@@ -312,13 +318,11 @@ def far_field_uv(x, y, fp, dx, u, v, theta, k=K0, chunk=512, pulse_u=False, puls
         th = theta[c0:c0 + chunk]
         sn, cs = np.sin(th)[:, None], np.cos(th)[:, None]
         kern = np.exp(1j * k * (sn * x[None, :] + cs * y[None, :])) * dx
-        stair = _sinc((0.5 * k * dx) * (sn + cs * fp[None, :]))
         acc = np.zeros((th.size, n_ti), complex)
         if u is not None:
-            ku = kern * (1j * k * (cs - sn * fp[None, :]))
-            acc += (ku * stair if pulse_u else ku) @ u
+            acc += (kern * (1j * k * (cs - sn * fp[None, :]))) @ u
         if v is not None:
-            acc -= (kern * stair if pulse_v else kern) @ v
+            acc -= kern @ v
         out[:, c0:c0 + chunk] = acc.T
     return out
 

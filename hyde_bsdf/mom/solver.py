@@ -106,6 +106,8 @@ import numpy as np
 import scipy.linalg
 import scipy.special
 
+from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv, layer_matrices
+
 __all__ = [
     "scatter",
     "MoMResult",
@@ -122,6 +124,8 @@ __all__ = [
     "check_taper",
     "check_partition",
     "power_grid",
+    "solve_partition",
+    "ENERGY_TOLERANCE",
 ]
 
 K0 = 2.0 * math.pi  # wavenumber in units of 1/lambda
@@ -140,7 +144,7 @@ class MoMAccuracyWarning(UserWarning):
 # Surface (Fung & Chen 1985 spectral method)
 # ---------------------------------------------------------------------------
 
-def gaussian_surface(length_wl, n_points, rms_height_wl, corr_length_wl, seed=0):
+def gaussian_surface(length_wl, n_points, rms_height_wl, corr_length_wl, seed=0, second_derivative=False):
     """Gaussian random surface with Gaussian correlation, by spectral filtering of white noise.
 
     The surface (Fung & Chen, JOSA A 2, 2274 (1985), the paper's Ref. 43) is
@@ -164,14 +168,16 @@ def gaussian_surface(length_wl, n_points, rms_height_wl, corr_length_wl, seed=0)
     Returns
     -------
     x, f, dfdx : ndarray [n_points] -- abscissae, heights (wavelengths) and the
-        exact slope of the band-limited surface.
+        exact slope of the band-limited surface; with ``second_derivative=True`` also
+        d2fdx2, its exact curvature f'' (1/wavelength).
     """
     length_wl = float(length_wl)
     n_points = int(n_points)
     dx = length_wl / n_points
     x = (np.arange(n_points) + 0.5) * dx
     if rms_height_wl == 0.0:
-        return x, np.zeros(n_points), np.zeros(n_points)
+        zero = np.zeros(n_points)
+        return (x, zero, zero.copy(), zero.copy()) if second_derivative else (x, zero, zero.copy())
     dk = 2.0 * math.pi / length_wl
     j_max = int(math.ceil(12.0 / corr_length_wl / dk))
     if 2 * j_max >= n_points:
@@ -192,7 +198,10 @@ def gaussian_surface(length_wl, n_points, rms_height_wl, corr_length_wl, seed=0)
     f = np.fft.irfft(X, n=n_points)
     X[: j_max + 1] *= 1j * kj
     dfdx = np.fft.irfft(X, n=n_points)
-    return x, f, dfdx
+    if not second_derivative:
+        return x, f, dfdx
+    X[: j_max + 1] *= 1j * kj
+    return x, f, dfdx, np.fft.irfft(X, n=n_points)
 
 
 # ---------------------------------------------------------------------------
@@ -449,7 +458,8 @@ def _openblas_libs():
     controls through ctypes (what threadpoolctl does) and skip any we cannot find.
     """
     try:
-        maps = open("/proc/self/maps").read().split("\n")
+        with open("/proc/self/maps") as fh:  # closed at once (no ResourceWarning)
+            maps = fh.read().split("\n")
     except OSError:  # not Linux: leave the BLAS alone
         return []
     paths = {line.split()[-1] for line in maps if "openblas" in line.lower() and line.split()[-1].startswith("/")}
@@ -491,35 +501,93 @@ def _worker_init():
     _limit_blas_threads(1)
 
 
-def solve_partition(task):
-    """Solve one partition: fill, LU-factor once, solve every theta_i, taper, radiate.
+def _banded_solve(A, B, band):
+    """Solve A X = B for a banded A (``band`` off-diagonals each side), B dense [N, N]."""
+    n = A.shape[0]
+    ab = np.zeros((2 * band + 1, n), dtype=A.dtype)
+    for d in range(-band, band + 1):
+        # LAPACK band storage: ab[band + i - j, j] = A[i, j]
+        diag = np.diagonal(A, offset=-d)
+        if d >= 0:
+            ab[band + d, : n - d] = diag
+        else:
+            ab[band + d, -d:] = diag
+    return scipy.linalg.solve_banded((band, band), ab, B, check_finite=False)
 
-    ``task`` is a dict with x, y, dfdx (local coordinates, centred on the
+
+def solve_partition(task):
+    """Solve one partition: fill, LU-factor once per polarisation, solve every theta_i, taper, radiate.
+
+    ``task`` is a dict with x, y, dfdx, d2fdx2 (local coordinates, centred on the
     partition), dx, theta_i [rad], theta_r [rad], theta_fine [rad] (the power
-    grid), w.  Returns a dict with the
-    far fields ``F`` [n_ti, n_tr] and ``F_fine`` [n_ti, len(theta_fine)],
-    and the CPU seconds (process time) of each stage.
+    grid), w, pols (tuple of "s"/"p"), eta (None for a PEC, else n - j kappa).
+    Returns a dict with, per polarisation P, the far fields ``F_P``
+    [n_ti, n_tr] and ``Ffine_P`` [n_ti, n_fine] (the F of :mod:`hyde_bsdf.mom.kernels`),
+    the absorbed flux ``absorbed_P`` [n_ti], the incident ``flux`` [n_ti] and
+    the CPU seconds (process time) of each stage (fill, factor, solve, far field).
     """
     clock = time.process_time  # CPU seconds of this process (its BLAS is single-threaded in the pool)
     t0 = clock()
-    x, y, dfdx, dx = task["x"], task["y"], task["dfdx"], task["dx"]
-    A = moment_matrix(x, y, dfdx, dx)
+    x, y, fp, fpp, dx = task["x"], task["y"], task["dfdx"], task["d2fdx2"], task["dx"]
+    pols, eta = task["pols"], task["eta"]
+    n = x.size
+    psi = incident_field(x, y, task["theta_i"])
+    half = 0.5 * np.eye(n)
+    S0, D0, _ = layer_matrices(x, y, fp, fpp, dx, K0, need_S=(eta is not None or "s" in pols),
+                               need_D=(eta is not None or "p" in pols))
+    systems = {}
+    if eta is None:
+        if "s" in pols:
+            systems["s"] = S0            # EFIE (u = 0):  S0 v = psi
+        if "p" in pols:
+            D0 *= -1.0
+            D0 += half                   # MFIE (v = 0):  (1/2 - D0) u = psi
+            systems["p"] = D0
+        Zt = P = None
+    else:
+        S1, D1, band = layer_matrices(x, y, fp, fpp, dx, K0 * eta)
+        D1 += half
+        # interior equation: u = rho Zt v with Zt = (1/2 + D1)^-1 S1 (banded in a metal)
+        Zt = _banded_solve(D1, S1, band) if 4 * band < n else scipy.linalg.solve(D1, S1, check_finite=False)
+        del S1, D1
+        D0 *= -1.0
+        D0 += half
+        P = D0 @ Zt                      # (1/2 - D0) Zt
+        del D0
+        for pol in pols:
+            rho = 1.0 if pol == "s" else eta * eta  # d psi_1/dn = rho d psi/dn (p: eps_1 / eps_0)
+            systems[pol] = rho * P + S0
     t1 = clock()
-    # factor A^T: its transpose view is Fortran-ordered, so LAPACK works in place (no copy)
-    # and lu_solve(..., trans=1) solves (A^T)^T J = A J = E_i
-    lu = scipy.linalg.lu_factor(A.T, overwrite_a=True, check_finite=False)
-    del A
-    t2 = clock()
-    current = scipy.linalg.lu_solve(lu, incident_field(x, y, task["theta_i"]), trans=1, check_finite=False)
-    del lu
     win = taper(x, 0.0, task["w"])
-    current *= win[:, None]
-    t3 = clock()
-    F = far_field(x, y, dfdx, dx, current, task["theta_r"])
-    F_fine = far_field(x, y, dfdx, dx, current, task["theta_fine"])
-    t4 = clock()
-    return {"F": F, "F_fine": F_fine, "flux": incident_flux(x, dfdx, dx, win, task["theta_i"]),
-            "times": np.array([t1 - t0, t2 - t1, t3 - t2, t4 - t3])}
+    out = {"flux": incident_flux(x, fp, dx, win, task["theta_i"])}
+    t_factor = t_solve = t_far = 0.0
+    for pol in pols:
+        ta = clock()
+        # factor A^T: its transpose view is Fortran-ordered, so LAPACK works in place (no copy)
+        # and lu_solve(..., trans=1) solves (A^T)^T X = A X = psi
+        lu = scipy.linalg.lu_factor(systems.pop(pol).T, overwrite_a=True, check_finite=False)
+        tb = clock()
+        sol = scipy.linalg.lu_solve(lu, psi, trans=1, check_finite=False)
+        del lu
+        if eta is None:
+            u, v = (None, sol) if pol == "s" else (sol, None)
+            out["absorbed_" + pol] = np.zeros(psi.shape[1])
+        else:
+            rho = 1.0 if pol == "s" else eta * eta
+            v = sol
+            u = rho * (Zt @ v)
+            out["absorbed_" + pol] = absorbed_flux(u, v, win, dx)
+        u = None if u is None else u * win[:, None]
+        v = None if v is None else v * win[:, None]
+        tc = clock()
+        out["F_" + pol] = far_field_uv(x, y, fp, dx, u, v, task["theta_r"])
+        out["Ffine_" + pol] = far_field_uv(x, y, fp, dx, u, v, task["theta_fine"])
+        td = clock()
+        t_factor += tb - ta
+        t_solve += tc - tb
+        t_far += td - tc
+    out["times"] = np.array([t1 - t0, t_factor, t_solve, t_far])
+    return out
 
 
 class SerialExecutor(cf.Executor):
@@ -553,22 +621,42 @@ class MoMResult:
     Attributes
     ----------
     theta_i, theta_r : ndarray [n_ti], [n_tr], radians (signed theta_r, + = forward/specular side).
+    polarization : tuple of the polarisations solved, ("s",), ("p",) or ("s", "p").
     sigma : ndarray [n_ti, n_tr], Eq. 23 (dimensionless: 2-D RCS per effective
-        illuminated length), coherent plus incoherent.
-    sigma_coherent, sigma_incoherent : same shape, the split |<F>|^2 / rest.
-    power_balance : ndarray [n_ti], reflected / incident power (1 for a PEC): the
-        far-field power of the windowed currents over the incident power through
-        the windowed surfaces (:func:`incident_flux`, the partitions' tilt included).
-    power_balance_nominal : ndarray [n_ti], the same over the nominal incident
-        power of Eq. 23, (1/(2 pi cos ti)) int sigma d tr; it carries the sample's
-        tilt noise, ~ tan(ti) sqrt(2) sigma_h / (w sqrt(pi/2) sqrt(M)).
+        illuminated length), coherent plus incoherent, of the first polarisation.
+    sigma_s, sigma_p : the same per polarisation (None where not solved).
+    sigma_sp : complex ndarray, the cross term <E_s E_p*> in the same units (None
+        unless both were solved); E_p in the right-handed (s, p, k) basis of
+        :mod:`hyde_bsdf.model.fresnel` (a flat PEC has sigma_sp = -sigma_s).
+    mueller : dict "M00", "M01", "M22", "M23" of ndarrays [n_ti, n_tr] (both
+        polarisations only, else None): M00 = (sigma_s + sigma_p)/2,
+        M01 = (sigma_s - sigma_p)/2, M22 = Re sigma_sp, M23 = Im sigma_sp -- the
+        in-plane Mueller matrix [[M00, M01, 0, 0], [M01, M00, 0, 0], [0, 0, M22, M23],
+        [0, 0, -M23, M22]] in the units of sigma, with the model's conventions.
+    mueller_std_error : dict of the same keys, standard errors over partitions.
+    mueller_normalised, mueller_normalised_std_error : dicts "M01/M00", "M22/M00",
+        "M23/M00" (ratios of the partition means; jackknife standard errors).
+    sigma_coherent, sigma_incoherent : first polarisation, the split |<F>|^2 / rest.
+    power_balance : ndarray [n_ti], reflected / incident power of the first
+        polarisation: the far-field power of the windowed fields over the incident
+        power through the windowed surfaces (:func:`incident_flux`, the partitions' tilt included).
+    power_balance_s, power_balance_p : the same per polarisation (None where not solved).
+    absorbed_s, absorbed_p : power flowing into the surface (Poynting's theorem on the
+        surface fields, :func:`hyde_bsdf.mom.kernels.absorbed_flux`) over the same
+        incident power: 0 for a PEC, the absorbed (metal) or transmitted (glass) share.
+    energy_s, energy_p : reflected + absorbed (1 when energy is conserved).
+    power_balance_nominal : ndarray [n_ti], the first polarisation's reflected power over
+        the nominal incident power of Eq. 23, (1/(2 pi cos ti)) int sigma d tr; it carries
+        the sample's tilt noise, ~ tan(ti) sqrt(2) sigma_h / (w sqrt(pi/2) sqrt(M)).
     power_coherent : ndarray [n_ti], the coherent (specular) share of the nominal power.
-    fine_theta_r, fine_sigma : the internal power grid (:func:`power_grid`) and sigma on it.
+    fine_theta_r, fine_sigma : the internal power grid (:func:`power_grid`) and sigma on
+        it (first polarisation); fine_sigma_s, fine_sigma_p per polarisation.
     sigma_std_error : ndarray [n_ti, n_tr], standard error of sigma from the
-        spread between partitions (the speckle left by a finite M).
+        spread between partitions (the speckle left by a finite M); sigma_s_std_error,
+        sigma_p_std_error per polarisation.
     times : dict of summed worker CPU seconds (process time) per stage ("fill",
         "factor", "solve", "far_field") and the wall time of the call ("wall").
-    params : dict of the run's parameters (taper width w, dx, N per partition, ...).
+    params : dict of the run's parameters (taper width w, dx, N per partition, index, ...).
     warnings : list of str, the MoM failure reasons found for this run.
     """
 
@@ -586,6 +674,24 @@ class MoMResult:
     times: dict = field(default_factory=dict)
     params: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    polarization: tuple = ("s",)
+    sigma_s: np.ndarray = None
+    sigma_p: np.ndarray = None
+    sigma_sp: np.ndarray = None
+    sigma_s_std_error: np.ndarray = None
+    sigma_p_std_error: np.ndarray = None
+    fine_sigma_s: np.ndarray = None
+    fine_sigma_p: np.ndarray = None
+    power_balance_s: np.ndarray = None
+    power_balance_p: np.ndarray = None
+    absorbed_s: np.ndarray = None
+    absorbed_p: np.ndarray = None
+    energy_s: np.ndarray = None
+    energy_p: np.ndarray = None
+    mueller: dict = None
+    mueller_std_error: dict = None
+    mueller_normalised: dict = None
+    mueller_normalised_std_error: dict = None
 
     @property
     def theta_i_deg(self):
@@ -644,9 +750,66 @@ class _Progress:
         sys.stderr.flush()
 
 
+def _check_seed(seed):
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    return int(seed)
+
+
+def _check_polarization(polarization):
+    pols = (polarization,) if isinstance(polarization, str) else tuple(polarization)
+    if not pols or any(p not in ("s", "p") for p in pols) or len(set(pols)) != len(pols):
+        raise ValueError(f"polarization must be 's', 'p' or a sequence of both, e.g. ('s', 'p'), got {polarization!r}")
+    return pols
+
+
+def _check_index(n, k):
+    """None, None: a PEC; else the paper's eta = n - j k (n > 0, k >= 0)."""
+    if n is None:
+        if k is not None:
+            raise ValueError(f"k={k!r} needs n (the real part of the index n - jk); give n, or neither for a PEC")
+        return None
+    n = _check_positive("n", n)
+    k = 0.0 if k is None else _check_positive("k", k, allow_zero=True)
+    if n > 1e3 or k > 1e3:
+        raise ValueError(f"n and k must be <= 1000 (use the PEC, n=None, for a better conductor), got n={n:g}, k={k:g}")
+    return complex(n, -k)
+
+
+def _memory_available():
+    """Bytes of memory available to new allocations (Linux /proc/meminfo), or 8 GiB if unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 8 * 2**30
+
+
+def _matrices_per_partition(pols, eta):
+    """Complex N x N arrays a worker holds at its peak (fill + LU)."""
+    if eta is not None:
+        return 7
+    return 2 + (len(pols) > 1)
+
+
+#: |reflected + absorbed - 1| beyond this after a solve gives a MoMAccuracyWarning with the value
+#: (the Fig. 6 statistics with 100 partitions stay within 1 %; tilt noise of few partitions adds ~1 %)
+ENERGY_TOLERANCE = 0.03
+#: fewest points per wavelength of *arc length* at the steepest point of the realised surface
+ARC_PTS_MIN = 5.0
+#: largest turn of the surface direction over one cell (radians), |f''| dx / (1 + f'^2)
+TURN_MAX = 0.3
+#: most quadrature panels per cell for the interior Green's function (one per decay length)
+MAX_PANELS = 64
+
+
 def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
-            pts_per_wl=10, seed=0, executor=None, *, taper_width_wl=None, progress=None):
-    """Incoherent far-field scattering of a 1-D Gaussian rough PEC surface, TM (s-pol) -- paper Eqs. 18-23.
+            pts_per_wl=10, seed=0, executor=None, *, taper_width_wl=None, progress=None,
+            polarization="s", n=None, k=None):
+    """Incoherent far-field scattering of a 1-D Gaussian rough surface -- paper Eqs. 18-23, both polarisations.
 
     Parameters
     ----------
@@ -659,33 +822,56 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     theta_i_deg : float or sequence, incidence angles in [0, 90) degrees.
     theta_r_deg : float or sequence, signed observation angles in [-90, 90]
         degrees (+ = specular side).
-    pts_per_wl : float, pulses per wavelength along x (default 10).
-    seed : int, surface realisation (same seed, same surface at any pts_per_wl).
+    pts_per_wl : float, samples per wavelength along x (default 10).  Where the
+        realised surface is so steep that this leaves fewer than ARC_PTS_MIN = 5
+        per wavelength of arc length (or turns by more than TURN_MAX = 0.3 rad per
+        cell), the surface is resampled finer (``params["pts_per_wl"]`` says how
+        fine); if that does not fit in memory a ValueError is raised.
+    seed : int >= 0, surface realisation (same seed, same surface at any pts_per_wl,
+        for both polarisations and any index).
     executor : concurrent.futures.Executor or None.  None: a process pool with
         one worker per core (each worker single-threaded BLAS); pass
-        :class:`SerialExecutor` for in-process runs or a dask executor to spread
-        partitions across machines.  A caller's executor is not shut down.
-    taper_width_wl : float, keyword-only, Eq. 22's w (default L_p / 4).
+        :class:`SerialExecutor` for in-process runs or a dask executor
+        (``distributed.Client(...).get_executor()``) to spread partitions across
+        machines.  A caller's executor is not shut down.
+    taper_width_wl : float in (0, L_p], keyword-only, Eq. 22's w (default L_p / 4).
     progress : bool or None, keyword-only; None shows a stderr line for runs of
         10 or more partitions.
+    polarization : "s", "p" or ("s", "p"), keyword-only (default "s").  s: E along z
+        (TM_z, the paper's Fig. 6); p: H along z.  Both on the same surface give
+        the cross term and the in-plane Mueller matrix.
+    n, k : float or None, keyword-only: the paper's complex index eta = n - j k
+        (n > 0, k >= 0; Infragold 0.285, 7.3523).  Neither: a perfect conductor.
 
     Returns
     -------
     MoMResult with ``theta_r`` [rad], ``sigma`` [n_theta_i, n_theta_r] (Eq. 23),
-    ``power_balance`` [n_theta_i] and more (see :class:`MoMResult`).
+    per-polarisation ``sigma_s``/``sigma_p``, ``sigma_sp``, ``mueller``, the power
+    balance, absorbed power and energy per polarisation (see :class:`MoMResult`).
+
+    Raises
+    ------
+    ValueError naming the parameter for bad input, for sampling too coarse to be
+    repaired, and before any allocation that would not fit in memory.
 
     Warns
     -----
-    MoMAccuracyWarning where the MoM answer cannot be trusted (see module docstring).
+    MoMAccuracyWarning where the MoM answer cannot be trusted (see module docstring),
+    and after every solve whose reflected + absorbed power is off 1 by more than
+    ENERGY_TOLERANCE (the value is in the message).
     """
     t_wall = time.perf_counter()
     length_wl = _check_positive("length_wl", length_wl)
-    if int(partitions) != partitions or partitions < 1:
+    if isinstance(partitions, bool) or not isinstance(partitions, (int, np.integer, float)) \
+            or int(partitions) != partitions or partitions < 1:
         raise ValueError(f"partitions must be an integer >= 1, got {partitions!r}")
     partitions = int(partitions)
     rms_height_wl = _check_positive("rms_height_wl", rms_height_wl, allow_zero=True)
     corr_length_wl = _check_positive("corr_length_wl", corr_length_wl)
     pts_per_wl = _check_positive("pts_per_wl", pts_per_wl)
+    seed = _check_seed(seed)
+    pols = _check_polarization(polarization)
+    eta = _check_index(n, k)
     ti_deg = np.atleast_1d(np.asarray(theta_i_deg, dtype=float))
     tr_deg = np.atleast_1d(np.asarray(theta_r_deg, dtype=float))
     if ti_deg.ndim != 1 or not np.all(np.isfinite(ti_deg)) or np.any(ti_deg < 0) or np.any(ti_deg >= 90):
@@ -700,99 +886,200 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     n_part = int(round(part_len * pts_per_wl))
     if n_part < 4:
         raise ValueError(f"partitions of {part_len:g} wavelengths at pts_per_wl={pts_per_wl:g} hold fewer than 4 pulses")
-    dx = part_len / n_part
-    w = part_len / 4.0 if taper_width_wl is None else _check_positive("taper_width_wl", taper_width_wl)
+    if taper_width_wl is None:
+        w = part_len / 4.0
+    else:
+        w = _check_positive("taper_width_wl", taper_width_wl)
+        if w > part_len:
+            raise ValueError(f"taper_width_wl={w:g} must be in (0, {part_len:g}] (the partition length "
+                             f"length_wl/partitions; Eq. 22's window must fit in its partition)")
 
     reasons = []
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MoMAccuracyWarning)  # re-issued below from this frame
-        reasons += check_sampling(1.0 / dx, corr_length_wl, rough)
+        reasons += check_sampling(n_part / part_len, corr_length_wl, rough)
+
+    def surface(npart):
+        try:
+            return gaussian_surface(length_wl, npart * partitions, rms_height_wl, corr_length_wl, seed,
+                                    second_derivative=True)
+        except ValueError as exc:
+            raise ValueError(f"pts_per_wl={pts_per_wl:g} is too coarse for corr_length_wl={corr_length_wl:g} "
+                             f"(the surface spectrum needs > {3.9 / corr_length_wl:.3g} points per wavelength): "
+                             f"{exc}") from None
+
+    own = executor is None
+    workers = min(os.cpu_count() or 1, partitions) if own else 1
+    budget = 0.8 * _memory_available()
+
+    def check_memory(npart, why):
+        need = _matrices_per_partition(pols, eta) * 16.0 * npart**2 * workers
+        if need > budget:
+            raise ValueError(f"pts_per_wl={pts_per_wl:g}{why} needs {npart} unknowns per partition of "
+                             f"{part_len:g} wavelengths, {need / 2**30:.1f} GiB for {workers} worker(s), more than "
+                             f"the {budget / 2**30:.1f} GiB available: use shorter partitions (more `partitions`), "
+                             "a smoother surface or a lower pts_per_wl")
+
+    check_memory(n_part, "")
+    x_all, f_all, s_all, c_all = surface(n_part)
+    dx = part_len / n_part
+    if rough:
+        # the realised surface: arc length per sample and turn per cell at its steepest point
+        stretch = float(np.max(np.hypot(1.0, s_all)))
+        turn = float(np.max(np.abs(c_all) / (1.0 + s_all * s_all))) * dx
+        refine = max(ARC_PTS_MIN * stretch * dx, turn / TURN_MAX)
+        if refine > 1.0:
+            new = int(math.ceil(n_part * refine * 1.02))
+            check_memory(new, f" on this surface (steepest slope {math.sqrt(stretch**2 - 1):.3g}, "
+                              f"{1.0 / (dx * stretch):.2g} points per wavelength of arc length there; "
+                              f"resampling to >= {ARC_PTS_MIN:g})")
+            n_part = new
+            dx = part_len / n_part
+            x_all, f_all, s_all, c_all = surface(n_part)
+    if eta is not None:
+        n_in = max(1.0, eta.real)
+        ppw_in = 1.0 / (dx * n_in)
+        if ppw_in < 2.0:
+            raise ValueError(f"pts_per_wl={pts_per_wl:g} gives {ppw_in:.2g} points per interior wavelength "
+                             f"(lambda / n, n={eta.real:g}): must be >= 2; raise pts_per_wl")
+        if ppw_in < 5.0:
+            reasons.append(f"only {ppw_in:.2g} points per interior wavelength (lambda / n, n={eta.real:g}): "
+                           "the field inside the material is not resolved")
+        panels = math.ceil(-eta.imag * K0 * dx * float(np.max(np.hypot(1.0, s_all))))
+        if panels > MAX_PANELS:
+            raise ValueError(f"k={-eta.imag:g} gives a skin depth of {1 / (-eta.imag * K0):.2g} wavelengths, "
+                             f"{panels} quadrature panels per cell (> {MAX_PANELS}): use k <= "
+                             f"{MAX_PANELS / (K0 * dx):.3g} at this sampling, or the PEC (n=None)")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MoMAccuracyWarning)
         reasons += check_taper(theta_i, w, part_len)
         reasons += check_partition(part_len, corr_length_wl, rough)
     for r in reasons:
         warnings.warn("MoM failure risk: " + r, MoMAccuracyWarning, stacklevel=2)
 
     fine = power_grid(w)
-    try:
-        x_all, f_all, s_all = gaussian_surface(length_wl, n_part * partitions, rms_height_wl, corr_length_wl, seed)
-    except ValueError as exc:
-        raise ValueError(f"pts_per_wl={pts_per_wl:g} is too coarse for corr_length_wl={corr_length_wl:g} "
-                         f"(the surface spectrum needs > {3.9 / corr_length_wl:.3g} points per wavelength): {exc}") from None
     tasks = []
     for m in range(partitions):
         sl = slice(m * n_part, (m + 1) * n_part)
         xc = (m + 0.5) * part_len
         # local coordinates centred on the partition: the incident phase is referred to x_m,
         # so the partition average of F is the coherent field
-        tasks.append({"x": x_all[sl] - xc, "y": f_all[sl].copy(), "dfdx": s_all[sl].copy(), "dx": dx,
-                      "theta_i": theta_i, "theta_r": theta_r, "theta_fine": fine, "w": w})
-    del x_all, f_all, s_all
+        tasks.append({"x": x_all[sl] - xc, "y": f_all[sl].copy(), "dfdx": s_all[sl].copy(),
+                      "d2fdx2": c_all[sl].copy(), "dx": dx, "theta_i": theta_i, "theta_r": theta_r,
+                      "theta_fine": fine, "w": w, "pols": pols, "eta": eta})
+    del x_all, f_all, s_all, c_all
 
-    own = executor is None
-    ex = process_pool(min(os.cpu_count() or 1, partitions)) if own else executor
+    ex = process_pool(workers) if own else executor
     show = (partitions >= 10) if progress is None else bool(progress)
     bar = _Progress(partitions, show)
-    n_ti, n_tr, n_f = theta_i.size, theta_r.size, fine.size
-    sum_F = np.zeros((n_ti, n_tr), complex)
-    sum_P = np.zeros((n_ti, n_tr))
-    sum_P2 = np.zeros((n_ti, n_tr))
-    sum_Ff = np.zeros((n_ti, n_f), complex)
-    sum_Pf = np.zeros((n_ti, n_f))
-    times = np.zeros(4)
-    sum_flux = np.zeros(n_ti)
+    results = [None] * partitions
     try:
-        futures = [ex.submit(solve_partition, t) for t in tasks]
+        futures = {ex.submit(solve_partition, t): i for i, t in enumerate(tasks)}
         del tasks
         for done, fut in enumerate(cf.as_completed(futures), start=1):
-            out = fut.result()
-            P = np.abs(out["F"]) ** 2
-            sum_F += out["F"]
-            sum_P += P
-            sum_P2 += P * P
-            sum_Ff += out["F_fine"]
-            sum_Pf += np.abs(out["F_fine"]) ** 2
-            times += out["times"]
-            sum_flux += out["flux"]
+            results[futures[fut]] = fut.result()
             bar.update(done)
     finally:
         if own:
             ex.shutdown(wait=True, cancel_futures=True)
 
     M = partitions
-    # Eq. 23: sigma = 1/(w sqrt(pi/2)) * (1/M) sum_m (pi/2) |Z0 F_m|^2   (lambda = 1)
-    norm = (math.pi / 2.0) / (w * math.sqrt(math.pi / 2.0))
-    sigma = norm * sum_P / M
-    # |<F>|^2 without the 1/M bias of |mean F|^2:  (M |mean F|^2 - mean |F|^2) / (M - 1)
-    # (an estimate: it can come out slightly negative where the coherent part is ~0)
-    def coherent(sF, sP):
-        if M == 1:
-            return norm * np.abs(sF) ** 2
-        return norm * (np.abs(sF / M) ** 2 * M - sP / M) / (M - 1)
-
-    sigma_coh = coherent(sum_F, sum_P)
-    var = np.maximum(sum_P2 / M - (sum_P / M) ** 2, 0.0)  # guard: round-off can make it slightly negative
-    std_err = norm * np.sqrt(var / max(M - 1, 1))
-    fine_sigma = norm * sum_Pf / M
-    fine_coh = coherent(sum_Ff, sum_Pf)
+    # Eq. 23 with F = -j k0 (Eq. 21's sum): sigma = |F|^2 / (8 pi w sqrt(pi/2)), partition mean
+    norm = 1.0 / (8.0 * math.pi * w * math.sqrt(math.pi / 2.0))
+    times = sum(r["times"] for r in results)
+    sum_flux = sum(r["flux"] for r in results)
     cos_i = np.cos(theta_i)
-    # reflected power per unit incident power on the nominal (flat, Eq. 23) illuminated length
-    power_nominal = np.trapezoid(fine_sigma, fine, axis=1) / (2.0 * math.pi * cos_i)
-    power_coh = np.trapezoid(fine_coh, fine, axis=1) / (2.0 * math.pi * cos_i)
-    # ... and per unit incident power actually falling on the windowed partitions (tilt included)
     nominal_flux = M * w * math.sqrt(math.pi / 2.0) * cos_i
-    power = power_nominal * nominal_flux / sum_flux
-    if not (np.all(np.isfinite(sigma)) and np.all(np.isfinite(power))):
-        raise FloatingPointError("MoM produced non-finite values (singular moment matrix?)")
+
+    def mean_se(stack):
+        """Partition mean and its standard error (spread between partitions)."""
+        mean = stack.mean(axis=0)
+        se = stack.std(axis=0, ddof=1) / math.sqrt(M) if M > 1 else np.zeros_like(mean)
+        return mean, se
+
+    def coherent(F, P):
+        """|<F>|^2 without the 1/M bias of |mean F|^2: (M |mean F|^2 - mean |F|^2) / (M - 1)."""
+        if M == 1:
+            return norm * np.abs(F[0]) ** 2
+        return norm * (np.abs(F.mean(axis=0)) ** 2 * M - P.mean(axis=0)) / (M - 1)
+
+    per = {}
+    for pol in pols:
+        F = np.stack([r["F_" + pol] for r in results])
+        Ff = np.stack([r["Ffine_" + pol] for r in results])
+        P = np.abs(F) ** 2
+        Pf = np.abs(Ff) ** 2
+        sig, se = mean_se(norm * P)
+        fine_sig = norm * Pf.mean(axis=0)
+        nominal = np.trapezoid(fine_sig, fine, axis=1) / (2.0 * math.pi * cos_i)
+        power = nominal * nominal_flux / sum_flux
+        absorbed = sum(r["absorbed_" + pol] for r in results) / sum_flux
+        per[pol] = dict(F=F, sigma=sig, se=se, fine=fine_sig, nominal=nominal, power=power, absorbed=absorbed,
+                        energy=power + absorbed, coherent=coherent(F, P),
+                        power_coherent=np.trapezoid(coherent(Ff, Pf), fine, axis=1) / (2.0 * math.pi * cos_i))
+    first = per[pols[0]]
+    for name, d in per.items():
+        for key in ("sigma", "power", "absorbed"):
+            if not np.all(np.isfinite(d[key])):
+                raise FloatingPointError("MoM produced non-finite values (singular moment matrix?)")
+
+    mueller = mueller_se = mueller_n = mueller_n_se = sigma_sp = None
+    if len(pols) == 2:
+        Fs, Fp = per["s"]["F"], per["p"]["F"]
+        X = norm * Fs * np.conj(Fp)
+        Ps, Pp = norm * np.abs(Fs) ** 2, norm * np.abs(Fp) ** 2
+        stacks = {"M00": 0.5 * (Ps + Pp), "M01": 0.5 * (Ps - Pp), "M22": X.real, "M23": X.imag}
+        mueller, mueller_se = {}, {}
+        for key, st in stacks.items():
+            mueller[key], mueller_se[key] = mean_se(st)
+        sigma_sp = X.mean(axis=0)
+        mueller_n, mueller_n_se = {}, {}
+        den_sum = stacks["M00"].sum(axis=0)
+        for key in ("M01", "M22", "M23"):
+            num_sum = stacks[key].sum(axis=0)
+            with np.errstate(invalid="ignore", divide="ignore"):  # M00 = 0 only where nothing is scattered
+                ratio = num_sum / den_sum
+                if M > 1:  # jackknife over partitions
+                    jack = (num_sum - stacks[key]) / (den_sum - stacks["M00"])
+                    se = np.sqrt((M - 1) / M * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
+                else:
+                    se = np.zeros_like(ratio)
+            mueller_n[key + "/M00"], mueller_n_se[key + "/M00"] = ratio, se
+
+    # the energy check after every solve: a result that does not conserve energy is never quiet
+    post = []
+    for pol, d in per.items():
+        bad = np.abs(d["energy"] - 1.0) > ENERGY_TOLERANCE
+        if np.any(bad):
+            vals = ", ".join(f"{e:.4g} at {t:g} deg" for e, t in zip(d["energy"][bad], ti_deg[bad]))
+            post.append(f"{pol}-pol reflected + absorbed power is {vals} (should be 1 within {ENERGY_TOLERANCE:g}): "
+                        "the solution does not conserve energy; refine pts_per_wl or widen the taper")
+    for r in post:
+        warnings.warn("MoM failure: " + r, MoMAccuracyWarning, stacklevel=2)
+    reasons += post
+
     wall = time.perf_counter() - t_wall
+    get = lambda pol, key: per[pol][key] if pol in per else None  # noqa: E731
     return MoMResult(
-        theta_i=theta_i, theta_r=theta_r, sigma=sigma, sigma_coherent=sigma_coh,
-        sigma_incoherent=sigma - sigma_coh, power_balance=power, power_balance_nominal=power_nominal,
-        power_coherent=power_coh,
-        fine_theta_r=fine, fine_sigma=fine_sigma, sigma_std_error=std_err,
+        theta_i=theta_i, theta_r=theta_r, sigma=first["sigma"], sigma_coherent=first["coherent"],
+        sigma_incoherent=first["sigma"] - first["coherent"], power_balance=first["power"],
+        power_balance_nominal=first["nominal"], power_coherent=first["power_coherent"],
+        fine_theta_r=fine, fine_sigma=first["fine"], sigma_std_error=first["se"],
         times={"fill": times[0], "factor": times[1], "solve": times[2], "far_field": times[3], "wall": wall},
         params={"length_wl": length_wl, "partitions": M, "partition_length_wl": part_len,
                 "unknowns_per_partition": n_part, "dx_wl": dx, "pts_per_wl": 1.0 / dx,
+                "pts_per_wl_requested": pts_per_wl,
                 "taper_width_wl": w, "rms_height_wl": rms_height_wl, "corr_length_wl": corr_length_wl,
-                "rms_slope": math.sqrt(2.0) * rms_height_wl / corr_length_wl, "seed": seed},
-        warnings=reasons,
+                "rms_slope": math.sqrt(2.0) * rms_height_wl / corr_length_wl, "seed": seed,
+                "polarization": pols, "n": None if eta is None else eta.real,
+                "k": None if eta is None else -eta.imag},
+        warnings=reasons, polarization=pols,
+        sigma_s=get("s", "sigma"), sigma_p=get("p", "sigma"), sigma_sp=sigma_sp,
+        sigma_s_std_error=get("s", "se"), sigma_p_std_error=get("p", "se"),
+        fine_sigma_s=get("s", "fine"), fine_sigma_p=get("p", "fine"),
+        power_balance_s=get("s", "power"), power_balance_p=get("p", "power"),
+        absorbed_s=get("s", "absorbed"), absorbed_p=get("p", "absorbed"),
+        energy_s=get("s", "energy"), energy_p=get("p", "energy"),
+        mueller=mueller, mueller_std_error=mueller_se,
+        mueller_normalised=mueller_n, mueller_normalised_std_error=mueller_n_se,
     )
