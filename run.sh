@@ -26,7 +26,7 @@ ensure_venv() {
     if [ ! -f "$stamp" ]; then
         echo "[run.sh] installing hyde-bsdf and its dependencies into .venv" >&2
         .venv/bin/python -m pip install -q --upgrade pip >/dev/null
-        .venv/bin/python -m pip install -q -e '.[test]'
+        .venv/bin/python -m pip install -q -e '.[test,distributed]'
         touch "$stamp"
     fi
 }

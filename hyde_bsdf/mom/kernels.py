@@ -161,13 +161,114 @@ def _cell_moments(a):
     return m0, 0.5j * d1, -0.25 * d2
 
 
-def _spread(M, r0, r1, c0, c1, K, m0, m1, m2):
-    """Add the far cells' weights to columns n-1, n, n+1 (quadratic interpolant; ends folded into the end column)."""
+def _complex_weights(K, moments):
+    """Weights of v_n, v_{n+1}, v_{n-1} from the moments m0, m1, m2 (quadratic interpolant)."""
+    m0, m1, m2 = moments
+    return K * (m0 - m2), K * (0.5 * (m1 + m2)), K * (0.5 * (m2 - m1))
+
+
+def _sinc_derivatives(a):
+    """sinc(a) and its first three derivatives for real a (closed forms; Taylor series where |a| < 0.2)."""
+    ag = np.where(np.abs(a) < 0.2, 1.0, a)  # guard: the closed forms divide by a^4
+    inv = 1.0 / ag
+    s0 = np.sin(ag) * inv
+    s1 = (np.cos(ag) - s0) * inv                 # sinc'
+    s2 = -s0 - 2.0 * s1 * inv                    # sinc'' = -sinc - 2 sinc'/a
+    s3 = -s1 - 2.0 * (s2 - s1 * inv) * inv       # sinc''' = -sinc' - 2 (sinc''/a - sinc'/a^2)
+    small = np.nonzero(np.abs(a) < 0.2)
+    if small[0].size:
+        b = a[small]
+        b2 = b * b
+        s0[small] = 1.0 - b2 / 6.0 + b2 * b2 / 120.0
+        s1[small] = b * (-1.0 / 3.0 + b2 / 30.0 - b2 * b2 / 840.0)
+        s2[small] = -1.0 / 3.0 + b2 / 10.0 - b2 * b2 / 168.0
+        s3[small] = b * (0.2 - b2 / 42.0)
+    return s0, s1, s2, s3
+
+
+def _interp_weights(K, sd, eps):
+    """Weights of v_n, v_{n+1}, v_{n-1} for far cells: K times the moments of the quadratic interpolant.
+
+    With m0 = sinc, m1 = (j/2) sinc', m2 = -(1/4) sinc'', m3 = -(j/8) sinc''' (the moments
+    int tau^p e^{-2 j a tau} d tau over the cell) and the amplitude slope (1 + eps tau),
+    m_p' = m_p + eps m_{p+1}; the weights are m0' - m2', (m1' + m2')/2, (m2' - m1')/2.
+    Real and imaginary parts are formed in real arithmetic (the cost of the fill).
+    """
+    s0, s1, s2, s3 = sd
+    q2 = 0.25 * s2
+    h1 = 0.5 * s1
+    e3 = eps * (0.125 * s3)
+    w0 = np.empty(K.shape, complex)
+    w0.real = s0 + q2
+    w0.imag = eps * h1 + e3
+    wp = np.empty(K.shape, complex)
+    wp.real = -0.5 * (1.0 + eps) * q2
+    wp.imag = 0.5 * (h1 - e3)
+    wm = np.empty(K.shape, complex)
+    wm.real = 0.5 * (eps - 1.0) * q2
+    wm.imag = -0.5 * (h1 + e3)
+    w0 *= K
+    wp *= K
+    wm *= K
+    return w0, wp, wm
+
+
+def _far_real(x, y, fp, dx, k, near, need_S, need_D, S, D, block):
+    """Far cells of a lossless region (dense).
+
+    The Hankel functions are evaluated on one triangle (R is symmetric) and
+    mirrored; the cell integrals use the phase moments with the asymptotic
+    amplitude slope d ln|H_0(kR)|/dR ~ -1/(2R) (-3/(2R) for H_1(kR)/R).
+    """
+    n = x.size
+    h0 = np.empty((n, n), complex) if need_S else None
+    h1 = np.empty((n, n), complex) if need_D else None
+    for r0 in range(0, n, block):
+        r1 = min(n, r0 + block)
+        kr = np.hypot(x[None, r0:] - x[r0:r1, None], y[None, r0:] - y[r0:r1, None])
+        kr *= k
+        kr[np.arange(r1 - r0), np.arange(r1 - r0)] = 1.0  # guard: R = 0 (self cells are integrated apart)
+        if need_S:
+            blk = hankel2(0, kr)
+            h0[r0:r1, r0:] = blk
+            h0[r0:, r0:r1] = blk.T
+        if need_D:
+            blk = hankel2(1, kr)
+            h1[r0:r1, r0:] = blk
+            h1[r0:, r0:r1] = blk.T
+    for r0 in range(0, n, block):
+        r1 = min(n, r0 + block)
+        ddx = x[None, :] - x[r0:r1, None]
+        ddy = y[None, :] - y[r0:r1, None]
+        R = np.hypot(ddx, ddy)
+        rows = np.arange(r0, r1)
+        near_mask = np.abs(rows[:, None] - np.arange(n)[None, :]) <= near
+        R[near_mask] = 1.0  # guard: near cells are integrated apart
+        drdt = ddy * fp[None, :]
+        drdt += ddx
+        drdt /= R
+        sd = _sinc_derivatives((0.5 * k * dx) * drdt)
+        eps = drdt
+        eps *= -0.5 * dx
+        eps /= R    # amplitude slope over a cell, for H_0
+        if need_S:
+            K = (-0.25j * dx) * h0[r0:r1]
+            K[near_mask] = 0.0
+            _spread(S, r0, r1, 0, n, *_interp_weights(K, sd, eps))
+        if need_D:
+            num = -fp[None, :] * ddx + ddy   # constant along a straight cell
+            num /= R
+            K = (0.25j * k * dx) * h1[r0:r1]
+            K *= num
+            K[near_mask] = 0.0
+            _spread(D, r0, r1, 0, n, *_interp_weights(K, sd, 3.0 * eps))
+
+
+def _spread(M, r0, r1, c0, c1, w0, cp, cm):
+    """Add the far cells' weights to columns n, n+1, n-1 (the ends folded into the end column)."""
     n = M.shape[1]
     blk = M[r0:r1]
-    blk[:, c0:c1] += K * (m0 - m2)
-    cp = K * (0.5 * (m1 + m2))   # weight of v_{n+1}
-    cm = K * (0.5 * (m2 - m1))   # weight of v_{n-1}
+    blk[:, c0:c1] += w0
     hi = min(c1, n - 1)
     blk[:, c0 + 1:hi + 1] += cp[:, :hi - c0]
     if c1 == n:
@@ -248,7 +349,7 @@ def _add_self(M, m, w0, wm, wp):
     M[m[right], m[right] + 1] += wp[right]
 
 
-def layer_matrices(x, y, fp, fpp, dx, k=K0, need_S=True, need_D=True, near=4, block=256):
+def layer_matrices(x, y, fp, fpp, dx, k=K0, need_S=True, need_D=True, near=4, block=64):
     """The single- and double-layer matrices S, D of the module docstring on the pulse grid.
 
     Parameters
@@ -272,9 +373,11 @@ def layer_matrices(x, y, fp, fpp, dx, k=K0, need_S=True, need_D=True, near=4, bl
         band = n - 1
     S = np.zeros((n, n), complex) if need_S else None
     D = np.zeros((n, n), complex) if need_D else None
-    # far cells, by row blocks over the band: the kernel's phase (and decay) along the source cell
+    if decay == 0.0:
+        _far_real(x, y, fp, dx, k, near, need_S, need_D, S, D, block)
+    # far cells of a lossy region, by row blocks over the band: the kernel's phase (and decay) along the source cell
     # integrated exactly against the quadratic interpolant of the samples (_cell_moments)
-    for r0 in range(0, n, block):
+    for r0 in range(0, n, block) if decay > 0.0 else ():
         r1 = min(n, r0 + block)
         c0, c1 = max(0, r0 - band), min(n, r1 + band)
         ddx = x[None, c0:c1] - x[r0:r1, None]   # r' - r (source minus match point)
@@ -293,12 +396,12 @@ def layer_matrices(x, y, fp, fpp, dx, k=K0, need_S=True, need_D=True, near=4, bl
         if need_S:
             K = np.where(inside, (-0.25j * dx) * h0, 0.0)
             # d ln H0(kR) / dR = -k H1 / H0
-            _spread(S, r0, r1, c0, c1, K, *_cell_moments(drdt * (-k) * h1 / h0))
+            _spread(S, r0, r1, c0, c1, *_complex_weights(K, _cell_moments(drdt * (-k) * h1 / h0)))
         if need_D:
             num = -fp[None, c0:c1] * ddx + ddy   # constant along a straight cell
             K = np.where(inside, (0.25j * k * dx) * h1 * num / Rg, 0.0)
             # d ln(H1(kR)/R) / dR = k H0 / H1 - 2 / R
-            _spread(D, r0, r1, c0, c1, K, *_cell_moments(drdt * (k * h0 / h1 - 2.0 / Rg)))
+            _spread(D, r0, r1, c0, c1, *_complex_weights(K, _cell_moments(drdt * (k * h0 / h1 - 2.0 / Rg))))
     offsets = [d for d in range(-near, near + 1) if d != 0 and abs(d) < n]
     _near(x, y, fp, fpp, dx, k, offsets, need_S, need_D, S, D)
     _self(x, y, fp, fpp, dx, k, need_S, need_D, S, D)

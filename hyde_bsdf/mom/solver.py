@@ -802,6 +802,8 @@ ENERGY_TOLERANCE = 0.03
 ARC_PTS_MIN = 5.0
 #: largest turn of the surface direction over one cell (radians), |f''| dx / (1 + f'^2)
 TURN_MAX = 0.3
+#: most unknowns per partition: a dense 10,000 x 10,000 LU is ~10 CPU minutes per partition and 1.6 GB
+MAX_UNKNOWNS = 10000
 #: most quadrature panels per cell for the interior Green's function (one per decay length)
 MAX_PANELS = 64
 
@@ -914,11 +916,18 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
 
     def check_memory(npart, why):
         need = _matrices_per_partition(pols, eta) * 16.0 * npart**2 * workers
+        if npart > MAX_UNKNOWNS:
+            raise ValueError(f"pts_per_wl={pts_per_wl:g}{why} needs {npart} unknowns per partition of "
+                             f"{part_len:g} wavelengths, more than {MAX_UNKNOWNS} (a dense solve of that size takes "
+                             "many CPU minutes per partition): use shorter partitions (more `partitions`)"
+                             + (" or a smoother surface (smaller rms_height_wl / corr_length_wl)" if why else
+                                " or a lower pts_per_wl"))
         if need > budget:
             raise ValueError(f"pts_per_wl={pts_per_wl:g}{why} needs {npart} unknowns per partition of "
                              f"{part_len:g} wavelengths, {need / 2**30:.1f} GiB for {workers} worker(s), more than "
-                             f"the {budget / 2**30:.1f} GiB available: use shorter partitions (more `partitions`), "
-                             "a smoother surface or a lower pts_per_wl")
+                             f"the {budget / 2**30:.1f} GiB available: use shorter partitions (more `partitions`)"
+                             + (" or a smoother surface (smaller rms_height_wl / corr_length_wl)" if why else
+                                " or a lower pts_per_wl"))
 
     check_memory(n_part, "")
     x_all, f_all, s_all, c_all = surface(n_part)
