@@ -56,6 +56,16 @@ Pieces (each the 1-D counterpart of a paper equation)
   int f_d cos(theta_r) d theta_r = 2 f_d, so energy conservation for a PEC
   gives f_d = (1 - rho_s(theta_i)) / 2.
 * :func:`brdf` (Eq. 17): f = f_s + f_d.
+* :func:`mueller_sigma` (Eqs. 9-11, 17 in the plane): for a finite index the
+  facet's Fresnel Mueller matrix at the local incidence angle beta (single
+  bounce; in the plane of incidence the rotations of Eq. 9 are the identity)
+  multiplies the specular term, [[A, B, 0, 0], [B, A, 0, 0], [0, 0, C, S],
+  [0, 0, -S, C]] with A = (|r_s|^2+|r_p|^2)/2, B = (|r_s|^2-|r_p|^2)/2,
+  C = Re(r_s r_p*), S = Im(r_s r_p*) (:func:`hyde_bsdf.model.fresnel.fresnel_mueller_terms`;
+  a PEC has A = 1, B = 0, C = -1, S = 0).  The diffuse term of Eq. 16 is
+  unpolarised: it adds (1 - rho_s^PEC(theta_i))/2 * A(beta) to M00 only, which is
+  how the model depolarises.  Returned in sigma units, like the MoM's
+  :attr:`hyde_bsdf.mom.MoMResult.mueller`.
 * :func:`sigma_equivalent`: the model in the units of the MoM's Eq. 23.  The
   MoM's power balance is (1/(2 pi cos theta_i)) int sigma d theta_r, so
   sigma = 2 pi cos(theta_i) f cos(theta_r).  Note the cos(theta_r): sigma is
@@ -77,6 +87,7 @@ __all__ = [
     "brdf",
     "sigma_equivalent",
     "lobe_energy_shares",
+    "mueller_sigma",
 ]
 
 _HALF_PI = 0.5 * math.pi
@@ -232,3 +243,27 @@ def lobe_energy_shares(theta_i, theta_r, sigma_mom, rms_slope, level=0.01):
         "mom_outside": energy(sigma_mom, ~inside),
         "mom_total": energy(sigma_mom, np.ones_like(inside)),
     }
+
+
+def mueller_sigma(theta_i, theta_r, rms_slope, n=None, k=0.0, shadowing=True, diffuse=True):
+    """In-plane Mueller elements of the 1-D model in the MoM's sigma units (Eqs. 9-11, 16, 17 in the plane).
+
+    theta_i [n_ti, 1] against theta_r [n_tr] (radians; broadcast).  ``n``, ``k``: the
+    paper's eta = n - j k; ``n=None`` is a PEC.  Returns a dict "M00", "M01", "M22",
+    "M23": the facet Fresnel terms (A, B, C, S) at the local incidence angle
+    beta = (theta_i + theta_r)/2 times the specular sigma, plus, in M00 only, the
+    diffuse term (1 - rho_s(theta_i))/2 * A(beta) in sigma units.
+    """
+    from hyde_bsdf.model.fresnel import fresnel_mueller_terms
+
+    theta_i = np.asarray(theta_i, dtype=float)
+    theta_r = np.asarray(theta_r, dtype=float)
+    _, beta = facet_angles(theta_i, theta_r)
+    A, B, C, S = fresnel_mueller_terms(np.clip(np.cos(beta), 0.0, 1.0), n if n is not None else 1.0, k,
+                                       pec=n is None)
+    spec = sigma_equivalent(theta_i, theta_r, rms_slope, shadowing, diffuse=False)
+    out = {"M00": spec * A, "M01": spec * B, "M22": spec * C, "M23": spec * S}
+    if diffuse:
+        units = 2.0 * math.pi * np.cos(theta_i) * np.cos(theta_r)
+        out["M00"] = out["M00"] + units * brdf_diffuse(theta_i, rms_slope, shadowing) * A
+    return out
