@@ -330,7 +330,7 @@ def _flags(tokens):
     return [t.split("=", 1)[0] for t in tokens if t.startswith("-") and t not in ("-", "--")]
 
 
-_PLACEHOLDER = re.compile(r"^(?:[A-Z][A-Z_]+|.*<[^>]*>.*)$")   # COMMAND, CMD, validation/<name>.py
+_PLACEHOLDER = re.compile(r"^(?:[A-Z][A-Z_]+:?|.*<[^>]*>.*)$")   # COMMAND, CMD, validation/<name>.py
 
 
 def _check_command(cmd: str, commands: dict) -> list[str]:
