@@ -79,7 +79,7 @@ def scene_dict(config: str, width: int, height: int, spp: int, stokes: bool) -> 
 
 def roughness_keys(params) -> list[str]:
     return [k for k in params.keys() if k.endswith("bsdf.alpha.value") or k.endswith("bsdf.alpha")
-            or k.endswith("bsdf.rms_slope")]
+            or k.endswith("bsdf.rms_slope") or k.endswith("bsdf.rms_slope.value")]
 
 
 def forward_once(scene, spp: int, seed: int) -> tuple[float, float]:

@@ -189,7 +189,8 @@ def test_gradients_reach_each_texel(key, diffuse):
     grad = np.asarray(dr.grad(data)).reshape(2, 2)
     for i in range(2):
         for j in range(2):
-            h = 1e-3 * x0[i, j]
+            # 3e-3: smaller steps drown in the float32 rounding of the DHR texture coordinate
+            h = 3e-3 * x0[i, j]
             vals = []
             for s in (1, -1):
                 x = x0.copy()

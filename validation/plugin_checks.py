@@ -9,7 +9,7 @@ against accuracy, and a stability map of the plugin.
    unpolarized M00 path in llvm_ad_rgb; Mitsuba's roughconductor in llvm_ad_spectral_polarized
    for the speed reference (its error is against the evaluator with Smith shadowing, where
    Mitsuba's rational G1 fit differs by < 0.7 %).
-3. The DHR texture of the diffuse term (1 - rho^{s,PEC}, 256 nodes per decade of rms_slope
+3. The DHR texture of the diffuse term (1 - rho^{s,PEC}, 1025 x 192 nodes per decade of rms_slope
    over the table's 1e-4..100, read by the plugin's own Dr.Jit lookup in llvm_ad_rgb) against
    the table's ``__call__``, 1 - rho clipped at 0 as used, at random (theta_i, rms_slope),
    rms_slope log-uniform over the accepted [1e-4, 50]: max abs error, target <= 2e-4.

@@ -163,10 +163,10 @@ def vgroove_g(wi, wo, h):
 
 #: accepted rms_slope: the NumPy evaluator's range (``hyde_bsdf.model.roughness.check_rms_slope``)
 RMS_RANGE = (1e-4, 50.0)
-#: texture nodes along x = 1 - sqrt(cos theta) on [0, 1]
-DHR_X_POINTS = 2049
+#: texture nodes along x = 1 - sqrt(cos theta) on [0, 1] (error and size: plugin.DOC, "DHR lookup")
+DHR_X_POINTS = 1025
 #: texture nodes per decade of rms_slope (over the DHR table's whole range, 1e-4..100)
-DHR_SLOPE_PER_DECADE = 256
+DHR_SLOPE_PER_DECADE = 192
 
 
 def dhr_rms_range(table):

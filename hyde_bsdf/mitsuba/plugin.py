@@ -163,12 +163,13 @@ Roughness textures are evaluated once per call (``eval_1``) and the DHR lookup o
 the diffuse term is done at that per-point roughness.
 
 DHR lookup.  1 - rho^{s,PEC} is resampled from the table's bicubic ``__call__``
-onto 2049 nodes in x = 1 - sqrt(cos theta) times 256 per decade of rms_slope over
-the table's whole range [1e-4, 100] and read with a linear ``mi.Texture2f``
-(differentiable in rms_slope), at each shading point's own roughness.  Its
-deviation from the table is <= 1.5e-5 (vgroove, smith) and <= 6e-5 (none)
-absolute for theta <= 89 deg, rms_slope in [1e-4, 50] (measured by
-``validation/plugin_checks.py``, "DHR texture interpolation error").  1 - rho is
+onto 1025 nodes in x = 1 - sqrt(cos theta) times 192 per decade of rms_slope over
+the table's whole range [1e-4, 100] (4.7 MB, float32) and read with a linear
+``mi.Texture2f`` (differentiable in rms_slope), at each shading point's own roughness.
+Its deviation from the table, 1 - rho clipped at 0, for rms_slope in [1e-4, 50] and
+theta <= 89 deg is <= 1.9e-5 (vgroove), 2.6e-5 (smith), 1.3e-4 (none), target 2e-4
+(``validation/plugin_checks.py``, "DHR texture interpolation error"); denser grids
+cost render time once the roughness varies per point (cache misses).  1 - rho is
 clipped at 0 (rho > 1 happens without shadowing near grazing).
 
 Sampling.  With probability p_spec the specular lobe is sampled from the
