@@ -73,8 +73,12 @@ def table_error(out, quick):
     theta_i 0 .. 90 deg, on a grid uniform in the table's x = 1 - sqrt(cos theta_i) (so that
     the grazing layer, where near-mirror surfaces lose light to shadowing, is sampled densely)."""
     table = dhr.load_table("vgroove")
-    nx, ns = (257, 61) if quick else (2049, 241)
-    x = np.linspace(0.0, 1.0, nx)
+    if quick:    # coarse where rho is smooth, dense in the grazing layer (theta_i > 89.2 deg)
+        x = np.concatenate([np.linspace(0.0, 0.9, 46)[:-1], np.linspace(0.9, 1.0, 101)])
+        ns = 41
+    else:
+        x, ns = np.linspace(0.0, 1.0, 2049), 241
+    nx = x.size
     ls = np.linspace(math.log(dhr.TABLE_SLOPE_RANGE[0]), math.log(dhr.TABLE_SLOPE_RANGE[1]), ns)
     X, L = np.meshgrid(x, ls, indexing="ij")
     T, S = dhr.theta_of_x(X), np.exp(L)
@@ -127,8 +131,19 @@ def table_error(out, quick):
                  value=mirror_flat, tolerance=1e-6, passed=bool(mirror_flat <= 1e-6)),
             dict(name=f"DHR reference quadrature time for {nx * ns} points (s)", value=seconds,
                  tolerance=float("inf"), passed=True),
-            dict(name="DHR table build time (s)", value=float(table.build_seconds), tolerance=5.0,
-                 passed=bool(table.build_seconds <= 5.0 or not math.isfinite(table.build_seconds)))]
+            build_check()]
+
+
+def build_check():
+    """A fresh build of the V-groove table, timed now (the cached table's build_seconds may come
+    from a busy machine); the load average goes into the check's name."""
+    import os
+    t0 = time.perf_counter()
+    dhr.build_table("vgroove", progress=False)
+    seconds = time.perf_counter() - t0
+    return dict(name=f"DHR table build time, {dhr.TABLE_THETA_POINTS} x {dhr.TABLE_SLOPE_POINTS} (s; "
+                     f"load average {os.getloadavg()[0]:.1f})", value=seconds, tolerance=5.0,
+                passed=bool(seconds <= 5.0))
 
 
 def table_resolution(out, quick):
