@@ -110,7 +110,17 @@ def _api_rows():
     from hyde_bsdf.render.renderer import load_scene, plan_passes, prepare_variant, render_stokes
     from hyde_bsdf.render.stokes_io import write_stokes_exr
 
+    def loaded(path):            # a scene loaded by Mitsuba itself, without our XML checks
+        import mitsuba as mi
+
+        prepare_variant("llvm_ad_spectral_polarized")
+        return mi.load_file(str(path))
+
     return [
+        ("render_stokes of a loaded scene without a sensor", lambda p: render_stokes(loaded(p["nosensor"])),
+         UsageError, "the scene has no sensor"),
+        ("render_stokes of a loaded ptracer scene", lambda p: render_stokes(loaded(p["ptracer"])), UsageError,
+         r"integrator \(AdjointIntegrator\) is not a sampling integrator"),
         ("render_stokes spp=0", lambda p: render_stokes(p["tiny"], spp=0), UsageError, "spp must be an integer >= 1"),
         ("render_stokes seed=-1", lambda p: render_stokes(p["tiny"], seed=-1), UsageError,
          r"seed must be an integer in \[0, 32767\]"),

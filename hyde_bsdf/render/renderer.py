@@ -421,7 +421,7 @@ def _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, 
     if not scene.sensors():
         raise UsageError("the scene has no sensor: add a camera, e.g. <sensor type=\"perspective\">")
     if not isinstance(scene.integrator(), mi.SamplingIntegrator):
-        raise UsageError(f"the scene's integrator ({scene.integrator().class_().name()}) is not a sampling "
+        raise UsageError(f"the scene's integrator ({type(scene.integrator()).__name__}) is not a sampling "
                          "integrator; render needs path, direct, volpath, ... (or stokes around one)")
     sensor = scene.sensors()[0]
     if spp is None:
