@@ -69,14 +69,16 @@ MAX_SEED = 2**15 - 1
 #: Dr.Jit arrays hold fewer than 2^32 entries; the film holds pixels x channels floats.
 MAX_FILM_VALUES = 2**32 - 1
 #: Memory model of a whole ``hyde-bsdf render`` (peak RSS, ``/usr/bin/time -f %M``, on
-#: ``scenes/inverse.xml`` at res 300 and 900, 2 spp, EXR and PNGs written): 495 B per film pixel
-#: for a Stokes render (llvm_ad_spectral_polarized: 17 film channels in Mitsuba's film and image
-#: block, the float64 accumulators, the output arrays, the EXR and PNG writers), 159 B per pixel
-#: in llvm_ad_rgb, ~310 MB fixed (Python, Mitsuba, LLVM).  Rounded up ~10 %.  Samples per pixel
-#: add next to nothing (Mitsuba traces each pass in one fused kernel: 400^2 px at 16 spp and at
-#: 1 spp peaked within 1 %).
-BYTES_PER_PIXEL_STOKES = 550
-BYTES_PER_PIXEL_COLOUR = 180
+#: ``scenes/inverse.xml`` at res 300, 900 and 1800, 1-2 spp, EXR and PNGs written): a Stokes render
+#: (llvm_ad_spectral_polarized: 17 film channels in Mitsuba's film and image block, the float64
+#: accumulators, the output arrays, the EXR and PNG writers) took 495 B per film pixel between
+#: res 300 and 900 and 676 B/px between 300 and 1800 (Dr.Jit's allocator rounds blocks up to
+#: powers of two, so the cost per pixel steps between ~1x and ~2x); llvm_ad_rgb 160 B/px;
+#: ~310 MB fixed (Python, Mitsuba, LLVM).  The model takes the upper end with a margin.  Samples
+#: per pixel add next to nothing (Mitsuba traces each pass in one fused kernel: 400^2 px at 16 spp
+#: and at 1 spp peaked within 1 %).
+BYTES_PER_PIXEL_STOKES = 800
+BYTES_PER_PIXEL_COLOUR = 250
 BYTES_FIXED = 400 * 2**20
 
 
