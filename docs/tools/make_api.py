@@ -1,10 +1,12 @@
-"""Write docs/api.md: every public name of the package (each module's ``__all__``) with its
-signature and the first line of its docstring, read from the source (no imports, no Mitsuba).
+"""Write docs/api.md (every public name of the package, each module's ``__all__``, with its
+signature and the first line of its docstring) and the table of test files in
+docs/validation.md (between ``<!-- BEGIN tests -->`` and ``<!-- END tests -->``: each file with
+the first paragraph of its docstring), read from the source (no imports, no Mitsuba).
 
-    .venv/bin/python docs/tools/make_api.py          # rewrite docs/api.md
-    .venv/bin/python docs/tools/make_api.py --check  # exit 1 if docs/api.md is out of date
+    .venv/bin/python docs/tools/make_api.py          # rewrite both
+    .venv/bin/python docs/tools/make_api.py --check  # exit 1 if either is out of date
 
-``tests/test_docs.py`` runs the check, so the API page cannot fall behind the code.
+``tests/test_docs.py`` checks that every public name and every test file is listed.
 """
 from __future__ import annotations
 
@@ -160,17 +162,37 @@ def render() -> str:
     return "\n".join(out).rstrip() + "\n"
 
 
+VALIDATION = REPO / "docs" / "validation.md"
+BEGIN_TESTS, END_TESTS = "<!-- BEGIN tests -->", "<!-- END tests -->"
+
+
+def render_tests() -> str:
+    """The table of tests/test_*.py: file, first paragraph of its docstring."""
+    rows = ["| file | what it checks |", "|---|---|"]
+    for path in sorted((REPO / "tests").glob("test_*.py")):
+        doc = _first_line(ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))))
+        rows.append(f"| `tests/{path.name}` | {doc.replace('|', chr(92) + '|')} |")
+    return "\n".join(rows)
+
+
+def updated_validation() -> str:
+    text = VALIDATION.read_text(encoding="utf-8")
+    start, end = text.index(BEGIN_TESTS) + len(BEGIN_TESTS), text.index(END_TESTS)
+    return text[:start] + "\n" + render_tests() + "\n" + text[end:]
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    text = render()
+    outputs = {OUT: render(), VALIDATION: updated_validation()}
     if "--check" in argv:
-        current = OUT.read_text(encoding="utf-8") if OUT.exists() else ""
-        if current != text:
-            print("docs/api.md is out of date: run .venv/bin/python docs/tools/make_api.py", file=sys.stderr)
-            return 1
-        return 0
-    OUT.write_text(text, encoding="utf-8")
-    print(f"wrote {OUT.relative_to(REPO)}")
+        stale = [p for p, text in outputs.items() if (p.read_text(encoding="utf-8") if p.exists() else "") != text]
+        for p in stale:
+            print(f"{p.relative_to(REPO)} is out of date: run .venv/bin/python docs/tools/make_api.py",
+                  file=sys.stderr)
+        return 1 if stale else 0
+    for p, text in outputs.items():
+        p.write_text(text, encoding="utf-8")
+        print(f"wrote {p.relative_to(REPO)}")
     return 0
 
 
