@@ -471,3 +471,19 @@ def test_validation_page_lists_every_test_file():
     missing = [f.name for f in sorted((REPO / "tests").glob("test_*.py")) if f"`tests/{f.name}`" not in text]
     assert not missing, (f"docs/validation.md does not list {missing}; "
                          "run .venv/bin/python docs/tools/make_api.py")
+
+
+@pytest.mark.parametrize("page", PAGES, ids=_rel)
+def test_tables_have_one_cell_count(page):
+    """Every row of a Markdown table has as many cells as its header (a stray | breaks a table)."""
+    bad, count = [], None
+    for n, line in enumerate(prose(page).splitlines(), 1):
+        if line.startswith("|"):
+            cells = len(re.findall(r"(?<!\\)\|", line))
+            if count is None:
+                count = cells
+            elif cells != count:
+                bad.append(f"line {n}: {cells - 1} cells, the header has {count - 1}")
+        else:
+            count = None
+    assert not bad, f"{_rel(page)}: " + "; ".join(bad)
