@@ -219,3 +219,9 @@ def test_specular_reflectance_scales_the_bsdf_and_is_differentiable():
     params.update()
     dr.backward(dr.sum(half.eval(mi.BSDFContext(), si, wo)[0, 0][0]))
     assert dr.grad(value)[0] == pytest.approx(ref[:, 0, 0].sum(), rel=1e-4)
+
+
+def test_sigma_h_and_ell_stay_scalar_with_a_message_saying_so():
+    mi = _setup("scalar_rgb")
+    with pytest.raises(Exception, match="sigma_h and ell are scalars; give rms_slope or alpha for a texture"):
+        mi.load_dict({"type": "hyde", "sigma_h": {"type": "checkerboard"}, "ell": 1.0})
