@@ -9,27 +9,38 @@ index (:func:`hyde_bsdf.mom.model1d.mueller_sigma`: facet Fresnel r_s, r_p at th
 incidence angle beta = (theta_i + theta_r)/2, single bounce, V-groove shadowing, plus the
 unpolarised diffuse term of Eq. 16 in M00): M00 in absolute dB over the lobe (where the
 model's M00 is >= 10 % of its peak), M01/M00, M22/M00, M23/M00 as absolute differences
-over the lobe.  Also reflected + absorbed = 1 per polarisation (the lossy energy check,
-10-60 deg; at 75 deg p-polarised waves launched along the metal by the truncated
-partition ends are absorbed under the window and the sum comes out several percent
-high -- reported, a limitation of Eq. 22's windowed partitions, not of the solver).
+over the lobe.  Also reflected + absorbed = 1 within 1 % per polarisation (the lossy
+energy check; full mode 10-75 deg: <= 0.0087.  The quick mode's 4 partitions of 100
+lambda check 10-60 deg: at 75 deg p-polarised waves launched along the metal by the
+short partitions' truncated ends are absorbed under the window and the sum comes out
+up to 6 % high -- reported there, a limitation of Eq. 22's windowed partitions).
 
-What the numbers say (full mode, 40 partitions of 150 lambda, 10 pts/lambda; see the
-table mom_mueller_1d_table.csv and the report's text):
+What the numbers say (full mode: 40 partitions of 150 lambda, 10 pts/lambda, seed 11;
+mom_mueller_1d_table.csv; Infragold and flame-sprayed Al behave alike):
 
-* Near specular, where single reflection dominates, the model's M01/M00 and M22/M00 follow
-  the MoM within a few hundredths: the facet Fresnel coefficients at beta are the right
-  polarisation physics of a single bounce.
-* The model's diffuse term is unpolarised and only adds to M00, so every normalised element
-  is diluted by M00_specular / M00 -- away from the lobe's core, and at grazing incidence,
-  where 1 - rho_s is largest, the model's |M22/M00| falls faster than the MoM's.  The MoM's
-  energy outside the specular lobe is mostly doubly reflected light, which for a metal is
-  still strongly polarised (a double bounce multiplies two Fresnel matrices: M22/M00 stays
-  near +1 rather than -1, and M23 changes sign), so "diffuse = depolarised" is the wrong
-  picture for the off-lobe light of these surfaces.
-* For the PEC the model predicts sigma_s = sigma_p; the MoM's s and p curves split where
-  multiple scattering and shadowing matter (large theta_i and the lobe's wings), because
-  TM and TE waves diffract differently at the surface's ridges.
+* M00: the model is within 0.9-1.0 dB rms of the MoM over the lobe for theta_i = 10-60
+  deg, 2.0 dB at 75 deg, where the MoM's forward lobe is ~2 dB lower than the model's
+  and its backscatter side (theta_r < -40 deg) falls far below the model's Lambertian
+  diffuse term.
+* M01/M00: the facet Fresnel term makes it ~0.01-0.03; the MoM agrees over the lobe
+  (rms difference 0.05-0.08 at 10-60 deg, mostly speckle), but on the backscatter side at
+  45-75 deg the MoM has M01/M00 = -0.4 to -0.9: p is scattered back far more than s,
+  which single-bounce facets cannot produce.
+* M22/M00: near specular the model's -0.9 matches the MoM.  Where the model hands the
+  light to its diffuse term -- the backscatter side, grazing incidence -- the model's
+  M22/M00 is diluted towards 0 (the diffuse term is unpolarised), while the MoM stays at
+  -0.75 to -1 at 10-45 deg: the off-lobe light of these surfaces is *not* depolarised.
+  On the forward wing at 45-75 deg the opposite: the MoM's M22/M00 rises to -0.5...-0.1
+  while the model stays near -0.9, the signature of multiple scattering (two bounces
+  with different local angles retard and mix s and p), which the single-bounce facet
+  Fresnel misses.  rms differences over the lobe 0.07 (10 deg) to 0.21 (60 deg).
+* M23/M00: the model's retardance grows smoothly to -1 at grazing forward scattering;
+  the MoM follows its trend at 45-75 deg but reaches only about -0.5, and has a
+  structure of opposite sign on the backscatter side at 75 deg (rms difference 0.07-0.18).
+* PEC on the same surface: the model predicts sigma_s = sigma_p (M01 = 0); the MoM's s
+  and p split on the backscatter side and at 75 deg (the plotted sigma_s, sigma_p), and
+  its M22/M00 leaves -1 in the same places as for the metals -- so these departures
+  come from multiple scattering and diffraction by the surface, not from the index.
 
 Writes, per material, mom_mueller_1d_<material>.png and .csv (curves), and
 mom_mueller_1d_table.csv.
@@ -162,13 +173,14 @@ def validate(outdir="out/validation", quick=False):
                    "mom_sigma_s", "mom_sigma_p"], curves)
         rows = compare(res, mod)
         table += [[title] + r for r in rows]
-        energy = max(max(abs(r[-4] - 1), abs(r[-3] - 1)) for r in rows if r[0] <= 60.0)
+        top = 60.0 if quick else 75.0
+        energy = max(max(abs(r[-4] - 1), abs(r[-3] - 1)) for r in rows if r[0] <= top)
         tol = 0.03 if quick else 0.01  # quick: 4 partitions of 100 lambda leave ~2 % sample noise (PEC too)
-        checks.append(dict(name=f"MoM {title}: max |reflected + absorbed - 1| over s, p, theta_i 10-60 deg",
+        checks.append(dict(name=f"MoM {title}: max |reflected + absorbed - 1| over s, p, theta_i 10-{top:g} deg",
                            value=f"{energy:.4f}", tolerance=tol, passed=energy <= tol))
         # at 75 deg the partitions' truncated ends launch p-polarised waves along the metal whose absorption
         # under the window is counted (as on the flat plate at 80 deg): reported, a known limitation
-        graze = [r for r in rows if r[0] > 60.0]
+        graze = [r for r in rows if r[0] > top]
         if graze:
             checks.append(dict(name=f"MoM {title}: reflected + absorbed at 75 deg (s, p; edge waves of the "
                                     "truncated partitions enter the absorbed power)",
