@@ -23,7 +23,8 @@ validation's textured plane (validation/svbrdf_inverse.py: a 32 x 32 Beckmann al
 then ``--rounds`` rounds each run ``--iterations`` iterations of every material, in an order
 rotated per round (interleaved, so the machine's load drifts alike over all); the figure is the
 median over all timed iterations (the first of each call, which builds the optimiser, excluded)
-and the ratio of medians to roughconductor's.
+and the ratio of medians to roughconductor's.  The step is a ``dr.freeze`` function (invert_maps'
+default; recorded once per call, replayed after); ``--no-freeze`` re-traces it every iteration.
 
     python benchmarks/bench_inverse.py [--res 80] [--rounds 7] [--iterations 6] [--variant V] [--csv F]
 """
@@ -81,7 +82,7 @@ MAP_CONFIGS = {
 }
 
 
-def bench_maps(res=80, rounds=7, iterations=6, variant=None, spp=4, csv_path=None):
+def bench_maps(res=80, rounds=7, iterations=6, variant=None, spp=4, csv_path=None, freeze=True):
     """Interleaved per-iteration times of invert_maps for each of MAP_CONFIGS; prints the ratios."""
     import mitsuba as mi
     import numpy as np
@@ -103,7 +104,8 @@ def bench_maps(res=80, rounds=7, iterations=6, variant=None, spp=4, csv_path=Non
 
     def run(name, n, seed):
         obs, seen = setups[name]
-        r = inv.invert_maps(obs, {"alpha": 0.3}, iterations=n, spp=spp, seed=seed, seen=seen, progress=False)
+        r = inv.invert_maps(obs, {"alpha": 0.3}, iterations=n, spp=spp, seed=seed, seen=seen, progress=False,
+                            freeze=freeze)
         return list(np.diff([0.0] + [h["seconds"] for h in r.history]))[1:]
 
     names = list(MAP_CONFIGS)
@@ -116,15 +118,15 @@ def bench_maps(res=80, rounds=7, iterations=6, variant=None, spp=4, csv_path=Non
         print(f"[bench] round {k + 1}/{rounds}", file=sys.stderr, flush=True)
     base = float(np.median(times["roughconductor"]))
     print(f"SVBRDF inversion iteration (32x32 alpha bitmap, 2 renders of 3 views x {res}x{res} px, {spp} spp, "
-          f"{variant}, {os.cpu_count()} CPU threads): median of {rounds} interleaved rounds x {iterations} "
-          f"iterations")
+          f"{variant}, {os.cpu_count()} CPU threads, {'frozen' if freeze else 'unfrozen'} step): median of "
+          f"{rounds} interleaved rounds x {iterations} iterations")
     print(f"{'config':22s} {'median it s':>12s} {'IQR s':>14s} {'ratio to roughconductor':>24s}")
     rows = []
     for name in names:
         t = np.array(times[name])
         med = float(np.median(t))
         q1, q3 = np.percentile(t, [25, 75])
-        rows.append({"config": name, "variant": variant, "res": res, "spp": spp, "samples": len(t),
+        rows.append({"config": name, "variant": variant, "frozen": freeze, "res": res, "spp": spp, "samples": len(t),
                      "median_iteration_s": med, "q1_s": float(q1), "q3_s": float(q3), "ratio": med / base})
         print(f"{name:22s} {med:12.4f} {q1:6.4f}-{q3:6.4f} {med / base:24.3f}")
     if csv_path:
@@ -150,12 +152,13 @@ def main(argv=None):
                     help="iterations (default 40 scalar; per material and round SVBRDF: 6)")
     ap.add_argument("--rounds", type=int, default=7, help="SVBRDF: interleaved rounds")
     ap.add_argument("--variant", default=None, help="SVBRDF: Mitsuba variant (default llvm_ad_mono_polarized)")
+    ap.add_argument("--no-freeze", action="store_true", help="SVBRDF: unfrozen steps (re-traced each iteration)")
     ap.add_argument("--csv", default=None, help="also write the table here")
     ap.add_argument("--one", default=None, help=argparse.SUPPRESS)   # child process: one config
     args = ap.parse_args(argv)
     if not args.scalar and not args.one:
         bench_maps(res=args.res or 80, rounds=args.rounds, iterations=args.iterations or 6,
-                   variant=args.variant, spp=args.spp or 4, csv_path=args.csv)
+                   variant=args.variant, spp=args.spp or 4, csv_path=args.csv, freeze=not args.no_freeze)
         return 0
     args.res = args.res or 64
     args.spp = args.spp or 16
