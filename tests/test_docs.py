@@ -487,3 +487,16 @@ def test_tables_have_one_cell_count(page):
         else:
             count = None
     assert not bad, f"{_rel(page)}: " + "; ".join(bad)
+
+
+def test_report_tutorial_lists_every_validation_script():
+    """docs/tutorials/report.md's table of sections names every script of the report's SECTIONS."""
+    tree = ast.parse((REPO / "hyde_bsdf" / "report" / "build.py").read_text(encoding="utf-8"))
+    sections = None
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "SECTIONS" for t in node.targets):
+            sections = ast.literal_eval(node.value)
+    assert sections, "hyde_bsdf/report/build.py defines SECTIONS"
+    text = (REPO / "docs" / "tutorials" / "report.md").read_text(encoding="utf-8")
+    missing = [s for _, scripts in sections for s in scripts if f"`{s}`" not in text]
+    assert not missing, f"docs/tutorials/report.md does not list the report's scripts {missing}"
