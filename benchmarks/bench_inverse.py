@@ -25,6 +25,10 @@ rotated per round (interleaved, so the machine's load drifts alike over all); th
 median over all timed iterations (the first of each call, which builds the optimiser, excluded)
 and the ratio of medians to roughconductor's.  The step is a ``dr.freeze`` function (invert_maps'
 default; recorded once per call, replayed after); ``--no-freeze`` re-traces it every iteration.
+Measured 2026-12-01 on the shared 2-core machine (load 2-4), 80 px per view: frozen, hyde
+0.176 s vs roughconductor 0.169 s (ratio 1.04; diffuse "none" 1.00; 7 rounds x 6); unfrozen,
+0.602 vs 0.529 s (1.14; diffuse "none" 1.04; 5 rounds x 6).  Under heavy load (6 on 2 cores) the
+ratios scattered 0.8-1.3 between runs: compare only the ratios of one run.
 
     python benchmarks/bench_inverse.py [--res 80] [--rounds 7] [--iterations 6] [--variant V] [--csv F]
 """
