@@ -35,6 +35,25 @@ def load():
         return ["?"] * 3
 
 
+def load_reference(rev):
+    """The s-only solver of git revision ``rev`` (e.g. 245d8eb, before both polarisations), as a module."""
+    import importlib.util
+    import subprocess
+    import tempfile
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    src = subprocess.run(["git", "-C", root, "show", f"{rev}:hyde_bsdf/mom/solver.py"], check=True,
+                         capture_output=True, text=True).stdout
+    path = os.path.join(tempfile.mkdtemp(prefix="bench_mom_"), "reference_solver.py")
+    with open(path, "w") as fh:
+        fh.write(src)
+    spec = importlib.util.spec_from_file_location("reference_solver", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["reference_solver"] = mod  # the process pool pickles its functions by module name
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def run_case(mom, args, workers, **kw):
     ell = 5.0
     ex = mom.process_pool(workers)
@@ -67,6 +86,8 @@ def main(argv=None):
     ap.add_argument("--length-wl", type=float, default=15000.0)
     ap.add_argument("--workers", type=int, default=os.cpu_count())
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of s-only and s+p (median reported)")
+    ap.add_argument("--reference-rev", default="245d8eb",
+                    help="git revision whose s-only solver is timed too ('' to skip): the ratio to today's s-only")
     ap.add_argument("--lossy-partitions", type=int, default=10,
                     help="partitions of the Infragold (n = 0.285, k = 7.3523) s+p run (0: skip)")
     args = ap.parse_args(argv)
@@ -74,23 +95,35 @@ def main(argv=None):
     from hyde_bsdf import mom
 
     load0 = load()
-    walls = {"s": [], "sp": []}
-    cpus = {"s": [], "sp": []}
+    ref = load_reference(args.reference_rev) if args.reference_rev else None
+    walls = {"s": [], "sp": [], "ref": []}
+    cpus = {"s": [], "sp": [], "ref": []}
     for r in range(args.rounds):
+        if ref is not None:
+            res, wall = run_case(ref, args, args.workers)
+            t = res.times
+            cpus["ref"].append(t["fill"] + t["factor"] + t["solve"] + t["far_field"])
+            walls["ref"].append(wall)
+            print(f"[round {r + 1}] reference ({args.reference_rev}) PEC s: wall {wall:.1f} s, "
+                  f"worker CPU {cpus['ref'][-1]:.1f} s")
         for key, pols in (("s", "s"), ("sp", ("s", "p"))):
             res, wall = run_case(mom, args, args.workers, polarization=pols)
             print(f"[round {r + 1}]", end=" ")
             cpus[key].append(report(f"PEC {'+'.join(pols)}", res, wall, args.workers, args.partitions))
             walls[key].append(wall)
     n = res.params["unknowns_per_partition"]
-    med = {k: float(np.median(v)) for k, v in walls.items()}
-    medc = {k: float(np.median(v)) for k, v in cpus.items()}
+    med = {k: float(np.median(v)) for k, v in walls.items() if v}
+    medc = {k: float(np.median(v)) for k, v in cpus.items() if v}
     print(f"case: {args.length_wl:g} lambda, {args.partitions} partitions x {n} unknowns "
           f"({res.params['pts_per_wl']:g} pts/lambda), 5 theta_i, {res.theta_r.size} + {res.fine_theta_r.size} "
           f"observation angles, {args.workers} workers, {args.rounds} interleaved rounds")
     print(f"load average before: {' '.join(load0)}   after: {' '.join(load())}   (cores: {os.cpu_count()})")
-    print(f"median wall: s-only {med['s']:.1f} s, s+p {med['sp']:.1f} s -> ratio {med['sp'] / med['s']:.2f} "
-          f"(target <= 2.5); median worker CPU ratio {medc['sp'] / medc['s']:.2f}")
+    print(f"median wall: s-only {med['s']:.1f} s, s+p {med['sp']:.1f} s -> ratio {med["sp"] / med["s"]:.2f}"
+          f"; median worker CPU ratio {medc['sp'] / medc['s']:.2f}")
+    if ref is not None:
+        print(f"against today's s-only solver ({args.reference_rev}): wall {med['ref']:.1f} s -> s+p / reference "
+              f"{med['sp'] / med['ref']:.2f} (target <= 2.5), worker CPU ratio {medc['sp'] / medc['ref']:.2f}; "
+              f"new s-only / reference {med['s'] / med['ref']:.2f}")
     if args.lossy_partitions > 0:
         sub = argparse.Namespace(**vars(args))
         sub.partitions = args.lossy_partitions
