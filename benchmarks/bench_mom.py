@@ -118,7 +118,7 @@ def main(argv=None):
           f"({res.params['pts_per_wl']:g} pts/lambda), 5 theta_i, {res.theta_r.size} + {res.fine_theta_r.size} "
           f"observation angles, {args.workers} workers, {args.rounds} interleaved rounds")
     print(f"load average before: {' '.join(load0)}   after: {' '.join(load())}   (cores: {os.cpu_count()})")
-    print(f"median wall: s-only {med['s']:.1f} s, s+p {med['sp']:.1f} s -> ratio {med["sp"] / med["s"]:.2f}"
+    print(f"median wall: s-only {med['s']:.1f} s, s+p {med['sp']:.1f} s -> ratio {med['sp'] / med['s']:.2f}"
           f"; median worker CPU ratio {medc['sp'] / medc['s']:.2f}")
     if ref is not None:
         print(f"against today's s-only solver ({args.reference_rev}): wall {med['ref']:.1f} s -> s+p / reference "
