@@ -1,7 +1,9 @@
 """Method-of-moments reference for 1-D random rough surfaces, and the model reduced to 1-D.
 
-``solver`` (:func:`scatter`: Gaussian surfaces, the integral equation, partitions, executors)
-and ``model1d`` (the pBRDF of a 1-D facet surface, the apples-to-apples counterpart of the
+``solver`` (:func:`scatter`: Gaussian surfaces, partitions, executors, both polarisations, a PEC
+or a finite index n - jk, the Mueller elements and the energy checks), ``kernels`` (the
+single- and double-layer operators of the two-region integral equations, far field, absorbed
+power) and ``model1d`` (the pBRDF of a 1-D facet surface, the apples-to-apples counterpart of the
 MoM result).
 
 May import: ``hyde_bsdf.model``.  Independent of Mitsuba.
