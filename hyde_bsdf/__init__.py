@@ -23,10 +23,6 @@ Conventions (angles, Stokes bases, sign of the index) are in README.md, section
 """
 from __future__ import annotations
 
-from hyde_bsdf.model.roughness import alpha_from_rms_slope, rms_slope_from, rms_slope_from_alpha
-from hyde_bsdf.model.dhr import dhr_specular_pec
-from hyde_bsdf.model.evaluator import pbrdf
-
 __all__ = [
     "pbrdf",
     "dhr_specular_pec",
@@ -39,14 +35,28 @@ __version__ = "0.1.0"
 
 
 _SUBPACKAGES = ("model", "mitsuba", "mom", "fit", "render", "report")
+#: public functions, imported on first use: ``import hyde_bsdf`` (and so the command line's
+#: start-up, before it can catch Ctrl-C) loads only the standard library
+_FUNCTIONS = {"pbrdf": "hyde_bsdf.model.evaluator", "dhr_specular_pec": "hyde_bsdf.model.dhr",
+              "rms_slope_from": "hyde_bsdf.model.roughness",
+              "alpha_from_rms_slope": "hyde_bsdf.model.roughness",
+              "rms_slope_from_alpha": "hyde_bsdf.model.roughness"}
 
 
 def __getattr__(name):
-    if name in _SUBPACKAGES:
-        import importlib
+    import importlib
 
+    if name in _SUBPACKAGES:
         return importlib.import_module(f"hyde_bsdf.{name}")
+    if name in _FUNCTIONS:
+        value = getattr(importlib.import_module(_FUNCTIONS[name]), name)
+        globals()[name] = value
+        return value
     raise AttributeError(f"module 'hyde_bsdf' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_SUBPACKAGES) | set(_FUNCTIONS))
 
 
 def register(variant: str | None = None) -> list:
