@@ -35,6 +35,10 @@ import numpy as np
 
 from hyde_bsdf.fit import IllPosedFitWarning, fit_measurements, fit_mueller, plot_fit, synthetic_measurements
 from hyde_bsdf.fit.measurements import write_measurements
+from hyde_bsdf.atomic import atomic_open
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import save_figure  # noqa: E402
 
 MATERIALS = {
     "infragold": {"n": 0.285, "k": 7.3523, "rms_slope": 0.44, "label": "LabSphere Infragold (Fig. 8)"},
@@ -297,12 +301,11 @@ def _plot_correlation(rows, path):
     fig.suptitle(f"expected fit uncertainty (Jacobian at the truth; noise {NOISE}/sqrt({N_SAMPLES}) per value); "
                  "missing points: singular Jacobian", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def _write(path, rows):
-    with open(path, "w", newline="") as fh:
+    with atomic_open(path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         for r in rows:

@@ -26,6 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.render import inverse as inv
+from hyde_bsdf.atomic import atomic_open
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import save_figure  # noqa: E402
 
 AT = {"rms_slope": 0.4, "eta": 2.0, "k": 4.0}
 
@@ -62,7 +66,7 @@ def validate(outdir="out/validation", quick=False, seeds=4, res=48, spp=16, rel_
     t0 = time.perf_counter()
     rows = check("paper", args.seeds, args.res, args.spp, args.rel_step) + \
         check("none", args.seeds, args.res, args.spp, args.rel_step)
-    with (out / "gradient_check.csv").open("w", newline="") as fh:
+    with atomic_open(out / "gradient_check.csv", "w", newline="") as fh:
         fh.write(f"# loss at {AT}, reference at {inv.TRUTH}; {args.res}x{args.res}, {args.spp} spp; "
                  f"central differences with relative step {args.rel_step}, same seed as the AD render\n")
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
@@ -105,8 +109,7 @@ def validate(outdir="out/validation", quick=False, seeds=4, res=48, spp=16, rel_
                  f"({args.res}x{args.res}, {args.spp} spp, seeds 1..{args.seeds}; error bars: standard error "
                  f"over seeds)", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "gradient_check.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "gradient_check.png", dpi=110)
     print(f"{'diffuse':8s} {'param':10s} {'AD(same seed)':>14s} {'FD':>12s} {'max rel diff':>13s} "
           f"{'AD(decorr.) +- SE':>24s} {'z':>6s}")
     for d, p, a_, f_, m, dm, dse, z in summary:

@@ -34,6 +34,10 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.render import inverse as inv
+from hyde_bsdf.atomic import atomic_open
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import save_figure  # noqa: E402
 
 
 def recovery(out, iterations, spp, spp_ref, res, lighting, tag, runs=("stokes", "s0"), lr=0.05):
@@ -141,14 +145,14 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
     etas, ks, maps = landscape(sceneB, spp, grid_n)
     valley = valley_profile(sceneB, spp, points=7 if quick else 13)
     ends = endpoint_losses(sceneB, B, spp, spp_ref)
-    with (out / "inverse_endpoints.csv").open("w", newline="") as fh:
+    with atomic_open(out / "inverse_endpoints.csv", "w", newline="") as fh:
         fh.write("# directional light (beta = 60 deg): both losses at the truth and at the end points of the "
                  "two runs, rendered with the reference's seed (no sampling noise between them)\n")
         w = csv.DictWriter(fh, fieldnames=list(ends[0]))
         w.writeheader()
         for r in ends:
             w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    with (out / "inverse_valley.csv").open("w", newline="") as fh:
+    with atomic_open(out / "inverse_valley.csv", "w", newline="") as fh:
         fh.write("# directional light (beta = 60 deg): losses along the curve of equal facet reflectance "
                  "A(60 deg) through the truth; rms_slope at truth; same seed for reference and renders\n")
         w = csv.DictWriter(fh, fieldnames=list(valley[0]))
@@ -167,12 +171,12 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
                              "tolerance": tol, "within": abs(err) <= tol,
                              "final_loss": r.history[-1]["loss"],
                              "s_per_iteration": r.seconds_per_iteration})
-    with (out / "inverse_render.csv").open("w", newline="") as fh:
+    with atomic_open(out / "inverse_render.csv", "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()
         for r in rows:
             w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    with (out / "inverse_landscape.csv").open("w", newline="") as fh:
+    with atomic_open(out / "inverse_landscape.csv", "w", newline="") as fh:
         w = csv.writer(fh)
         fh.write("# directional light, phase 120 deg; rms_slope at truth; loss vs (eta, k); same seed "
                  "for reference and renders\n")
@@ -206,8 +210,7 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
     fig.suptitle("hyde inverse rendering, sphere under two point lights (64x64, 16 spp/it, Adam); "
                  f"truth {inv.TRUTH}, start {inv.START}", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "inverse_render.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "inverse_render.png", dpi=110)
 
     # ---- figure 2: identifiability (directional light)
     fig, axes = plt.subplots(1, 5, figsize=(22, 4.2))
@@ -248,8 +251,7 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
     fig.suptitle("identifiability: one facet angle (beta = 60 deg); S0 alone fixes one combination "
                  "of n and k, S1-S3 fix both", fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "inverse_identifiability.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "inverse_identifiability.png", dpi=110)
 
     checks = []
     for r in rows:

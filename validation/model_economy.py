@@ -24,8 +24,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from hyde_bsdf.atomic import atomic_open
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import cli  # noqa: E402
+from _common import cli, save_figure  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from speed_accuracy_render import SURFACES, scene_dict  # noqa: E402
@@ -118,9 +120,8 @@ def validate(outdir="out/validation", quick=False):
     ax.set_title("What each simplification changes, against Monte-Carlo noise (bars) and what it saves (time ratio)",
                  fontsize=9)
     fig.tight_layout()
-    fig.savefig(out / "model_economy.png", dpi=130)
-    plt.close(fig)
-    with open(out / "model_economy.csv", "w", newline="") as f:
+    save_figure(fig, out / "model_economy.png", dpi=130)
+    with atomic_open(out / "model_economy.csv", "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["simplification", "rms_slope", "rms_image_change", "rms_mc_noise", "time_ratio_simplified_over_full",
                     "below_noise"])

@@ -25,6 +25,7 @@ import os
 import sys
 
 import numpy as np
+from hyde_bsdf.atomic import atomic_open
 
 __all__ = ["main", "cli_main"]
 
@@ -199,7 +200,7 @@ def dhr_texture():
 def _write(outdir, name, rows):
     os.makedirs(outdir, exist_ok=True)
     path = os.path.join(outdir, name)
-    with open(path, "w", newline="") as fh:
+    with atomic_open(path, "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(rows[0].keys()))
         w.writeheader()
         w.writerows(rows)

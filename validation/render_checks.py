@@ -53,6 +53,10 @@ import numpy as np
 
 from hyde_bsdf.render import prepare_variant, render_stokes, rotate_stokes, sensor_to_paper_rotation
 from hyde_bsdf.model.roughness import alpha_from_rms_slope
+from hyde_bsdf.atomic import atomic_open
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import save_figure  # noqa: E402
 
 DEFAULT_VARIANT = "llvm_ad_spectral_polarized"
 
@@ -334,7 +338,7 @@ def run_furnace_check(kind="hyde", rms_slope=0.5, shadowing="vgroove", diffuse="
 
 def write_csv(path: Path, rows: list[dict]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
+    with atomic_open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
         w.writeheader()
         for row in rows:
@@ -367,8 +371,7 @@ def plot_plane(rows: list[dict], path: Path, title: str) -> None:
         ax.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def plot_furnace(rows: list[dict], images: dict, path: Path, title: str) -> None:
@@ -401,8 +404,7 @@ def plot_furnace(rows: list[dict], images: dict, path: Path, title: str) -> None
     ax.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def _summary_plane(rows):
