@@ -239,7 +239,16 @@ def test_named_repository_files_exist(page):
 
 
 def _defines(module_file: Path, name: str) -> bool:
+    """``name`` is defined, imported or listed in ``__all__`` (lazy exports) by the module."""
     tree = ast.parse(module_file.read_text(encoding="utf-8"))
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__all__"
+                                                for t in node.targets):
+            try:
+                if name in ast.literal_eval(node.value):
+                    return True
+            except ValueError:
+                pass
     for node in ast.walk(tree):
         if isinstance(node, (ast.FunctionDef, ast.ClassDef, ast.AsyncFunctionDef)) and node.name == name:
             return True

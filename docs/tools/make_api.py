@@ -105,6 +105,18 @@ def _describe(tree: ast.Module, name: str, lines=None, depth=0) -> tuple[str, st
                     comment.insert(0, lines[i].lstrip()[2:].strip())
                     i -= 1
             return f"`{name} = {value}`", _md(" ".join(comment))
+    for node in tree.body:   # a lazy export: a {name: "hyde_bsdf.module"} table read by __getattr__
+        if isinstance(node, ast.Assign) and isinstance(node.value, ast.Dict):
+            try:
+                table = ast.literal_eval(node.value)
+            except ValueError:
+                continue
+            target = table.get(name)
+            if isinstance(target, str) and target.startswith("hyde_bsdf") and depth < 3:
+                sub, sub_lines = _source_tree(target)
+                if sub is not None:
+                    head, doc = _describe(sub, name, sub_lines, depth + 1)
+                    return head, (doc + " " if doc else "") + f"(from `{target}`)"
     for node in tree.body:   # re-exported: describe it where it is defined
         if isinstance(node, ast.ImportFrom) and any((a.asname or a.name) == name for a in node.names):
             sub, sub_lines = _source_tree(node.module)
