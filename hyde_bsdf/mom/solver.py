@@ -172,9 +172,7 @@ __all__ = [
     "SerialExecutor",
     "process_pool",
     "gaussian_surface",
-    "moment_matrix",
     "incident_field",
-    "far_field",
     "incident_flux",
     "taper",
     "check_sampling",
@@ -186,9 +184,6 @@ __all__ = [
 ]
 
 K0 = 2.0 * math.pi  # wavenumber in units of 1/lambda
-EULER_GAMMA_EXP = math.exp(np.euler_gamma)  # gamma = 1.781... of the self term
-#: Gauss-Legendre nodes/weights on [-1, 1] for near-neighbour and self integrals
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(8)
 #: Thorsos' taper parameter above which the taper is "too narrow" for theta_i
 THORSOS_LIMIT = 0.02
 
@@ -265,127 +260,6 @@ def gaussian_surface(length_wl, n_points, rms_height_wl, corr_length_wl, seed=0,
 # Eqs. 18-20: the EFIE moment matrix and the incident field
 # ---------------------------------------------------------------------------
 
-def _sinc(a):
-    """sin(a)/a for real arrays; a Taylor polynomial where |a| <= 1.2 (error < 1e-7), NumPy's sinc beyond."""
-    if a.size and np.max(np.abs(a)) > 1.2:
-        return np.sinc(a / math.pi)
-    a2 = a * a
-    # 1 - a^2/6 + a^4/120 - a^6/5040 + a^8/362880
-    out = a2 * (1.0 / 362880.0)
-    out -= 1.0 / 5040.0
-    out *= a2
-    out += 1.0 / 120.0
-    out *= a2
-    out -= 1.0 / 6.0
-    out *= a2
-    out += 1.0
-    return out
-
-
-def _hankel2_0(z):
-    """H_0^(2)(z) = J_0(z) - j Y_0(z) for real z > 0 (SciPy/Cephes Bessel functions)."""
-    out = np.empty(z.shape, dtype=complex)
-    out.real = scipy.special.j0(z)
-    out.imag = scipy.special.y0(z)
-    out.imag *= -1.0
-    return out
-
-
-def _segment_integral(xm, ym, xn, yn, half_dx, slope, k=K0):
-    """int over the straight pulse segment n of H_0^(2)(k |rho_m - rho'|) dC' (8-point Gauss-Legendre).
-
-    The segment spans x in [xn - half_dx, xn + half_dx] with height yn + slope (x - xn);
-    dC' = sqrt(1 + slope^2) dx.  Used for near neighbours, where the midpoint rule
-    misses the logarithmic variation of Y_0.
-    """
-    t = half_dx[..., None] * _GL_X
-    xs = xn[..., None] + t
-    ys = yn[..., None] + slope[..., None] * t
-    r = np.hypot(xm[..., None] - xs, ym[..., None] - ys)
-    jac = half_dx * np.sqrt(1.0 + slope**2)
-    return (_hankel2_0(k * r) @ _GL_W) * jac
-
-
-def _self_term(seg_len, k=K0):
-    """Eq. 20 self term: int over the pulse's own segment of H_0^(2)(k|t|) dt, t in [-D/2, D/2].
-
-    The singular part comes from the small-argument expansion
-    H_0^(2)(z) ~ 1 - j (2/pi) ln(gamma z / 2), gamma = e^{Euler} = 1.781...,
-    integrated analytically (Peterson, Ray & Mittra, Ref. 40):
-    D [1 - j (2/pi) ln(gamma k D / (4 e))].  The smooth remainder
-    H_0^(2)(z) - [1 - j(2/pi) ln(gamma z/2)] = O(z^2 ln z) is added by Gauss-Legendre
-    quadrature (it is ~1% of the term at 10 points per wavelength).
-    """
-    analytic = seg_len * (1.0 - 2j / math.pi * np.log(EULER_GAMMA_EXP * k * seg_len / (4.0 * math.e)))
-    half = seg_len / 2.0
-    t = half[:, None] * (_GL_X + 1.0) / 2.0  # nodes on (0, D/2)
-    z = k * t
-    remainder = _hankel2_0(z) - (1.0 - 2j / math.pi * np.log(EULER_GAMMA_EXP * z / 2.0))
-    return analytic + 2.0 * (remainder @ _GL_W) * (half / 2.0)
-
-
-def moment_matrix(x, y, dfdx, dx, k=K0, near=4, block=256):
-    """The EFIE moment matrix of Eq. 20 with Z0 factored out: A_mn = (k/4) int_{C_n} H_0^(2)(k|rho_m - rho'|) dC'.
-
-    Pulse basis on straight segments of x-width ``dx`` centred on (x_n, y_n) with
-    slope ``dfdx[n]`` (arc length D_n = dx sqrt(1 + f'^2)); delta testing at the
-    segment centres.  Far entries use the midpoint rule with the segment's phase
-    variation, D_n H_0^(2)(k R_mn) sinc(k D_n cos(psi_mn) / 2) (psi: angle between
-    the segment and the line to the match point; the bare midpoint rule would make
-    a flat plate's current 1 % too large at 10 points per wavelength); entries
-    with |m - n| <= ``near`` use 8-point Gauss-Legendre over the source segment;
-    the diagonal is :func:`_self_term`.  ``k/4 = pi/(2 lambda)`` is
-    Eq. 18's prefactor over Z0.
-
-    Parameters
-    ----------
-    x, y, dfdx : ndarray [N], wavelengths.  dx : float, sample spacing.
-
-    Returns
-    -------
-    ndarray [N, N] complex128, so that A @ (Z0 J) = E_i at the match points.
-    """
-    n = x.size
-    seg_len = dx * np.sqrt(1.0 + dfdx**2)
-    A = np.empty((n, n), dtype=complex)
-    # H_0^(2)(k R) is symmetric: fill the upper triangle by row blocks and mirror it
-    for r0 in range(0, n, block):
-        r1 = min(n, r0 + block)
-        ddx = x[r0:r1, None] - x[None, r0:]
-        ddy = y[r0:r1, None] - y[None, r0:]
-        kr = ddx * ddx
-        kr += ddy * ddy
-        np.sqrt(kr, out=kr)
-        kr *= k
-        # guard: the diagonal (R = 0) is replaced by the self term below; avoid Y_0(0) = -inf
-        diag = (np.arange(r1 - r0), np.arange(r0, r1) - r0)
-        kr[diag] = 1.0
-        h = _hankel2_0(kr)
-        # midpoint rule with the segment's phase variation: int e^{-j k R(t)} dt over a segment
-        # of length D seen under angle psi ~ D sinc(k D cos(psi) / 2)  (the bare midpoint rule
-        # is off by (k D)^2 / 24, 1.6 % at 10 points per wavelength)
-        # source n (upper block): k D_n cos(psi) / 2 = k dx (ddx + ddy f'_n) / (2 R), kr = k R
-        c_up = (ddx + ddy * dfdx[None, r0:]) * (k * k * dx / 2.0)
-        c_up /= kr
-        c_lo = (ddx + ddy * dfdx[r0:r1, None]) * (k * k * dx / 2.0)
-        c_lo /= kr
-        up = h * _sinc(c_up)
-        up *= seg_len[None, r0:]
-        lo = h * _sinc(c_lo)
-        lo *= seg_len[r0:r1, None]
-        A[r0:r1, r0:] = up
-        A[r0:, r0:r1] = lo.T
-    # near neighbours: accurate segment integrals
-    for d in range(1, near + 1):
-        m = np.arange(n - d)
-        half = np.full(n - d, dx / 2.0)
-        A[m, m + d] = _segment_integral(x[m], y[m], x[m + d], y[m + d], half, dfdx[m + d], k)
-        A[m + d, m] = _segment_integral(x[m + d], y[m + d], x[m], y[m], half, dfdx[m], k)
-    A[np.arange(n), np.arange(n)] = _self_term(seg_len, k)
-    A *= k / 4.0
-    return A
-
-
 def incident_field(x, y, theta_i, k=K0):
     """Right-hand side of Eqs. 18/20: E_i = exp(-j k (x sin ti - y cos ti)) at the match points.
 
@@ -414,22 +288,6 @@ def incident_flux(x, dfdx, dx, window, theta_i):
     ti = np.atleast_1d(theta_i)
     w2 = window * window * dx
     return np.cos(ti) * w2.sum() + np.sin(ti) * (w2 @ dfdx)
-
-
-def far_field(x, y, dfdx, dx, current, theta_r, k=K0):
-    """Eq. 21's far-field sum F(tr) = sum_n I_n int_{C_n} exp(j k (x' sin tr + y' cos tr)) dC'.
-
-    The integral over each straight pulse segment is exact:
-    dx sqrt(1+f'^2) * exp(j k (x_n u + y_n c)) * sinc(k dx (u + f'_n c) / 2) with
-    u = sin tr, c = cos tr (the sinc follows the staircase current the pulses
-    represent).  ``current`` [N, n_ti] is the (tapered) Z0 J; returns [n_ti, n_tr].
-    """
-    uc = np.stack([np.sin(theta_r), np.cos(theta_r)], axis=1)  # [n_tr, 2]
-    phase = uc @ (k * np.stack([x, y]))  # k (x_n u + y_n c), [n_tr, N]
-    kern = np.exp(1j * phase)
-    kern *= _sinc(uc @ ((k * dx / 2.0) * np.stack([np.ones_like(dfdx), dfdx])))
-    weights = current * (dx * np.sqrt(1.0 + dfdx**2))[:, None]
-    return (kern @ weights).T
 
 
 def power_grid(w, k=K0):
