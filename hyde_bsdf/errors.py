@@ -18,5 +18,16 @@ class UsageError(ValueError):
 
 
 def one_line(text) -> str:
-    """``text`` with its lines joined by ' | ' (Mitsuba's parser messages span several lines)."""
-    return " | ".join(part.strip() for part in str(text).strip().splitlines() if part.strip())
+    """``text`` with its lines joined by ' | ' (Mitsuba's parser messages span several lines).
+
+    A Python traceback embedded in the text (Mitsuba re-raises a plugin constructor's exception
+    with its traceback inside the message) is reduced to its last line, the exception itself.
+    """
+    lines = [part.strip() for part in str(text).strip().splitlines() if part.strip()]
+    marker = "Traceback (most recent call last):"
+    for i, line in enumerate(lines):
+        if marker in line:
+            head = line.split(marker, 1)[0].strip()
+            lines = lines[:i] + ([head] if head else []) + lines[-1:]
+            return " ".join(lines)
+    return " | ".join(lines)

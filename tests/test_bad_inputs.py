@@ -58,6 +58,9 @@ CLI_ROWS = [
      "pngdir_dolp.png' is a directory", "in"),
     # --- render: scene sanity ---
     ("render: no sensor", ["render", "{nosensor}", "-o", "{tmp}/a.exr"], 2, "has no <sensor>", "in"),
+    # Mitsuba re-raises the plugin's ValueError with its traceback inside the message: one line is left
+    ("render: bad hyde parameter in the scene", ["render", "{badhyde}", "-o", "{tmp}/a.exr"], 2,
+     "ValueError: hyde: rms_slope must be a finite number in the accepted range [0.0001, 50]", "in"),
     ("render: ptracer integrator", ["render", "{ptracer}", "-o", "{tmp}/a.exr"], 2, "integrator 'ptracer'", "in"),
     ("render: sample_count 0 (was SIGFPE)", ["render", "{inverse}", "-o", "{tmp}/a.exr", "-D", "spp=0"], 2,
      "sample_count is 0; it must be an integer >= 1 (the scene's $spp; set it with -D spp=N)", "sub"),
@@ -142,6 +145,7 @@ def paths(tmp_path_factory):
     (tmp / "nosensor.xml").write_text('<scene version="3.0.0"><shape type="sphere"/><emitter type="constant"/>'
                                       "</scene>")
     (tmp / "ptracer.xml").write_text(SCENE.replace('<integrator type="path">', '<integrator type="ptracer">'))
+    (tmp / "badhyde.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', '<bsdf type="hyde"><float name="rms_slope" value="-1"/></bsdf>'))
     (tmp / "dir.exr").mkdir()
     (tmp / "pngdir_dolp.png").mkdir()
     (tmp / "notreport").mkdir()
@@ -156,7 +160,7 @@ def paths(tmp_path_factory):
     write_measurements(tmp / "meas.csv", meas)
     return {"tmp": tmp, "file": tmp / "file.txt", "tiny": tmp / "tiny.xml", "nosensor": tmp / "nosensor.xml",
             "ptracer": tmp / "ptracer.xml", "inverse": ROOT / "scenes" / "inverse.xml", "csv": tmp / "meas.csv",
-            "notreport": tmp / "notreport"}
+            "notreport": tmp / "notreport", "badhyde": tmp / "badhyde.xml"}
 
 
 def _fill(argv, paths):

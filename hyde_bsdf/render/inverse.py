@@ -3,8 +3,8 @@
 A reference Stokes image of a scene with the ``hyde`` BSDF is matched by a
 rendering whose BSDF parameters (``rms_slope``, ``eta``, ``k``; any subset) are
 optimized with Mitsuba's ``mi.ad.Adam`` through the ``stokes`` integrator around
-``path`` (Mitsuba's ``prb`` integrators refuse polarized variants; ``path``
-differentiates through ``mi.render(scene, params, spp=..., seed=...)`` and
+``path`` (``prb`` inside ``stokes`` gives the same gradients, bare ``prb`` fails in
+polarized variants; ``path`` differentiates through ``mi.render(scene, params, spp=..., seed=...)`` and
 ``dr.backward``) in ``llvm_ad_spectral_polarized``.
 
 Loss (``components="stokes"``, the default)::
