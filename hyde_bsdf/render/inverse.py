@@ -196,15 +196,26 @@ def parameter_keys(params, names=PARAMETERS, prefix: str | None = None) -> dict:
     for name in names:
         if name not in suffix:
             raise ValueError(f"parameter names must be from {PARAMETERS}, got {name!r}")
-        found = [key for key in params.keys() if key.endswith(suffix[name])
-                 and (prefix is None or key.startswith(prefix + "."))]
-        if len(found) != 1:
-            raise ValueError(f"need exactly one BSDF parameter for {name!r} "
-                             f"(keys ending in {' or '.join(suffix[name])}"
-                             f"{'' if prefix is None else ' under ' + repr(prefix)}); found {found}"
-                             f"{'; name the BSDF with prefix= (CLI: --target)' if len(found) > 1 else ''}")
-        out[name] = found[0]
+        out[name] = _unique_key(params, name, [suffix[name]], prefix)
     return out
+
+
+def _unique_key(params, name, suffix_groups, prefix):
+    """The one traverse key ending in a suffix of the first group that matches any key (under
+    ``prefix`` if given); ValueError naming ``name``, the suffixes and the keys found otherwise."""
+    found = []
+    for group in suffix_groups:
+        found = [key for key in params.keys() if key.endswith(group)
+                 and (prefix is None or key.startswith(prefix + "."))]
+        if found:
+            break
+    if len(found) != 1:
+        suffixes = [s for group in suffix_groups for s in group]
+        raise ValueError(f"need exactly one BSDF parameter for {name!r} "
+                         f"(keys ending in {' or '.join(suffixes)}"
+                         f"{'' if prefix is None else ' under ' + repr(prefix)}); found {found}"
+                         f"{'; name the BSDF with prefix= (CLI: --target)' if len(found) > 1 else ''}")
+    return found[0]
 
 
 def stokes_images(img, channel_names):
@@ -545,17 +556,8 @@ def map_keys(params, names=("alpha",), prefix: str | None = None) -> dict:
     for name in names:
         if name not in MAP_PARAMETERS:
             raise ValueError(f"parameter names must be from {tuple(MAP_PARAMETERS)}, got {name!r}")
-        for suffix in MAP_PARAMETERS[name][0]:
-            found = [key for key in params.keys() if key.endswith(suffix)
-                     and (prefix is None or key.startswith(prefix + "."))]
-            if found:
-                break
-        if len(found) != 1:
-            raise ValueError(f"need exactly one BSDF parameter for {name!r} (keys ending in "
-                             f"{' or '.join(MAP_PARAMETERS[name][0])}"
-                             f"{'' if prefix is None else ' under ' + repr(prefix)}); found {found}"
-                             f"{'; name the BSDF with prefix= (CLI: --target)' if len(found) > 1 else ''}")
-        out[name] = found[0]
+        # suffixes tried in order: the texture's data first, then a constant's value
+        out[name] = _unique_key(params, name, [(s,) for s in MAP_PARAMETERS[name][0]], prefix)
     return out
 
 
