@@ -3,7 +3,8 @@
 ``solver`` (:func:`scatter`: Gaussian surfaces, partitions, executors, both polarisations, a PEC
 or a finite index n - jk, the Mueller elements and the energy checks), ``kernels`` (the
 single- and double-layer operators of the two-region integral equations, far field, absorbed
-power) and ``model1d`` (the pBRDF of a 1-D facet surface, the apples-to-apples counterpart of the
+power), ``gather`` (waiting on an executor with liveness checks and a timeout: a dead dask
+cluster ends in one error, never a hang) and ``model1d`` (the pBRDF of a 1-D facet surface, the apples-to-apples counterpart of the
 MoM result).
 
 May import: ``hyde_bsdf.model``.  Independent of Mitsuba.

@@ -163,6 +163,7 @@ import numpy as np
 import scipy.linalg
 import scipy.special
 
+from hyde_bsdf.mom.gather import ExecutorError, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv, layer_matrices
 
 __all__ = [
@@ -170,6 +171,7 @@ __all__ = [
     "MoMResult",
     "MoMAccuracyWarning",
     "SerialExecutor",
+    "ExecutorError",
     "process_pool",
     "gaussian_surface",
     "incident_field",
@@ -750,7 +752,7 @@ MAX_PANELS = 64
 
 def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
             pts_per_wl=10, seed=0, executor=None, *, taper_width_wl=None, progress=None,
-            polarization="s", n=None, k=None):
+            polarization="s", n=None, k=None, timeout=None):
     """Incoherent far-field scattering of a 1-D Gaussian rough surface -- paper Eqs. 18-23, both polarisations.
 
     Parameters
@@ -775,13 +777,19 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         one worker per core (each worker single-threaded BLAS); pass
         :class:`SerialExecutor` for in-process runs or a dask executor
         (``distributed.Client(...).get_executor()``) to spread partitions across
-        machines.  A caller's executor is not shut down.
+        machines.  A caller's executor is not shut down.  The wait on it never hangs:
+        a dask cluster that loses its last worker (for ``gather.NO_WORKER_GRACE_S`` =
+        60 s), a closed client or a broken process pool ends in :class:`ExecutorError`
+        naming it, and a stderr line reports every 30 s in which no partition finished.
     taper_width_wl : float in (0, L_p], keyword-only, Eq. 22's w (default L_p / 4).
     progress : bool or None, keyword-only; None shows a stderr line for runs of
         10 or more partitions.
     polarization : "s", "p" or ("s", "p"), keyword-only (default "s").  s: E along z
         (TM_z, the paper's Fig. 6); p: H along z.  Both on the same surface give
         the cross term and the in-plane Mueller matrix.
+    timeout : float or None, keyword-only: seconds without any partition finishing
+        after which the run is given up with :class:`ExecutorError` (None: no limit
+        while the executor is alive).
     n, k : float or None, keyword-only: the paper's complex index eta = n - j k
         (n > 0, k >= 0; Infragold 0.285, 7.3523).  Neither: a perfect conductor.
 
@@ -795,6 +803,8 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     ------
     ValueError naming the parameter for bad input, for sampling too coarse to be
     repaired, and before any allocation that would not fit in memory.
+    ExecutorError (a RuntimeError, one line naming the executor) when the executor
+    dies, breaks or exceeds ``timeout``; the pending partitions are cancelled.
 
     Warns
     -----
@@ -814,6 +824,8 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     seed = _check_seed(seed)
     pols = _check_polarization(polarization)
     eta = _check_index(n, k)
+    if timeout is not None:
+        timeout = _check_positive("timeout", timeout)
     ti_deg = np.atleast_1d(np.asarray(theta_i_deg, dtype=float))
     tr_deg = np.atleast_1d(np.asarray(theta_r_deg, dtype=float))
     if ti_deg.ndim != 1 or not np.all(np.isfinite(ti_deg)) or np.any(ti_deg < 0) or np.any(ti_deg >= 90):
@@ -921,13 +933,11 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     ex = process_pool(workers) if own else executor
     show = (partitions >= 10) if progress is None else bool(progress)
     bar = _Progress(partitions, show)
-    results = [None] * partitions
     try:
-        futures = {ex.submit(solve_partition, t): i for i, t in enumerate(tasks)}
+        # never a blind wait: liveness checks, the caller's timeout and a heartbeat (gather.py)
+        results = gather(ex, solve_partition, tasks, timeout=timeout, on_done=bar.update,
+                         heartbeat=progress is not False, what="partition", label="mom.scatter")
         del tasks
-        for done, fut in enumerate(cf.as_completed(futures), start=1):
-            results[futures[fut]] = fut.result()
-            bar.update(done)
     finally:
         if own:
             ex.shutdown(wait=True, cancel_futures=True)

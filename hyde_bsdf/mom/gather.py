@@ -1,0 +1,192 @@
+"""Waiting on an executor without hanging: results of independent tasks, with liveness checks.
+
+:func:`gather` submits one task per item to a :class:`concurrent.futures.Executor` (a process
+pool, :class:`~hyde_bsdf.mom.solver.SerialExecutor`, or a dask.distributed
+``client.get_executor()``) and collects the results in order.  It never waits blindly: it waits
+at most ``POLL_S`` seconds at a time, and between waits it
+
+* checks that the executor can still run tasks -- a dask cluster whose client is no longer
+  running, or which has had no worker for ``NO_WORKER_GRACE_S`` seconds (its only worker died),
+  is dead; a process pool that lost a worker process is broken;
+* enforces the caller's ``timeout`` (seconds without any task finishing), if given;
+* writes a heartbeat line to stderr every ``HEARTBEAT_S`` seconds without a finished task.
+
+A dead or broken executor, a task killed with its worker, or a timeout ends in
+:class:`ExecutorError`, a one-line message that names the executor (``dask cluster at
+tcp://...``, ``process pool of 4 workers``) and how many tasks had finished; the tasks still
+pending are cancelled.  An exception raised *by a task* reaches the caller unchanged.
+
+May import: the standard library only.
+"""
+from __future__ import annotations
+
+import concurrent.futures as cf
+import sys
+import time
+
+__all__ = ["gather", "ExecutorError", "describe_executor", "executor_problem",
+           "POLL_S", "HEARTBEAT_S", "NO_WORKER_GRACE_S"]
+
+#: longest single wait on the executor before the liveness checks run again (seconds)
+POLL_S = 2.0
+#: a stderr line every this many seconds in which no task finished (unless heartbeat=False)
+HEARTBEAT_S = 30.0
+#: a dask cluster with no worker for this long is dead (an adaptive cluster may sit at zero
+#: workers briefly while it scales up)
+NO_WORKER_GRACE_S = 60.0
+
+
+class ExecutorError(RuntimeError):
+    """The executor cannot finish the work: dead cluster, broken pool, killed worker or timeout."""
+
+
+def _dask_client(executor):
+    """The dask.distributed Client behind a ``client.get_executor()``, else None."""
+    if type(executor).__module__.split(".")[0] != "distributed":
+        return None
+    return getattr(executor, "_client", None)
+
+
+def describe_executor(executor) -> str:
+    """A short name for messages: 'dask cluster at tcp://host:8786', 'process pool of 4 workers', ..."""
+    client = _dask_client(executor)
+    if client is not None:
+        try:
+            address = client.scheduler.address
+        except AttributeError:
+            address = None
+        return f"dask cluster at {address}" if address else "dask cluster"
+    if isinstance(executor, cf.ProcessPoolExecutor):
+        return f"process pool of {getattr(executor, '_max_workers', '?')} workers"
+    if isinstance(executor, cf.ThreadPoolExecutor):
+        return f"thread pool of {getattr(executor, '_max_workers', '?')} threads"
+    return f"executor {type(executor).__name__}"
+
+
+def executor_problem(executor):
+    """None while ``executor`` can run tasks; else (kind, sentence) saying why it cannot.
+
+    kind is 'dead' (no recovery: fail at once) or 'no-workers' (a dask cluster with no worker
+    right now: fail after NO_WORKER_GRACE_S).
+    """
+    if getattr(executor, "_broken", False):          # ProcessPoolExecutor after a worker died
+        return "dead", f"it is broken ({executor._broken})"
+    if getattr(executor, "_shutdown_thread", False) or getattr(executor, "_shutdown", False):
+        return "dead", "it was shut down"
+    client = _dask_client(executor)
+    if client is None:
+        return None
+    status = str(getattr(client, "status", "running"))
+    if status not in ("running", "newly-created"):
+        return "dead", f"its client is {status} (the scheduler is unreachable or was closed)"
+    try:
+        try:
+            info = client.scheduler_info(n_workers=0)  # totals only: cheap on a big cluster
+        except TypeError:                             # distributed < 2025: no n_workers argument
+            info = client.scheduler_info()
+    except Exception as exc:  # noqa: BLE001 -- any failure to reach the scheduler is reported
+        return "dead", f"its scheduler does not answer ({type(exc).__name__}: {exc})"
+    n_workers = info.get("n_workers")
+    if n_workers is None:
+        n_workers = len(info.get("workers", {}))
+    if n_workers == 0:
+        return "no-workers", "it has no worker (the only worker died or was never started)"
+    return None
+
+
+def _is_executor_failure(exc) -> bool:
+    """A failure of the executor rather than of the task: a broken pool, a killed dask worker, a cancel."""
+    if isinstance(exc, (cf.BrokenExecutor, cf.CancelledError)):
+        return True
+    return type(exc).__name__ in ("KilledWorker", "FutureCancelledError") \
+        and type(exc).__module__.split(".")[0] == "distributed"
+
+
+def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=True, what="task",
+           label="hyde-bsdf"):
+    """[fn(item) for item in items], run on ``executor``, without ever waiting blindly.
+
+    Parameters
+    ----------
+    executor : concurrent.futures.Executor (a caller's executor is not shut down here).
+    fn, items : the task function and its arguments, one task per item.
+    timeout : float or None, seconds without any task finishing after which the run is
+        given up (None: no limit while the executor is alive).
+    on_done : callable(done_count) or None, called after every finished task (progress).
+    heartbeat : bool, write a stderr line every HEARTBEAT_S seconds in which nothing finished.
+    what, label : words for the messages ('partition', 'mom').
+
+    Raises
+    ------
+    ExecutorError (one line naming the executor) for a dead cluster, a broken pool, a task
+    killed with its worker, or the timeout; the pending tasks are cancelled.  A task's own
+    exception is re-raised unchanged.
+    """
+    if timeout is not None and not (timeout > 0):
+        raise ValueError(f"timeout must be > 0 seconds or None, got {timeout!r}")
+    items = list(items)
+    total = len(items)
+    results = [None] * total
+    futures = {}
+    pending = set()
+    done_count = 0
+    name = describe_executor(executor)
+
+    def fail(sentence):
+        for fut in pending:
+            fut.cancel()
+        return ExecutorError(f"{label}: the {name} {sentence}; {done_count} of {total} {what}s had finished")
+
+    try:
+        for i, item in enumerate(items):
+            fut = executor.submit(fn, item)
+            futures[fut] = i
+            pending.add(fut)
+    except (cf.BrokenExecutor, RuntimeError) as exc:
+        raise fail(f"refused the {what}s ({type(exc).__name__}: {exc})") from None
+    last_done = time.monotonic()
+    last_beat = last_done
+    no_worker_since = None
+    while pending:
+        step = POLL_S if timeout is None else min(POLL_S, max(0.01, timeout - (time.monotonic() - last_done)))
+        done, pending = cf.wait(pending, timeout=step, return_when=cf.FIRST_COMPLETED)
+        for fut in done:
+            try:
+                results[futures[fut]] = fut.result()
+            except BaseException as exc:
+                if _is_executor_failure(exc):
+                    raise fail(f"lost {what} {futures[fut] + 1} ({type(exc).__name__}: "
+                               f"{str(exc).strip().splitlines()[0] if str(exc).strip() else 'no detail'})") from None
+                for other in pending:
+                    other.cancel()
+                raise
+            done_count += 1
+            if on_done is not None:
+                on_done(done_count)
+        now = time.monotonic()
+        if done:
+            last_done = last_beat = now
+            no_worker_since = None
+            continue
+        problem = executor_problem(executor)
+        if problem is not None:
+            kind, sentence = problem
+            if kind == "dead":
+                raise fail(f"cannot finish the work: {sentence}")
+            no_worker_since = now if no_worker_since is None else no_worker_since
+            if now - no_worker_since >= NO_WORKER_GRACE_S:
+                raise fail(f"is dead: {sentence}; no worker for {now - no_worker_since:.0f} s")
+        else:
+            no_worker_since = None
+        idle = now - last_done
+        if timeout is not None and idle >= timeout:
+            raise fail(f"finished no {what} for {idle:.0f} s (timeout={timeout:g} s)")
+        if heartbeat and now - last_beat >= HEARTBEAT_S:
+            last_beat = now
+            try:
+                sys.stderr.write(f"{label}: waiting on the {name}: {done_count}/{total} {what}s done, "
+                                 f"none finished for {idle:.0f} s\n")
+                sys.stderr.flush()
+            except (OSError, ValueError):
+                pass
+    return results
