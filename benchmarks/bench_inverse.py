@@ -2,7 +2,7 @@
 
 One iteration = set the parameters, ``mi.render(scene, params, spp, seed)`` through
 ``stokes`` around ``path`` (llvm_ad_spectral_polarized), the masked Stokes loss,
-``dr.backward``, one ``mi.ad.Adam`` step (exactly hyde_bsdf.render.inverse.invert).  Each
+``dr.backward``, one ``mi.ad.Adam`` step (exactly hyde_bsdf.inverse.invert).  Each
 material runs in its own fresh process (so the peak resident memory is its own):
 the scene of scenes/inverse.xml at ``--res`` x ``--res`` pixels and ``--spp`` samples,
 ``--iterations`` iterations; reported: the first iteration (includes the JIT
@@ -15,7 +15,7 @@ The multijitter sampler rounds sample counts to a product of two near-equal inte
 
     python benchmarks/bench_inverse.py --scalar [--res 64] [--spp 16] [--iterations 40] [--csv out/bench_inverse.csv]
 
-Default (``--maps``): the SVBRDF inversion (hyde_bsdf.render.inverse.invert_maps) of the
+Default (``--maps``): the SVBRDF inversion (hyde_bsdf.inverse.invert_maps) of the
 validation's textured plane (validation/svbrdf_inverse.py: a 32 x 32 Beckmann alpha bitmap,
 3 views in one batch sensor x 2 point lights, llvm_ad_mono_polarized, 4 spp), with ``hyde``
 (diffuse "paper" and "none") against ``roughconductor`` given the same ``alpha`` texture, eta, k
@@ -59,7 +59,7 @@ def _rss_mib():
 def run_one(name, res, spp, iterations):
     import numpy as np
 
-    from hyde_bsdf.render import inverse as inv
+    from hyde_bsdf import inverse as inv
 
     cfg = CONFIGS[name]
     inv.prepare()
@@ -91,7 +91,7 @@ def bench_maps(res=80, rounds=7, iterations=6, variant=None, spp=4, csv_path=Non
     import mitsuba as mi
     import numpy as np
 
-    from hyde_bsdf.render import inverse as inv
+    from hyde_bsdf import inverse as inv
 
     variant = inv.prepare(variant or inv.MAP_VARIANT)
     truth = inv.example_maps(32)

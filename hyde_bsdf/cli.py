@@ -28,7 +28,7 @@ COMMANDS = {
     "demo": ("hyde_bsdf.render.demo", "the main job: demo pictures into a folder"),
     "render": ("hyde_bsdf.render.renderer", "render a scene to a Stokes EXR and polarization PNGs"),
     "fit": ("hyde_bsdf.fit.mueller_fit", "fit n, k, rms_slope to a Mueller-matrix CSV"),
-    "invert": ("hyde_bsdf.render.inverse", "recover roughness and index from a Stokes image"),
+    "invert": ("hyde_bsdf.inverse.cli", "recover roughness and index from a Stokes image"),
     "validate": ("hyde_bsdf.report.build", "run the validation report"),
 }
 

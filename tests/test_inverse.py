@@ -1,4 +1,4 @@
-"""Differentiable inverse rendering with the hyde plugin (hyde_bsdf.render.inverse), on tiny images.
+"""Differentiable inverse rendering with the hyde plugin (hyde_bsdf.inverse), on tiny images.
 
 Physics checked: the AD gradient of a rendered Stokes loss (llvm_ad_spectral_polarized,
 ``stokes`` around ``path``) equals the central finite difference of the same loss and
@@ -12,7 +12,7 @@ import pytest
 
 import mitsuba as mi
 
-from hyde_bsdf.render import inverse as inv
+from hyde_bsdf import inverse as inv
 
 RES, SPP = 16, 16
 AT = {"rms_slope": 0.4, "eta": 2.0, "k": 4.0}

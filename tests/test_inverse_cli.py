@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from hyde_bsdf.cli import main
-from hyde_bsdf.render import inverse as inv
+from hyde_bsdf import inverse as inv
 
 TINY = ["--res", "16", "--spp", "4", "--spp-ref", "16"]
 
@@ -99,7 +99,7 @@ def test_bad_output_path_refused_before_optimising(capsys, tmp_path):
 
 
 def test_memory_estimate_refused_with_the_flag(capsys, monkeypatch, tmp_path):
-    monkeypatch.setattr(inv, "_mem_available", lambda: 64 * 2**20)
+    monkeypatch.setattr("hyde_bsdf.inverse.cli._mem_available", lambda: 64 * 2**20)
     rc, _, err = _run(capsys, TINY + ["-o", str(tmp_path)])
     assert rc == 2
     line = _one_error_line(err)

@@ -1,4 +1,4 @@
-"""Texture-valued (SVBRDF) inverse rendering (hyde_bsdf.render.inverse.invert_maps) on tiny problems.
+"""Texture-valued (SVBRDF) inverse rendering (hyde_bsdf.inverse.invert_maps) on tiny problems.
 
 Physics and behaviour checked, in llvm_ad_mono_polarized with the ``stokes`` integrator around
 ``path``: a Beckmann alpha map of 8 x 8 texels on a plane, seen by 2 cameras under 2 point lights
@@ -13,7 +13,7 @@ import pytest
 import drjit as dr
 import mitsuba as mi
 
-from hyde_bsdf.render import inverse as inv
+from hyde_bsdf import inverse as inv
 
 N, RES = 8, 32
 BSDF = "hyde"     # alpha texture: Beckmann alpha, key alpha.data (as roughconductor)

@@ -1,8 +1,8 @@
 """AD gradients of a rendered Stokes loss against central finite differences.
 
-Scene: scenes/inverse.xml's sphere under two point lights (hyde_bsdf.render.inverse.scene_dict),
+Scene: scenes/inverse.xml's sphere under two point lights (hyde_bsdf.inverse.scene_dict),
 llvm_ad_spectral_polarized, ``stokes`` around ``path``.  Loss: the Stokes loss of
-hyde_bsdf.render.inverse against a reference at (rms_slope 0.3, eta 1.5, k 3.0), evaluated at
+hyde_bsdf.inverse against a reference at (rms_slope 0.3, eta 1.5, k 3.0), evaluated at
 (0.4, 2.0, 4.0).  For each seed the AD gradient (``dr.backward`` through
 ``mi.render(scene, params, seed=s)``) is compared with a central difference of the
 same loss rendered with the **same seed** at +-h (relative step ``--rel-step``), so
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.render import inverse as inv
+from hyde_bsdf import inverse as inv
 from hyde_bsdf.atomic import atomic_open
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -1,9 +1,9 @@
 """SVBRDF inverse rendering: a 32 x 32 roughness map recovered from Stokes images of 3 views x 2 lights.
 
-Scene (:func:`hyde_bsdf.render.inverse.plane_scene_dict`): a 2 x 2 plane carrying the ``hyde``
+Scene (:func:`hyde_bsdf.inverse.plane_scene_dict`): a 2 x 2 plane carrying the ``hyde``
 BSDF with a texture-valued Beckmann ``alpha`` (nearest-neighbour bitmap, 32 x 32 texels: a smooth
 gradient 0.15 -> 0.45 along u with a sine ripple along v, and a sharp-edged square at alpha 0.6;
-:func:`~hyde_bsdf.render.inverse.example_maps`) and a known constant index (eta 1.5, k 3, Mitsuba's
+:func:`~hyde_bsdf.inverse.example_maps`) and a known constant index (eta 1.5, k 3, Mitsuba's
 n + ik).  Three cameras at 55 deg elevation, 120 deg apart (one ``batch`` sensor), and two point
 lights, one per scene (a scene with both lights would pick one at random per sample: noise), so each
 texel is seen under 6 pairs of directions.  Direct light only (``stokes`` around ``path``,
@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.atomic import atomic_open, atomic_path
-from hyde_bsdf.render import inverse as inv
+from hyde_bsdf import inverse as inv
 
 ETA, K = 1.5, 3.0
 START_ALPHA = 0.3

@@ -21,7 +21,7 @@ OUT = REPO / "docs" / "api.md"
 HEADER = """# Reference: the Python API
 
 Every public name of `hyde_bsdf` (each module's `__all__`), its signature and the first line of its
-docstring; `help(name)` shows the whole docstring (or, for a module, `python -m pydoc hyde_bsdf.render.inverse`). The
+docstring; `help(name)` shows the whole docstring (or, for a module, `python -m pydoc hyde_bsdf.inverse`). The
 guides: [plugin `hyde`](plugin.md) (the plugin's parameters), [NumPy evaluator](evaluator.md),
 [command line](cli.md), and the tutorials in [the index](index.md).
 
@@ -128,7 +128,7 @@ def _describe(tree: ast.Module, name: str, lines=None, depth=0) -> tuple[str, st
 
 
 #: module order on the page: what a user calls first, then the layers below it
-ORDER = ("hyde_bsdf", "hyde_bsdf.render", "hyde_bsdf.fit", "hyde_bsdf.mom", "hyde_bsdf.mitsuba",
+ORDER = ("hyde_bsdf", "hyde_bsdf.render", "hyde_bsdf.inverse", "hyde_bsdf.fit", "hyde_bsdf.mom", "hyde_bsdf.mitsuba",
          "hyde_bsdf.model", "hyde_bsdf.report", "hyde_bsdf.atomic", "hyde_bsdf.cli")
 
 

@@ -1,0 +1,67 @@
+"""Inverse rendering: BSDF parameters -- one global value or per-texel maps -- from Stokes images.
+
+It uses the renderer and produces parameter maps, so it sits right of ``render`` (may import
+``hyde_bsdf.model``, ``mitsuba``, ``fit``, ``render``; only ``report`` imports it).  Modules:
+
+``loss``          the Stokes-image loss (:class:`StokesLoss`), its mask, the map regulariser
+``scalar``        one global rms_slope, eta, k from one image (:func:`invert`; spectral polarized)
+``observations``  :class:`Observation`, texture keys, Stokes renders, the UV-coverage pass, the plane scene
+``maps``          per-texel maps (:func:`invert_maps`)
+``cli``           ``hyde-bsdf invert``
+
+Every public name of these modules is importable from ``hyde_bsdf.inverse`` itself.
+
+Texture-valued parameters (SVBRDF, :func:`invert_maps`): a scene whose BSDF takes
+``<texture name="alpha" type="bitmap">`` (Beckmann alpha; hyde and roughconductor alike,
+key ``...bsdf.alpha.data``), ``rms_slope`` (``rms_slope.data``) or index textures
+(``eta.data``, ``k.data``; constants ``eta.value``/``k.value`` are fitted as one number) is
+matched to one or more reference Stokes images (:class:`Observation`: scene, sensor, reference,
+mask, weight; several views and lights), per texel, with Adam on log(value), the same Stokes loss
+per image and an optional smoothness regulariser (:func:`smoothness`, weight lambda documented
+there).  :func:`texel_coverage` finds the texels the images see (a UV-coverage pass), over which
+errors are reported.  The validation (validation/svbrdf_inverse.py) and the benchmark
+(benchmarks/bench_inverse.py) use :data:`MAP_VARIANT` = ``llvm_ad_mono_polarized`` and
+:func:`plane_scene_dict` (a textured plane, 3 views in one ``batch`` sensor, one point light per
+scene).  Per-texel gradients: the rendering depends on exactly the texels the coverage pass finds
+(tests/test_inverse_maps.py: dL/dalpha != 0 there and only there).
+
+Command line (errors: one line on stderr, exit 2; Ctrl-C: exit 130; progress per iteration on
+stderr; output paths and memory checked before any rendering; outputs written atomically)::
+
+    hyde-bsdf invert [--scene SCENE.xml [--target PREFIX] | (built-in sphere)] [--truth rms_slope=0.3,eta=1.5,k=3]
+                     [--reference REF.exr] [--start rms_slope=0.6,eta=3,k=6]
+                     [--fit rms_slope,eta,k] [--loss stokes|s0] [--iterations 200]
+                     [--spp 16] [--spp-ref 512] [--res 64] [--lr 0.05] [--seed 0] [-o OUTDIR]
+
+writes OUTDIR/invert_history.csv and OUTDIR/invert.png (loss and parameter trajectories).
+Texture mode::
+
+    hyde-bsdf invert --maps [--scene S1.xml --reference R1.exr [--mask M1.png] ...
+                     | (built-in plane, 3 views x 2 lights, truth map of --map-size 32)]
+                     [--fit alpha[,eta,k]] [--start alpha=0.3] [--regularizer tv|l2 --weight 0.1]
+                     [--iterations 100] [--spp 4] [--spp-ref 64] [--res 80] [--sensor 0] [-o OUTDIR]
+
+writes OUTDIR/invert_maps_history.csv, OUTDIR/NAME.npy and NAME.exr per fitted map (rows along
+v; load the EXR as a ``bitmap`` texture with ``raw`` true) and OUTDIR/invert_maps.png.
+"""
+
+from hyde_bsdf.inverse._common import Y_WEIGHTS, _log  # noqa: F401  (_log: the scripts' progress lines)
+from hyde_bsdf.inverse.cli import (AD_BYTES_FIXED, AD_BYTES_PER_SAMPLE, check_memory, cli_main, estimate_memory)
+from hyde_bsdf.inverse.loss import StokesLoss, channel_names, interior_mask, smoothness, stokes_images
+from hyde_bsdf.inverse.maps import MapInversionResult, invert_maps
+from hyde_bsdf.inverse.observations import _obs_mask  # noqa: F401
+from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, VIEW_AZIMUTHS, Observation,
+                                            example_maps, film_channels, map_keys, plane_scene_dict,
+                                            render_stokes, render_stokes_np, texel_coverage)
+from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, VARIANT, InversionResult,
+                                      finite_difference_gradient, invert, load_scene, loss_and_gradient,
+                                      parameter_keys, plot_history, prepare, render_reference, scene_dict,
+                                      write_history)
+
+__all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
+           "parameter_keys", "stokes_images", "channel_names", "interior_mask", "StokesLoss", "render_reference",
+           "InversionResult", "invert", "loss_and_gradient", "finite_difference_gradient",
+           "plot_history", "write_history", "MAP_PARAMETERS", "MAP_VARIANT", "map_keys", "film_channels",
+           "render_stokes", "render_stokes_np", "Observation", "texel_coverage", "smoothness",
+           "MapInversionResult", "invert_maps", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",
+           "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "Y_WEIGHTS", "cli_main"]

@@ -1,0 +1,439 @@
+"""``hyde-bsdf invert``: the command line of scalar and texture-valued (``--maps``) inversion.
+
+May import: every module of ``hyde_bsdf.inverse``.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from hyde_bsdf.atomic import atomic_open, atomic_path, check_output_path
+from hyde_bsdf.errors import UsageError
+from hyde_bsdf.inverse._common import Y_WEIGHTS, _log
+from hyde_bsdf.inverse.loss import StokesLoss
+from hyde_bsdf.inverse.maps import invert_maps
+from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, Observation, example_maps,
+                                            map_keys, plane_scene_dict, render_stokes_np)
+from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, invert, load_scene, parameter_keys,
+                                      plot_history, prepare, render_reference, write_history)
+
+__all__ = ["cli_main", "build_parser", "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE"]
+
+
+#: peak memory of one differentiable render (reverse mode through ``path``): a fixed part plus
+#: bytes per sample (measured: 1.4-1.5 kB/sample spectral polarized sphere at 64-128 px, 16 spp;
+#: 0.8-1.2 kB mono polarized plane, 3 x 80-160 px, 4 spp; the figure below has a margin)
+AD_BYTES_FIXED = 400 * 2**20
+AD_BYTES_PER_SAMPLE = 2048
+EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
+
+
+def estimate_memory(width: int, height: int, spp: int) -> int:
+    """Estimated peak memory (bytes) of one optimisation step on a ``width`` x ``height`` film."""
+    return AD_BYTES_FIXED + AD_BYTES_PER_SAMPLE * int(width) * int(height) * int(spp)
+
+
+def _mem_available():
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def check_memory(width: int, height: int, spp: int, hint: str) -> int:
+    """UsageError when :func:`estimate_memory` exceeds the available memory; returns the estimate."""
+    need, avail = estimate_memory(width, height, spp), _mem_available()
+    if avail is not None and need > avail:
+        raise UsageError(f"one optimisation step on the {width}x{height} film at {spp} spp needs about "
+                         f"{need / 2**30:.1f} GiB ({AD_BYTES_PER_SAMPLE} B per sample + "
+                         f"{AD_BYTES_FIXED // 2**20} MiB), but only {avail / 2**30:.1f} GiB is available; "
+                         f"lower {hint}")
+    return need
+
+
+def _one_line(exc) -> str:
+    return " | ".join(p.strip() for p in str(exc).strip().splitlines() if p.strip())
+
+
+def _parse_values(text, what, names=PARAMETERS, ranges=None):
+    ranges = ranges or RANGES
+    out = {}
+    for item in filter(None, (s.strip() for s in text.split(","))):
+        if "=" not in item:
+            raise UsageError(f"{what}: expected name=value pairs like "
+                             f"{','.join(f'{n}=0.3' for n in names[:2])}; got {item!r}")
+        name, value = (s.strip() for s in item.split("=", 1))
+        if name not in names:
+            raise UsageError(f"{what}: unknown parameter {name!r}; use {', '.join(names)}")
+        try:
+            v = float(value)
+        except ValueError:
+            raise UsageError(f"{what}: {name}={value!r} is not a number") from None
+        lo, hi = ranges[name]
+        if not (math.isfinite(v) and lo <= v <= hi):
+            raise UsageError(f"{what}: {name}={v:g} is outside the accepted range [{lo:g}, {hi:g}]")
+        out[name] = v
+    return out
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a bad argument is one UsageError line (not usage text + exit)."""
+
+    def error(self, message):
+        raise UsageError(message)
+
+
+def build_parser():
+    ap = _Parser(
+        prog="hyde-bsdf invert",
+        description="Recover the hyde BSDF's roughness and index from Stokes images by differentiable "
+                    "rendering.  Scalar mode (default): rms_slope, eta, k (Mitsuba n + ik; the paper's "
+                    "eta = n - jk, same numbers) from one image (llvm_ad_spectral_polarized).  --maps: a "
+                    "texture-valued roughness (alpha or rms_slope bitmap), optionally index maps, from "
+                    "one or more images (llvm_ad_mono_polarized).")
+    ap.add_argument("--maps", action="store_true", help="texture-valued mode: fit per-texel maps")
+    ap.add_argument("--scene", action="append", default=None,
+                    help="Mitsuba XML scene holding the BSDF (repeat for several scenes, e.g. one per light; "
+                         "default: the built-in sphere (scalar) or textured plane, 3 views x 2 lights (--maps))")
+    ap.add_argument("--reference", action="append", default=None,
+                    help="reference Stokes EXR of the matching --scene (hyde-bsdf render output; same film "
+                         "size); default: render one at --truth (built-in truth map with --maps)")
+    ap.add_argument("--mask", action="append", default=None,
+                    help="--maps: PNG or .npy of the pixels to use for the matching --reference (non-zero = use)")
+    ap.add_argument("--sensor", type=int, default=0, help="index of the sensor of each --scene (default 0)")
+    ap.add_argument("--target", default=None, help="key prefix of the BSDF to recover when the scene has "
+                    "several, e.g. sphere.bsdf (mi.traverse names)")
+    ap.add_argument("--truth", default=None, help="scalar mode: parameters of the reference rendering "
+                    "(default rms_slope=0.3,eta=1.5,k=3); errors are reported against them")
+    ap.add_argument("--start", default=None, help="start values, name=value,... (default rms_slope=0.6,"
+                    "eta=3,k=6; --maps: alpha=0.3, a constant map)")
+    ap.add_argument("--fit", default=None, help="parameters to optimise (default rms_slope,eta,k; --maps: alpha; "
+                    "--maps accepts alpha|rms_slope, eta, k)")
+    ap.add_argument("--loss", default="stokes", choices=("stokes", "s0"),
+                    help="stokes: all four Stokes components; s0: intensity only")
+    ap.add_argument("--iterations", type=int, default=None, help="Adam iterations (default 200; --maps 100)")
+    ap.add_argument("--spp", type=int, default=None, help="samples per pixel and iteration (default 16; --maps 4)")
+    ap.add_argument("--spp-ref", type=int, default=None, help="samples per pixel of a rendered reference "
+                    "(default 512; --maps 64)")
+    ap.add_argument("--res", type=int, default=None, help="image size of the built-in scene (default 64; "
+                    "--maps: 80 per view)")
+    ap.add_argument("--map-size", type=int, default=32, help="--maps, built-in scene: texels per side of the "
+                    "truth map (default 32)")
+    ap.add_argument("--lr", type=float, default=0.05, help="Adam learning rate (on log parameters)")
+    ap.add_argument("--regularizer", default=None, choices=("tv", "l2"),
+                    help="--maps: smoothness term on each fitted map (total variation or squared gradient)")
+    ap.add_argument("--weight", type=float, default=0.0, help="--maps: regulariser weight lambda (loss units "
+                    "per map unit (tv) or squared map unit (l2); 0.1 mild, >= 1 flattens; default 0)")
+    ap.add_argument("--seed", type=int, default=0, help="random seed (integer >= 0)")
+    ap.add_argument("-o", "--output", default="out/invert", help="output folder (default out/invert)")
+    return ap
+
+
+def _check_args(args):
+    maps = args.maps
+    d = {"iterations": 100 if maps else 200, "spp": 4 if maps else 16, "spp_ref": 64 if maps else 512,
+         "res": 80 if maps else 64}
+    for k, v in d.items():
+        if getattr(args, k) is None:
+            setattr(args, k, v)
+    for flag, v, lo in (("--iterations", args.iterations, 1), ("--spp", args.spp, 1),
+                        ("--spp-ref", args.spp_ref, 1), ("--res", args.res, 1), ("--seed", args.seed, 0),
+                        ("--sensor", args.sensor, 0), ("--map-size", args.map_size, 2)):
+        if v < lo:
+            raise UsageError(f"{flag} must be an integer >= {lo}, got {v}")
+    if args.seed + (args.iterations + 1) * 8 >= 2**31:
+        raise UsageError(f"--seed must be < {2**31 - (args.iterations + 1) * 8} (seeds of the later iterations "
+                         f"are --seed + 1 + iteration x images), got {args.seed}")
+    if not (math.isfinite(args.lr) and args.lr > 0):
+        raise UsageError(f"--lr must be a finite number > 0, got {args.lr}")
+    if not (math.isfinite(args.weight) and args.weight >= 0):
+        raise UsageError(f"--weight must be a finite number >= 0, got {args.weight}")
+    if not maps and (args.regularizer or args.weight or args.mask):
+        raise UsageError("--regularizer, --weight and --mask need --maps (they act on texture maps)")
+    scenes, refs, masks = args.scene or [], args.reference or [], args.mask or []
+    if refs and len(refs) != max(1, len(scenes)):
+        raise UsageError(f"give one --reference per --scene: {len(scenes)} --scene, {len(refs)} --reference")
+    if maps and scenes and not refs:
+        raise UsageError("--maps with --scene needs a --reference per scene (the truth maps of a user scene "
+                         "are unknown)")
+    if not maps and len(scenes) > 1:
+        raise UsageError("scalar mode takes one --scene; several scenes need --maps")
+    if masks and len(masks) != len(refs):
+        raise UsageError(f"give one --mask per --reference: {len(refs)} --reference, {len(masks)} --mask")
+    for path in scenes + refs + masks:
+        if not Path(path).is_file():
+            raise UsageError(f"{path!r} is not an existing file")
+    if args.truth is not None and refs:
+        pass                                   # errors are reported against it
+    if maps and args.truth is not None:
+        raise UsageError("--truth is for scalar mode; --maps renders its references from the built-in "
+                         "truth map or reads --reference")
+
+
+def _check_out(path):
+    """An output file checked writable before any long work (a UsageError naming -o otherwise)."""
+    try:
+        return check_output_path(path, "-o/--output file")
+    except ValueError as exc:
+        raise UsageError(_one_line(exc)) from None
+
+
+def _read_reference(path, width, height, what="--reference"):
+    """Luminance Stokes images (4, H, W) of a Stokes EXR, checked against the film size and for NaN."""
+    from hyde_bsdf.render.stokes_io import read_stokes_exr
+
+    try:
+        st = read_stokes_exr(path)
+    except (ValueError, OSError, RuntimeError) as exc:
+        raise UsageError(f"{what} {str(path)!r}: {_one_line(exc)}") from None
+    ref = np.array([np.asarray(st[s], np.float64) @ np.array(Y_WEIGHTS) for s in ("S0", "S1", "S2", "S3")])
+    h, w = ref.shape[1:]
+    if (w, h) != (width, height):
+        raise UsageError(f"{what} {str(path)!r} is {w}x{h} pixels but the scene's film is {width}x{height}: "
+                         f"render the reference with the same scene and film")
+    bad = int((~np.isfinite(ref)).any(axis=0).sum())
+    if bad:
+        raise UsageError(f"{what} {str(path)!r} has {bad} pixel(s) with NaN or infinite Stokes values; "
+                         f"the loss needs finite references")
+    return ref
+
+
+def _read_mask(path, shape):
+    path = Path(path)
+    try:
+        if path.suffix.lower() == ".npy":
+            m = np.load(path)
+        else:
+            import matplotlib.image as mpimg
+
+            m = mpimg.imread(str(path))
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"--mask {str(path)!r}: cannot read it ({_one_line(exc)}); give a PNG or .npy") from None
+    m = np.asarray(m)
+    if m.ndim == 3:
+        m = m[..., :3].max(axis=2)
+    if m.shape != tuple(shape):
+        raise UsageError(f"--mask {str(path)!r} is {m.shape[1]}x{m.shape[0]} pixels but the film is "
+                         f"{shape[1]}x{shape[0]}")
+    return m != 0
+
+
+def _load_user_scene(path):
+    try:
+        return load_scene(path)
+    except (RuntimeError, ValueError) as exc:
+        raise UsageError(f"--scene {str(path)!r}: Mitsuba could not load it: {_one_line(exc)[:400]}") from None
+
+
+def cli_main(argv=None) -> int:
+    """``hyde-bsdf invert``: one-line errors (exit 2), Ctrl-C exit 130, progress on stderr."""
+    try:
+        return _cli(argv)
+    except KeyboardInterrupt:
+        print("hyde-bsdf invert: interrupted (no output written for this run)", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except UsageError as exc:
+        print(f"hyde-bsdf invert: error: {_one_line(exc)}", file=sys.stderr)
+        return EXIT_USAGE
+    except FloatingPointError as exc:
+        print(f"hyde-bsdf invert: error: {_one_line(exc)} (try a smaller --lr or more --spp)", file=sys.stderr)
+        return 1
+    except RuntimeError as exc:
+        cause = exc
+        while cause is not None:               # Ctrl-C inside mi.render comes back wrapped
+            if isinstance(cause, KeyboardInterrupt):
+                print("hyde-bsdf invert: interrupted (no output written for this run)", file=sys.stderr)
+                return EXIT_INTERRUPTED
+            cause = cause.__cause__ or cause.__context__
+        raise
+
+
+def _cli(argv):
+    args = build_parser().parse_args(argv)
+    _check_args(args)
+    if args.maps:
+        return _cli_maps(args)
+    truth = {**TRUTH, **_parse_values(args.truth or "", "--truth")}
+    start = {**START, **_parse_values(args.start or "", "--start")}
+    fit = tuple(s.strip() for s in (args.fit or ",".join(PARAMETERS)).split(",") if s.strip())
+    bad = [p for p in fit if p not in PARAMETERS]
+    if bad or not fit:
+        raise UsageError(f"--fit must list parameters from {', '.join(PARAMETERS)}, got {args.fit!r}")
+    out = Path(args.output)
+    paths = [_check_out(out / name) for name in ("invert_history.csv", "invert.png")]
+    try:
+        prepare()
+    except RuntimeError as exc:
+        raise UsageError(_one_line(exc)) from None
+    import mitsuba as mi
+
+    scene = (load_scene(None, res=args.res, spp=args.spp) if not args.scene else _load_user_scene(args.scene[0]))
+    try:
+        parameter_keys(mi.traverse(scene), PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
+    except ValueError as exc:
+        raise UsageError(_one_line(exc)) from None
+    W, H = scene.sensors()[0].film().crop_size()
+    check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
+    if args.reference:
+        ref = _read_reference(args.reference[0], W, H)
+        truth_known = args.truth is not None
+    else:
+        _log(f"rendering the reference at {truth} ({args.spp_ref} spp)")
+        ref = render_reference(scene, truth, args.spp_ref, seed=args.seed, prefix=args.target)
+        truth_known = True
+    try:
+        loss_fn = StokesLoss(ref, components=args.loss)
+    except ValueError as exc:
+        raise UsageError(f"--reference: {_one_line(exc)}") from None
+    res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
+                 seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
+    write_history(res, paths[0])
+    plot_history({args.loss: res}, paths[1],
+                 title=f"hyde-bsdf invert ({args.loss} loss, {args.iterations} it, {args.spp} spp)")
+    print(f"loss: {args.loss}; {args.iterations} iterations, {res.seconds_per_iteration:.3f} s/iteration "
+          f"(first {res.first_iteration_seconds:.1f} s incl. JIT)")
+    for p in PARAMETERS:
+        line = f"  {p:9s} start {start[p]:.4g} -> {res.final[p]:.5g}"
+        if res.truth and p in res.fitted:
+            line += f"   truth {truth[p]:.4g}, error {100 * (res.final[p] / truth[p] - 1):+.2f} %"
+        elif p not in res.fitted:
+            line += " (fixed)"
+        print(line)
+    print(f"wrote {paths[0]} and {paths[1]}")
+    return 0
+
+
+def _cli_maps(args):
+    names = tuple(MAP_PARAMETERS)
+    ranges = {n: MAP_PARAMETERS[n][1] for n in names}
+    fit = tuple(s.strip() for s in (args.fit or "alpha").split(",") if s.strip())
+    bad = [p for p in fit if p not in names]
+    if bad or not fit:
+        raise UsageError(f"--fit must list parameters from {', '.join(names)}, got {args.fit!r}")
+    if "alpha" in fit and "rms_slope" in fit:
+        raise UsageError("--fit: alpha and rms_slope are the same roughness; fit one of them")
+    start = {n: 0.3 for n in fit if n in ("alpha", "rms_slope")}
+    start.update(_parse_values(args.start or "", "--start", names, ranges))
+    missing = [n for n in fit if n not in start]
+    if missing:
+        raise UsageError(f"--start must give a start value for {', '.join(missing)} (e.g. --start "
+                         f"{','.join(f'{n}=1.5' for n in missing)})")
+    out = Path(args.output)
+    outputs = {"history": "invert_maps_history.csv", "png": "invert_maps.png"}
+    for n in fit:
+        outputs[n + ".npy"] = f"{n}.npy"
+        outputs[n + ".exr"] = f"{n}.exr"
+    paths = {k: _check_out(out / v) for k, v in outputs.items()}
+    try:
+        prepare(MAP_VARIANT)
+    except RuntimeError as exc:
+        raise UsageError(_one_line(exc)) from None
+    import mitsuba as mi
+
+    truth = None
+    if args.scene:
+        scenes = [_load_user_scene(p) for p in args.scene]
+    else:
+        truth_map = example_maps(args.map_size)
+        truth = {"alpha": truth_map} if fit == ("alpha",) else None
+        if fit != ("alpha",):
+            raise UsageError("the built-in --maps scene has a known index (eta 1.5, k 3) and an alpha map: "
+                             "--fit alpha (give --scene/--reference for other fits)")
+        scenes = [mi.load_dict(plane_scene_dict(truth_map, light=j, res=args.res, spp=args.spp))
+                  for j in range(len(LIGHTS))]
+    observations = []
+    for i, scene in enumerate(scenes):
+        if args.sensor >= len(scene.sensors()):
+            raise UsageError(f"--sensor {args.sensor}: scene {i} has {len(scene.sensors())} sensor(s)")
+        try:
+            map_keys(mi.traverse(scene), fit, args.target)
+        except ValueError as exc:
+            raise UsageError(f"scene {i}: {_one_line(exc)}") from None
+        W, H = scene.sensors()[args.sensor].film().crop_size()
+        check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
+        if args.reference:
+            ref = _read_reference(args.reference[i], W, H)
+        else:
+            _log(f"rendering reference {i + 1}/{len(scenes)} ({args.spp_ref} spp)")
+            ref = render_stokes_np(scene, args.sensor, args.spp_ref, seed=args.seed)
+        mask = _read_mask(args.mask[i], (H, W)) if args.mask else None
+        observations.append(Observation(scene, ref, sensor=args.sensor, mask=mask))
+    try:
+        res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
+                          seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
+                          truth=truth, prefix=args.target)
+    except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
+        raise UsageError(_one_line(exc)) from None
+    _write_map_outputs(res, paths, args)
+    print(f"loss: {args.loss}; {args.iterations} iterations over {len(observations)} image(s), "
+          f"{res.seconds_per_iteration:.3f} s/iteration (first {res.first_iteration_seconds:.1f} s incl. JIT)")
+    for n in fit:
+        v = np.asarray(res.final[n])
+        line = f"  {n:9s} start {start[n]:.4g} -> "
+        line += (f"map {v.shape[1]}x{v.shape[0]}, {v.min():.4g}..{v.max():.4g} (median {np.median(v):.4g})"
+                 if v.ndim == 2 else f"{float(v):.5g}")
+        if truth and n in truth:
+            e = res.texel_errors(n)
+            line += (f"; per-texel error over the {int(res.seen.sum())} seen texels: median "
+                     f"{100 * np.median(e):.2f} %, 90th percentile {100 * np.percentile(e, 90):.2f} %")
+        print(line)
+    if res.seen is not None:
+        print(f"  texels seen by the images: {int(res.seen.sum())} of {res.seen.size}")
+    print("wrote " + ", ".join(str(p) for p in paths.values()))
+    return 0
+
+
+def _write_map_outputs(res, paths, args):
+    import mitsuba as mi
+
+    with atomic_open(paths["history"], "w", newline="") as fh:
+        w = csv.writer(fh)
+        cols = ["iteration", "loss", "data_loss", "regularizer", "seconds"]
+        extra = [k for k in res.history[0] if k.endswith("_error")]
+        w.writerow(cols + extra)
+        for h in res.history:
+            w.writerow([h["iteration"]] + [f"{h[c]:.6e}" for c in cols[1:4]] + [f"{h['seconds']:.3f}"]
+                       + [f"{h[c]:.5f}" for c in extra])
+    for n in res.fitted:
+        v = np.asarray(res.final[n], np.float32)
+        with atomic_path(paths[n + ".npy"]) as tmp:
+            with open(tmp, "wb") as fh:
+                np.save(fh, v)
+        with atomic_path(paths[n + ".exr"]) as tmp:
+            mi.Bitmap(v[..., None] if v.ndim == 2 else np.full((1, 1, 1), v, np.float32)).write(str(tmp))
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    maps = [n for n in res.fitted if np.ndim(res.final[n]) == 2]
+    cols = 1 + sum(2 if res.truth and n in res.truth else 1 for n in maps)
+    fig, axes = plt.subplots(1, max(cols, 2), figsize=(4.2 * max(cols, 2), 3.6), layout="constrained")
+    c = 0
+    for n in maps:
+        im = axes[c].imshow(res.final[n], origin="lower", extent=(0, 1, 0, 1))
+        fig.colorbar(im, ax=axes[c], shrink=0.8)
+        axes[c].set_title(f"recovered {n}")
+        c += 1
+        if res.truth and n in res.truth:
+            rel = 100 * (res.final[n] / res.truth[n] - 1)
+            if res.seen is not None:
+                rel = np.where(res.seen, rel, np.nan)
+            im = axes[c].imshow(rel, origin="lower", extent=(0, 1, 0, 1), cmap="RdBu_r", vmin=-15, vmax=15)
+            fig.colorbar(im, ax=axes[c], shrink=0.8)
+            axes[c].set_title(f"{n} / truth - 1 (%)")
+            c += 1
+    axes[c].semilogy([h["iteration"] for h in res.history], [h["loss"] for h in res.history])
+    axes[c].set_xlabel("iteration")
+    axes[c].set_title(f"loss ({args.loss})")
+    with atomic_path(paths["png"]) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
+    plt.close(fig)

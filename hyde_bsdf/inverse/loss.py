@@ -1,0 +1,133 @@
+"""The Stokes-image loss of inverse rendering, its mask, and the smoothness regulariser of maps.
+
+Loss (``components="stokes"``, the default)::
+
+    L = <m (S0 - R0)^2> / <m R0^2>  +  <m sum_{c=1..3} (Sc - Rc)^2> / <m sum_{c=1..3} Rc^2>
+
+with S, R the luminance (Y = 0.2126 R + 0.7152 G + 0.0722 B) of each Stokes
+component of the rendering and the reference, <.> the image mean and m a mask of
+the pixels whose footprint lies entirely on the object (its silhouette pixels
+are partly covered and carry the largest sampling noise; they say nothing about
+the material).  ``components="s0"`` keeps the first term only (an ordinary
+intensity image).  The polarization terms share one normalization, so the loss
+compares all of them in the same radiometric units.  With unpolarized light
+sources one reflection gives S3 = 0 (Eq. 11: the facet Mueller matrix maps an
+unpolarized Stokes vector to (M00, M01, 0, 0)); the S3 term then only has to
+stay zero.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hyde_bsdf.inverse._common import Y_WEIGHTS
+
+__all__ = ["stokes_images", "channel_names", "interior_mask", "StokesLoss", "smoothness"]
+
+
+def stokes_images(img, channel_names):
+    """Luminance S0..S3 images (4 tensors of shape (H, W), differentiable) of a ``stokes`` render."""
+    index = {n: i for i, n in enumerate(channel_names)}
+    out = []
+    for s in ("S0", "S1", "S2", "S3"):
+        out.append(sum(w * img[:, :, index[f"{s}.{c}"]] for c, w in zip("RGB", Y_WEIGHTS)))
+    return out
+
+
+def channel_names(scene):
+    """The film's channel names (after a first render)."""
+    return [f.name for f in scene.sensors()[0].film().bitmap().struct_()]
+
+
+def interior_mask(s0) -> np.ndarray:
+    """Pixels lit and away from the silhouette: S0 > 0 in the pixel and its 4 neighbours."""
+    lit = np.asarray(s0) > 0
+    mask = lit.copy()
+    for axis in (0, 1):
+        for shift in (1, -1):
+            rolled = np.roll(lit, shift, axis=axis)
+            edge = [slice(None)] * 2
+            edge[axis] = 0 if shift == 1 else -1
+            rolled[tuple(edge)] = False          # np.roll wraps around: the border has no neighbour
+            mask &= rolled
+    return mask
+
+
+class StokesLoss:
+    """The loss of the module docstring against reference luminance Stokes images ``ref`` (4, H, W)."""
+
+    def __init__(self, ref, mask=None, components: str = "stokes"):
+        import mitsuba as mi
+
+        if components not in ("stokes", "s0"):
+            raise ValueError(f"components must be 'stokes' or 's0', got {components!r}")
+        ref = np.asarray(ref, dtype=np.float64)
+        if mask is None:
+            mask = interior_mask(ref[0])
+        if not mask.any():
+            raise ValueError("the reference image has no lit interior pixel: nothing to fit")
+        self.components = components
+        self.mask_np = mask
+        m = mask.astype(np.float64)
+        self.norm0 = float((m * ref[0] ** 2).mean())
+        self.normp = float((m * (ref[1:] ** 2).sum(0)).mean())
+        if self.normp <= 0 and components == "stokes":
+            raise ValueError("the reference has no polarization (S1 = S2 = S3 = 0): use components='s0'")
+        self.ref = [mi.TensorXf(r.astype(np.float32)) for r in ref]
+        self.mask = mi.TensorXf(m.astype(np.float32))
+        self.ref_np = ref
+
+    def __call__(self, S, tensors=None):
+        """Differentiable loss of luminance Stokes images ``S`` (list of 4 tensors).
+
+        ``tensors``: this loss's own (reference list, mask) (:attr:`tensors`) passed in explicitly,
+        as a ``dr.freeze`` function needs every array it reads among its inputs.
+        """
+        import drjit as dr
+
+        ref, mask = self.tensors if tensors is None else tensors
+        loss = dr.mean(mask * dr.square(S[0] - ref[0]), axis=None) / self.norm0
+        if self.components == "stokes":
+            pol = sum(dr.square(S[c] - ref[c]) for c in (1, 2, 3))
+            loss = loss + dr.mean(mask * pol, axis=None) / self.normp
+        return loss
+
+    @property
+    def tensors(self):
+        """(reference tensors S0..S3, mask tensor) as Dr.Jit arrays."""
+        return self.ref, self.mask
+
+    def numpy(self, S) -> float:
+        """The same loss in float64 from NumPy images (4, H, W) (finite differences)."""
+        S = np.asarray(S, dtype=np.float64)
+        m = self.mask_np.astype(np.float64)
+        loss = (m * (S[0] - self.ref_np[0]) ** 2).mean() / self.norm0
+        if self.components == "stokes":
+            loss += (m * ((S[1:] - self.ref_np[1:]) ** 2).sum(0)).mean() / self.normp
+        return float(loss)
+
+
+
+def smoothness(x, kind: str = "tv", eps: float = 1e-3):
+    """Mean over the horizontal and vertical neighbour pairs of a map ``x`` (TensorXf (H, W, 1)).
+
+    ``kind="tv"``: sqrt(d^2 + eps^2) - eps (total variation, smoothed at |d| < eps so it is
+    differentiable; keeps sharp edges: a step costs its height once).  ``kind="l2"``: d^2
+    (squared gradient; smooths noise and rounds edges).  d is the difference of the map's values
+    (for alpha: dimensionless), so the regulariser has the units of d (tv) or d^2 (l2).
+    """
+    import drjit as dr
+
+    H, W = x.shape[0], x.shape[1]
+    terms = []
+    if W > 1:
+        terms.append((x[:, 1:, :] - x[:, :-1, :], H * (W - 1)))
+    if H > 1:
+        terms.append((x[1:, :, :] - x[:-1, :, :], (H - 1) * W))
+    if kind not in ("tv", "l2"):
+        raise ValueError(f"regularizer must be 'tv' or 'l2', got {kind!r}")
+    total, n = 0.0, 0
+    for d, count in terms:
+        pen = dr.sqrt(dr.square(d) + eps * eps) - eps if kind == "tv" else dr.square(d)
+        total = total + dr.sum(pen, axis=None)
+        n += count
+    return total / max(n, 1)

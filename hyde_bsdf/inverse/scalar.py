@@ -1,0 +1,383 @@
+"""Differentiable inverse rendering of one global roughness and index (scalars) from a Stokes image.
+
+A reference Stokes image of a scene with the ``hyde`` BSDF is matched by a
+rendering whose BSDF parameters (``rms_slope``, ``eta``, ``k``; any subset) are
+optimized with Mitsuba's ``mi.ad.Adam`` through the ``stokes`` integrator around
+``path`` (``prb`` inside ``stokes`` gives the same gradients, bare ``prb`` fails in
+polarized variants; ``path`` differentiates through ``mi.render(scene, params, spp=..., seed=...)`` and
+``dr.backward``) in ``llvm_ad_spectral_polarized``, with the loss of :mod:`hyde_bsdf.inverse.loss`.
+
+Parameters are optimized as their logarithms (so they stay positive and one
+learning rate fits all), clamped to the plugin's accepted range, with the
+learning rate decaying geometrically over the last quarter.  Each iteration renders
+with a new seed (``seed + 1 + iteration``); the reference uses ``seed`` and
+``spp_ref`` samples.
+
+Index convention: the plugin's ``eta``, ``k`` are Mitsuba's n + ik; the paper's
+eta = n - jk describes the same material with the same numbers.
+
+May import: ``hyde_bsdf.inverse.loss``, ``hyde_bsdf.inverse._common``, and the folders left of ``inverse``.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hyde_bsdf.atomic import atomic_open, atomic_path
+from hyde_bsdf.inverse._common import SQRT2, _log
+from hyde_bsdf.inverse.loss import StokesLoss, channel_names, stokes_images
+
+__all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
+           "parameter_keys", "render_reference", "InversionResult", "invert", "loss_and_gradient",
+           "finite_difference_gradient", "plot_history", "write_history"]
+
+VARIANT = "llvm_ad_spectral_polarized"
+#: optimizable BSDF parameters (the plugin's names)
+PARAMETERS = ("rms_slope", "eta", "k")
+#: ground truth and a start far from it used by the scripts and the CLI by default
+TRUTH = {"rms_slope": 0.3, "eta": 1.5, "k": 3.0}
+START = {"rms_slope": 0.6, "eta": 3.0, "k": 6.0}
+#: the plugin's DHR texture range for rms_slope (diffuse on); eta, k kept in a sane box
+RANGES = {"rms_slope": (0.011, 2.9), "eta": (0.02, 50.0), "k": (0.0, 50.0)}
+
+
+def prepare(variant: str = VARIANT) -> str:
+    """Select the (LLVM-checked) variant and register ``hyde``; returns the variant set."""
+    import mitsuba as mi
+
+    from hyde_bsdf import register
+    from hyde_bsdf.mitsuba.variants import set_variant
+
+    if mi.variant() != variant:
+        variant = set_variant(variant)
+    register()
+    if not mi.variant().endswith("_polarized") or "_ad_" not in mi.variant():
+        raise RuntimeError(f"inverse rendering needs an AD polarized variant; got {mi.variant()!r} "
+                           f"(is libLLVM >= 16 installed?)")
+    return mi.variant()
+
+
+def scene_dict(*, bsdf: str = "hyde", rms_slope: float = 0.3, eta: float = 1.5, k: float = 3.0,
+               res: int = 64, spp: int = 16, diffuse: str = "paper", sampler: str = "multijitter",
+               lighting: str = "points", phase_deg: float = 120.0) -> dict:
+    """The inverse-rendering scene (as scenes/inverse.xml) as a ``mi.load_dict`` dict.
+
+    ``lighting="points"``: two point lights (front and back; facet angles beta ~ 10-70 deg
+    over the image, as scenes/inverse.xml).  ``lighting="directional"``: one distant light
+    at ``phase_deg`` from the viewing direction, so that every pixel sees nearly the same
+    facet angle beta = phase_deg / 2 (the identifiability study: S0 then measures one
+    reflectance value, too little for two unknowns n, k).
+
+    ``bsdf="roughconductor"`` swaps in Mitsuba's conductor with alpha = sqrt(2) rms_slope
+    (Beckmann, the same eta, k) for comparisons.  Shape id ``sphere``.
+    """
+    import mitsuba as mi
+
+    if bsdf == "hyde":
+        material = {"type": "hyde", "rms_slope": float(rms_slope), "eta": float(eta), "k": float(k),
+                    "diffuse": diffuse}
+    elif bsdf == "roughconductor":
+        material = {"type": "roughconductor", "distribution": "beckmann",
+                    "alpha": SQRT2 * float(rms_slope), "eta": float(eta), "k": float(k)}
+    else:
+        raise ValueError(f"bsdf must be 'hyde' or 'roughconductor', got {bsdf!r}")
+    if lighting == "points":
+        lights = {"light_front": {"type": "point", "position": [-1.5, 0.8, 3.0],
+                                  "intensity": {"type": "spectrum", "value": 15.0}},
+                  "light_back": {"type": "point", "position": [2.5, -0.3, -1.2],
+                                 "intensity": {"type": "spectrum", "value": 25.0}}}
+    elif lighting == "directional":
+        ph = math.radians(float(phase_deg))
+        lights = {"light": {"type": "directional", "direction": [-math.sin(ph), 0.0, -math.cos(ph)],
+                            "irradiance": {"type": "spectrum", "value": 3.0}}}
+    else:
+        raise ValueError(f"lighting must be 'points' or 'directional', got {lighting!r}")
+    return {
+        "type": "scene",
+        "integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": 2}},
+        "sensor": {"type": "perspective", "fov": 20,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 6], target=[0, 0, 0],
+                                                              up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": int(res), "height": int(res),
+                            "rfilter": {"type": "box"}},
+                   "sampler": {"type": sampler, "sample_count": int(spp)}},
+        "sphere": {"type": "sphere", "bsdf": material},
+        **lights,
+    }
+
+
+def load_scene(path=None, **kwargs):
+    """Load ``path`` (XML; ``kwargs`` fill its $-defaults) or, with no path, :func:`scene_dict`."""
+    import mitsuba as mi
+
+    if path is None:
+        return mi.load_dict(scene_dict(**kwargs))
+    from hyde_bsdf.render.renderer import load_scene as _load
+
+    return _load(path, {k: v for k, v in kwargs.items()})
+
+
+def parameter_keys(params, names=PARAMETERS, prefix: str | None = None) -> dict:
+    """Map plugin parameter names to ``mi.traverse`` keys of the one target BSDF.
+
+    Looks for keys ending in ``.rms_slope.value`` (``hyde``; ``.alpha.value`` for
+    roughconductor), ``.eta.value`` and ``.k.value``; ``prefix`` (e.g. ``"sphere.bsdf"``)
+    picks one BSDF when the scene has several.
+    """
+    suffix = {"rms_slope": (".rms_slope.value", ".alpha.value"), "eta": (".eta.value",), "k": (".k.value",)}
+    out = {}
+    for name in names:
+        if name not in suffix:
+            raise ValueError(f"parameter names must be from {PARAMETERS}, got {name!r}")
+        out[name] = _unique_key(params, name, [suffix[name]], prefix)
+    return out
+
+
+def _unique_key(params, name, suffix_groups, prefix):
+    """The one traverse key ending in a suffix of the first group that matches any key (under
+    ``prefix`` if given); ValueError naming ``name``, the suffixes and the keys found otherwise."""
+    found = []
+    for group in suffix_groups:
+        found = [key for key in params.keys() if key.endswith(group)
+                 and (prefix is None or key.startswith(prefix + "."))]
+        if found:
+            break
+    if len(found) != 1:
+        suffixes = [s for group in suffix_groups for s in group]
+        raise ValueError(f"need exactly one BSDF parameter for {name!r} "
+                         f"(keys ending in {' or '.join(suffixes)}"
+                         f"{'' if prefix is None else ' under ' + repr(prefix)}); found {found}"
+                         f"{'; name the BSDF with prefix= (CLI: --target)' if len(found) > 1 else ''}")
+    return found[0]
+
+
+def _set(params, keys, values, bsdf="hyde"):
+    for name, v in values.items():
+        # roughconductor's roughness is Beckmann alpha = sqrt(2) rms_slope
+        params[keys[name]] = v * SQRT2 if (name == "rms_slope" and bsdf == "roughconductor") else v
+    params.update()
+
+
+def render_reference(scene, values: dict, spp: int, seed: int = 0, bsdf="hyde", prefix=None) -> np.ndarray:
+    """Luminance Stokes images (4, H, W) (float64) of ``scene`` with the BSDF set to ``values``."""
+    import mitsuba as mi
+
+    params = mi.traverse(scene)
+    _set(params, parameter_keys(params, tuple(values), prefix), values, bsdf)
+    img = mi.render(scene, spp=int(spp), seed=int(seed))
+    return np.array([np.asarray(s, dtype=np.float64)
+                     for s in stokes_images(img, channel_names(scene))])
+
+
+@dataclass
+class InversionResult:
+    """Trajectory and outcome of :func:`invert` (``history`` rows: one per iteration)."""
+
+    fitted: tuple
+    start: dict
+    final: dict
+    truth: dict | None
+    components: str
+    history: list = field(default_factory=list)   # dicts: iteration, loss, seconds, params...
+    seconds_per_iteration: float = float("nan")
+    first_iteration_seconds: float = float("nan")
+
+    def relative_errors(self) -> dict:
+        if not self.truth:
+            return {}
+        return {n: (self.final[n] - self.truth[n]) / self.truth[n] for n in self.fitted}
+
+
+def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iterations: int = 200,
+           lr: float = 0.05, spp: int = 16, seed: int = 0, truth: dict | None = None,
+           bsdf: str = "hyde", progress: bool = True, average_last: int = 20,
+           prefix: str | None = None) -> InversionResult:
+    """Optimize the BSDF parameters ``fit`` of ``scene`` to minimize ``loss_fn``.
+
+    ``start`` gives every parameter's start value (the unfitted ones stay there).
+    Adam on log(parameter), lr decaying by 5 % per iteration over the last quarter;
+    iteration i renders ``spp`` samples with seed ``seed + 1 + i``.  The final value
+    is the mean of the parameters over the last ``average_last`` iterations
+    (Polyak averaging: it cancels the Monte-Carlo jitter of single steps).
+    ``prefix`` picks the BSDF when the scene has several (see :func:`parameter_keys`).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    fit = tuple(p for p in PARAMETERS if p in fit)
+    if not fit:
+        raise ValueError(f"fit must name at least one of {PARAMETERS}")
+    missing = [p for p in PARAMETERS if p not in start]
+    if missing:
+        raise ValueError(f"start must give a value for every parameter; missing {missing}")
+    if not (isinstance(iterations, int) and iterations >= 1):
+        raise ValueError(f"iterations must be an integer >= 1, got {iterations!r}")
+    params = mi.traverse(scene)
+    keys = parameter_keys(params, PARAMETERS, prefix)
+    fixed = {p: float(start[p]) for p in PARAMETERS if p not in fit}
+    _set(params, keys, {**fixed, **{p: float(start[p]) for p in fit}}, bsdf)
+    opt = mi.ad.Adam(lr=lr)
+    for p in fit:
+        lo, hi = RANGES[p]
+        opt[p] = mi.Float(math.log(min(max(float(start[p]), max(lo, 1e-6)), hi)))
+    names = None
+    history = []
+    t0 = time.perf_counter()
+    t_first = None
+    rate = lr
+    for it in range(iterations):
+        t_it = time.perf_counter()
+        values = {}
+        for p in fit:
+            lo, hi = RANGES[p]
+            # keep the latent inside the accepted range (the plugin refuses rms_slope outside its DHR table)
+            opt[p] = dr.clip(opt[p], math.log(max(lo, 1e-6)), math.log(hi))
+            values[p] = dr.exp(opt[p])
+            if p == "rms_slope" and bsdf == "roughconductor":
+                params[keys[p]] = values[p] * SQRT2
+            else:
+                params[keys[p]] = values[p]
+        params.update()
+        img = mi.render(scene, params, spp=int(spp), seed=int(seed) + 1 + it)
+        if names is None:
+            names = channel_names(scene)
+        loss = loss_fn(stokes_images(img, names))
+        dr.backward(loss)
+        row = {"iteration": it, "loss": float(np.asarray(loss).ravel()[0])}
+        row.update({p: float(np.asarray(values[p]).ravel()[0]) for p in fit})
+        if not math.isfinite(row["loss"]):   # never hand back a NaN trajectory silently
+            raise FloatingPointError(f"the loss became {row['loss']} at iteration {it} with "
+                                     + ", ".join(f"{p}={row[p]:.6g}" for p in fit))
+        row.update(fixed)
+        opt.step()
+        if it >= iterations - iterations // 4:
+            rate *= 0.95
+            opt.set_learning_rate(rate)
+        dt = time.perf_counter() - t_it
+        if t_first is None:
+            t_first = dt
+        row["seconds"] = time.perf_counter() - t0
+        history.append(row)
+        if progress:
+            _log(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.3e}  " +
+                 "  ".join(f"{p}={row[p]:.4f}" for p in fit) + f"  ({row['seconds']:.1f} s)")
+    tail = history[-min(average_last, len(history)):]
+    final = {p: float(np.mean([r[p] for r in tail])) for p in fit}
+    final.update(fixed)
+    per_it = ((history[-1]["seconds"] - history[0]["seconds"]) / (len(history) - 1)
+              if len(history) > 1 else float("nan"))
+    return InversionResult(fitted=fit, start=dict(start), final=final, truth=truth,
+                           components=loss_fn.components, history=history,
+                           seconds_per_iteration=per_it, first_iteration_seconds=t_first)
+
+
+def loss_and_gradient(scene, loss_fn: StokesLoss, values: dict, *, spp: int, seed: int,
+                      seed_grad: int | None = None, bsdf: str = "hyde") -> tuple[float, dict]:
+    """The loss at ``values`` and its AD gradient with respect to each of them.
+
+    ``mi.render`` differentiates in a second pass whose samples come from ``seed_grad``;
+    by default (None) Mitsuba derives a decorrelated one from ``seed`` (what the
+    optimization uses: the gradient is then that of (E[image] - reference)^2, without
+    the noise-variance term).  ``seed_grad=seed`` (seed >= 1) makes the gradient pass
+    reuse the primal samples: the gradient of exactly the loss that a finite
+    difference with that seed sees (computed by tracing the integrator's primal render
+    with AD on, as ``mi.render`` refuses equal seeds).
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    params = mi.traverse(scene)
+    keys = parameter_keys(params, tuple(values))
+    latent = {}
+    for p, v in values.items():
+        latent[p] = mi.Float(float(v))
+        dr.enable_grad(latent[p])
+        params[keys[p]] = latent[p] * SQRT2 if (p == "rms_slope" and bsdf == "roughconductor") else latent[p]
+    params.update()
+    if seed_grad is not None and int(seed_grad) == int(seed):
+        # mi.render refuses equal seeds; the integrator's own render, traced with AD on,
+        # differentiates its primal samples directly (fine for small images)
+        # (evaluated loops: reverse-mode AD cannot go through the path tracer's symbolic loop)
+        with dr.scoped_set_flag(dr.JitFlag.SymbolicLoops, False):
+            img = scene.integrator().render(scene, scene.sensors()[0], seed=int(seed), spp=int(spp),
+                                            develop=True, evaluate=False)
+            loss = loss_fn(stokes_images(img, channel_names(scene)))
+            dr.backward(loss)
+    else:
+        img = mi.render(scene, params, spp=int(spp), seed=int(seed),
+                        seed_grad=0 if seed_grad is None else int(seed_grad))
+        loss = loss_fn(stokes_images(img, channel_names(scene)))
+        dr.backward(loss)
+    grads = {p: float(np.asarray(dr.grad(latent[p])).ravel()[0]) for p in values}
+    return float(np.asarray(loss).ravel()[0]), grads
+
+
+def finite_difference_gradient(scene, loss_fn: StokesLoss, values: dict, name: str, *, rel_step: float,
+                               spp: int, seed: int, bsdf: str = "hyde") -> float:
+    """Central difference dL/d(name) at ``values`` (same seed for both renders), loss in float64."""
+    import mitsuba as mi
+
+    h = rel_step * abs(values[name])
+    out = []
+    for sign in (+1, -1):
+        v = dict(values)
+        v[name] = values[name] + sign * h
+        params = mi.traverse(scene)
+        _set(params, parameter_keys(params, tuple(v)), v, bsdf)
+        img = mi.render(scene, spp=int(spp), seed=int(seed))
+        S = np.array([np.asarray(s, dtype=np.float64) for s in stokes_images(img, channel_names(scene))])
+        out.append(loss_fn.numpy(S))
+    return (out[0] - out[1]) / (2 * h)
+
+
+def write_history(result: InversionResult, path) -> Path:
+    """CSV: one row per iteration (iteration, loss, seconds, parameters)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cols = ["iteration", "loss", "seconds"] + list(PARAMETERS)
+    with atomic_open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        fh.write(f"# loss={result.components}; truth={result.truth}; start={result.start}; "
+                 f"final (mean of the last iterations)={result.final}\n")
+        w.writerow(cols)
+        for r in result.history:
+            w.writerow([r["iteration"], f"{r['loss']:.6e}", f"{r['seconds']:.3f}"] +
+                       [f"{r[p]:.6g}" for p in PARAMETERS])
+    return path
+
+
+def plot_history(results: dict, path, title: str = "") -> Path:
+    """Loss and parameter trajectories (relative to the truth when known) of one or more runs."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 1 + len(PARAMETERS), figsize=(4.2 * (1 + len(PARAMETERS)), 3.4))
+    for c, (label, res) in enumerate(results.items()):
+        it = [r["iteration"] for r in res.history]
+        axes[0].semilogy(it, [r["loss"] for r in res.history], f"C{c}-", lw=1, label=label)
+        for a, p in zip(axes[1:], PARAMETERS):
+            a.plot(it, [r[p] for r in res.history], f"C{c}-", lw=1.2, label=label)
+            if res.truth:
+                a.axhline(res.truth[p], color="k", ls="--", lw=0.8)
+    axes[0].set_title("loss (each run's own)")
+    axes[0].set_xlabel("iteration")
+    axes[0].legend(fontsize=7)
+    for a, p in zip(axes[1:], PARAMETERS):
+        a.set_title(f"{p} (dashed: truth)")
+        a.set_xlabel("iteration")
+        a.grid(alpha=0.3)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return path
