@@ -104,6 +104,9 @@ CLI_ROWS = [
     ("fit: -o is a directory", ["fit", "{csv}", "-o", "{tmp}"], 2, "is a directory", "in"),
     ("fit: -o under a regular file", ["fit", "{csv}", "-o", "{file}/plot.png"], 2, "is not a directory", "in"),
     ("fit: stdout closed (| head)", ["fit", "{csv}"], 141, "", "pipe"),
+    # --- invert (issue 15: a reference scaled by 1e30 ended in a drjit.backward traceback) ---
+    ("invert: reference scaled by 1e30", ["invert", "--reference", "{ref1e30}", "--res", "16", "-o", "{tmp}/kept"], 2,
+     "ref1e30.exr' has peak |S0| = 1e+30, outside the accepted range [1e-10, 1e+10]", "in"),
     # --- dispatcher ---
     ("unknown command", ["nosuch"], 2, "unknown command 'nosuch'", "in"),
 ]
@@ -137,6 +140,17 @@ def _api_rows():
     ]
 
 
+def _stokes_exr(path, size, value):
+    """A Stokes EXR (R, G, B, S0.R ... S3.B) of size x size pixels: S0 = value, S1 = value / 2, S2 = S3 = 0."""
+    import numpy as np
+    import OpenEXR
+
+    names = ["R", "G", "B"] + [f"S{i}.{c}" for i in range(4) for c in "RGB"]
+    level = {"R": 1.0, "G": 1.0, "B": 1.0, "S0": 1.0, "S1": 0.5, "S2": 0.0, "S3": 0.0}
+    ch = {n: np.full((size, size), value * level[n.split(".")[0]], np.float32) for n in names}
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, ch).write(str(path))
+
+
 @pytest.fixture(scope="module")
 def paths(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("bad")
@@ -146,6 +160,9 @@ def paths(tmp_path_factory):
                                       "</scene>")
     (tmp / "ptracer.xml").write_text(SCENE.replace('<integrator type="path">', '<integrator type="ptracer">'))
     (tmp / "badhyde.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', '<bsdf type="hyde"><float name="rms_slope" value="-1"/></bsdf>'))
+    _stokes_exr(tmp / "ref1e30.exr", 16, 1e30)
+    (tmp / "kept").mkdir()
+    (tmp / "kept" / "invert_history.csv").write_text("a previous run's output\n")
     (tmp / "dir.exr").mkdir()
     (tmp / "pngdir_dolp.png").mkdir()
     (tmp / "notreport").mkdir()
@@ -160,7 +177,7 @@ def paths(tmp_path_factory):
     write_measurements(tmp / "meas.csv", meas)
     return {"tmp": tmp, "file": tmp / "file.txt", "tiny": tmp / "tiny.xml", "nosensor": tmp / "nosensor.xml",
             "ptracer": tmp / "ptracer.xml", "inverse": ROOT / "scenes" / "inverse.xml", "csv": tmp / "meas.csv",
-            "notreport": tmp / "notreport", "badhyde": tmp / "badhyde.xml"}
+            "notreport": tmp / "notreport", "badhyde": tmp / "badhyde.xml", "ref1e30": tmp / "ref1e30.exr"}
 
 
 def _fill(argv, paths):
@@ -225,6 +242,7 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     assert lines, "no message on stderr"
     assert lines[-1].startswith(f"hyde-bsdf {argv[0]}"), lines[-1]
     assert needle in lines[-1], lines[-1]
+    assert (paths["tmp"] / "kept" / "invert_history.csv").read_text() == "a previous run's output\n"   # no file lost
     if how == "sigint":
         assert not (paths["tmp"] / "sigint.exr").exists()
         assert not list(paths["tmp"].glob(".sigint.exr.*"))   # no temporary left behind

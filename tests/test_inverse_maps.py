@@ -122,6 +122,11 @@ def test_input_errors_name_the_parameter(problem):
     bad[0, 3, 3] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         inv.invert_maps([inv.Observation(o.scene, bad)], {"alpha": 0.3}, iterations=1)
+    # issue 15: a reference scaled by 1e30 overflowed the float32 loss (a drjit.backward traceback)
+    with pytest.raises(ValueError, match=r"peak \|S0\| = .*e\+\d\d, outside the accepted range \[1e-10, 1e\+10\]"):
+        inv.invert_maps([inv.Observation(o.scene, o.reference * 1e30)], {"alpha": 0.3}, iterations=1)
+    with pytest.raises(FloatingPointError, match="gradient of alpha became NaN or infinite at iteration 3"):
+        inv.check_gradients({"alpha": mi.Float([1.0, float("nan")])}, 3)
     with pytest.raises(ValueError, match="missing 'alpha'"):
         inv.invert_maps(obs, {"eta": 1.5}, iterations=1)
     with pytest.raises(ValueError, match="regularizer"):

@@ -47,20 +47,22 @@ v; load the EXR as a ``bitmap`` texture with ``raw`` true) and OUTDIR/invert_map
 
 from hyde_bsdf.inverse._common import Y_WEIGHTS, _log  # noqa: F401  (_log: the scripts' progress lines)
 from hyde_bsdf.inverse.cli import (AD_BYTES_FIXED, AD_BYTES_PER_SAMPLE, check_memory, cli_main, estimate_memory)
-from hyde_bsdf.inverse.loss import StokesLoss, channel_names, interior_mask, smoothness, stokes_images
+from hyde_bsdf.inverse.loss import (REFERENCE_RANGE, StokesLoss, channel_names, check_reference_scale,
+                                    interior_mask, smoothness, stokes_images)
 from hyde_bsdf.inverse.maps import MapInversionResult, invert_maps
 from hyde_bsdf.inverse.observations import _obs_mask  # noqa: F401
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, VIEW_AZIMUTHS, Observation,
                                             example_maps, film_channels, map_keys, plane_scene_dict,
                                             render_stokes, render_stokes_np, texel_coverage)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, VARIANT, InversionResult,
-                                      finite_difference_gradient, invert, load_scene, loss_and_gradient,
+                                      check_gradients, finite_difference_gradient, invert, load_scene, loss_and_gradient,
                                       parameter_keys, plot_history, prepare, render_reference, scene_dict,
                                       write_history)
 
 __all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
-           "parameter_keys", "stokes_images", "channel_names", "interior_mask", "StokesLoss", "render_reference",
-           "InversionResult", "invert", "loss_and_gradient", "finite_difference_gradient",
+           "parameter_keys", "stokes_images", "channel_names", "interior_mask", "StokesLoss", "REFERENCE_RANGE",
+           "check_reference_scale", "render_reference",
+           "InversionResult", "invert", "check_gradients", "loss_and_gradient", "finite_difference_gradient",
            "plot_history", "write_history", "MAP_PARAMETERS", "MAP_VARIANT", "map_keys", "film_channels",
            "render_stokes", "render_stokes_np", "Observation", "texel_coverage", "smoothness",
            "MapInversionResult", "invert_maps", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",

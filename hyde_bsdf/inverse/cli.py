@@ -15,7 +15,7 @@ import numpy as np
 from hyde_bsdf.atomic import atomic_open, atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.inverse._common import Y_WEIGHTS, _log
-from hyde_bsdf.inverse.loss import StokesLoss
+from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
 from hyde_bsdf.inverse.maps import invert_maps
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, Observation, example_maps,
                                             map_keys, plane_scene_dict, render_stokes_np)
@@ -200,10 +200,10 @@ def _read_reference(path, width, height, what="--reference"):
     if (w, h) != (width, height):
         raise UsageError(f"{what} {str(path)!r} is {w}x{h} pixels but the scene's film is {width}x{height}: "
                          f"render the reference with the same scene and film")
-    bad = int((~np.isfinite(ref)).any(axis=0).sum())
-    if bad:
-        raise UsageError(f"{what} {str(path)!r} has {bad} pixel(s) with NaN or infinite Stokes values; "
-                         f"the loss needs finite references")
+    try:
+        check_reference_scale(ref, f"{what} {str(path)!r}")
+    except ValueError as exc:
+        raise UsageError(_one_line(exc)) from None
     return ref
 
 

@@ -21,7 +21,33 @@ import numpy as np
 
 from hyde_bsdf.inverse._common import Y_WEIGHTS
 
-__all__ = ["stokes_images", "channel_names", "interior_mask", "StokesLoss", "smoothness"]
+__all__ = ["stokes_images", "channel_names", "interior_mask", "StokesLoss", "smoothness", "REFERENCE_RANGE",
+           "check_reference_scale"]
+
+#: accepted range of a reference's peak |S0| (radiance in the scene's units).  The loss squares
+#: differences in float32 (largest 3.4e38): a peak of 1e10 leaves 18 orders of magnitude of headroom
+#: for sums over the image; below 1e-10 the squares of the differences (1e-20 and less) fall into
+#: float32's subnormal range and the gradients vanish.  Renders of real scenes lie far inside.
+REFERENCE_RANGE = (1e-10, 1e10)
+
+
+def check_reference_scale(ref, what: str = "the reference") -> float:
+    """The peak |S0| of reference images ``ref`` (4, H, W); ValueError naming ``what`` when it is not
+    finite or lies outside :data:`REFERENCE_RANGE` (such a reference cannot be matched by a
+    rendering, and its squared differences overflow or underflow float32)."""
+    ref = np.asarray(ref, dtype=np.float64)
+    if not np.isfinite(ref).all():
+        bad = int((~np.isfinite(ref)).any(axis=0).sum())
+        raise ValueError(f"{what} has {bad} pixel(s) with NaN or infinite Stokes values; the loss needs "
+                         f"finite references")
+    peak = float(np.abs(ref[0]).max()) if ref.size else 0.0
+    lo, hi = REFERENCE_RANGE
+    if not (lo <= peak <= hi):
+        raise ValueError(f"{what} has peak |S0| = {peak:.3g}, outside the accepted range [{lo:g}, {hi:g}] "
+                         f"(radiance in the scene's units: a reference {'scaled up' if peak > hi else 'black or scaled down'}"
+                         f" beyond what a rendering can match); rescale it or fix its units")
+    return peak
+
 
 
 def stokes_images(img, channel_names):
@@ -61,6 +87,7 @@ class StokesLoss:
         if components not in ("stokes", "s0"):
             raise ValueError(f"components must be 'stokes' or 's0', got {components!r}")
         ref = np.asarray(ref, dtype=np.float64)
+        check_reference_scale(ref)
         if mask is None:
             mask = interior_mask(ref[0])
         if not mask.any():

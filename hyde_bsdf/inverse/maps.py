@@ -14,6 +14,7 @@ import numpy as np
 
 from hyde_bsdf.inverse._common import _first_line, _log
 from hyde_bsdf.inverse.loss import StokesLoss, smoothness
+from hyde_bsdf.inverse.scalar import check_gradients
 from hyde_bsdf.inverse.observations import (MAP_PARAMETERS, _obs_mask, film_channels, map_keys,
                                             render_stokes, texel_coverage)
 
@@ -239,6 +240,7 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
             loss, data, reg = step_fn(scenes, values, seed_it, [fn.tensors for fn in losses])
         for name in fit:
             dr.set_grad(opt[name], dr.grad(values[name]) * dr.detach(values[name]))
+        check_gradients({n: dr.grad(opt[n]) for n in fit}, it)
         row = {"iteration": it, "loss": float(np.asarray(loss).ravel()[0]),
                "data_loss": float(np.asarray(data).ravel()[0]),
                "regularizer": float(np.asarray(reg).ravel()[0])}

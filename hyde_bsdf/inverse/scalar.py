@@ -33,7 +33,7 @@ from hyde_bsdf.inverse._common import SQRT2, _log
 from hyde_bsdf.inverse.loss import StokesLoss, channel_names, stokes_images
 
 __all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
-           "parameter_keys", "render_reference", "InversionResult", "invert", "loss_and_gradient",
+           "parameter_keys", "render_reference", "InversionResult", "invert", "check_gradients", "loss_and_gradient",
            "finite_difference_gradient", "plot_history", "write_history"]
 
 VARIANT = "llvm_ad_spectral_polarized"
@@ -247,12 +247,13 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
         if names is None:
             names = channel_names(scene)
         loss = loss_fn(stokes_images(img, names))
-        dr.backward(loss)
         row = {"iteration": it, "loss": float(np.asarray(loss).ravel()[0])}
         row.update({p: float(np.asarray(values[p]).ravel()[0]) for p in fit})
         if not math.isfinite(row["loss"]):   # never hand back a NaN trajectory silently
             raise FloatingPointError(f"the loss became {row['loss']} at iteration {it} with "
                                      + ", ".join(f"{p}={row[p]:.6g}" for p in fit))
+        dr.backward(loss)
+        check_gradients({p: dr.grad(opt[p]) for p in fit}, it)
         row.update(fixed)
         opt.step()
         if it >= iterations - iterations // 4:
@@ -274,6 +275,17 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
     return InversionResult(fitted=fit, start=dict(start), final=final, truth=truth,
                            components=loss_fn.components, history=history,
                            seconds_per_iteration=per_it, first_iteration_seconds=t_first)
+
+
+def check_gradients(grads: dict, iteration: int) -> None:
+    """FloatingPointError naming the parameter and the iteration when a gradient is NaN or infinite
+    (an optimiser step with it would turn every value into NaN)."""
+    import drjit as dr
+
+    for name, g in grads.items():
+        if not bool(dr.all(dr.isfinite(g), axis=None)):
+            raise FloatingPointError(f"the gradient of {name} became NaN or infinite at iteration {iteration} "
+                                     f"(a reference far from what the scene can render, or a step too large)")
 
 
 def loss_and_gradient(scene, loss_fn: StokesLoss, values: dict, *, spp: int, seed: int,
