@@ -1,0 +1,559 @@
+"""Export the ``hyde`` model as a ``measured_polarized`` table for Mitsuba's C++ renderer.
+
+Python plugins are invisible to the C++ ``mitsuba`` executable and to CUDA without Python; a
+table of the model in the format of Mitsuba's ``measured_polarized`` plugin
+(:mod:`hyde_bsdf.fit.pbsdf_file`) renders in any Mitsuba 3 build (``*_spectral_polarized``
+variants).  :func:`export_pbsdf` tabulates the NumPy evaluator (:func:`hyde_bsdf.pbrdf`,
+paper Eq. 17):
+
+- grids: theta_h = (pi/2) u^2 for u uniform in [0, 1] (concentrated near 0, where the specular
+  lobe is), theta_d uniform in [0, pi/2], phi_d uniform in [-pi, pi] (the paper's diffuse term
+  is not reciprocal, so both signs are stored); resolution (N_pd, N_td, N_th);
+- 5 bands at 450, 500, 550, 600, 650 nm (Mitsuba's loader reads exactly 5; queries outside are
+  clamped), with n, k per band (scalars, 5 values, or a Mitsuba ``data/ior`` material such as
+  "Au" sampled at the band centres);
+- each cell is F in the table's Stokes frames (x = normalize(omega_i x omega_r)), 1/sr;
+  cells with a direction beyond :data:`EDGE_DEG` (near, at or below the horizon) are filled with
+  the model at the edge (polar angles clamped to EDGE_DEG), never NaN: Mitsuba's interpolation
+  turns a NaN at any corner into a black matrix, and the model's 1/cos growth at grazing
+  angles would leak into the cells beside the horizon;
+- a suggested ``alpha_sample`` (the GGX roughness Mitsuba's plugin samples with): the value
+  among :data:`ALPHA_CANDIDATES` that minimizes the relative variance of f cos / pdf of
+  M00 over observer angles 0-80 deg (:func:`suggest_alpha_sample`).
+
+The interpolation error is measured on the written file (read back, interpolated as Mitsuba's
+lookup does, :meth:`~hyde_bsdf.fit.pbsdf_file.PbsdfTable.interpolate`) against the exact model
+at random geometries (cosine-distributed light directions, observers half cosine-distributed
+and half from the Beckmann lobe; seeded): the relative L1 error of M00 weighted by
+cos theta_i cos theta_r, and the energy-weighted median and 95th percentile of the largest
+normalized-element error max_jk |M_jk/M00 - F_jk/F00| in the paper's bases
+(:func:`interpolation_error`).  The file stores these, the parameters and the suggested
+``alpha_sample`` in an extra field ``hyde_export`` (JSON) that Mitsuba ignores.
+
+Reliability: the table size is checked before any work against Mitsuba's 32-bit indices
+(< 2^32 floats), the free disk space of the target folder and the available memory (Mitsuba's
+loader holds the mapped file and a copy of it: 2x the file size); ``M`` is streamed slab by
+slab (one phi_d slice in memory) into a temporary file renamed at the end (atomic).
+
+Command line::
+
+    hyde-bsdf export OUT.pbsdf --rms-slope 0.3 (--material Au | --n N[,N,...] --k K[,K,...])
+                     [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
+                     [--resolution 145x37x37] [--error-samples 20000] [-q]
+
+May import: ``hyde_bsdf.model``, ``hyde_bsdf.fit``, ``hyde_bsdf.atomic``, ``hyde_bsdf.errors``.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import math
+import os
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hyde_bsdf.atomic import atomic_path, check_output_path
+from hyde_bsdf.errors import UsageError
+from hyde_bsdf.fit.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, paper_angles,
+                                      read_pbsdf, rusinkiewicz_to_directions, table_frame_x,
+                                      table_nbytes, table_to_paper, paper_to_table)
+from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.model.shadowing import SHADOWING
+
+__all__ = ["DEFAULT_RESOLUTION", "EDGE_DEG", "ALPHA_CANDIDATES", "ExportReport", "grids",
+           "band_index", "check_table_size", "interpolation_error", "suggest_alpha_sample",
+           "export_pbsdf", "cli_main"]
+
+#: (N_phi_d, N_theta_d, N_theta_h) of the default export (validation/pbsdf_export.py measures the choice)
+DEFAULT_RESOLUTION = (145, 37, 37)
+#: cells below the horizon take the model's value at polar angles clamped to this (degrees)
+EDGE_DEG = 89.0
+#: GGX alphas tried for the suggested ``alpha_sample``
+ALPHA_CANDIDATES = tuple(float(a) for a in np.round(np.geomspace(0.005, 1.0, 24), 4))
+#: Mitsuba's Marginal2D indexes the table with 32-bit integers
+MAX_ELEMENTS = 2 ** 32 - 1
+#: Mitsuba's loader: the mapped file plus its own copy of M
+LOADER_COPIES = 2
+_JSON_BYTES = 4096
+PROGRESS_SECONDS = 3.0
+RESOLUTION_RANGE = (2, 4097)
+
+
+def grids(resolution=DEFAULT_RESOLUTION):
+    """(phi_d, theta_d, theta_h) grids in radians (float64) of an export of this resolution."""
+    n_pd, n_td, n_th = _check_resolution(resolution)
+    u = np.linspace(0.0, 1.0, n_th)
+    return (np.linspace(-math.pi, math.pi, n_pd), np.linspace(0.0, math.pi / 2, n_td),
+            (math.pi / 2) * u * u)
+
+
+def _check_resolution(resolution):
+    if isinstance(resolution, str):
+        try:
+            resolution = tuple(int(v) for v in resolution.lower().split("x"))
+        except ValueError:
+            raise UsageError(f"resolution must look like 145x37x37 (N_phi_d x N_theta_d x N_theta_h), "
+                             f"got {resolution!r}") from None
+    try:
+        res = tuple(int(v) for v in resolution)
+        ok = len(res) == 3 and all(float(v) == int(v) for v in resolution)
+    except (TypeError, ValueError):
+        ok = False
+    if not ok or not all(RESOLUTION_RANGE[0] <= v <= RESOLUTION_RANGE[1] for v in res):
+        raise UsageError(f"resolution must be 3 integers (N_phi_d, N_theta_d, N_theta_h), each in "
+                         f"[{RESOLUTION_RANGE[0]}, {RESOLUTION_RANGE[1]}], got {resolution!r}")
+    return res
+
+
+# ---------------------------------------------------------------------------------------------
+# the index per band
+
+def _ior_folder() -> Path | None:
+    spec = importlib.util.find_spec("mitsuba")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    return Path(list(spec.submodule_search_locations)[0]) / "data" / "ior"
+
+
+def _read_spd(path: Path):
+    data = np.loadtxt(path, comments="#")
+    return data[:, 0], data[:, 1]
+
+
+def band_index(wavelengths=KAIST_WAVELENGTHS, n=None, k=None, material=None):
+    """(n, k) arrays, one value per band: scalars broadcast, sequences of one value per band, or a
+    Mitsuba ``data/ior`` material ("Au", "Cu", ...) interpolated linearly at the band centres
+    (as Mitsuba's spectra are).  eta = n - jk in the paper's sign (the plugin's eta = n, k = k)."""
+    wl = np.asarray(wavelengths, float)
+    if material is not None:
+        if n is not None or k is not None:
+            raise UsageError("give either material or n and k, not both")
+        folder = _ior_folder()
+        eta_file = None if folder is None else folder / f"{material}.eta.spd"
+        if eta_file is None or not eta_file.is_file() or "/" in str(material):
+            known = sorted(p.name[:-8] for p in folder.glob("*.eta.spd")) if folder and folder.is_dir() else []
+            raise UsageError(f"material {material!r} is not one of Mitsuba's data/ior tables"
+                             + (f" ({', '.join(known)})" if known else " (Mitsuba is not installed)"))
+        out = []
+        for suffix in (".eta.spd", ".k.spd"):
+            x, y = _read_spd(folder / f"{material}{suffix}")
+            out.append(np.interp(wl, x, y))
+        return out[0], out[1]
+    if n is None:
+        raise UsageError("give the index: n (and k), or material (e.g. 'Au')")
+    vals = []
+    for name, v in (("n", n), ("k", 0.0 if k is None else k)):
+        a = np.atleast_1d(np.asarray(v, dtype=float))
+        if a.ndim != 1 or a.size not in (1, wl.size):
+            raise UsageError(f"{name} must be one value or {wl.size} (one per band {wl.tolist()} nm), got {v!r}")
+        if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a > 1e6):
+            raise UsageError(f"{name} must be finite and in [0, 1e6], got {v!r}")
+        vals.append(np.broadcast_to(a, wl.shape).astype(float))
+    if np.any(np.hypot(*vals) < 1e-6):
+        raise UsageError("n and k cannot both be 0 (|eta| >= 1e-6) in any band")
+    return vals[0], vals[1]
+
+
+# ---------------------------------------------------------------------------------------------
+# size checks
+
+def _mem_available() -> int | None:
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError):
+        pass
+    return None
+
+
+def check_table_size(path, resolution, bands: int = len(KAIST_WAVELENGTHS), free_disk=None,
+                     free_memory=None) -> int:
+    """Refuse (UsageError, before any work) a table that Mitsuba cannot index (>= 2^32 floats), that
+    does not fit on the disk of ``path``'s folder, or whose loading (about 2x the file size: the
+    mapped file and the loader's copy) exceeds the available memory.  Returns the file size in
+    bytes.  ``free_disk`` / ``free_memory`` (bytes) override the measured values (for tests)."""
+    n_pd, n_td, n_th = _check_resolution(resolution)
+    elements = n_pd * n_td * n_th * bands * 16
+    nbytes = table_nbytes(n_pd, n_td, n_th, bands) + _JSON_BYTES
+    res = f"{n_pd}x{n_td}x{n_th}"
+    gib = lambda b: f"{b / 2**30:.2f} GiB"
+    if elements > MAX_ELEMENTS:
+        raise UsageError(f"resolution {res}: {elements} table values exceed Mitsuba's 32-bit index "
+                         f"limit ({MAX_ELEMENTS}); choose a smaller resolution")
+    folder = Path(path).parent if str(Path(path).parent) else Path(".")
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    disk = shutil.disk_usage(folder).free if free_disk is None else int(free_disk)
+    if nbytes > disk:
+        raise UsageError(f"resolution {res}: the file needs {gib(nbytes)} and {str(folder)!r} has "
+                         f"{gib(disk)} free; choose a smaller resolution or another folder")
+    mem = _mem_available() if free_memory is None else int(free_memory)
+    if mem is not None and LOADER_COPIES * nbytes > mem:
+        raise UsageError(f"resolution {res}: a {gib(nbytes)} table needs about {gib(LOADER_COPIES * nbytes)} "
+                         f"of memory to load in Mitsuba and {gib(mem)} is available; choose a smaller resolution")
+    return nbytes
+
+
+# ---------------------------------------------------------------------------------------------
+# tabulation
+
+def _edge_directions(om_i, om_r, x_fallback):
+    """Directions with polar angles clamped to EDGE_DEG (cells at, near or below the horizon),
+    and the table frame's x axis (``x_fallback`` where omega_i = omega_r)."""
+    cmax = math.cos(math.radians(EDGE_DEG))
+    out = []
+    for om in (om_i, om_r):
+        z = om[..., 2]
+        clamp = z < cmax
+        horiz = np.hypot(om[..., 0], om[..., 1])
+        scale = np.where(horiz > 0, math.sqrt(1 - cmax * cmax) / np.where(horiz > 0, horiz, 1.0), 1.0)
+        new = om.copy()
+        new[..., 0] = np.where(clamp, om[..., 0] * scale, om[..., 0])
+        new[..., 1] = np.where(clamp, om[..., 1] * scale, om[..., 1])
+        new[..., 2] = np.where(clamp, cmax, z)
+        out.append(new)
+    x = table_frame_x(*out)
+    bad = ~np.isfinite(x).all(-1) | (np.linalg.norm(np.cross(out[0], out[1]), axis=-1) < 1e-9)
+    x = np.where(bad[..., None], x_fallback, x)
+    return out[0], out[1], x
+
+
+def _model(theta_i, theta_r, phi, params, band):
+    return pbrdf(theta_i, theta_r, phi, rms_slope=params["rms_slope"], n=params["n"][band],
+                 k=params["k"][band], shadowing=params["shadowing"], diffuse=params["diffuse"])
+
+
+def _slab(p, phi_d, theta_d, theta_h, params):
+    """M for one phi_d node: (N_td, N_th, K, 4, 4) float32, table frames."""
+    om_i, om_r, x = rusinkiewicz_to_directions(phi_d[p], theta_d[:, None], theta_h[None, :])
+    oi, orr, x = _edge_directions(om_i, om_r, x)
+    ti, tr, ph, _, _ = paper_angles(oi, orr)
+    K = len(params["n"])
+    out = np.empty(ti.shape + (K, 4, 4), np.float32)
+    for b in range(K):
+        F = _model(ti, tr, ph, params, b)
+        out[..., b, :, :] = paper_to_table(F, oi, orr, x)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# error and sampling measures
+
+def _query_geometries(count, rms_slope, rng):
+    """(omega_i, omega_r, weight): light cosine-distributed; observers half cosine-distributed and
+    half mirrored about Beckmann normals; weight = cos theta_r / (mixture pdf of omega_r)
+    (the light's cos / pdf = pi is common to all and drops out of every ratio)."""
+    def cosine(m):
+        u1, u2 = rng.random(m), rng.random(m)
+        r, ph = np.sqrt(u1), 2 * math.pi * u2
+        return np.stack([r * np.cos(ph), r * np.sin(ph), np.sqrt(np.maximum(1 - u1, 0))], -1)
+
+    alpha = math.sqrt(2.0) * rms_slope
+    om_i = cosine(count)
+    half = count // 2
+    om_r = np.empty_like(om_i)
+    om_r[:half] = cosine(half)
+    t2 = -alpha * alpha * np.log1p(-rng.random(count - half))
+    ph = 2 * math.pi * rng.random(count - half)
+    ct = 1 / np.sqrt(1 + t2)
+    st = np.sqrt(np.maximum(1 - ct * ct, 0))
+    h = np.stack([st * np.cos(ph), st * np.sin(ph), ct], -1)
+    oi = om_i[half:]
+    om_r[half:] = 2 * np.sum(oi * h, -1, keepdims=True) * h - oi
+    # mixture pdf of omega_r given omega_i
+    hr = om_i + om_r
+    hr /= np.linalg.norm(hr, axis=-1, keepdims=True)
+    c = np.clip(hr[..., 2], 1e-12, 1.0)
+    tan2 = (1 - c * c) / (c * c)
+    D = np.exp(-tan2 / (alpha * alpha)) / (math.pi * alpha * alpha * c ** 4)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p_lobe = D * c / (4 * np.abs(np.sum(om_r * hr, -1)))
+    cr = om_r[..., 2]
+    pdf = 0.5 * np.maximum(cr, 0) / math.pi + 0.5 * np.where(hr[..., 2] > 0, p_lobe, 0.0)
+    up = (cr > 1e-6) & (om_i[..., 2] > 1e-6) & np.isfinite(pdf) & (pdf > 0)
+    weight = np.where(up, np.maximum(cr, 0) / np.where(up, pdf, 1.0), 0.0)
+    return om_i[up], om_r[up], weight[up]
+
+
+def _weighted_quantile(values, weights, q):
+    order = np.argsort(values)
+    v, w = values[order], weights[order]
+    cum = np.cumsum(w)
+    if cum[-1] <= 0:
+        return float("nan")
+    return float(v[min(np.searchsorted(cum, q * cum[-1]), v.size - 1)])
+
+
+def error_statistics(F_test, F_true, weight) -> dict:
+    """The export's error measures of matrices F_test against F_true (both (N, 4, 4), the paper's
+    bases) at geometries of the given weights (cos theta_r / pdf): ``m00_l1`` = sum w |dF00| /
+    sum w F00; ``m00_p95`` the F00-energy-weighted 95th percentile of |dF00| / F00; ``pol_median``,
+    ``pol_p95`` the same quantiles of max_jk |F_jk/F00 - G_jk/G00| (the 15 normalized elements)."""
+    t00, m00 = F_test[:, 0, 0], F_true[:, 0, 0]
+    ok = m00 > 0
+    energy = weight * np.where(ok, m00, 0.0)
+    l1 = float(np.sum(weight * np.abs(t00 - m00)) / max(np.sum(energy), 1e-300))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rel = np.where(ok, np.abs(t00 - m00) / m00, 0.0)
+        nt = F_test / np.where(t00 > 0, t00, np.inf)[:, None, None]
+        nm = F_true / np.where(ok, m00, np.inf)[:, None, None]
+    diff = np.abs(nt - nm).reshape(-1, 16)[:, 1:].max(-1)
+    diff = np.where(t00 > 0, diff, 1.0)            # a black table cell has lost all polarization
+    return {"m00_l1": l1, "m00_p95": _weighted_quantile(rel, energy, 0.95),
+            "pol_median": _weighted_quantile(diff, energy, 0.5),
+            "pol_p95": _weighted_quantile(diff, energy, 0.95)}
+
+
+def interpolation_error(table: PbsdfTable, params: dict, samples: int = 20000, seed: int = 0) -> dict:
+    """The table's interpolation error against the model (see the module docstring) for each band
+    at its centre wavelength, and the worst band.  ``params``: rms_slope, n, k (per band),
+    shadowing, diffuse.  Returns {"by_band": {nm: stats}, worst stats..., "samples": count}."""
+    rng = np.random.default_rng(seed)
+    om_i, om_r, w = _query_geometries(samples, params["rms_slope"], rng)
+    ti, tr, ph, _, _ = paper_angles(om_i, om_r)
+    by_band = {}
+    for b, wl in enumerate(table.wavelengths):
+        T = table_to_paper(table.interpolate_directions(om_i, om_r, wl), om_i, om_r)
+        by_band[int(wl)] = error_statistics(T, _model(ti, tr, ph, params, b), w)
+    worst = {key: max(s[key] for s in by_band.values()) for key in next(iter(by_band.values()))}
+    return {**worst, "by_band": by_band, "samples": int(w.size)}
+
+
+def _ggx_pdf(wi, wo, alpha):
+    """Mitsuba's ``measured_polarized`` sampling density of wo given wi (10 % cosine, 90 % GGX
+    visible normals with ``alpha_sample``), float64 NumPy."""
+    H = wi + wo
+    H /= np.linalg.norm(H, axis=-1, keepdims=True)
+    c = np.clip(H[..., 2], 1e-12, 1.0)
+    t2 = (1 - c * c) / (c * c)
+    a2 = alpha * alpha
+    D = 1.0 / (math.pi * a2 * c ** 4 * (1 + t2 / a2) ** 2)
+    ci = np.clip(wi[..., 2], 1e-12, 1.0)
+    t2i = (1 - ci * ci) / (ci * ci)
+    G1 = 2.0 / (1.0 + np.sqrt(1.0 + a2 * t2i))
+    wim = np.sum(wi * H, -1)
+    G1 = np.where(wim / ci > 0, G1, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pm = D * G1 * np.maximum(wim, 0) / ci / (4 * np.sum(wo * H, -1))
+    pm = np.where(np.isfinite(pm) & (H[..., 2] > 0), pm, 0.0)
+    return 0.1 * np.maximum(wo[..., 2], 0) / math.pi + 0.9 * pm
+
+
+def suggest_alpha_sample(params: dict, band: int | None = None, view_deg=(0, 20, 40, 60, 80),
+                         n_theta: int = 240, n_phi: int = 240) -> tuple[float, dict]:
+    """The ``alpha_sample`` of :data:`ALPHA_CANDIDATES` with the least mean relative variance of
+    Mitsuba's sampling weight f cos / pdf (M00 of the middle band) over the observer angles
+    ``view_deg``, by quadrature on a (theta, phi) grid of the light direction.  Returns
+    (alpha, {alpha: relative variance})."""
+    band = len(params["n"]) // 2 if band is None else band
+    t_edges = np.linspace(0, math.pi / 2, n_theta + 1)
+    tc = 0.5 * (t_edges[1:] + t_edges[:-1])
+    pc = (np.arange(n_phi) + 0.5) * 2 * math.pi / n_phi
+    T, P = np.meshgrid(tc, pc, indexing="ij")
+    dw = (np.cos(t_edges[:-1]) - np.cos(t_edges[1:]))[:, None] * (2 * math.pi / n_phi)
+    wo = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1)
+    score = {a: 0.0 for a in ALPHA_CANDIDATES}
+    for vd in view_deg:
+        v = math.radians(vd)
+        wi = np.broadcast_to(np.array([math.sin(v), 0.0, math.cos(v)]), wo.shape)
+        g = _model(T, v, np.mod(-P, 2 * math.pi), params, band)[..., 0, 0] * np.cos(T)
+        integral = float(np.sum(g * dw))
+        if integral <= 0:
+            continue
+        for a in ALPHA_CANDIDATES:
+            p = _ggx_pdf(wi, wo, a)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                m2 = float(np.sum(np.where(g > 0, g * g / p, 0.0) * dw))
+            score[a] += (m2 / integral ** 2 - 1.0) / len(view_deg)
+    best = min(score, key=lambda a: (score[a] if math.isfinite(score[a]) else math.inf))
+    return best, score
+
+
+# ---------------------------------------------------------------------------------------------
+# the export
+
+@dataclass
+class ExportReport:
+    """What :func:`export_pbsdf` wrote and measured."""
+
+    path: Path
+    resolution: tuple
+    nbytes: int
+    seconds: float
+    params: dict
+    wavelengths: tuple
+    alpha_sample: float
+    errors: dict = field(default_factory=dict)
+
+    def xml(self, indent: str = "") -> str:
+        """The ``<bsdf type="measured_polarized">`` element that loads the file."""
+        return (f'{indent}<bsdf type="measured_polarized">\n'
+                f'{indent}    <string name="filename" value="{self.path.name}"/>\n'
+                f'{indent}    <float name="alpha_sample" value="{self.alpha_sample:.4g}"/>\n'
+                f'{indent}</bsdf>')
+
+    def summary(self) -> str:
+        p = self.params
+        idx = ", ".join(f"{w:g} nm: {n:.4g} - j{k:.4g}" for w, n, k in zip(self.wavelengths, p["n"], p["k"]))
+        lines = [f"wrote {self.path} ({self.nbytes / 2**20:.1f} MiB, {'x'.join(map(str, self.resolution))} "
+                 f"phi_d x theta_d x theta_h x {len(self.wavelengths)} bands, {self.seconds:.1f} s)",
+                 f"  hyde: rms_slope = {p['rms_slope']:.6g}, shadowing = {p['shadowing']}, diffuse = {p['diffuse']}",
+                 f"  index (paper eta = n - jk): {idx}"]
+        e = self.errors
+        if e:
+            lines.append(f"  interpolation error (worst band, {e['samples']} geometries): M00 L1 "
+                         f"{100 * e['m00_l1']:.2f} %, M00 p95 {100 * e['m00_p95']:.2f} %; normalized elements "
+                         f"median {100 * e['pol_median']:.3f} %, p95 {100 * e['pol_p95']:.2f} %")
+        lines.append(f"  suggested alpha_sample = {self.alpha_sample:.4g}")
+        return "\n".join(lines)
+
+
+def _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths):
+    if not isinstance(rms_slope, (int, float)) or isinstance(rms_slope, bool) or not \
+            (RMS_SLOPE_RANGE[0] <= float(rms_slope) <= RMS_SLOPE_RANGE[1]):
+        raise UsageError(f"rms_slope must be a number in [{RMS_SLOPE_RANGE[0]:g}, {RMS_SLOPE_RANGE[1]:g}], "
+                         f"got {rms_slope!r}")
+    if shadowing not in SHADOWING:
+        raise UsageError(f"shadowing must be one of {', '.join(SHADOWING)}, got {shadowing!r}")
+    if diffuse not in DIFFUSE:
+        raise UsageError(f"diffuse must be one of {', '.join(DIFFUSE)}, got {diffuse!r}")
+    if diffuse == "reciprocal" and shadowing == "none":
+        raise UsageError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
+    nb, kb = band_index(wavelengths, n, k, material)
+    return {"rms_slope": float(rms_slope), "n": [float(v) for v in nb], "k": [float(v) for v in kb],
+            "shadowing": shadowing, "diffuse": diffuse, "material": material}
+
+
+def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="vgroove",
+                 diffuse="paper", resolution=DEFAULT_RESOLUTION, error_samples: int = 20000,
+                 alpha_sample: float | None = None, seed: int = 0, progress: bool = False) -> ExportReport:
+    """Write the ``hyde`` model as a ``measured_polarized`` table (see the module docstring).
+
+    Parameters: ``rms_slope`` (the paper's), the index as ``n``/``k`` (eta = n - jk; one value or
+    one per band) or ``material`` (Mitsuba ``data/ior`` name), ``shadowing``, ``diffuse`` (as
+    :func:`hyde_bsdf.pbrdf`), ``resolution`` (N_phi_d, N_theta_d, N_theta_h) or "145x37x37",
+    ``error_samples`` geometries for the error estimate (0: skip it), ``alpha_sample`` (default:
+    :func:`suggest_alpha_sample`), ``seed`` of the error geometries, ``progress`` on stderr.
+    Everything is checked, and the size refused (:func:`check_table_size`), before any work.
+    """
+    t0 = time.perf_counter()
+    wavelengths = KAIST_WAVELENGTHS
+    params = _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths)
+    res = _check_resolution(resolution)
+    if not (isinstance(error_samples, (int, np.integer)) and 0 <= error_samples <= 10**7):
+        raise UsageError(f"error_samples must be an integer in [0, 1e7], got {error_samples!r}")
+    if alpha_sample is not None and not (isinstance(alpha_sample, (int, float)) and 1e-4 <= alpha_sample <= 10):
+        raise UsageError(f"alpha_sample must be in [1e-4, 10], got {alpha_sample!r}")
+    path = check_output_path(path, "pBSDF file")
+    nbytes = check_table_size(path, res, len(wavelengths))
+    pd, td, th = grids(res)
+    say = (lambda text: print(f"[hyde-bsdf] export: {text}", file=sys.stderr, flush=True)) if progress else (lambda t: None)
+    last = [time.perf_counter()]
+
+    def slabs():
+        for p in range(res[0]):
+            yield _slab(p, pd, td, th, params)
+            now = time.perf_counter()
+            if progress and now - last[0] >= PROGRESS_SECONDS:
+                last[0] = now
+                say(f"tabulating phi_d {p + 1}/{res[0]} ({100 * (p + 1) / res[0]:.0f} %), {now - t0:.0f} s")
+
+    with atomic_path(path) as tmp:
+        meta = {"producer": "hyde-bsdf export", "model": "Hyde, Schmidt, Havrilla, Opt. Express 17(24) 2009, Eq. 17",
+                **params, "resolution": list(res), "wavelengths_nm": list(wavelengths),
+                "theta_h_grid": "(pi/2) u^2", "edge_deg": EDGE_DEG}
+        layout = {"theta_h": (np.dtype(np.float32), (1, res[2])), "theta_d": (np.dtype(np.float32), (1, res[1])),
+                  "phi_d": (np.dtype(np.float32), (1, res[0])), "wvls": (np.dtype(np.uint16), (len(wavelengths),)),
+                  "hyde_export": (np.dtype(np.uint8), (_JSON_BYTES,)), "M": (np.dtype(np.float32), (*res, len(wavelengths), 4, 4))}
+        head, offsets, total = _header(layout)
+        with open(tmp, "wb") as f:
+            f.write(head)
+            for name, arr in (("theta_h", th), ("theta_d", td), ("phi_d", pd)):
+                f.seek(offsets[name])
+                f.write(np.asarray(arr, np.float32).tobytes())
+            f.seek(offsets["wvls"])
+            f.write(np.asarray(wavelengths, np.uint16).tobytes())
+            f.seek(offsets["M"])
+            for slab in slabs():
+                f.write(slab.tobytes())
+        table = read_pbsdf(tmp)
+        errors = {}
+        if error_samples:
+            say(f"measuring the interpolation error at {error_samples} geometries")
+            errors = interpolation_error(table, params, error_samples, seed)
+        if alpha_sample is None:
+            say("choosing alpha_sample")
+            alpha_sample, _ = suggest_alpha_sample(params)
+        meta.update(errors={k_: v for k_, v in errors.items()}, alpha_sample=float(alpha_sample))
+        text = json.dumps(meta, separators=(",", ":"))
+        if len(text.encode()) > _JSON_BYTES:
+            meta["errors"] = {k_: v for k_, v in errors.items() if k_ != "by_band"}
+            text = json.dumps(meta, separators=(",", ":"))
+        del table
+        with open(tmp, "r+b") as f:
+            f.seek(offsets["hyde_export"])
+            f.write(text.encode().ljust(_JSON_BYTES, b" "))
+    return ExportReport(path=Path(path), resolution=res, nbytes=os.path.getsize(path),
+                        seconds=time.perf_counter() - t0, params=params, wavelengths=tuple(wavelengths),
+                        alpha_sample=float(alpha_sample), errors=errors)
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise UsageError(f"{message} (see hyde-bsdf export --help)")
+
+
+def _floats(text, name):
+    try:
+        vals = [float(v) for v in str(text).split(",")]
+    except ValueError:
+        raise UsageError(f"--{name} must be a number or 5 comma-separated numbers (one per band), got {text!r}") from None
+    return vals[0] if len(vals) == 1 else vals
+
+
+def build_parser():
+    ap = _Parser(prog="hyde-bsdf export",
+                 description="Write the hyde model as a Mitsuba measured_polarized table (.pbsdf) that the C++ "
+                             "renderer (mitsuba executable, CUDA without Python) renders in *_spectral_polarized "
+                             "variants; prints the measured interpolation error and the <bsdf> element to use. "
+                             "Index: the paper's eta = n - jk (the plugin's eta = n, k = k).")
+    ap.add_argument("output", help="the .pbsdf file to write (atomically)")
+    ap.add_argument("--rms-slope", type=float, required=True, help="the paper's rms_slope = sqrt(2) sigma_h/ell")
+    ap.add_argument("--material", default=None, help="a Mitsuba data/ior material (Au, Ag, Al, Cu, ...)")
+    ap.add_argument("--n", default=None, help="real part of the index: one value or 5 (450..650 nm)")
+    ap.add_argument("--k", default=None, help="imaginary part (paper's kappa >= 0): one value or 5")
+    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING)
+    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE)
+    ap.add_argument("--resolution", default="x".join(map(str, DEFAULT_RESOLUTION)),
+                    help="N_phi_d x N_theta_d x N_theta_h (default %(default)s)")
+    ap.add_argument("--error-samples", type=int, default=20000,
+                    help="geometries for the interpolation-error estimate (0: skip; default %(default)s)")
+    ap.add_argument("--alpha-sample", type=float, default=None, help="override the suggested alpha_sample")
+    ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    return ap
+
+
+def cli_main(argv=None) -> int:
+    """``hyde-bsdf export``: write the table, print the summary and the XML element."""
+    args = build_parser().parse_args(argv)
+    n = None if args.n is None else _floats(args.n, "n")
+    k = None if args.k is None else _floats(args.k, "k")
+    report = export_pbsdf(args.output, rms_slope=args.rms_slope, n=n, k=k, material=args.material,
+                          shadowing=args.shadowing, diffuse=args.diffuse, resolution=args.resolution,
+                          error_samples=args.error_samples, alpha_sample=args.alpha_sample,
+                          progress=not args.quiet)
+    print(report.summary())
+    print("\nMitsuba material (C++ measured_polarized, *_spectral_polarized variants):")
+    print(report.xml(indent="    "))
+    return 0

@@ -1,0 +1,615 @@
+"""Measured pBRDF tables in the format of Mitsuba's ``measured_polarized`` plugin (``.pbsdf``).
+
+The format (Mitsuba 3.9 ``src/bsdfs/measured_polarized.cpp``; Baek et al. 2020, the KAIST
+database) is a Mitsuba ``TensorFile`` with these fields:
+
+=========== ======== ===================================== =====================================
+field       dtype    shape                                 meaning
+=========== ======== ===================================== =====================================
+``theta_h`` float32  (1, N_th)                             half-vector polar angle, radians
+``theta_d`` float32  (1, N_td)                             difference angle, radians
+``phi_d``   float32  (1, N_pd)                             difference azimuth, radians, [-pi, pi]
+``wvls``    uint16   (K,)                                  band wavelengths, nm (K = 5)
+``M``       float32  (N_pd, N_td, N_th, K, 4, 4)           Mueller BRDF, 1/sr (not times cos)
+=========== ======== ===================================== =====================================
+
+Other fields are ignored by Mitsuba (the exporter stores its provenance in ``hyde_export``).
+
+Geometry and frames (as the C++ ``eval``; in Radiance mode ``wo`` points to the light, the
+paper's omega_i, and ``si.wi`` to the observer, omega_r):
+
+- isotropic Rusinkiewicz coordinates: h = normalize(omega_i + omega_r), theta_h = angle(n, h),
+  theta_d = angle(h, omega_i), phi_d = atan2(b . i', t . i') with b = normalize(n x h),
+  t = normalize(b x h) and i' the part of omega_i normal to h.  Conversely, with h in the
+  x-z plane: omega_i = cos theta_d h + sin theta_d (cos phi_d t + sin phi_d b) and omega_r
+  its mirror image about h (:func:`rusinkiewicz_to_directions`);
+- both Stokes frames have x = normalize(omega_i x omega_r) (= Mitsuba's ``wo x wi``,
+  roughconductor's s axis) and y = k x x for the propagation direction k (-omega_i in,
+  +omega_r out) -- not the paper's per-wave s = k x z.  :func:`table_to_paper` and
+  :func:`paper_to_table` rotate a Mueller matrix between the two (S3 has the same sign in both);
+- ``M`` is the BRDF itself (1/sr); Mitsuba's ``eval`` multiplies it by cos theta.
+
+Loader quirks (measured with Mitsuba 3.9.1): it copies exactly 5 wavelengths and clamps
+queries outside them (450-650 nm in the KAIST files); interpolation is multilinear in
+(phi_d, theta_d, theta_h, wavelength) and a NaN at any of the 16 corners makes M00 NaN,
+which zeroes the whole matrix; theta_h = 0 gives NaN coordinates (0); omega_i = omega_r
+gives NaN frames.  :meth:`PbsdfTable.interpolate` reproduces the lookup in NumPy.
+
+Reading for fitting (:func:`read_pbsdf`, :func:`pbsdf_samples`): cells are classified
+below-horizon (either direction at or below the surface: Mitsuba never evaluates there),
+non-finite (NaN or inf in any element: KAIST raw files have many) and non-physical (M00 <= 0,
+or |M_jk| > (1 + tol) M00, or a diattenuation / polarizance vector longer than (1 + tol) M00);
+the counts are reported (:class:`CellCounts`).  The usable cells are converted to the paper's
+angles (theta_i, theta_r, phi = phi_r - phi_i; phi = pi the specular plane) and Stokes bases
+(:mod:`hyde_bsdf.model.evaluator`) and subsampled (fixed seed) for fitting.
+
+The reader and writer are plain NumPy (``M`` is memory-mapped, so a 1 GB file is subsampled
+without loading it); Mitsuba is not needed.  Writing (:func:`write_pbsdf`) is atomic
+(:mod:`hyde_bsdf.atomic`) and streams ``M`` slab by slab.
+
+May import: ``hyde_bsdf.model`` (nothing here needs it), ``hyde_bsdf.atomic``, ``hyde_bsdf.errors``.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import struct
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hyde_bsdf.atomic import atomic_path, check_output_path
+from hyde_bsdf.errors import UsageError
+
+__all__ = ["PbsdfFileError", "PbsdfTable", "CellCounts", "PbsdfSamples", "KAIST_WAVELENGTHS",
+           "read_pbsdf", "write_pbsdf", "read_tensor_file", "rusinkiewicz_to_directions",
+           "directions_to_rusinkiewicz", "paper_angles", "table_frame_x", "table_to_paper",
+           "paper_to_table", "classify_cells", "pbsdf_samples"]
+
+#: the band centres of the KAIST database and of every exported table (nm)
+KAIST_WAVELENGTHS = (450, 500, 550, 600, 650)
+#: Mitsuba's loader reads exactly this many wavelengths
+MITSUBA_BANDS = 5
+_MAGIC = b"tensor_file\0"
+#: Mitsuba's struct type codes (sj::Type) <-> NumPy
+_DTYPES = {1: np.uint8, 2: np.int8, 3: np.uint16, 4: np.int16, 5: np.uint32, 6: np.int32,
+           7: np.uint64, 8: np.int64, 9: np.float16, 10: np.float32, 11: np.float64}
+_CODES = {np.dtype(v): k for k, v in _DTYPES.items()}
+_FIELDS = ("theta_h", "theta_d", "phi_d", "wvls", "M")
+PROGRESS_SECONDS = 3.0
+
+
+class PbsdfFileError(UsageError):
+    """A file that is not a readable ``measured_polarized`` table (the message names it)."""
+
+
+# ---------------------------------------------------------------------------------------------
+# the TensorFile container
+
+def read_tensor_file(path) -> dict:
+    """The fields of a Mitsuba ``TensorFile`` as read-only NumPy arrays (memory-mapped).
+
+    Raises :class:`PbsdfFileError` naming the file for a missing file, a bad header, an unknown
+    type, or a field that runs past the end of the file (a truncated download).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise PbsdfFileError(f"pBSDF file {str(path)!r} does not exist or is not a file")
+    size = path.stat().st_size
+    try:
+        with open(path, "rb") as f:
+            head = f.read(min(size, 1 << 20))
+    except OSError as exc:
+        raise PbsdfFileError(f"pBSDF file {str(path)!r}: cannot read it ({exc.strerror or exc})") from None
+    if len(head) < 18 or head[:12] != _MAGIC:
+        raise PbsdfFileError(f"pBSDF file {str(path)!r} is not a Mitsuba tensor file (no 'tensor_file' header)")
+    if head[12] != 1:
+        raise PbsdfFileError(f"pBSDF file {str(path)!r}: unknown tensor file version {head[12]}.{head[13]}")
+    (count,) = struct.unpack_from("<I", head, 14)
+    pos, fields = 18, {}
+    try:
+        for _ in range(count):
+            (nlen,) = struct.unpack_from("<H", head, pos)
+            name = head[pos + 2:pos + 2 + nlen].decode("utf-8")
+            pos += 2 + nlen
+            ndim, code, offset = struct.unpack_from("<HBQ", head, pos)
+            pos += 11
+            shape = struct.unpack_from("<" + "Q" * ndim, head, pos)
+            pos += 8 * ndim
+            if code not in _DTYPES:
+                raise PbsdfFileError(f"pBSDF file {str(path)!r}: field {name!r} has an unknown type code {code}")
+            dtype = np.dtype(_DTYPES[code])
+            nbytes = int(np.prod(shape, dtype=np.uint64)) * dtype.itemsize
+            if offset + nbytes > size:
+                raise PbsdfFileError(f"pBSDF file {str(path)!r}: field {name!r} ({nbytes} bytes at {offset}) runs "
+                                     f"past the end of the file ({size} bytes): truncated?")
+            fields[name] = (dtype, tuple(int(s) for s in shape), int(offset))
+    except (struct.error, UnicodeDecodeError):
+        raise PbsdfFileError(f"pBSDF file {str(path)!r}: the tensor file header is truncated or corrupt") from None
+    out = {}
+    for name, (dtype, shape, offset) in fields.items():
+        if int(np.prod(shape)) == 0:
+            out[name] = np.zeros(shape, dtype)
+        else:
+            out[name] = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=shape)
+    return out
+
+
+def _header(fields: dict, align: int = 8):
+    """(header bytes, {name: offset}) of a tensor file holding ``fields`` (name -> (dtype, shape))."""
+    head = bytearray(_MAGIC + struct.pack("<BBI", 1, 0, len(fields)))
+    for name, (dtype, shape) in fields.items():
+        label = name.encode("utf-8")
+        head += struct.pack("<H", len(label)) + label + struct.pack("<HB", len(shape), _CODES[np.dtype(dtype)])
+        head += struct.pack("<Q", 0) + struct.pack("<" + "Q" * len(shape), *shape)
+    offsets, pos = {}, len(head)
+    for name, (dtype, shape) in fields.items():
+        pos = (pos + align - 1) // align * align
+        offsets[name] = pos
+        pos += int(np.prod(shape)) * np.dtype(dtype).itemsize
+    # patch the offsets into the header
+    cursor = 18
+    for name, (dtype, shape) in fields.items():
+        cursor += 2 + len(name.encode("utf-8")) + 3
+        struct.pack_into("<Q", head, cursor, offsets[name])
+        cursor += 8 + 8 * len(shape)
+    return bytes(head), offsets, pos
+
+
+def table_nbytes(n_phi: int, n_theta_d: int, n_theta_h: int, bands: int = MITSUBA_BANDS) -> int:
+    """Size in bytes of a table file of this resolution (header and grids included, approximately)."""
+    return 4 * 16 * n_phi * n_theta_d * n_theta_h * bands + 4 * (n_phi + n_theta_d + n_theta_h) + 512
+
+
+def write_pbsdf(path, theta_h, theta_d, phi_d, wavelengths, M, extra: dict | None = None,
+                progress=None) -> Path:
+    """Write a ``measured_polarized`` table atomically.
+
+    ``M`` is an array of shape (N_pd, N_td, N_th, K, 4, 4) (any float type, written as float32)
+    or an iterable yielding N_pd slabs of shape (N_td, N_th, K, 4, 4) in order (streamed: only
+    one slab is in memory).  ``extra``: more fields, name -> array or str (a str is stored as
+    uint8 UTF-8 text; Mitsuba ignores extra fields).  ``progress(i, n)`` is called per slab.
+    """
+    path = check_output_path(path, "pBSDF file")
+    grids = {"theta_h": np.asarray(theta_h, np.float32).reshape(1, -1),
+             "theta_d": np.asarray(theta_d, np.float32).reshape(1, -1),
+             "phi_d": np.asarray(phi_d, np.float32).reshape(1, -1),
+             "wvls": np.asarray(np.round(wavelengths), np.uint16).reshape(-1)}
+    shape = (grids["phi_d"].shape[1], grids["theta_d"].shape[1], grids["theta_h"].shape[1],
+             grids["wvls"].shape[0], 4, 4)
+    extras = {}
+    for name, value in (extra or {}).items():
+        if name in _FIELDS:
+            raise ValueError(f"extra field {name!r} clashes with a table field")
+        extras[name] = (np.frombuffer(value.encode("utf-8"), np.uint8) if isinstance(value, str)
+                        else np.ascontiguousarray(value))
+    small = {**grids, **extras}
+    layout = {n: (a.dtype, a.shape) for n, a in small.items()}
+    layout["M"] = (np.dtype(np.float32), shape)       # last: streamed after the small fields
+    head, offsets, total = _header(layout)
+    slabs = [M] if isinstance(M, np.ndarray) else M
+    if isinstance(M, np.ndarray) and M.shape != shape:
+        raise ValueError(f"M has shape {M.shape}; the grids need {shape}")
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        f.write(head)
+        for name, a in small.items():
+            f.seek(offsets[name])
+            f.write(np.ascontiguousarray(a).tobytes())
+        f.seek(offsets["M"])
+        written = 0
+        for i, slab in enumerate(slabs):
+            slab = np.ascontiguousarray(slab, dtype=np.float32)
+            f.write(slab.tobytes())
+            written += slab.size
+            if progress is not None:
+                progress(i + 1, shape[0])
+        if written != int(np.prod(shape)):
+            raise ValueError(f"M: {written} values written, the grids need {int(np.prod(shape))}")
+        f.flush()
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# geometry: Rusinkiewicz coordinates, paper angles, Stokes frames
+
+def _normalize(v):
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def rusinkiewicz_to_directions(phi_d, theta_d, theta_h):
+    """(omega_i, omega_r, x): unit directions to the light and to the observer (float64 [..., 3])
+    of isotropic Rusinkiewicz coordinates, with h in the x-z plane, and the table's Stokes x axis
+    normalize(omega_i x omega_r) -- here as normalize(u x h), u = cos phi_d t + sin phi_d b, its
+    value for theta_d > 0 and its limit at theta_d = 0 (where omega_i = omega_r)."""
+    pd, td, th = np.broadcast_arrays(*(np.asarray(a, float) for a in (phi_d, theta_d, theta_h)))
+    zero = np.zeros_like(th)
+    h = np.stack([np.sin(th), zero, np.cos(th)], -1)
+    t = np.stack([np.cos(th), zero, -np.sin(th)], -1)
+    b = np.stack([zero, np.ones_like(th), zero], -1)
+    u = np.cos(pd)[..., None] * t + np.sin(pd)[..., None] * b
+    om_i = np.cos(td)[..., None] * h + np.sin(td)[..., None] * u
+    om_r = np.cos(td)[..., None] * h - np.sin(td)[..., None] * u
+    return om_i, om_r, _normalize(np.cross(u, h))
+
+
+def directions_to_rusinkiewicz(om_i, om_r):
+    """(phi_d, theta_d, theta_h) of directions to the light and the observer, as Mitsuba's
+    ``directions_to_rusinkiewicz(wo, wi)`` computes them (NaN phi_d at theta_h = 0, as there)."""
+    om_i = _normalize(np.asarray(om_i, float))
+    om_r = _normalize(np.asarray(om_r, float))
+    h = _normalize(om_i + om_r)
+    n = np.array([0.0, 0.0, 1.0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        b = _normalize(np.cross(n, h))
+        t = _normalize(np.cross(b, h))
+        td = np.arccos(np.clip(np.sum(h * om_i, -1), -1, 1))
+        th = np.arccos(np.clip(h[..., 2], -1, 1))
+        ip = _normalize(om_i - np.sum(om_i * h, -1, keepdims=True) * h)
+        pd = np.arctan2(np.clip(np.sum(b * ip, -1), -1, 1), np.clip(np.sum(t * ip, -1), -1, 1))
+    return pd, td, th
+
+
+def paper_angles(om_i, om_r):
+    """(theta_i, theta_r, phi, phi_i, phi_r) of directions to the light and observer (radians;
+    phi = phi_r - phi_i in [0, 2 pi), the paper's angles; azimuth 0 at the pole)."""
+    om_i = np.asarray(om_i, float)
+    om_r = np.asarray(om_r, float)
+    ti = np.arccos(np.clip(om_i[..., 2], -1, 1))
+    tr = np.arccos(np.clip(om_r[..., 2], -1, 1))
+    pi_ = np.arctan2(om_i[..., 1], om_i[..., 0])
+    pr = np.arctan2(om_r[..., 1], om_r[..., 0])
+    return ti, tr, np.mod(pr - pi_, 2 * np.pi), pi_, pr
+
+
+def table_frame_x(om_i, om_r):
+    """The table's Stokes x axis normalize(omega_i x omega_r) (NaN where omega_i = omega_r)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return _normalize(np.cross(om_i, om_r))
+
+
+def _angle(x_from, x_to, k):
+    """Angle from basis vector x_from to x_to, counter-clockwise about the propagation k."""
+    return np.arctan2(np.sum(np.cross(x_from, x_to) * k, -1), np.sum(x_from * x_to, -1))
+
+
+def _rotator(angle):
+    """Stokes rotation R (..., 4, 4): S in the basis x_b = cos a x_a + sin a y_a is R S_a."""
+    c, s = np.cos(2 * angle), np.sin(2 * angle)
+    R = np.zeros(np.shape(angle) + (4, 4))
+    R[..., 0, 0] = R[..., 3, 3] = 1.0
+    R[..., 1, 1] = R[..., 2, 2] = c
+    R[..., 1, 2] = s
+    R[..., 2, 1] = -s
+    return R
+
+
+def _paper_axes(phi_i, phi_r):
+    """The paper's s axes of the incident and reflected waves (limit at fixed azimuth at theta = 0)."""
+    s_i = np.stack([-np.sin(phi_i), np.cos(phi_i), np.zeros_like(phi_i)], -1)
+    s_r = np.stack([np.sin(phi_r), -np.cos(phi_r), np.zeros_like(phi_r)], -1)
+    return s_i, s_r
+
+
+def _rotations(om_i, om_r, x_table):
+    """(angle in: paper s_i -> table x about k_i = -omega_i, angle out: table x -> paper s_r about omega_r)."""
+    _, _, _, pi_, pr = paper_angles(om_i, om_r)
+    s_i, s_r = _paper_axes(pi_, pr)
+    return _angle(s_i, x_table, -om_i), _angle(x_table, s_r, om_r)
+
+
+def table_to_paper(M, om_i, om_r, x_table=None):
+    """Mueller matrices (..., 4, 4) in the table's frames -> the paper's s/p bases.
+
+    ``om_i``, ``om_r``: directions to the light and the observer (..., 3); ``x_table`` the table
+    frame's x axis (default normalize(om_i x om_r); give it where om_i = om_r).
+    """
+    x = table_frame_x(om_i, om_r) if x_table is None else x_table
+    a_in, a_out = _rotations(om_i, om_r, x)
+    return _rotator(a_out) @ M @ _rotator(a_in)
+
+
+def paper_to_table(F, om_i, om_r, x_table=None):
+    """The inverse of :func:`table_to_paper`: the paper's bases -> the table's frames."""
+    x = table_frame_x(om_i, om_r) if x_table is None else x_table
+    a_in, a_out = _rotations(om_i, om_r, x)
+    return _rotator(-a_out) @ F @ _rotator(-a_in)
+
+
+# ---------------------------------------------------------------------------------------------
+# the table
+
+@dataclass
+class PbsdfTable:
+    """A ``measured_polarized`` table: grids in radians (float64), wavelengths in nm, and ``M``
+    (float32, shape (N_pd, N_td, N_th, K, 4, 4), the table's frames, 1/sr; memory-mapped when
+    read from a file).  ``extra``: the file's other fields (``hyde_export`` decoded from JSON)."""
+
+    theta_h: np.ndarray
+    theta_d: np.ndarray
+    phi_d: np.ndarray
+    wavelengths: np.ndarray
+    M: np.ndarray
+    source: str = "<memory>"
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple:
+        return tuple(self.M.shape)
+
+    @property
+    def resolution(self) -> str:
+        return f"{self.phi_d.size}x{self.theta_d.size}x{self.theta_h.size}"
+
+    def grid_directions(self):
+        """(omega_i, omega_r, x) of every (phi_d, theta_d, theta_h) node, shapes (N_pd, N_td, N_th, 3)."""
+        return rusinkiewicz_to_directions(self.phi_d[:, None, None], self.theta_d[None, :, None],
+                                          self.theta_h[None, None, :])
+
+    def interpolate(self, phi_d, theta_d, theta_h, wavelength):
+        """The table at arbitrary coordinates, as Mitsuba's lookup does it: multilinear in
+        (phi_d, theta_d, theta_h, wavelength), each clamped to its grid; a NaN M00 zeroes the matrix
+        and M00 < 0 is clamped to 0.  Returns float64 (..., 4, 4) in the table's frames."""
+        coords = np.broadcast_arrays(*(np.asarray(c, float) for c in (phi_d, theta_d, theta_h, wavelength)))
+        shape = coords[0].shape
+        coords = [c.ravel() for c in coords]
+        grids = [self.phi_d, self.theta_d, self.theta_h, np.asarray(self.wavelengths, float)]
+        idx, wts = [], []
+        for c, g in zip(coords, grids):
+            if g.size == 1:
+                idx.append(np.zeros(c.size, int))
+                wts.append(np.zeros(c.size))
+                continue
+            i = np.clip(np.searchsorted(g, c, side="left") - 1, 0, g.size - 2)
+            with np.errstate(invalid="ignore"):
+                w = np.clip((c - g[i]) / (g[i + 1] - g[i]), 0.0, 1.0)
+            idx.append(i)
+            wts.append(w)
+        out = np.zeros((coords[0].size, 4, 4))
+        flat = self.M
+        for corner in range(16):
+            bits = [(corner >> d) & 1 for d in range(4)]
+            w = np.ones(coords[0].size)
+            sel = []
+            for d in range(4):
+                if grids[d].size == 1:
+                    if bits[d]:
+                        w = w * 0.0
+                    sel.append(idx[d])
+                    continue
+                w = w * (wts[d] if bits[d] else 1.0 - wts[d])
+                sel.append(idx[d] + bits[d])
+            out += w[:, None, None] * np.asarray(flat[sel[0], sel[1], sel[2], sel[3]], float)
+        bad = ~np.isfinite(out[:, 0, 0])
+        out[bad] = 0.0
+        out[:, 0, 0] = np.maximum(out[:, 0, 0], 0.0)
+        return out.reshape(shape + (4, 4))
+
+    def interpolate_directions(self, om_i, om_r, wavelength):
+        """:meth:`interpolate` at directions to the light and observer (..., 3); 0 below the horizon."""
+        pd, td, th = directions_to_rusinkiewicz(om_i, om_r)
+        out = self.interpolate(pd, td, th, wavelength)
+        up = (np.asarray(om_i)[..., 2] > 0) & (np.asarray(om_r)[..., 2] > 0)
+        return np.where(up[..., None, None], out, 0.0)
+
+
+def _grid(name, a, path):
+    a = np.asarray(a, float).reshape(-1)
+    if a.size < 1 or not np.all(np.isfinite(a)):
+        raise PbsdfFileError(f"pBSDF file {path!r}: grid {name!r} must be finite numbers")
+    if a.size > 1 and not np.all(np.diff(a) > 0):
+        raise PbsdfFileError(f"pBSDF file {path!r}: grid {name!r} must increase strictly "
+                             f"(Mitsuba's interpolation searches it)")
+    return a
+
+
+def read_pbsdf(path) -> PbsdfTable:
+    """Read a ``measured_polarized`` file (see the module docstring); ``M`` stays memory-mapped.
+
+    Checks what Mitsuba's loader checks (field names, dtypes, ranks, matching shapes) and more:
+    increasing, finite grids in radians (theta in [0, pi/2], phi_d in [-pi, pi], checked with a
+    1e-4 margin), 1-5 wavelengths in 300-1100 nm.  Every refusal is a :class:`PbsdfFileError`
+    (a :class:`~hyde_bsdf.errors.UsageError`) naming the file and the field.
+    """
+    name = str(path)
+    fields = read_tensor_file(path)
+    missing = [f for f in _FIELDS if f not in fields]
+    if missing:
+        raise PbsdfFileError(f"pBSDF file {name!r} lacks the field(s) {', '.join(missing)} of a "
+                             f"measured_polarized table (it has {', '.join(fields) or 'none'})")
+    expect = {"theta_h": (np.float32, 2), "theta_d": (np.float32, 2), "phi_d": (np.float32, 2),
+              "wvls": (np.uint16, 1), "M": (np.float32, 6)}
+    for f, (dt, nd) in expect.items():
+        a = fields[f]
+        if a.dtype != np.dtype(dt) or a.ndim != nd:
+            raise PbsdfFileError(f"pBSDF file {name!r}: field {f!r} must be {np.dtype(dt).name} of rank {nd} "
+                                 f"(Mitsuba's loader refuses anything else), got {a.dtype.name} of shape {a.shape}")
+    th, td, pd = (_grid(f, fields[f], name) for f in ("theta_h", "theta_d", "phi_d"))
+    wv = np.asarray(fields["wvls"], float)
+    M = fields["M"]
+    want = (pd.size, td.size, th.size, wv.size, 4, 4)
+    if M.shape != want:
+        raise PbsdfFileError(f"pBSDF file {name!r}: M has shape {M.shape}; the grids need {want} "
+                             f"(phi_d, theta_d, theta_h, wavelengths, 4, 4)")
+    eps = 1e-4
+    for f, a, lo, hi in (("theta_h", th, 0.0, math.pi / 2), ("theta_d", td, 0.0, math.pi / 2),
+                         ("phi_d", pd, -math.pi, math.pi)):
+        if a.min() < lo - eps or a.max() > hi + eps:
+            raise PbsdfFileError(f"pBSDF file {name!r}: grid {f!r} spans {a.min():.4g}..{a.max():.4g}; "
+                                 f"it must lie in [{lo:.4g}, {hi:.4g}] radians")
+    if not 1 <= wv.size <= MITSUBA_BANDS or np.any((wv < 300) | (wv > 1100)) or \
+            (wv.size > 1 and not np.all(np.diff(wv) > 0)):
+        raise PbsdfFileError(f"pBSDF file {name!r}: wvls must be 1-{MITSUBA_BANDS} increasing wavelengths in "
+                             f"300-1100 nm (Mitsuba reads exactly 5), got {wv.tolist()}")
+    extra = {}
+    for f, a in fields.items():
+        if f in _FIELDS:
+            continue
+        if f == "hyde_export" and a.dtype == np.uint8:
+            try:
+                extra[f] = json.loads(bytes(np.asarray(a)).decode("utf-8"))
+                continue
+            except (ValueError, UnicodeDecodeError):
+                pass
+        extra[f] = a
+    return PbsdfTable(theta_h=th, theta_d=td, phi_d=pd, wavelengths=wv, M=M, source=name, extra=extra)
+
+
+# ---------------------------------------------------------------------------------------------
+# masking and subsampling for fitting
+
+@dataclass
+class CellCounts:
+    """How many cells (geometry x band) a table has, and why some cannot be used."""
+
+    total: int
+    below_horizon: int
+    nonfinite: int
+    nonphysical: int
+    usable: int
+    #: per reason of non-physicality: name -> count
+    detail: dict = field(default_factory=dict)
+
+    def summary(self) -> str:
+        pct = lambda n: f"{100.0 * n / max(self.total, 1):.1f} %"
+        extra = "".join(f"; {k} {v}" for k, v in self.detail.items() if v)
+        return (f"{self.total} cells (geometry x band): {self.usable} usable ({pct(self.usable)}), "
+                f"{self.below_horizon} below the horizon, {self.nonfinite} with NaN/inf, "
+                f"{self.nonphysical} non-physical{extra}")
+
+
+def classify_cells(M, up, tolerance: float = 0.05):
+    """Masks of one slab of cells: (usable, nonfinite, nonphysical, detail counts).
+
+    ``M`` (..., K, 4, 4); ``up`` (...) True where both directions are above the horizon.
+    Non-physical: M00 <= 0, or |M_jk| > (1 + tolerance) M00, or |(M01, M02, M03)| or
+    |(M10, M20, M30)| > (1 + tolerance) M00 (a degree of polarization above 1).
+    """
+    M = np.asarray(M, float)
+    up = np.broadcast_to(np.asarray(up, bool)[..., None], M.shape[:-2])
+    finite = np.isfinite(M).all(axis=(-2, -1))
+    with np.errstate(invalid="ignore"):
+        m00 = M[..., 0, 0]
+        lim = (1.0 + tolerance) * m00
+        nonpos = finite & (m00 <= 0)
+        elem = finite & ~nonpos & (np.abs(M).max(axis=(-2, -1)) > lim)
+        diat = finite & ~nonpos & (np.linalg.norm(M[..., 0, 1:], axis=-1) > lim)
+        polz = finite & ~nonpos & (np.linalg.norm(M[..., 1:, 0], axis=-1) > lim)
+    nonphys = nonpos | elem | diat | polz
+    usable = up & finite & ~nonphys
+    detail = {"M00 <= 0": int((up & nonpos).sum()), "|M_jk| > M00": int((up & elem).sum()),
+              "diattenuation > 1": int((up & diat).sum()), "polarizance > 1": int((up & polz).sum())}
+    return usable, up & ~finite, up & finite & nonphys, detail
+
+
+@dataclass
+class PbsdfSamples:
+    """Usable cells of a table in the paper's angles and Stokes bases, for fitting.
+
+    ``theta_i``, ``theta_r``, ``phi`` (N,) radians; ``F`` (K, N, 4, 4) the Mueller BRDF (1/sr)
+    in the paper's bases; ``wavelengths`` (K,) nm; ``counts`` the cell classification of the
+    whole table; ``cells`` (N, 3) the (phi_d, theta_d, theta_h) indices of each sample.
+    A geometry is kept when it is usable in every band.
+    """
+
+    theta_i: np.ndarray
+    theta_r: np.ndarray
+    phi: np.ndarray
+    F: np.ndarray
+    wavelengths: np.ndarray
+    counts: CellCounts
+    cells: np.ndarray
+    source: str = "<memory>"
+    usable_geometries: int = 0
+
+    def __len__(self) -> int:
+        return int(self.theta_i.size)
+
+    def normalized(self):
+        """F / F00, (K, N, 4, 4)."""
+        return self.F / self.F[..., :1, :1]
+
+    def measurements(self, band: int):
+        """One band as :class:`hyde_bsdf.fit.measurements.Measurements` (the 15 normalized
+        elements, no sigma) for :func:`hyde_bsdf.fit.fit_measurements`."""
+        from hyde_bsdf.fit.measurements import ELEMENT_NAMES, Measurements
+
+        N = self.normalized()[band]
+        values = {n: N[:, int(n[1]), int(n[2])].copy() for n in ELEMENT_NAMES}
+        return Measurements(self.theta_i.copy(), self.theta_r.copy(), self.phi.copy(), values,
+                            source=f"{self.source} @ {self.wavelengths[band]:g} nm")
+
+
+def _progress_printer(label, enabled):
+    state = {"t0": time.perf_counter(), "last": time.perf_counter()}
+
+    def report(i, n):
+        now = time.perf_counter()
+        if enabled and (now - state["last"] >= PROGRESS_SECONDS):
+            state["last"] = now
+            print(f"[hyde-bsdf] {label}: {i}/{n} ({100 * i / n:.0f} %), {now - state['t0']:.0f} s",
+                  file=sys.stderr, flush=True)
+    return report
+
+
+def pbsdf_samples(table, max_points: int = 3000, theta_max: float = math.radians(80.0),
+                  tolerance: float = 0.05, seed: int = 0, progress: bool = False) -> PbsdfSamples:
+    """Mask, convert and subsample a table (a :class:`PbsdfTable` or a path) for fitting.
+
+    Cells are classified (:func:`classify_cells`; counts for the whole table, every band);
+    geometries usable in every band with theta_i, theta_r <= ``theta_max`` (radians; grazing
+    cells are the least reliable in a measurement) and theta_d > 0 (omega_i = omega_r: the
+    table frame is undefined there) are candidates, of which ``max_points`` are drawn at random
+    (``seed``; all of them if fewer).  The drawn cells are converted to the paper's angles and
+    bases.  The table is read one phi_d slab at a time (progress on stderr with ``progress``).
+    """
+    if not isinstance(table, PbsdfTable):
+        table = read_pbsdf(table)
+    if not (isinstance(max_points, (int, np.integer)) and max_points >= 1):
+        raise UsageError(f"max_points must be an integer >= 1, got {max_points!r}")
+    if not (isinstance(theta_max, (int, float)) and 0 < theta_max <= math.pi / 2):
+        raise UsageError(f"theta_max must be in (0, pi/2] radians, got {theta_max!r}")
+    if not (isinstance(tolerance, (int, float)) and 0 <= tolerance <= 1):
+        raise UsageError(f"tolerance must be in [0, 1], got {tolerance!r}")
+    om_i, om_r, x = table.grid_directions()
+    up = (om_i[..., 2] > 1e-12) & (om_r[..., 2] > 1e-12)
+    cand = up & (om_i[..., 2] >= math.cos(theta_max) - 1e-12) & (om_r[..., 2] >= math.cos(theta_max) - 1e-12)
+    cand &= (table.theta_d > 0)[None, :, None]
+    K = table.wavelengths.size
+    totals = dict(total=0, below=0, nonfinite=0, nonphysical=0, usable=0)
+    detail = {}
+    all_bands = np.zeros(up.shape, bool)
+    report = _progress_printer(f"reading {Path(table.source).name}", progress)
+    n_pd = table.phi_d.size
+    for p in range(n_pd):
+        slab = np.asarray(table.M[p], float)
+        usable, nonfinite, nonphys, det = classify_cells(slab, up[p], tolerance)
+        totals["total"] += usable.size
+        totals["below"] += int((~up[p]).sum()) * K
+        totals["nonfinite"] += int(nonfinite.sum())
+        totals["nonphysical"] += int(nonphys.sum())
+        totals["usable"] += int(usable.sum())
+        for k, v in det.items():
+            detail[k] = detail.get(k, 0) + v
+        all_bands[p] = usable.all(axis=-1) & cand[p]
+        report(p + 1, n_pd)
+    counts = CellCounts(totals["total"], totals["below"], totals["nonfinite"], totals["nonphysical"],
+                        totals["usable"], detail)
+    where = np.argwhere(all_bands)
+    if where.shape[0] == 0:
+        raise PbsdfFileError(f"pBSDF file {table.source!r}: no geometry is usable in every band within "
+                             f"theta <= {math.degrees(theta_max):.0f} deg ({counts.summary()})")
+    rng = np.random.default_rng(seed)
+    if where.shape[0] > max_points:
+        where = where[np.sort(rng.choice(where.shape[0], max_points, replace=False))]
+    a, b, c = where.T
+    oi, orr, xt = om_i[a, b, c], om_r[a, b, c], x[a, b, c]
+    M = np.asarray(table.M[a, b, c], float)               # (N, K, 4, 4)
+    F = table_to_paper(np.moveaxis(M, 1, 0), oi, orr, xt)  # (K, N, 4, 4)
+    ti, tr, ph, _, _ = paper_angles(oi, orr)
+    return PbsdfSamples(theta_i=ti, theta_r=tr, phi=ph, F=F, wavelengths=table.wavelengths.copy(),
+                        counts=counts, cells=where, source=table.source,
+                        usable_geometries=int(all_bands.sum()))
