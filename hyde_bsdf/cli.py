@@ -27,7 +27,8 @@ import sys
 COMMANDS = {
     "demo": ("hyde_bsdf.render.demo", "the main job: demo pictures into a folder"),
     "render": ("hyde_bsdf.render.renderer", "render a scene to a Stokes EXR and polarization PNGs"),
-    "fit": ("hyde_bsdf.fit.mueller_fit", "fit n, k, rms_slope to a Mueller-matrix CSV"),
+    "fit": ("hyde_bsdf.fit.fit_command", "fit n, k, rms_slope to a Mueller-matrix CSV or a measured_polarized table"),
+    "export": ("hyde_bsdf.fit.pbsdf_export", "write a hyde material as a measured_polarized table for C++ Mitsuba"),
     "invert": ("hyde_bsdf.inverse.cli", "recover roughness and index from a Stokes image"),
     "validate": ("hyde_bsdf.report.build", "run the validation report"),
 }

@@ -1,0 +1,466 @@
+"""Fit the pBRDF (paper Eq. 17) to a measured ``measured_polarized`` table: n, k per band, one rms_slope.
+
+    minimize  sum_b sum_m [ (log(F00 + c_b) - log(M00 + c_b)) / s00 ]^2
+                        + sum_jk [ (F_jk/F00 - M_jk/M00) / s_el ]^2
+
+over rms_slope (shared by the bands) and n_b, k_b (eta = n - jk per band; any subset can be held
+fixed), with F = :func:`hyde_bsdf.pbrdf` and M the table's usable cells in the paper's angles and
+bases (:func:`hyde_bsdf.fit.pbsdf_file.pbsdf_samples`).  M00 carries the roughness: the lobe's
+width and height (a fit of the normalized elements alone cannot identify rms_slope, which only
+enters them through the diffuse fraction); the normalized elements carry the index.  c_b =
+1e-4 max M00 keeps the log finite where the lobe falls to 0.
+
+A table has no uncertainties: ``s00`` (relative, of M00) and ``s_el`` (absolute, of the normalized
+elements) are estimated from the residual scatter of a first fit, and the fit is repeated with
+them; the standard errors are then sqrt(diag((J^T J)^-1)) of the weighted residuals, i.e. they
+assume the misfit is noise.  A table written by ``hyde-bsdf export`` is fitted to ~1e-6 (only
+float32 rounding), a real material leaves model error that these errors include as if it were
+noise.  Ill-posed fits warn as :func:`hyde_bsdf.fit.fit_mueller` does (correlation > 0.999,
+relative error > 50 %, a parameter on its bound, no convergence).
+
+Procedure: multi-start (n, k, rms_slope) on the middle band (starts as :func:`fit_mueller`'s),
+then (n, k) of each other band from its neighbour's solution, then all parameters jointly on all
+bands; then the weights and the final joint fit.  3000 geometries x 5 bands take a few seconds.
+
+Command line::
+
+    hyde-bsdf fit FILE.pbsdf [--fit n,k,rms_slope] [--rms-slope 0.3] [--n0 N] [--k0 K]
+                  [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
+                  [--max-points 3000] [--theta-max 80] [--tolerance 0.05] [--seed 0]
+                  [--strict] [-o fit.png] [-q]
+
+May import: ``hyde_bsdf.model``, ``hyde_bsdf.fit``.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hyde_bsdf.atomic import atomic_path, check_output_path
+from hyde_bsdf.errors import UsageError
+from hyde_bsdf.fit.pbsdf_file import PbsdfSamples, pbsdf_samples, read_pbsdf
+from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.model.shadowing import SHADOWING
+
+__all__ = ["PbsdfFitResult", "fit_pbsdf", "plot_pbsdf_fit", "cli_main"]
+
+#: elements fitted besides M00 (normalized by M00): all 15
+ELEMENTS = tuple((j, k) for j in range(4) for k in range(4) if (j, k) != (0, 0))
+BOUNDS = {"n": (0.0, 1e3), "k": (0.0, 1e3), "rms_slope": RMS_SLOPE_RANGE}
+STARTS = {"n": (0.3, 1.5), "k": (0.5, 3.0, 9.0)}
+#: geometries used by the multi-start stage (the joint fit uses all)
+SEARCH_ROWS = 1000
+PROGRESS_SECONDS = 3.0
+
+
+@dataclass
+class PbsdfFitResult:
+    """Result of :func:`fit_pbsdf`.  Arrays are per band (``wavelengths``, nm); eta = n - jk."""
+
+    rms_slope: float
+    n: np.ndarray
+    k: np.ndarray
+    wavelengths: np.ndarray
+    stderr: dict            # "rms_slope" -> float, "n" / "k" -> arrays (nan where held fixed)
+    fitted: tuple           # ("rms_slope", "n", "k") subset
+    correlation: np.ndarray
+    names: tuple            # parameter names of the correlation matrix rows
+    sigma_m00: float        # estimated relative scatter of M00 (log residual rms)
+    sigma_elements: float   # estimated scatter of the normalized elements
+    chi2: float
+    dof: int
+    success: bool
+    message: str
+    nfev: int
+    n_geometries: int
+    shadowing: str = "vgroove"
+    diffuse: str = "paper"
+    warnings: list = field(default_factory=list)
+    rms_m00: np.ndarray = None        # per band rms of the log residual of M00
+    rms_elements: np.ndarray = None   # per band rms of the normalized-element residuals
+
+    def params(self, band: int) -> dict:
+        return {"rms_slope": self.rms_slope, "n": float(self.n[band]), "k": float(self.k[band])}
+
+    def model(self, theta_i, theta_r, phi, band: int):
+        """The fitted model's F (1/sr, paper bases) in one band (angles in radians)."""
+        return pbrdf(theta_i, theta_r, phi, **self.params(band), shadowing=self.shadowing,
+                     diffuse=self.diffuse)
+
+    def plugin_xml(self, indent: str = "") -> str:
+        """A ``<bsdf type="hyde">`` with eta and k as spectra over the bands (held constant outside)."""
+        wl = [float(w) for w in self.wavelengths]
+
+        def spectrum(values):
+            pts = [(360.0, values[0])] + list(zip(wl, values)) + [(830.0, values[-1])]
+            return ", ".join(f"{w:g}:{v:.6g}" for w, v in pts)
+
+        if len(wl) == 1:
+            eta = f'<float name="eta" value="{self.n[0]:.6g}"/>'
+            k = f'<float name="k" value="{self.k[0]:.6g}"/>'
+        else:
+            eta = f'<spectrum name="eta" value="{spectrum(list(self.n))}"/>'
+            k = f'<spectrum name="k" value="{spectrum(list(self.k))}"/>'
+        return "\n".join([f'{indent}<bsdf type="hyde">',
+                          f'{indent}    <float name="rms_slope" value="{self.rms_slope:.6g}"/>',
+                          f'{indent}    <!-- Mitsuba n + ik; the paper writes eta = n - jk with the same numbers -->',
+                          f"{indent}    {eta}", f"{indent}    {k}",
+                          f'{indent}    <string name="shadowing" value="{self.shadowing}"/>',
+                          f'{indent}    <string name="diffuse" value="{self.diffuse}"/>',
+                          f"{indent}</bsdf>"])
+
+    def summary(self) -> str:
+        def pm(v, e):
+            return f"{v:.6g} +- {e:.3g}" if math.isfinite(e) else f"{v:.6g} (fixed)"
+
+        out = [f"pBRDF fit to a measured_polarized table (paper Eq. 17; shadowing={self.shadowing!r}, "
+               f"diffuse={self.diffuse!r}): {self.n_geometries} geometries x {len(self.wavelengths)} bands",
+               f"  converged: {self.success} ({self.message}; {self.nfev} model evaluations)",
+               f"  rms_slope = {pm(self.rms_slope, self.stderr['rms_slope'])}"]
+        for b, wl in enumerate(self.wavelengths):
+            out.append(f"  {wl:5.0f} nm: n = {pm(self.n[b], self.stderr['n'][b])}, "
+                       f"k = {pm(self.k[b], self.stderr['k'][b])}   (rms misfit: M00 {100 * self.rms_m00[b]:.2f} %, "
+                       f"elements {self.rms_elements[b]:.4f})")
+        out.append(f"  scatter used as sigma: M00 {100 * self.sigma_m00:.3g} % (relative), normalized elements "
+                   f"{self.sigma_elements:.3g}; chi^2 = {self.chi2:.4g}, dof = {self.dof}")
+        out.append("  (a table has no error bars: the standard errors treat the misfit as noise)")
+        for w in self.warnings:
+            out.append(f"  WARNING: {w}")
+        return "\n".join(out)
+
+
+def _check(fit, rms_slope, n0, k0, shadowing, diffuse):
+    if isinstance(fit, str):
+        fit = tuple(p.strip() for p in fit.split(",") if p.strip())
+    fit = tuple(fit)
+    bad = [p for p in fit if p not in ("n", "k", "rms_slope")]
+    if bad or not fit or len(set(fit)) != len(fit):
+        raise UsageError(f"fit must be a non-empty subset of n,k,rms_slope without repeats, got {','.join(fit)!r}")
+    if not (isinstance(rms_slope, (int, float)) and RMS_SLOPE_RANGE[0] <= rms_slope <= RMS_SLOPE_RANGE[1]):
+        raise UsageError(f"rms_slope must be in [{RMS_SLOPE_RANGE[0]:g}, {RMS_SLOPE_RANGE[1]:g}], got {rms_slope!r}")
+    for name, v in (("n0", n0), ("k0", k0)):
+        if v is not None and not (isinstance(v, (int, float)) and 0 <= v <= BOUNDS[name[0]][1]):
+            raise UsageError(f"{name} must be in [0, {BOUNDS[name[0]][1]:g}], got {v!r}")
+    if ("n" not in fit and n0 is None) or ("k" not in fit and k0 is None):
+        raise UsageError("a parameter held fixed needs its value: --n0 for n, --k0 for k")
+    if shadowing not in SHADOWING:
+        raise UsageError(f"shadowing must be one of {', '.join(SHADOWING)}, got {shadowing!r}")
+    if diffuse not in DIFFUSE:
+        raise UsageError(f"diffuse must be one of {', '.join(DIFFUSE)}, got {diffuse!r}")
+    return fit
+
+
+class _Problem:
+    """Residuals of a set of bands and geometries for a parameter vector over the free parameters."""
+
+    def __init__(self, data: PbsdfSamples, bands, rows, free, fixed, shadowing, diffuse, s00, sel, tick):
+        self.ti, self.tr, self.ph = data.theta_i[rows], data.theta_r[rows], data.phi[rows]
+        F = data.F[np.ix_(bands, rows)]
+        self.m00 = F[..., 0, 0]
+        self.norm = F / F[..., :1, :1]
+        self.floor = 1e-4 * self.m00.max(axis=1, keepdims=True)
+        self.log_data = np.log(self.m00 + self.floor)
+        self.bands, self.free, self.fixed = list(bands), list(free), dict(fixed)
+        self.opts = dict(shadowing=shadowing, diffuse=diffuse)
+        self.s00, self.sel = s00, sel
+        self.tick = tick
+
+    def values(self, x):
+        v = dict(self.fixed)
+        v.update(zip(self.free, x))
+        return v
+
+    def parts(self, x):
+        v = self.values(x)
+        r00, rel = [], []
+        for i, b in enumerate(self.bands):
+            F = pbrdf(self.ti, self.tr, self.ph, rms_slope=v["rms_slope"], n=v[("n", b)], k=v[("k", b)], **self.opts)
+            m00 = F[:, 0, 0]
+            r00.append(np.log(m00 + self.floor[i]) - self.log_data[i])
+            N = F / m00[:, None, None]
+            rel.append(np.stack([N[:, j, k] - self.norm[i, :, j, k] for j, k in ELEMENTS], 0))
+        return np.array(r00), np.array(rel)
+
+    def __call__(self, x):
+        r00, rel = self.parts(x)
+        r = np.concatenate([r00.ravel() / self.s00, rel.ravel() / self.sel])
+        self.tick(r)
+        return r
+
+
+def _bounds(free):
+    lo = [BOUNDS[p if isinstance(p, str) else p[0]][0] for p in free]
+    hi = [BOUNDS[p if isinstance(p, str) else p[0]][1] for p in free]
+    return np.array(lo), np.array(hi)
+
+
+def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=None, k0=None,
+              shadowing: str = "vgroove", diffuse: str = "paper", strict: bool = False,
+              progress: bool | None = None, **sample_options) -> PbsdfFitResult:
+    """Fit rms_slope and n, k per band to a table (see the module docstring).
+
+    ``data``: :class:`~hyde_bsdf.fit.pbsdf_file.PbsdfSamples`, a
+    :class:`~hyde_bsdf.fit.pbsdf_file.PbsdfTable` or a path (then ``sample_options`` go to
+    :func:`~hyde_bsdf.fit.pbsdf_file.pbsdf_samples`).  ``fit``: the parameters to fit
+    ("n,k,rms_slope" or a tuple); ``rms_slope``, ``n0``, ``k0``: start values, or the values of
+    parameters held fixed (n0/k0 apply to every band).  ``strict``: raise instead of warning when
+    the fit is ill-posed.  ``progress``: lines on stderr every few seconds (default: when the
+    fit runs longer).
+    """
+    from scipy.optimize import least_squares
+
+    from hyde_bsdf.fit.mueller_fit import IllPosedFitError, IllPosedFitWarning
+
+    fit = _check(fit, rms_slope, n0, k0, shadowing, diffuse)
+    if not isinstance(data, PbsdfSamples):
+        data = pbsdf_samples(data, progress=bool(progress), **sample_options)
+    K = data.wavelengths.size
+    rows_all = np.arange(len(data))
+    t0 = time.perf_counter()
+    state = {"calls": 0, "last": t0, "stage": ""}
+
+    def tick(r):
+        state["calls"] += 1
+        now = time.perf_counter()
+        if progress is not False and now - state["last"] >= PROGRESS_SECONDS:
+            state["last"] = now
+            print(f"[hyde-bsdf] fit: {state['stage']}: {state['calls']} evaluations, chi^2 = {float(r @ r):.6g}, "
+                  f"{now - t0:.0f} s", file=sys.stderr, flush=True)
+
+    values = {"rms_slope": float(rms_slope)}
+    for b in range(K):
+        values[("n", b)] = float(n0) if n0 is not None else 1.0
+        values[("k", b)] = float(k0) if k0 is not None else 1.0
+    s00, sel = 0.05, 0.01
+    nfev = 0
+
+    def solve(bands, rows, free, x0, max_nfev, s00_, sel_):
+        nonlocal nfev
+        fixed = {p: v for p, v in values.items() if p not in free}
+        prob = _Problem(data, bands, rows, free, fixed, shadowing, diffuse, s00_, sel_, tick)
+        lo, hi = _bounds(free)
+        x0 = np.clip(np.asarray(x0, float), lo + 1e-9, hi - 1e-9)
+        res = least_squares(prob, x0, bounds=(lo, hi), method="trf", x_scale="jac", diff_step=1e-6,
+                            max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        nfev += int(res.nfev)
+        return res, prob
+
+    rng = np.random.default_rng(0)
+    search = rows_all if len(rows_all) <= SEARCH_ROWS else np.sort(rng.choice(rows_all, SEARCH_ROWS, replace=False))
+    mid = K // 2
+    # ---- 1. multi-start on the middle band
+    state["stage"] = f"multi-start at {data.wavelengths[mid]:g} nm"
+    free_mid = [p for p in (("n", mid), ("k", mid)) if p[0] in fit] + (["rms_slope"] if "rms_slope" in fit else [])
+    starts = [(n_, k_) for n_ in ((n0,) if n0 is not None else STARTS["n"])
+              for k_ in ((k0,) if k0 is not None else STARTS["k"])]
+    best = None
+    for n_, k_ in starts:
+        trial = {("n", mid): n_, ("k", mid): k_, "rms_slope": values["rms_slope"]}
+        res, _ = solve([mid], search, free_mid, [trial[p] for p in free_mid], 60 * len(free_mid), s00, sel)
+        if best is None or res.cost < best.cost:
+            best = res
+    values.update(zip(free_mid, best.x))
+    # ---- 2. the other bands, outwards from the middle, starting at the neighbour's index
+    for order in (range(mid + 1, K), range(mid - 1, -1, -1)):
+        for b in order:
+            nb = b - 1 if b > mid else b + 1
+            free_b = [p for p in (("n", b), ("k", b)) if p[0] in fit]
+            if not free_b:
+                continue
+            state["stage"] = f"band {data.wavelengths[b]:g} nm"
+            x0 = [values[(p[0], nb)] for p in free_b]
+            res, _ = solve([b], search, free_b, x0, 60 * len(free_b), s00, sel)
+            values.update(zip(free_b, res.x))
+    # ---- 3. joint fit, weights from its scatter, final joint fit
+    free = (["rms_slope"] if "rms_slope" in fit else []) + \
+           [(p, b) for b in range(K) for p in ("n", "k") if p in fit]
+    bands = list(range(K))
+    state["stage"] = f"joint fit of {len(free)} parameters on {len(rows_all)} geometries x {K} bands"
+    res, prob = solve(bands, rows_all, free, [values[p] for p in free], 40 * len(free), s00, sel)
+    values.update(zip(free, res.x))
+    r00, rel = prob.parts(res.x)
+    s00 = max(float(np.sqrt(np.mean(r00 ** 2))), 1e-7)
+    sel = max(float(np.sqrt(np.mean(rel ** 2))), 1e-7)
+    res, prob = solve(bands, rows_all, free, res.x, 20 * len(free), s00, sel)
+    values.update(zip(free, res.x))
+    r00, rel = prob.parts(res.x)
+    if progress and time.perf_counter() - t0 >= PROGRESS_SECONDS:
+        print(f"[hyde-bsdf] fit: done, {state['calls']} evaluations in {time.perf_counter() - t0:.0f} s",
+              file=sys.stderr, flush=True)
+
+    r = res.fun
+    chi2 = float(r @ r)
+    m, p = r.size, len(free)
+    J = np.asarray(res.jac, float)
+    diag = []
+    sv = np.linalg.svd(J, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+    if not math.isfinite(cond) or cond > 1e12:
+        cov = np.full((p, p), np.inf)
+        corr = np.eye(p)
+        diag.append(f"the Jacobian is singular (condition number {cond:.3g}): the table does not constrain "
+                    f"the fitted parameters separately")
+    else:
+        cov = np.linalg.inv(J.T @ J) * (chi2 / max(m - p, 1))
+        se = np.sqrt(np.diag(cov))
+        corr = cov / np.outer(se, se)
+    err = {q: math.sqrt(cov[i, i]) if math.isfinite(cov[i, i]) else math.inf for i, q in enumerate(free)}
+    names = tuple(q if isinstance(q, str) else f"{q[0]}@{data.wavelengths[q[1]]:g}nm" for q in free)
+    for i in range(p):
+        for j in range(i + 1, p):
+            if math.isfinite(corr[i, j]) and abs(corr[i, j]) > 0.999:
+                diag.append(f"{names[i]} and {names[j]} are strongly correlated (rho = {corr[i, j]:+.4f})")
+    for i, q in enumerate(free):
+        v = values[q]
+        if math.isfinite(err[q]) and v != 0 and err[q] > 0.5 * abs(v):
+            diag.append(f"{names[i]} is poorly determined: {v:.4g} +- {err[q]:.3g}")
+        lo, hi = BOUNDS[q if isinstance(q, str) else q[0]]
+        if v <= lo + 1e-6 * max(1.0, abs(lo)) or v >= hi * (1 - 1e-9):
+            diag.append(f"{names[i]} = {v:.4g} sits on its bound [{lo:g}, {hi:g}]")
+    if not res.success:
+        diag.append(f"the optimizer did not converge: {res.message}")
+    nan = float("nan")
+    stderr = {"rms_slope": err.get("rms_slope", nan),
+              "n": np.array([err.get(("n", b), nan) for b in range(K)]),
+              "k": np.array([err.get(("k", b), nan) for b in range(K)])}
+    result = PbsdfFitResult(
+        rms_slope=values["rms_slope"], n=np.array([values[("n", b)] for b in range(K)]),
+        k=np.array([values[("k", b)] for b in range(K)]), wavelengths=data.wavelengths.copy(),
+        stderr=stderr, fitted=tuple(fit), correlation=corr, names=names, sigma_m00=s00, sigma_elements=sel,
+        chi2=chi2, dof=m - p, success=bool(res.success), message=str(res.message), nfev=nfev,
+        n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
+        rms_m00=np.sqrt(np.mean(r00 ** 2, axis=1)), rms_elements=np.sqrt(np.mean(rel ** 2, axis=(1, 2))))
+    if diag:
+        text = "ill-posed fit: " + "; ".join(diag)
+        if strict:
+            raise IllPosedFitError(text)
+        warnings.warn(text, IllPosedFitWarning, stacklevel=2)
+    return result
+
+
+def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str = "", max_points: int = 1500):
+    """Fit against data per Mueller element: 16 panels of model (y) against table (x) at the fitted
+    geometries, every band in its own colour; M00 in 1/sr on log axes, the others normalized by M00."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = np.arange(len(data))
+    if rows.size > max_points:
+        rows = np.sort(np.random.default_rng(0).choice(rows, max_points, replace=False))
+    fig, axes = plt.subplots(4, 4, figsize=(12, 11))
+    cmap = plt.get_cmap("viridis")
+    K = data.wavelengths.size
+    for b in range(K):
+        F = result.model(data.theta_i[rows], data.theta_r[rows], data.phi[rows], b)
+        D = data.F[b, rows]
+        colour = cmap(b / max(K - 1, 1))
+        for j in range(4):
+            for k in range(4):
+                a = axes[j, k]
+                if (j, k) == (0, 0):
+                    a.loglog(D[:, 0, 0], F[:, 0, 0], ".", ms=2, color=colour, label=f"{data.wavelengths[b]:g} nm")
+                else:
+                    a.plot(D[:, j, k] / D[:, 0, 0], F[:, j, k] / F[:, 0, 0], ".", ms=2, color=colour)
+    for j in range(4):
+        for k in range(4):
+            a = axes[j, k]
+            lo, hi = a.get_xlim()
+            lo, hi = min(lo, a.get_ylim()[0]), max(hi, a.get_ylim()[1])
+            a.plot([lo, hi], [lo, hi], "k-", lw=0.6)
+            a.set_title("M00 (1/sr)" if (j, k) == (0, 0) else f"M{j}{k}/M00", fontsize=9)
+            a.tick_params(labelsize=7)
+            if j == 3:
+                a.set_xlabel("table", fontsize=8)
+            if k == 0:
+                a.set_ylabel("fitted model", fontsize=8)
+    axes[0, 0].legend(fontsize=6, markerscale=3)
+    fig.suptitle((title + "\n" if title else "") +
+                 f"rms_slope = {result.rms_slope:.4g}; n = {', '.join(f'{v:.3g}' for v in result.n)}; "
+                 f"k = {', '.join(f'{v:.3g}' for v in result.k)} ({len(rows)} of {len(data)} geometries)", fontsize=9)
+    fig.tight_layout()
+    path = check_output_path(path, "plot file")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".").lower() or "png")
+    plt.close(fig)
+    return path
+
+
+# ---------------------------------------------------------------------------------------------
+# command line
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise UsageError(f"{message} (see hyde-bsdf fit FILE.pbsdf --help)")
+
+
+def build_parser():
+    ap = _Parser(prog="hyde-bsdf fit", description=(
+        "Fit the Hyde-Schmidt-Havrilla pBRDF to a Mitsuba measured_polarized table (FILE.pbsdf, e.g. the KAIST "
+        "database): one rms_slope and n, k per band, from M00 and the 15 normalized elements; prints the cell "
+        "counts (NaN, non-physical, below the horizon), the fit with standard errors, and the hyde <bsdf>. "
+        "Index: the paper's eta = n - jk (the plugin's eta = n, k = k). Exit status: 0 fitted, 1 not converged "
+        "or ill-posed with --strict, 2 bad input."))
+    ap.add_argument("data", help="the measured_polarized table (.pbsdf)")
+    ap.add_argument("--fit", default="n,k,rms_slope", help="parameters to fit (default n,k,rms_slope)")
+    ap.add_argument("--rms-slope", type=float, default=0.3, help="start (or fixed) rms_slope (default 0.3)")
+    ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n of every band; default: several")
+    ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k of every band; default: several")
+    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING)
+    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE)
+    ap.add_argument("--max-points", type=int, default=3000, help="geometries drawn from the usable cells (default 3000)")
+    ap.add_argument("--theta-max", type=float, default=80.0,
+                    help="largest theta_i, theta_r used, degrees (default 80)")
+    ap.add_argument("--tolerance", type=float, default=0.05,
+                    help="a cell with |M_jk| or a degree of polarization above (1 + tolerance) M00 is non-physical")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
+    ap.add_argument("--strict", action="store_true", help="fail (exit 1) when the fit is ill-posed")
+    ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element")
+    ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    return ap
+
+
+def cli_main(argv=None) -> int:
+    """``hyde-bsdf fit FILE.pbsdf``: read, mask, subsample, fit, print, plot."""
+    from hyde_bsdf.fit.mueller_fit import IllPosedFitError, IllPosedFitWarning, _plot_format
+
+    args = build_parser().parse_args(argv)
+    fit = _check(args.fit, args.rms_slope, args.n0, args.k0, args.shadowing, args.diffuse)
+    if not 0 < args.theta_max <= 90:
+        raise UsageError(f"--theta-max must be in (0, 90] degrees, got {args.theta_max:g}")
+    if args.output:
+        check_output_path(args.output, "plot file (-o)")
+        try:
+            _plot_format(args.output)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
+    table = read_pbsdf(args.data)
+    data = pbsdf_samples(table, max_points=args.max_points, theta_max=math.radians(args.theta_max),
+                         tolerance=args.tolerance, seed=args.seed, progress=not args.quiet)
+    print(f"data: {args.data} ({table.resolution} phi_d x theta_d x theta_h, bands "
+          f"{', '.join(f'{w:g}' for w in table.wavelengths)} nm)")
+    print(f"  {data.counts.summary()}")
+    print(f"  fitting {len(data)} of {data.usable_geometries} geometries usable in every band "
+          f"(theta <= {args.theta_max:g} deg, seed {args.seed})")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", IllPosedFitWarning)
+            result = fit_pbsdf(data, fit=fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
+                               shadowing=args.shadowing, diffuse=args.diffuse, strict=args.strict,
+                               progress=None if not args.quiet else False)
+    except IllPosedFitError as exc:
+        print(f"hyde-bsdf fit: {exc}", file=sys.stderr)
+        return 1
+    print(result.summary())
+    print("\nMitsuba material (hyde plugin):")
+    print(result.plugin_xml(indent="    "))
+    if args.output:
+        plot_pbsdf_fit(result, data, args.output, title=str(args.data))
+        print(f"\nplot: {args.output}")
+    return 0 if result.success else 1
