@@ -11,6 +11,11 @@ What happens when things go wrong, for every sub-command (handled once here):
 * an operating-system error on a file (missing, no permission, disk full, ...) -- one line, exit 2;
 * a missing optional Python package -- one line naming it, exit 2;
 * Ctrl-C -- ``hyde-bsdf COMMAND: interrupted``, exit 130 (outputs are atomic: the old files stay);
+* SIGTERM / SIGHUP -- ``hyde-bsdf COMMAND: terminated (SIGTERM)``, exit 143 / 129: the signal
+  unwinds like Ctrl-C, so hidden temporary files and ``.partial`` folders are removed
+  (:func:`hyde_bsdf.atomic.install_signal_cleanup`; after a SIGKILL the next run removes them);
+* a failed write (disk full, quota, I/O error) -- one line naming the file, exit 2; the earlier
+  output set is unchanged (:class:`hyde_bsdf.atomic.OutputWriteError`);
 * a closed output pipe (``hyde-bsdf fit data.csv | head``) -- quiet, exit 141 (as for SIGPIPE);
 * anything else is a bug and keeps its Python traceback (exit 1).
 
@@ -21,6 +26,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import signal
 import sys
 
 #: sub-command -> (module, one-line help)
@@ -59,6 +65,9 @@ def main(argv: list[str] | None = None) -> int:
 
     argv = list(sys.argv[1:] if argv is None else argv)
     command = argv[0] if argv else ""
+    from hyde_bsdf.atomic import Terminated, install_signal_cleanup, remove_live_temporaries
+
+    previous = install_signal_cleanup()
     try:
         if not argv or command in ("-h", "--help") or command not in COMMANDS:
             print("usage: hyde-bsdf COMMAND [options]\n\ncommands:")
@@ -71,7 +80,12 @@ def main(argv: list[str] | None = None) -> int:
         code = int(module.cli_main(argv[1:]) or 0)
         sys.stdout.flush()        # a closed pipe shows up here, inside the handler below
         return code
+    except Terminated as exc:
+        remove_live_temporaries()   # any a Python callback inside Mitsuba could not unwind
+        _error(command, f"terminated ({exc})")
+        return 128 + exc.signum
     except KeyboardInterrupt:
+        remove_live_temporaries()
         _error(command, "interrupted")
         return EXIT_INTERRUPTED
     except BrokenPipeError:
@@ -90,6 +104,9 @@ def main(argv: list[str] | None = None) -> int:
         where = f": {exc.filename!r}" if getattr(exc, "filename", None) else ""
         _error(command, f"error: {exc.strerror or one_line(exc)}{where}")
         return EXIT_USAGE
+    finally:
+        for sig, handler in previous.items():   # in-process callers (tests) get their handlers back
+            signal.signal(sig, handler)
 
 
 if __name__ == "__main__":

@@ -10,11 +10,22 @@ Behaviour checked:
 - ``atomic_path`` / ``atomic_open``: an exception inside the block leaves the old file and no
   temporary; the new file gets the permissions ``open`` would give it (0666 & ~umask);
 - ``atomic_dir``: the folder is replaced as a whole on success, untouched on an exception;
+  it removes only the files its manifest lists: a folder with other files is refused, and with
+  ``force`` those files are kept (a clashing name is kept as ``NAME.orig``) (issue 15);
+- ``atomic_group``: a failed write -- a real OS limit (RLIMIT_FSIZE: OpenEXR's and matplotlib's
+  own errors) or a simulated ENOSPC -- leaves the whole previous EXR + PNG set byte for byte,
+  no temporary, and one ``OutputWriteError`` line naming the file (issue 15);
+- temporary names fit NAME_MAX (a 244-character output name works); a name that cannot fit is
+  refused by ``check_output_path`` before any work;
+- SIGTERM removes the temporaries and ``.partial`` folder in flight; the temporaries a SIGKILLed
+  run left are removed by the next run, and a live process's are not;
 - ``check_output_path`` / ``check_output_dir`` refuse a directory, a parent that is a file,
   ``/proc`` and an unwritable folder with a message naming the path.
 """
+import errno
 import os
 import random
+import re
 import signal
 import subprocess
 import sys
@@ -25,7 +36,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hyde_bsdf.atomic import atomic_dir, atomic_open, atomic_path, check_output_dir, check_output_path
+from hyde_bsdf import atomic
+from hyde_bsdf.atomic import (OutputWriteError, atomic_dir, atomic_group, atomic_open, atomic_path, check_output_dir,
+                              check_output_path, read_manifest)
 from hyde_bsdf.errors import UsageError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -164,21 +177,199 @@ def test_atomic_file_permissions_follow_umask(tmp_path):
 
 def test_atomic_dir_swaps_whole_folder(tmp_path):
     report = tmp_path / "report"
-    report.mkdir()
-    (report / "index.html").write_text("old report")
-    (report / "old_figure.png").write_text("old")
+    with atomic_dir(report) as new:                 # an earlier run: its manifest lists its files
+        (new / "index.html").write_text("old report")
+        (new / "old_figure.png").write_text("old")
+    assert read_manifest(report) == {"index.html", "old_figure.png"}
     with pytest.raises(RuntimeError):
         with atomic_dir(report) as new:
             (new / "index.html").write_text("half")
             raise RuntimeError("interrupted")
-    assert sorted(p.name for p in report.iterdir()) == ["index.html", "old_figure.png"]
+    assert sorted(p.name for p in report.iterdir()) == [".hyde-manifest.json", "index.html", "old_figure.png"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
     with atomic_dir(report) as new:
         (new / "index.html").write_text("new report")
         assert (report / "index.html").read_text() == "old report"
-    assert sorted(p.name for p in report.iterdir()) == ["index.html"]      # no stale old figure
+    assert sorted(p.name for p in report.iterdir()) == [".hyde-manifest.json", "index.html"]   # no stale figure
     assert (report / "index.html").read_text() == "new report"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
+
+
+def test_atomic_dir_never_deletes_files_it_did_not_write(tmp_path):
+    """A web site's folder (index.html, style.css, no manifest) is refused before any work; with
+    force the site's files stay, its index.html is kept as index.html.orig; a rerun replaces only
+    the report's own files, and a file added to the folder later is refused again."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "index.html").write_text("my web site")
+    (site / "style.css").write_text("body{}")
+    with pytest.raises(UsageError, match=r"'.*site' holds 2 file\(s\) that no earlier run wrote "
+                                         r"\('index.html', 'style.css'; it has no \.hyde-manifest\.json") as info:
+        with atomic_dir(site) as new:
+            raise AssertionError("the work started")
+    assert "\n" not in str(info.value) and "--force" in str(info.value)
+    kept = []
+    with atomic_dir(site, force=True, on_kept=kept.extend) as new:
+        (new / "index.html").write_text("report 1")
+        (new / "fig.png").write_text("figure 1")
+    assert kept == [site / "index.html.orig"]
+    assert (site / "index.html.orig").read_text() == "my web site" and (site / "style.css").read_text() == "body{}"
+    assert (site / "index.html").read_text() == "report 1" and read_manifest(site) == {"index.html", "fig.png"}
+    with atomic_dir(site, force=True) as new:      # rerun: only the report's files change
+        (new / "index.html").write_text("report 2")
+    assert sorted(p.name for p in site.iterdir()) == [".hyde-manifest.json", "index.html", "index.html.orig",
+                                                      "style.css"]
+    assert (site / "index.html").read_text() == "report 2"
+    with pytest.raises(UsageError, match="that no earlier run wrote"):
+        with atomic_dir(site) as new:
+            pass
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["site"]    # no .partial / .old left
+
+
+FSIZE_WRITER = textwrap.dedent(r"""
+    import resource, signal, sys
+    import numpy as np
+    from hyde_bsdf.atomic import atomic_group
+    from hyde_bsdf.render.stokes_io import save_polarization_pngs, write_stokes_exr
+    ramp = np.broadcast_to(np.linspace(0.1, 0.5, 32, dtype=np.float32)[:, None, None], (32, 32, 3))
+    st = {"S0": ramp + 0.5, "S1": ramp, "S2": 0.5 * ramp, "S3": 0.0 * ramp}   # a ~3 KB EXR, ~10 KB PNGs
+    out, limit = sys.argv[1], int(sys.argv[2])
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)       # writes past the limit fail with EFBIG
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, resource.RLIM_INFINITY))
+    try:
+        with atomic_group():
+            write_stokes_exr(out + ".exr", st)
+            save_polarization_pngs(st, out)
+    except OSError as exc:
+        print(type(exc).__name__, exc.strerror)
+""")
+
+
+def _old_set(folder):
+    folder.mkdir(exist_ok=True)
+    names = ["a.exr"] + [f"a_{n}.png" for n in ("intensity", "dolp", "aolp", "docp", "rgb")]
+    for n in names:
+        (folder / n).write_bytes(b"old " + n.encode())
+    return {n: (folder / n).read_bytes() for n in names}
+
+
+@pytest.mark.parametrize("limit, failing", [(1000, "a.exr"), (6000, "a_intensity.png")])
+def test_file_size_limit_keeps_the_old_output_set(tmp_path, limit, failing):
+    """A real write failure from the real writers (the process's file-size limit: OpenEXR raises
+    its RuntimeError, matplotlib an OSError): one OutputWriteError naming the file, the old EXR
+    and PNGs byte for byte, no temporary."""
+    before = _old_set(tmp_path)
+    proc = subprocess.run([sys.executable, "-c", FSIZE_WRITER, str(tmp_path / "a"), str(limit)], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    # OpenEXR's C++ stream may swallow the error of its last flush: the read-back check names it then
+    reason = "(File too large|the file written does not read back complete .disk full or a file-size limit..)"
+    assert re.fullmatch(f"OutputWriteError cannot write '{re.escape(str(tmp_path / failing))}': {reason}; "
+                        r"no output was replaced \(the earlier files are unchanged\)", proc.stdout.strip()), proc.stdout
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_simulated_full_disk_in_a_group(tmp_path, monkeypatch):
+    """ENOSPC from the third of three writes: nothing replaced, no temporary, the file named."""
+    before = _old_set(tmp_path)
+    real_write = os.write
+    calls = []
+
+    def full(fd, data):
+        calls.append(fd)
+        if len(calls) == 3:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real_write(fd, data)
+
+    with pytest.raises(OutputWriteError) as info:
+        with atomic_group():
+            for name in ("a.exr", "a_dolp.png", "a_rgb.png"):
+                with atomic_path(tmp_path / name) as tmp:
+                    fd = os.open(tmp, os.O_WRONLY)
+                    try:
+                        monkeypatch.setattr(os, "write", full)
+                        os.write(fd, b"new " + name.encode())
+                    finally:
+                        monkeypatch.setattr(os, "write", real_write)
+                        os.close(fd)
+    assert str(info.value) == (f"[Errno 28] cannot write '{tmp_path / 'a_rgb.png'}': No space left on device; "
+                               "no output was replaced (the earlier files are unchanged)")
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_temporary_names_fit_the_file_system(tmp_path):
+    """A 244-character output name (the issue's render that failed at the end) gets a shortened
+    temporary name of at most NAME_MAX bytes; a name that cannot fit is refused before any work."""
+    name_max = os.pathconf(tmp_path, "PC_NAME_MAX")
+    target = tmp_path / ("x" * 240 + ".exr")
+    with atomic_path(target) as tmp:
+        assert len(os.fsencode(tmp.name)) <= name_max and tmp.name.endswith(".tmp.exr")
+        assert atomic.TEMP_NAME_RE.match(tmp.name)
+        tmp.write_bytes(b"ok")
+    assert target.read_bytes() == b"ok"
+    check_output_path(tmp_path / ("x" * 240 + "_intensity.png"))        # 254 bytes: fits
+    for bad in ("x" * 256 + ".exr", "é" * 128 + ".exr"):               # 260 and 260 bytes
+        with pytest.raises(UsageError, match=f"the name is {len(os.fsencode(bad))} bytes, longer than the {name_max} "
+                                             "bytes the file system allows"):
+            check_output_path(tmp_path / bad, "--output")
+    with pytest.raises(UsageError, match="longer than the .* bytes the file system allows; give a shorter path"):
+        check_output_path("/" + "d/" * 2100 + "x.exr")
+    assert sorted(p.name for p in tmp_path.iterdir()) == [target.name]
+
+
+SIGTERM_WRITER = textwrap.dedent(r"""
+    import sys, time
+    from pathlib import Path
+    from hyde_bsdf.atomic import atomic_dir, atomic_path, install_signal_cleanup, Terminated
+    install_signal_cleanup()
+    out = Path(sys.argv[1])
+    try:
+        with atomic_dir(out / "report") as new:
+            (new / "index.html").write_text("half")
+            with atomic_path(out / "a.exr") as tmp:
+                tmp.write_bytes(b"half")
+                print("ready", flush=True)
+                time.sleep(60)
+    except Terminated as exc:
+        print("terminated", exc.signum, flush=True)
+        sys.exit(143)
+""")
+
+
+def test_sigterm_removes_temporaries_and_partial_folders(tmp_path):
+    (tmp_path / "a.exr").write_bytes(b"old")
+    proc = subprocess.Popen([sys.executable, "-c", SIGTERM_WRITER, str(tmp_path)], cwd=ROOT,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "ready"
+        assert len(list(tmp_path.iterdir())) == 3          # a.exr, its temporary, the .partial folder
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143 and out.strip() == "terminated 15"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.exr"]
+    assert (tmp_path / "a.exr").read_bytes() == b"old"
+
+
+def test_next_run_removes_what_a_killed_run_left(tmp_path):
+    """Temporaries of a dead process (pid 4194303 cannot exist on Linux by default... or is gone)
+    are removed by the next write into the folder; a live process's, and a user's look-alike
+    files without our pattern, stay."""
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
+                          text=True).stdout.strip()
+    host = atomic._HOST
+    stale_file = tmp_path / f".a.exr.{host}{dead}-abc123.tmp.exr"
+    stale_dir = tmp_path / f".report.{host}{dead}-abc123.partial"
+    live_file = tmp_path / f".b.exr.{host}{os.getppid()}-abc123.tmp.exr"
+    user_file = tmp_path / ".a.exr.notours.tmp.exr"
+    for f in (stale_file, live_file, user_file):
+        f.write_bytes(b"x")
+    stale_dir.mkdir()
+    (stale_dir / "index.html").write_text("half")
+    atomic._CLEANED.discard(os.path.abspath(tmp_path))
+    check_output_path(tmp_path / "a.exr")                          # before the work of the next run
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live_file.name, user_file.name])
 
 
 def test_check_output_paths_refuse_before_work(tmp_path):

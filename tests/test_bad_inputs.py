@@ -19,6 +19,7 @@ before the output paths and the scene have been checked.
 Append a row for each new mistake; ``API_ROWS`` does the same for Python calls
 ``(id, call(paths), exception type, needle)``.
 """
+import errno
 import os
 import signal
 import subprocess
@@ -29,6 +30,7 @@ from pathlib import Path
 import pytest
 
 from hyde_bsdf import cli
+from hyde_bsdf.atomic import TEMP_NAME_RE
 from hyde_bsdf.errors import UsageError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -104,6 +106,34 @@ CLI_ROWS = [
     ("fit: -o is a directory", ["fit", "{csv}", "-o", "{tmp}"], 2, "is a directory", "in"),
     ("fit: -o under a regular file", ["fit", "{csv}", "-o", "{file}/plot.png"], 2, "is not a directory", "in"),
     ("fit: stdout closed (| head)", ["fit", "{csv}"], 141, "", "pipe"),
+    # --- issue 15: nothing lost, ever (every row also checks that no existing file changed) ---
+    ("validate: outdir is a web site (index.html, no manifest)", ["validate", "-o", "{site}"], 2,
+     "is not a validation report (no .hyde-report-manifest.json) and holds 2 file(s) ('index.html', 'style.css')",
+     "in"),
+    ("validate: an earlier report plus a user's file", ["validate", "-o", "{oldreport}"], 2,
+     "holds 1 file(s) that no earlier run wrote ('thesis.tex'; its manifest does not list", "in"),
+    ("render: disk full writing the EXR (old set kept)", ["render", "{tiny}", "-o", "{full}/a.exr"], 2,
+     "a.exr': No space left on device; no output was replaced (the earlier files are unchanged)", "enospc@1"),
+    ("render: disk full at the 3rd file, EXR already written (old set kept)", ["render", "{tiny}", "-o",
+     "{full}/a.exr"], 2, "a_dolp.png': No space left on device; no output was replaced", "enospc@3"),
+    ("fit: disk full writing the plot", ["fit", "{csv}", "-o", "{full}/plot.png"], 2,
+     "plot.png': No space left on device; the earlier file is unchanged", "enospc@1"),
+    ("render: output names too long for the file system (refused before the render)",
+     ["render", "{tiny}", "-o", "{tmp}/" + "x" * 246 + ".exr"], 2,
+     "_intensity.png': the name is 260 bytes, longer than the 255 bytes the file system allows", "in"),
+    ("fit: -o name too long for the file system", ["fit", "{csv}", "-o", "{tmp}/" + "p" * 300 + ".png"], 2,
+     ".png': the name is 304 bytes, longer than the 255 bytes the file system allows", "in"),
+    ("render: SIGTERM removes the temporaries", ["render", "{tiny}", "-o", "{tmp}/sigterm.exr", "--spp", "200000",
+     "--chunks", "20000"], 143, "hyde-bsdf render: terminated (SIGTERM)", "sigterm"),
+    ("render: a killed run's temporaries are removed by the next run", ["render", "{tmp}/missing.xml", "-o",
+     "{stale}/a.exr"], 2, "scene file", "stale"),
+    # --- issue 15: fit statistics and files that tell the truth ---
+    ("fit: CSV with old-Mac CR line ends (the bad cell's line is named)", ["fit", "{crcsv}"], 2,
+     "crlines.csv, line 4, column 'M01': 'x' is not a number", "in"),
+    ("fit: 1000 copies of 3 rows (errors of 3 rows)", ["fit", "{copies}", "-q"], 0,
+     "2997 of 3000 rows repeat another row's geometry", "in"),
+    ("fit: impossible data, |M22/M00| > 1 beyond noise", ["fit", "{impossible}", "-q"], 0,
+     "warning: impossible data: |M22/M00| > 1 in 1 row(s) beyond 3 sigma", "in"),
     # --- invert (issue 15: a reference scaled by 1e30 ended in a drjit.backward traceback) ---
     ("invert: reference scaled by 1e30", ["invert", "--reference", "{ref1e30}", "--res", "16", "-o", "{tmp}/kept"], 2,
      "ref1e30.exr' has peak |S0| = 1e+30, outside the accepted range [1e-10, 1e+10]", "in"),
@@ -112,7 +142,26 @@ CLI_ROWS = [
 ]
 
 
+def _scatter_on_a_dead_cluster(p):
+    """mom.scatter over a dask cluster whose only worker died (issue 15: it waited forever); the
+    grace period for a cluster without workers is shortened from 60 s to 0.5 s here."""
+    distributed = pytest.importorskip("distributed")
+    from hyde_bsdf import mom
+    from hyde_bsdf.mom import gather
+
+    saved = gather.NO_WORKER_GRACE_S, gather.POLL_S
+    gather.NO_WORKER_GRACE_S, gather.POLL_S = 0.5, 0.05
+    try:
+        with distributed.LocalCluster(n_workers=1, processes=False, threads_per_worker=1,
+                                      dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+            client.sync(cluster.workers[0].close)
+            mom.scatter(20.0, 2, 0.0, 1.0, 0.0, 0.0, pts_per_wl=6, executor=client.get_executor(), progress=False)
+    finally:
+        gather.NO_WORKER_GRACE_S, gather.POLL_S = saved
+
+
 def _api_rows():
+    from hyde_bsdf.mom import ExecutorError
     from hyde_bsdf.render.renderer import load_scene, plan_passes, prepare_variant, render_stokes
     from hyde_bsdf.render.stokes_io import write_stokes_exr
 
@@ -137,6 +186,9 @@ def _api_rows():
          r"must end in \.exr"),
         ("plan_passes beyond 2^16 passes", lambda p: plan_passes(1000, 1000, 10**7), UsageError,
          "at most 65536 passes"),
+        ("mom.scatter on a dask cluster whose only worker died (was a hang)", _scatter_on_a_dead_cluster,
+         ExecutorError, r"^mom\.scatter: the dask cluster at inproc://\S+ is dead: it has no worker .*; 0 of 2 "
+                        r"partitions had finished$"),
     ]
 
 
@@ -167,6 +219,20 @@ def paths(tmp_path_factory):
     (tmp / "pngdir_dolp.png").mkdir()
     (tmp / "notreport").mkdir()
     (tmp / "notreport" / "thesis.tex").write_text("a user's file")
+    (tmp / "site").mkdir()                                  # a web site: its index.html is not a report
+    (tmp / "site" / "index.html").write_text("<html>my site</html>")
+    (tmp / "site" / "style.css").write_text("body {}")
+    from hyde_bsdf.atomic import write_manifest
+
+    (tmp / "oldreport").mkdir()                             # an earlier report, then a user's file beside it
+    for name in ("index.html", "checks.csv", "fig.png"):
+        (tmp / "oldreport" / name).write_text("report file")
+    write_manifest(tmp / "oldreport", ["index.html", "checks.csv", "fig.png"], ".hyde-report-manifest.json")
+    (tmp / "oldreport" / "thesis.tex").write_text("a user's file")
+    (tmp / "full").mkdir()                                  # an earlier render's output set
+    for name in ("a.exr", "a_intensity.png", "a_dolp.png", "a_aolp.png", "a_docp.png", "a_rgb.png", "plot.png"):
+        (tmp / "full" / name).write_text(f"old {name}")
+    (tmp / "stale").mkdir()
     import numpy as np
 
     from hyde_bsdf.fit.measurements import write_measurements
@@ -175,9 +241,28 @@ def paths(tmp_path_factory):
     th = np.radians([20.0, 40.0, 60.0])
     meas = synthetic_measurements(th, th, np.full(3, np.pi), n=1.5, k=3.0, rms_slope=0.3)
     write_measurements(tmp / "meas.csv", meas)
-    return {"tmp": tmp, "file": tmp / "file.txt", "tiny": tmp / "tiny.xml", "nosensor": tmp / "nosensor.xml",
+    text = (tmp / "meas.csv").read_text().splitlines()
+    head = [ln for ln in text if ln.startswith("theta")][0]
+    rows = [ln for ln in text if ln[:1].isdigit()]
+    (tmp / "copies.csv").write_text("\n".join([head] + rows * 1000) + "\n")
+    cells = rows[1].split(",")
+    cells[head.split(",").index("M22")] = "-1.3"
+    (tmp / "impossible.csv").write_text("\n".join([head, rows[0], ",".join(cells), rows[2]]) + "\n")
+    bad = rows[1].split(",")
+    bad[head.split(",").index("M01")] = "x"
+    (tmp / "crlines.csv").write_bytes(("# measured on a classic Mac\r" + "\r".join([head, rows[0], ",".join(bad)])
+                                       + "\r").encode())
+    return {"site": tmp / "site", "oldreport": tmp / "oldreport", "full": tmp / "full", "stale": tmp / "stale",
+            "copies": tmp / "copies.csv", "impossible": tmp / "impossible.csv", "crcsv": tmp / "crlines.csv",
+            "tmp": tmp, "file": tmp / "file.txt", "tiny": tmp / "tiny.xml", "nosensor": tmp / "nosensor.xml",
             "ptracer": tmp / "ptracer.xml", "inverse": ROOT / "scenes" / "inverse.xml", "csv": tmp / "meas.csv",
             "notreport": tmp / "notreport", "badhyde": tmp / "badhyde.xml", "ref1e30": tmp / "ref1e30.exr"}
+
+
+def _snapshot(folder):
+    """{relative path: bytes} of every file under ``folder`` except our own temporaries."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
+            if p.is_file() and not any(TEMP_NAME_RE.match(part) for part in p.relative_to(folder).parts)}
 
 
 def _fill(argv, paths):
@@ -191,7 +276,7 @@ def _subprocess(argv, how, timeout=120):
         proc.stdout.close()                       # the reader went away before any output
         err = proc.stderr.read()
         return proc.wait(timeout=timeout), "", err
-    if how == "sigint":
+    if how in ("sigint", "sigterm"):
         proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         watchdog = threading.Timer(timeout, proc.kill)
         watchdog.start()
@@ -202,7 +287,7 @@ def _subprocess(argv, how, timeout=120):
                 if not ch:
                     break
                 err += ch
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(signal.SIGINT if how == "sigint" else signal.SIGTERM)
             out, rest = proc.communicate(timeout=timeout)
         finally:
             watchdog.cancel()
@@ -220,7 +305,25 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
 
         if dr.has_backend(dr.JitBackend.CUDA):
             pytest.skip("hardware-dependent: this machine has a CUDA GPU, so the variant works")
-    if how in ("sub", "sigint", "pipe"):
+    before = _snapshot(paths["tmp"])
+    if how == "stale":                            # what a SIGKILLed run (a dead pid) left behind
+        from hyde_bsdf.atomic import _HOST
+
+        stale = [paths["stale"] / f".a.exr.{_HOST}4194999-abc123.tmp.exr",
+                 paths["stale"] / f".a.exr.{_HOST}4194999-abc123.partial"]
+        stale[0].write_bytes(b"half")
+        stale[1].mkdir()
+    if how.startswith("enospc@"):                 # the n-th file's data cannot reach the disk
+        nth, calls, real_fsync = int(how.split("@")[1]), [], os.fsync
+
+        def fsync(fd):
+            calls.append(fd)
+            if len(calls) == nth:
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            return real_fsync(fd)
+
+        monkeypatch.setattr(os, "fsync", fsync)
+    if how in ("sub", "sigint", "sigterm", "pipe"):
         got, out, err = _subprocess(argv, how)
     else:
         if how == "lowmem":
@@ -243,9 +346,14 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     assert lines[-1].startswith(f"hyde-bsdf {argv[0]}"), lines[-1]
     assert needle in lines[-1], lines[-1]
     assert (paths["tmp"] / "kept" / "invert_history.csv").read_text() == "a previous run's output\n"   # no file lost
-    if how == "sigint":
-        assert not (paths["tmp"] / "sigint.exr").exists()
-        assert not list(paths["tmp"].glob(".sigint.exr.*"))   # no temporary left behind
+    after = _snapshot(paths["tmp"])
+    assert {f: b for f, b in after.items() if f in before} == before, "an existing file changed or was lost"
+    assert not [f for f in after if TEMP_NAME_RE.match(Path(f).name)], "a temporary was left behind"
+    if how in ("sigint", "sigterm"):
+        assert not (paths["tmp"] / f"{how}.exr").exists()
+        assert not list(paths["tmp"].glob(f".{how}.exr.*"))   # no temporary left behind
+    if how == "stale":
+        assert not any(p.exists() for p in stale)
 
 
 def test_api_bad_input(paths):

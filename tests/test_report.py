@@ -69,7 +69,7 @@ def test_interrupted_report_keeps_previous_report(tmp_path, monkeypatch):
     ok, rows, _ = build_report(out, quick=True, progress=False)
     assert ok and len(rows) == 1
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    assert set(before) == {"index.html", "checks.csv", "fake.png", "fake.csv"}
+    assert set(before) == {"index.html", "checks.csv", "fake.png", "fake.csv", ".hyde-report-manifest.json"}
     assert "1 of 1 checks pass" in before["index.html"].decode()
     monkeypatch.setenv("HYDE_TEST_INTERRUPT", "1")
     try:
@@ -80,8 +80,42 @@ def test_interrupted_report_keeps_previous_report(tmp_path, monkeypatch):
         raise AssertionError("the interrupt did not reach build_report's caller")
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report", "validation"]
-    # A later complete run replaces the folder as a whole (no stale files survive).
+    # A later complete run replaces the report's own files, and only those (issue 15).
     monkeypatch.delenv("HYDE_TEST_INTERRUPT")
-    (out / "stale_from_old_run.png").write_bytes(b"old")
+    (out / "fake.csv").unlink()               # a report file gone: still the earlier report's folder
     assert cli_main(["-o", str(out), "--quick"]) == 0
-    assert not (out / "stale_from_old_run.png").exists()
+    assert {p.name for p in out.iterdir()} == set(before)
+
+
+def test_report_never_deletes_a_users_files(tmp_path, monkeypatch, capsys):
+    """Issue 15: ``validate -o DIR`` where DIR is a web site (index.html, no manifest) or an earlier
+    report with a user's file added is refused before any work (exit 2, one line naming the
+    folder); ``--force`` writes the report beside the user's files and keeps them all (the
+    site's index.html as index.html.orig); a report from before manifests is still recognised."""
+    _fake_validation(tmp_path, monkeypatch)
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "index.html").write_text("<html>my thesis site</html>")
+    (site / "notes.txt").write_text("keep me")
+    assert cli_main(["-o", str(site), "--quick"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"hyde-bsdf validate: error: --outdir {str(site)!r} is not a validation report (no "
+                   ".hyde-report-manifest.json) and holds 2 file(s) ('index.html', 'notes.txt'); give a new or "
+                   "empty folder, or pass --force to write the report beside them (they are kept)"]
+    assert sorted(p.name for p in site.iterdir()) == ["index.html", "notes.txt"]
+    assert cli_main(["-o", str(site), "--quick", "--force"]) == 0
+    assert (site / "index.html.orig").read_text() == "<html>my thesis site</html>"
+    assert (site / "notes.txt").read_text() == "keep me"
+    assert "1 of 1 checks pass" in (site / "index.html").read_text()
+    # an earlier report plus a user's file: refused again without --force
+    report = tmp_path / "report"
+    build_report(report, quick=True, progress=False)
+    (report / "my_figure.png").write_bytes(b"mine")
+    assert cli_main(["-o", str(report), "--quick"]) == 2
+    assert "holds 1 file(s) that no earlier run wrote ('my_figure.png'; its manifest does not list" \
+        in capsys.readouterr().err
+    # a report written before manifests: index.html title + checks.csv header make it ours
+    (report / "my_figure.png").unlink()
+    (report / ".hyde-report-manifest.json").unlink()
+    assert cli_main(["-o", str(report), "--quick"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report", "site", "validation"]

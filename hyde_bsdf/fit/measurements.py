@@ -148,6 +148,28 @@ def _plain_block(body: bytes) -> bool:
     return not body.translate(None, _PLAIN) and body.count(b"\r") == body.count(b"\r\n")
 
 
+_BOMS = ((b"\xff\xfe\x00\x00", "utf-32"), (b"\x00\x00\xfe\xff", "utf-32"),
+         (b"\xff\xfe", "utf-16"), (b"\xfe\xff", "utf-16"))
+
+
+def _normalise(name, raw: bytes) -> bytes:
+    """UTF-8 bytes with LF line ends, whatever the file had: a UTF-16/32 byte-order mark (a
+    spreadsheet's "Unicode text") is decoded, a UTF-8 one dropped, and CRLF (Windows) and lone
+    CR (classic Mac OS) line ends become LF -- so every later step sees one kind of text."""
+    for bom, codec in _BOMS:
+        if raw.startswith(bom):
+            try:
+                raw = raw.decode(codec).encode("utf-8")
+            except UnicodeError as exc:
+                raise MeasurementFileError(f"{name}: cannot be read as {codec.upper()} text ({exc})") from None
+            break
+    if raw.startswith(b"\xef\xbb\xbf"):
+        raw = raw[3:]
+    if b"\r" in raw:
+        raw = raw.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    return raw
+
+
 def _decode(name, raw: bytes) -> str:
     try:
         return raw.decode("utf-8-sig")
@@ -159,29 +181,19 @@ def _split_header(name, raw: bytes):
     """((line number, column names), the bytes after the header line, comments before it)."""
     comments = []
     pos, lineno = 0, 0
-    if raw.startswith(b"\xef\xbb\xbf"):
-        pos = 3
     while pos < len(raw):
         end = raw.find(b"\n", pos)
         end = len(raw) if end < 0 else end
-        line = _decode(name, raw[pos:end])
-        lineno += 1 + line.count("\r") - line.endswith("\r")   # a lone CR ends a line too
+        line = _decode(name, raw[pos:end])     # line ends are LF only here (_normalise)
+        lineno += 1
         pos = end + 1
         stripped = line.strip()
         if not stripped:
             continue
-        if "\r" in line.rstrip("\r"):            # old Mac line ends: the careful path sorts it out
-            break
         if stripped[0] == "#":
             comments.append(stripped[1:].strip())
             continue
         return (lineno, [c.strip() for c in next(csv.reader([line]))]), raw[pos:], comments
-    text = _decode(name, raw)
-    for lineno, line in enumerate(text.splitlines(), start=1):       # the general, slower scan
-        stripped = line.strip()
-        if stripped and stripped[0] != "#":
-            return (lineno, [c.strip() for c in next(csv.reader([line]))]), None, \
-                [c.strip()[1:].strip() for c in text.splitlines()[:lineno] if c.strip().startswith("#")]
     raise MeasurementFileError(f"{name}: no header line (expected columns "
                                f"{', '.join(ANGLE_COLUMNS)}, M01, M01_sigma, ...)")
 
@@ -189,7 +201,7 @@ def _split_header(name, raw: bytes):
 def _data_lines(name, raw: bytes, hline: int, comments: list):
     """The data lines after the header, with their 1-based numbers (comments collected)."""
     linenos, lines = [], []
-    for lineno, line in enumerate(_decode(name, raw).splitlines(), start=1):
+    for lineno, line in enumerate(_decode(name, raw).split("\n"), start=1):
         if lineno <= hline:
             continue
         stripped = line.strip()
@@ -305,6 +317,7 @@ def read_measurements(path, progress: bool = False) -> Measurements:
     except OSError as exc:
         raise MeasurementFileError(f"{name}: cannot be read ({exc.strerror or exc})") from None
 
+    raw = _normalise(name, raw)
     header, body, comments = _split_header(name, raw)
     hline, columns = header
     # the common case -- after the header only lines of plain numbers, no comments or blank
@@ -324,6 +337,9 @@ def read_measurements(path, progress: bool = False) -> Measurements:
     for col in columns:
         if col not in known:
             hint = " (M00 is the normalization and is not a column)" if col.startswith("M00") else ""
+            for sep, word in ((";", "semicolons"), ("\t", "tabs")):
+                if sep in col and "," not in col:
+                    hint = f" (the columns are separated by {word}; this format uses commas)"
             raise _error(name, hline, col, f"unknown column{hint}; accepted: "
                          f"{', '.join(ANGLE_COLUMNS)}, Mjk and Mjk_sigma for jk in "
                          f"{', '.join(e[1:] for e in ELEMENT_NAMES)}, n_samples")

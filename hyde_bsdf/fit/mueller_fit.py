@@ -32,6 +32,24 @@ above ``corr_limit``, relative errors above 50 %, a parameter on its bound) warn
 with :class:`IllPosedFitWarning` or, with ``strict=True``, raise
 :class:`IllPosedFitError`.  Fewer data than fitted parameters always raise.
 
+What the data can and cannot say (:class:`FitDataWarning`, ``FitResult.data_warnings``):
+
+- *Repeated geometries* (rows with the same theta_i, theta_r, phi) are detected and
+  reported, and merged into one value per geometry before the fit: the inverse-variance
+  mean, whose sigma is sigma / sqrt(repeats) for genuine repeats (widened by their own
+  scatter when it exceeds sigma), and the single-row sigma for identical copies, which
+  add no information.  A million copies of one row give the standard errors of one row.
+- *Reduced chi^2 far from 1* (p < 0.001 in a tail of the chi^2 distribution): far above,
+  the standard errors are multiplied by sqrt(chi^2_red) (the Birge ratio,
+  ``FitResult.stderr_scale``) and, above 2, a warning says the sigmas or the model do not
+  describe the data; far below (under 0.5) a warning says the sigmas are too large or
+  the rows not independent -- the errors are then never scaled down (noiseless data
+  would get zero errors).
+- *Impossible data*: a normalized element |M_jk / M_00| > 1, or a degree of polarization
+  sqrt(M01^2 + M02^2 + M03^2) (or of the first column) > 1, beyond 3 standard deviations
+  (the given sigma, or the fit's residual scatter without sigma): no Mueller matrix has
+  them, so the summary never reports a plain "converged".
+
 Command line::
 
     hyde-bsdf fit DATA.csv [--fit n,k,rms_slope] [--rms-slope X] [--n0 N] [--k0 K]
@@ -63,6 +81,7 @@ from hyde_bsdf.fit.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANG
                                         MeasurementFileError, element_index, read_measurements)
 
 __all__ = ["PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning", "IllPosedFitError",
+           "FitDataWarning", "merge_repeated_geometries", "impossible_values",
            "mueller_elements", "fit_mueller", "fit_measurements", "synthetic_measurements",
            "plot_fit", "cli_main"]
 
@@ -106,6 +125,106 @@ class IllPosedFitWarning(UserWarning):
 
 class IllPosedFitError(ValueError):
     """Raised instead of :class:`IllPosedFitWarning` when ``strict=True``."""
+
+
+class FitDataWarning(UserWarning):
+    """The data repeat geometries, do not match their sigmas (chi^2_red far from 1), or are impossible."""
+
+
+#: chi^2 tail probability below which the reduced chi^2 counts as far from 1 (either tail)
+CHI2_TAIL = 1e-3
+#: standard deviations beyond which |M_jk / M00| > 1 (or a degree of polarization > 1) is impossible
+IMPOSSIBLE_SIGMAS = 3.0
+
+
+def merge_repeated_geometries(theta_i, theta_r, phi, values, sigma=None):
+    """Merge rows that repeat a geometry (same theta_i, theta_r and phi modulo 2 pi) into one.
+
+    Parameters: 1-D arrays of one length; ``values`` and ``sigma`` dicts element -> 1-D array
+    (``sigma`` None: unit weights).  Returns ``(theta_i, theta_r, phi, values, sigma, info)``
+    with one row per distinct geometry (in sorted geometry order when anything was merged,
+    else the inputs unchanged) and ``info`` None when no geometry repeats, else a dict
+    ``rows``, ``geometries``, ``repeated_rows``, ``copy_geometries`` (geometries whose rows
+    are identical copies), ``most`` (the most repeated geometry (theta_i, theta_r, phi) in
+    radians) and ``most_count``.
+
+    Merged value: the inverse-variance mean (the plain mean without sigma).  Merged sigma:
+    genuine repeats (values differ) give 1 / sqrt(sum 1 / sigma^2), widened by the Birge
+    ratio sqrt(chi^2 / (count - 1)) of their own scatter when that exceeds 1; identical
+    copies give sqrt(count / sum 1 / sigma^2) -- the single-row sigma: a copied row adds
+    no information.  Without sigma every merged value weighs 1.
+    """
+    ti, tr = np.asarray(theta_i, float), np.asarray(theta_r, float)
+    ph = np.mod(np.asarray(phi, float), 2.0 * math.pi)
+    rows = ti.size
+    order = np.lexsort((ph, tr, ti))
+    a, b, c = ti[order], tr[order], ph[order]
+    new = np.ones(rows, bool)
+    new[1:] = (a[1:] != a[:-1]) | (b[1:] != b[:-1]) | (c[1:] != c[:-1])
+    if new.all():
+        return theta_i, theta_r, phi, values, sigma, None
+    starts = np.flatnonzero(new)
+    counts = np.diff(np.append(starts, rows))
+    member = np.cumsum(new) - 1
+    identical = np.ones(starts.size, bool)
+    out_v, out_s = {}, ({} if sigma is not None else None)
+    for name, v in values.items():
+        v = np.asarray(v, float)[order]
+        same = np.maximum.reduceat(v, starts) == np.minimum.reduceat(v, starts)
+        identical &= same
+        if sigma is None:
+            out_v[name] = np.add.reduceat(v, starts) / counts
+            continue
+        wt = 1.0 / np.asarray(sigma[name], float)[order] ** 2
+        W = np.add.reduceat(wt, starts)
+        mean = np.add.reduceat(wt * v, starts) / W
+        scatter = np.add.reduceat(wt * (v - mean[member]) ** 2, starts)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            birge = np.where(counts > 1, np.sqrt(scatter / np.maximum(counts - 1, 1)), 1.0)
+        out_v[name] = mean
+        out_s[name] = np.where(same, np.sqrt(counts / W), np.maximum(birge, 1.0) / np.sqrt(W))
+    most = int(np.argmax(counts))
+    info = {"rows": rows, "geometries": int(starts.size), "repeated_rows": int(rows - starts.size),
+            "copy_geometries": int(np.count_nonzero(identical & (counts > 1))),
+            "most": (float(a[starts[most]]), float(b[starts[most]]), float(c[starts[most]])),
+            "most_count": int(counts[most])}
+    return a[starts], b[starts], c[starts], out_v, out_s, info
+
+
+def impossible_values(values, noise) -> list:
+    """Values no Mueller matrix can have, beyond ``IMPOSSIBLE_SIGMAS`` x ``noise``.
+
+    ``values``: element -> normalized values M_jk / M00 (1-D arrays of one length);
+    ``noise``: element -> their standard deviations (arrays or scalars).  Checks |M_jk/M00| <= 1
+    and the degrees of polarization sqrt(M01^2 + M02^2 + M03^2) <= 1 (output of unpolarized
+    light) and sqrt(M10^2 + M20^2 + M30^2) <= 1 (diattenuation), over the elements present.
+    Returns a list of (what, row index, value, its sigma) for each failing check's worst row.
+    """
+    found = []
+    for name, v in values.items():
+        v = np.asarray(v, float)
+        s = np.broadcast_to(np.asarray(noise[name], float), v.shape)
+        excess = (np.abs(v) - 1.0) / s
+        bad = excess > IMPOSSIBLE_SIGMAS
+        if bad.any():
+            i = int(np.argmax(np.where(bad, excess, -np.inf)))
+            found.append((f"|{name}/M00| > 1 in {int(bad.sum())} row(s)", i, float(v[i]), float(s[i])))
+    for label, group in (("degree of polarization sqrt(M01^2+M02^2+M03^2)", ("M01", "M02", "M03")),
+                         ("diattenuation sqrt(M10^2+M20^2+M30^2)", ("M10", "M20", "M30"))):
+        present = [g for g in group if g in values]
+        if len(present) < 2:
+            continue
+        vs = [np.asarray(values[g], float) for g in present]
+        ss = [np.broadcast_to(np.asarray(noise[g], float), vs[0].shape) for g in present]
+        dop = np.sqrt(sum(x * x for x in vs))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sd = np.sqrt(sum((x * e) ** 2 for x, e in zip(vs, ss))) / np.where(dop > 0, dop, 1.0)
+            excess = (dop - 1.0) / np.maximum(sd, 1e-300)
+        bad = excess > IMPOSSIBLE_SIGMAS
+        if bad.any():
+            i = int(np.argmax(np.where(bad, excess, -np.inf)))
+            found.append((f"{label} > 1 in {int(bad.sum())} row(s)", i, float(dop[i]), float(sd[i])))
+    return found
 
 
 def _diffuse_mode(diffuse):
@@ -171,6 +290,10 @@ class FitResult:
     diffuse: str = "paper"
     warnings: list = field(default_factory=list)
     condition_number: float = float("nan")
+    rows: int = 0
+    repeats: dict | None = None
+    stderr_scale: float = 1.0
+    data_warnings: list = field(default_factory=list)
 
     @property
     def ill_posed(self) -> bool:
@@ -218,7 +341,14 @@ class FitResult:
         """A human-readable report of the fit."""
         out = [f"pBRDF fit (paper Eq. 17; shadowing={self.shadowing!r}, diffuse={self.diffuse!r}): "
                f"{self.n_data} values, {len(self.fitted)} fitted parameters"]
-        out.append(f"  converged: {self.success} ({self.message}; {self.nfev} model evaluations)")
+        caveat = " -- but the data warnings below limit what it means" if self.data_warnings else ""
+        out.append(f"  converged: {self.success} ({self.message}; {self.nfev} model evaluations){caveat}")
+        if self.repeats:
+            rp = self.repeats
+            out.append(f"  repeated geometries: {rp['repeated_rows']} of {rp['rows']} rows repeat another row's "
+                       f"geometry; fitted {rp['geometries']} distinct geometries")
+        if self.stderr_scale != 1.0:
+            out.append(f"  standard errors scaled by sqrt(reduced chi^2) = {self.stderr_scale:.4g}")
         for name in PARAMETERS:
             v = self.params[name]
             if name in self.fitted:
@@ -238,7 +368,7 @@ class FitResult:
             for i, a in enumerate(self.fitted):
                 out.append(f"    {a:10s}" + "".join(f"{self.correlation[i, j]:10.4f}"
                                                     for j in range(len(self.fitted))))
-        for w in self.warnings:
+        for w in self.warnings + self.data_warnings:
             out.append(f"  WARNING: {w}")
         return "\n".join(out)
 
@@ -398,12 +528,18 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     if progress is not None and not isinstance(progress, (bool, np.bool_)):
         raise TypeError(f"progress must be True, False or None, got {progress!r}")
     ti, tr, ph, y, w, _ = _as_arrays(theta_i, theta_r, phi, measured, sigma)
+    rows_in = ti.size
+    ti, tr, ph, y, w_merged, repeats = merge_repeated_geometries(ti, tr, ph, y, w if sigma is not None else None)
+    if repeats is not None:
+        w = w_merged if sigma is not None else {n_: np.ones(ti.size) for n_ in y}
     names = tuple(y)
     ydat = np.concatenate([y[n] for n in names])
     wdat = np.concatenate([w[n] for n in names])
     m, p = ydat.size, len(fitted)
     if m < p:
-        raise ValueError(f"too few data to fit {', '.join(fitted)}: {m} measured value(s) for {p} "
+        merged = (f" ({rows_in} rows, but only {ti.size} distinct geometries: rows that repeat a geometry "
+                  "count once)") if repeats is not None else ""
+        raise ValueError(f"too few data to fit {', '.join(fitted)}: {m} measured value(s){merged} for {p} "
                          f"parameters -- measure more angles or elements, or fix parameters "
                          f"(fit=...) at known values")
     rows = ti.size
@@ -496,6 +632,45 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
             cov *= chi2 / dof      # noise level estimated from the residual scatter
         se = np.sqrt(np.diag(cov))
         corr = cov / np.outer(se, se)
+    # ---- what the data can say: repeats, chi^2 far from 1, impossible values
+    data_diag = []
+    if repeats is not None:
+        t_i, t_r, f_ = (math.degrees(x) for x in repeats["most"])
+        data_diag.append(
+            f"{repeats['repeated_rows']} of {repeats['rows']} rows repeat another row's geometry "
+            f"({repeats['geometries']} distinct; the most repeated, theta_i={t_i:.6g}, theta_r={t_r:.6g}, "
+            f"phi={f_:.6g} deg, {repeats['most_count']} times); they were merged into one value per "
+            "geometry (inverse-variance mean)" +
+            (f", and {repeats['copy_geometries']} of the geometries hold only identical copies, which count "
+             "once: the standard errors do not shrink with copied rows" if repeats['copy_geometries'] else
+             ", its sigma that of the mean of the repeats"))
+    scale = 1.0
+    if sigma is not None and dof > 0 and math.isfinite(cond) and cond <= 1e10:
+        red = chi2 / dof
+        if chi2_dist.sf(chi2, dof) < CHI2_TAIL:
+            scale = math.sqrt(red)      # the Birge ratio: errors as large as the scatter says
+            cov *= red
+            if red > 2.0:
+                data_diag.append(
+                    f"reduced chi^2 = {red:.4g} is far above 1 (dof = {dof}): the sigmas underestimate the "
+                    "scatter, or the model does not describe the data; the standard errors are scaled by "
+                    f"sqrt(chi^2_red) = {scale:.3g}")
+        elif chi2_dist.cdf(chi2, dof) < CHI2_TAIL and red < 0.5:
+            # never scaled down: noiseless or over-cautious sigmas must not shrink the errors to 0
+            data_diag.append(
+                f"reduced chi^2 = {red:.4g} is far below 1 (dof = {dof}): the sigmas overestimate the "
+                "scatter, or the rows are not independent measurements; the standard errors follow the "
+                "given sigmas and may be too large")
+    noise = w if sigma is not None else {n_: np.full(ti.size, math.sqrt(chi2 / dof) if dof > 0 else 0.0)
+                                         for n_ in names}
+    if sigma is not None or dof > 0:
+        bad = impossible_values(y, {n_: np.maximum(noise[n_], 1e-12) for n_ in names})
+        for what, i, v, e in bad:
+            data_diag.append(
+                f"impossible data: {what} beyond {IMPOSSIBLE_SIGMAS:g} sigma (worst {v:.4g} +- {e:.2g} at "
+                f"theta_i={math.degrees(ti[i]):.4g}, theta_r={math.degrees(tr[i]):.4g}, "
+                f"phi={math.degrees(ph[i]):.4g} deg): no Mueller matrix has it -- unnormalized data or a "
+                "calibration error; the fit cannot describe these values")
     stderr = {q: float(math.sqrt(cov[i, i])) if math.isfinite(cov[i, i]) else float("inf")
               for i, q in enumerate(fitted)}
     vals = unpack(res.x)
@@ -532,7 +707,10 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
         p_value=float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan"),
         residuals=residuals, success=bool(res.success), message=str(res.message), nfev=int(nfev),
         n_data=m, sigma_given=sigma is not None, shadowing=shadowing, diffuse=mode,
-        warnings=diag, condition_number=cond)
+        warnings=diag, condition_number=cond, rows=rows_in, repeats=repeats, stderr_scale=scale,
+        data_warnings=data_diag)
+    for text in data_diag:
+        warnings.warn(text, FitDataWarning, stacklevel=2)
     if diag:
         text = "ill-posed fit: " + "; ".join(diag)
         if strict:
@@ -723,6 +901,7 @@ def cli_main(argv=None) -> int:
         meas = read_measurements(args.data, progress=not args.quiet)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", IllPosedFitWarning)   # printed in the summary instead
+            warnings.simplefilter("ignore", FitDataWarning)
             result = fit_measurements(meas, **opts, strict=args.strict,
                                       progress=None if not args.quiet else False)
     except IllPosedFitError as exc:
@@ -731,16 +910,19 @@ def cli_main(argv=None) -> int:
     except (MeasurementFileError, ValueError, TypeError) as exc:
         print(f"hyde-bsdf fit: error: {exc}", file=sys.stderr)
         return 2
-    print(f"data: {meas.source} ({len(meas)} geometries, elements {', '.join(meas.elements)}"
+    print(f"data: {meas.source} ({len(meas)} rows, elements {', '.join(meas.elements)}"
           + (", sigma / sqrt(n_samples)" if meas.n_samples is not None else "") + ")")
     print(result.summary())
+    for text in result.data_warnings:          # also on stderr, where a script's log sees them
+        print(f"hyde-bsdf fit: warning: {text}", file=sys.stderr)
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))
     if args.output:
         try:
             plot_fit(result, meas, args.output, title=str(meas.source))
         except (ValueError, OSError) as exc:
-            print(f"hyde-bsdf fit: error: cannot write the plot: {exc}", file=sys.stderr)
+            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+            print(f"hyde-bsdf fit: error: cannot write the plot: {why}", file=sys.stderr)
             return 2
         print(f"\nplot: {args.output}")
     return 0 if result.success else 1

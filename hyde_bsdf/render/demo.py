@@ -16,7 +16,9 @@ and writes into the output folder:
 
 With an unpolarized ``--variant`` (``llvm_ad_rgb``, ...) only ``demo.exr`` (R, G, B) and
 ``demo_rgb.png`` are written.  The output folder and every file in it are checked before the
-render starts; each file is written atomically (:mod:`hyde_bsdf.atomic`).
+render starts; the files are written as one set (:func:`hyde_bsdf.atomic.atomic_group`): the
+old pictures are replaced only once every new file is written, so a full disk leaves them as
+they were.
 
 The default (448 x 280 pixels, 96 spp) takes ~15-20 s on 2 cores with the LLVM
 variant; ``--width/--height/--spp`` raise it.  On the scalar fallback (one
@@ -32,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_path, check_output_dir, check_output_path
+from hyde_bsdf.atomic import atomic_group, atomic_path, check_output_dir, check_output_path
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.render.renderer import DEFAULT_VARIANT, _positive_int, prepare_variant, render_stokes
 from hyde_bsdf.render.stokes_io import (_tonemap, polarization_png_paths, polarization_quantities,
@@ -87,13 +89,14 @@ def render_demo(outdir, width=None, height=None, spp=None, variant=DEFAULT_VARIA
     params = {"width": width, "height": height, "spp": spp, "conductor": bsdf, "floor": bsdf}
     result = render_stokes(scene, variant=chosen, spp=spp, seed=seed, params=params)
     meta = dict(result["meta"], bsdf=bsdf, scene=scene.name)
-    paths = {"exr": write_stokes_exr(outdir / "demo.exr", result, metadata=meta)}
-    title = f"demo ({bsdf})"
-    if meta["polarized"]:
-        paths.update(save_polarization_pngs(result, outdir / "demo", title=title))
-        paths["overview"] = _overview(result, outdir / "demo_overview.png", title)
-    else:
-        paths["rgb"] = save_rgb_png(result["RGB"], outdir / "demo_rgb.png", title)
+    with atomic_group():      # the EXR and PNGs replace the old set together, or not at all
+        paths = {"exr": write_stokes_exr(outdir / "demo.exr", result, metadata=meta)}
+        title = f"demo ({bsdf})"
+        if meta["polarized"]:
+            paths.update(save_polarization_pngs(result, outdir / "demo", title=title))
+            paths["overview"] = _overview(result, outdir / "demo_overview.png", title)
+        else:
+            paths["rgb"] = save_rgb_png(result["RGB"], outdir / "demo_rgb.png", title)
     _log(f"{meta['spp']} spp in {meta['seconds']:.1f} s; wrote " + ", ".join(str(p) for p in paths.values()))
     return paths
 

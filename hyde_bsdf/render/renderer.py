@@ -29,8 +29,11 @@ Command line::
 writes ``OUT.exr`` (channels R, G, B, S0.R ... S3.B, float32) and
 ``OUT_intensity.png``, ``OUT_dolp.png``, ``OUT_aolp.png``, ``OUT_docp.png``,
 ``OUT_rgb.png``; with an unpolarized variant ``OUT.exr`` (R, G, B) and ``OUT_rgb.png``.
-Every file is written atomically (:mod:`hyde_bsdf.atomic`) and every output path is checked
-before the render starts.
+Every output path is checked before the render starts (a name too long for the file system
+included).  The files are written as one set (:func:`hyde_bsdf.atomic.atomic_group`): each to a
+hidden temporary, renamed only when every write has succeeded, so a full disk or a failed write
+leaves the previous EXR and PNGs complete and consistent and ends in one line naming the file
+(exit 2).
 """
 from __future__ import annotations
 
@@ -48,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import check_output_path
+from hyde_bsdf.atomic import atomic_group, check_output_path
 from hyde_bsdf.errors import UsageError, one_line
 from hyde_bsdf.render.stokes_io import (STOKES_NAMES, polarization_png_paths, save_polarization_pngs,
                                         save_rgb_png, write_stokes_exr)
@@ -357,7 +360,7 @@ def _render_pass(mi, scene, n, seed, integrator):
         cause, msgs = exc, []
         while cause is not None:            # drjit.custom chains the real message as the cause
             if isinstance(cause, KeyboardInterrupt):
-                raise KeyboardInterrupt from None   # Ctrl-C inside mi.render's Python part
+                raise cause from None       # Ctrl-C (or SIGTERM) inside mi.render's Python part
             msgs.append(one_line(cause))
             cause = cause.__cause__ or cause.__context__
         raise UsageError("Mitsuba could not render the scene: " + " <- ".join(msgs[::-1])[:600]) from exc
@@ -615,15 +618,16 @@ def _run(args) -> int:
     result = render_stokes(args.scene, variant=args.variant, spp=args.spp, seed=args.seed,
                            chunks=args.chunks, params=dict(args.define))
     meta = result["meta"]
-    write_stokes_exr(out, result, metadata=meta)
-    written = [out]
-    if not args.no_png:
-        stem = out.with_suffix("")
-        title = Path(args.scene).stem
-        if meta["polarized"]:
-            written += list(save_polarization_pngs(result, stem, title=title).values())
-        else:
-            written.append(save_rgb_png(result["RGB"], polarization_png_paths(stem, False)["rgb"], title))
+    with atomic_group():      # the EXR and its PNGs replace the old set together, or not at all
+        write_stokes_exr(out, result, metadata=meta)
+        written = [out]
+        if not args.no_png:
+            stem = out.with_suffix("")
+            title = Path(args.scene).stem
+            if meta["polarized"]:
+                written += list(save_polarization_pngs(result, stem, title=title).values())
+            else:
+                written.append(save_rgb_png(result["RGB"], polarization_png_paths(stem, False)["rgb"], title))
     _log(f"{meta['spp']} spp in {meta['seconds']:.1f} s ({meta['variant']}); wrote "
          + ", ".join(str(p) for p in written))
     return 0

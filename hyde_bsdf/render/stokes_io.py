@@ -130,8 +130,49 @@ def write_stokes_exr(path, stokes: dict, metadata: dict | None = None) -> Path:
         header[f"hyde_bsdf.{key}"] = str(value)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
-        OpenEXR.File(header, channels).write(str(tmp))
+        OpenEXR.File(header, dict(channels)).write(str(tmp))   # a copy: the binding rewrites its dict
+        _verify_exr(tmp, channels)
     return path
+
+
+def _verify_exr(tmp, channels) -> None:
+    """Read back what OpenEXR wrote: its C++ stream can swallow the error of the final flush (a
+    full disk, a file-size limit) and leave a truncated file without raising.  OSError if so."""
+    import errno
+    import os
+
+    import OpenEXR
+
+    import sys
+
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)            # the binding prints its read warnings on stdout: keep them off it
+    except (OSError, ValueError, AttributeError):
+        saved = None
+    try:
+        if saved is not None:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, 1)
+            os.close(devnull)
+        back = OpenEXR.File(str(tmp), separate_channels=True).channels()
+        ok = set(back) == set(channels) and all(
+            np.array_equal(back[name].pixels, a) for name, a in channels.items())
+    except Exception:  # noqa: BLE001 -- any failure to read back is a failed write
+        ok = False
+    finally:
+        if saved is not None:
+            os.dup2(saved, 1)
+            os.close(saved)
+    if not ok:
+        try:
+            st = os.statvfs(os.path.dirname(os.path.abspath(tmp)) or ".")
+            full = st.f_bavail * st.f_frsize < 1 << 20
+        except OSError:
+            full = False
+        code = errno.ENOSPC if full else errno.EIO
+        raise OSError(code, os.strerror(code) if full else
+                      "the file written does not read back complete (disk full or a file-size limit?)")
 
 
 def read_stokes_exr(path) -> dict:

@@ -7,12 +7,19 @@ and the figures, and writes ``DIR/index.html`` (and ``DIR/checks.csv``): the mac
 each script took, a table of every check with its number, tolerance and verdict, and the figures.
 A script that raises is reported as a failed check with its message; the report still completes.
 Exit status: 0 when every check passes, 1 otherwise, 2 for a usage error (an output folder that
-cannot be written or is not a report folder, no ``validation/`` scripts: not a source checkout).
+cannot be written or holds files an earlier report did not write, no ``validation/`` scripts:
+not a source checkout).
 
-The report is built in a fresh hidden folder beside ``DIR`` and swapped in at the end
-(:func:`hyde_bsdf.atomic.atomic_dir`): an interrupted run (Ctrl-C, a kill) leaves the previous
-report as it was, never an old ``index.html`` beside new figures.  ``DIR`` must be new, empty, or
-an earlier report (it holds ``index.html`` or ``checks.csv``): the whole folder is replaced.
+Nothing but an earlier report's own files is ever deleted.  The report is built in a fresh hidden
+folder beside ``DIR`` and moved in at the end (:func:`hyde_bsdf.atomic.atomic_dir`), with a
+manifest ``DIR/.hyde-report-manifest.json`` listing every file it wrote: an interrupted run
+(Ctrl-C, SIGTERM, a kill) leaves the previous report as it was, never an old ``index.html``
+beside new figures.  ``DIR`` must be new, empty, or hold only an earlier report's files (those its
+manifest lists); a folder with any other file -- a web site's ``index.html``, a thesis -- is
+refused before any work, unless ``--force``: then the files of the earlier report are replaced
+and every other file is kept (one whose name the report takes, such as ``index.html``, is renamed
+``index.html.orig``).  A report written before manifests existed is recognised by its
+``index.html`` title and ``checks.csv`` header.
 """
 from __future__ import annotations
 
@@ -28,10 +35,11 @@ import time
 import traceback
 from pathlib import Path
 
-from hyde_bsdf.atomic import atomic_dir, atomic_open, check_output_dir
+from hyde_bsdf.atomic import (TEMP_NAME_RE, atomic_dir, atomic_open, check_dir_owned, check_name_fits,
+                              check_output_dir, read_manifest, write_manifest)
 from hyde_bsdf.errors import UsageError
 
-__all__ = ["SECTIONS", "build_report", "cli_main"]
+__all__ = ["SECTIONS", "MANIFEST", "build_report", "check_report_dir", "cli_main"]
 
 #: (section title, [validation script stems]) in report order
 SECTIONS = [
@@ -60,21 +68,59 @@ def validation_dir() -> Path:
     return here
 
 
-def check_report_dir(outdir) -> Path:
-    """Check before any work that ``outdir`` can take a report (UsageError otherwise)."""
+#: the manifest of a report folder: every file the report wrote (a rerun removes only these)
+MANIFEST = ".hyde-report-manifest.json"
+_TITLE = "<title>hyde-bsdf validation report</title>"
+_CSV_HEADER = "script,name,value,tolerance,passed"
+
+
+def _legacy_report_files(out: Path):
+    """The files of a report written before manifests (index.html with our title, checks.csv with
+    our header, and the PNG/CSV files of the validation scripts it shows), or None if not one."""
+    try:
+        page = (out / "index.html").read_text(encoding="utf-8", errors="replace")
+        with open(out / "checks.csv", encoding="utf-8", errors="replace") as fh:
+            header = fh.readline().strip()
+    except OSError:
+        return None
+    if _TITLE not in page or header != _CSV_HEADER:
+        return None
+    import re
+
+    figures = set(re.findall(r"<img src='([^'/]+)'", page))
+    listed = {"index.html", "checks.csv"} | figures
+    listed |= {Path(f).stem + ".csv" for f in figures if (out / (Path(f).stem + ".csv")).exists()}
+    return listed
+
+
+def check_report_dir(outdir, force: bool = False) -> Path:
+    """Check before any work that ``outdir`` can take a report (UsageError otherwise).
+
+    Refused: a regular file, the current folder or one above it, and -- unless ``force`` -- a
+    folder holding files that no earlier report wrote (see the module docstring).
+    """
     out = Path(outdir)
+    check_name_fits(out, "--outdir")
     if out.is_symlink():
         out = out.resolve()
     if out.exists() and not out.is_dir():
         raise UsageError(f"--outdir {str(out)!r} is a regular file, not a folder")
     here = Path.cwd().resolve()
     if out.resolve() == here or out.resolve() in here.parents:
-        raise UsageError(f"--outdir {str(outdir)!r} is the current folder or one above it; the report "
-                         "replaces its folder as a whole: give a folder of its own (default out/report)")
-    if out.is_dir() and any(out.iterdir()) and not any((out / n).exists() for n in ("index.html", "checks.csv")):
-        raise UsageError(f"--outdir {str(out)!r} is a folder that is not a validation report (no index.html "
-                         "or checks.csv); the report replaces its folder as a whole: give a new or empty "
-                         "folder, or an earlier report's")
+        raise UsageError(f"--outdir {str(outdir)!r} is the current folder or one above it: give the report "
+                         "a folder of its own (default out/report)")
+    if out.is_dir() and read_manifest(out, MANIFEST) is None:
+        legacy = _legacy_report_files(out)
+        if legacy is not None:          # adopt a report written before manifests: these files are ours
+            write_manifest(out, [f for f in legacy if (out / f).is_file()], MANIFEST)
+    if out.is_dir():
+        others = [f for f in (p.name for p in out.iterdir()) if f != MANIFEST and not TEMP_NAME_RE.match(f)]
+        if others and read_manifest(out, MANIFEST) is None and not force:
+            shown = ", ".join(repr(f) for f in sorted(others)[:3]) + (" ..." if len(others) > 3 else "")
+            raise UsageError(f"--outdir {str(out)!r} is not a validation report (no {MANIFEST}) and holds "
+                             f"{len(others)} file(s) ({shown}); give a new or empty folder, or pass --force to "
+                             "write the report beside them (they are kept)")
+        check_dir_owned(out, MANIFEST, force, "--outdir")
     check_output_dir(out.parent, "--outdir's parent folder")
     return out
 
@@ -140,15 +186,21 @@ def _fmt(v):
     return html.escape(str(v))
 
 
-def build_report(outdir, quick=False, progress=True):
+def build_report(outdir, quick=False, progress=True, force=False):
     """Run all scripts into ``outdir``; return (all_passed, rows, seconds).
 
-    The report is built in a fresh folder and replaces ``outdir`` only once complete (see the
-    module docstring); UsageError before any work for an unusable ``outdir`` or no scripts.
+    The report is built in a fresh folder and moved into ``outdir`` only once complete (see the
+    module docstring); UsageError before any work for an unusable ``outdir`` (one holding files
+    an earlier report did not write, unless ``force``) or no scripts.
     """
-    final = check_report_dir(outdir)
+    final = check_report_dir(outdir, force)
     vdir = validation_dir()
-    with atomic_dir(final) as out:
+
+    def kept(paths):
+        print(f"[validate] kept your file(s) the report's names would replace as: "
+              + ", ".join(str(p) for p in paths), file=sys.stderr)
+
+    with atomic_dir(final, manifest=MANIFEST, force=force, on_kept=kept) as out:
         result = _build(out, vdir, quick, progress)
     return result
 
@@ -229,12 +281,15 @@ def cli_main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)")
     ap.add_argument("--quick", action="store_true", help="small sweeps; under 3 minutes on 2 cores")
+    ap.add_argument("--force", action="store_true",
+                    help="write into a folder that holds files no earlier report wrote; they are kept "
+                         "(a file whose name the report takes is renamed NAME.orig)")
     try:
         a = ap.parse_args(argv)
     except SystemExit as exc:  # argparse printed its message
         return int(exc.code or 0)
     try:
-        ok, rows, seconds = build_report(a.outdir, quick=a.quick)
+        ok, rows, seconds = build_report(a.outdir, quick=a.quick, force=a.force)
     except UsageError as exc:
         print(f"hyde-bsdf validate: error: {exc}", file=sys.stderr)
         return 2
