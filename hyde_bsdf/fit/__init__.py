@@ -1,11 +1,18 @@
-"""Fitting the model to Mueller-matrix measurements.
+"""Fitting the model to Mueller-matrix measurements, and measured pBRDF tables.
 
 ``mueller_fit`` (:func:`fit_mueller`, standard errors and ill-posedness checks, the
-``hyde-bsdf fit`` command) and ``measurements`` (the CSV format, its reader and writer).
+``hyde-bsdf fit`` command for CSV files) and ``measurements`` (the CSV format, its reader and
+writer); ``pbsdf_file`` (Mitsuba ``measured_polarized`` tables: :func:`read_pbsdf`,
+:func:`pbsdf_samples` -- frames, masking, subsampling), ``pbsdf_fit`` (:func:`fit_pbsdf`, n and k
+per band and rms_slope; ``hyde-bsdf fit FILE.pbsdf``) and ``pbsdf_export`` (:func:`export_pbsdf`,
+the model as such a table for the C++ renderer; ``hyde-bsdf export``).
 
 May import: ``hyde_bsdf.model``.  Independent of Mitsuba.
 """
 from hyde_bsdf.fit.mueller_fit import *  # noqa: F401,F403
 from hyde_bsdf.fit.mueller_fit import __all__ as _fit_all
+from hyde_bsdf.fit.pbsdf_export import export_pbsdf
+from hyde_bsdf.fit.pbsdf_file import pbsdf_samples, read_pbsdf
+from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
 
-__all__ = list(_fit_all)
+__all__ = list(_fit_all) + ["read_pbsdf", "pbsdf_samples", "fit_pbsdf", "export_pbsdf"]

@@ -384,7 +384,7 @@ def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str 
     fig.suptitle((title + "\n" if title else "") +
                  f"rms_slope = {result.rms_slope:.4g}; n = {', '.join(f'{v:.3g}' for v in result.n)}; "
                  f"k = {', '.join(f'{v:.3g}' for v in result.k)} ({len(rows)} of {len(data)} geometries)", fontsize=9)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.05, top=0.92, wspace=0.3, hspace=0.35)
     path = check_output_path(path, "plot file")
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".").lower() or "png")
@@ -434,6 +434,10 @@ def cli_main(argv=None) -> int:
     fit = _check(args.fit, args.rms_slope, args.n0, args.k0, args.shadowing, args.diffuse)
     if not 0 < args.theta_max <= 90:
         raise UsageError(f"--theta-max must be in (0, 90] degrees, got {args.theta_max:g}")
+    if not 0 <= args.tolerance <= 1:
+        raise UsageError(f"--tolerance must be in [0, 1], got {args.tolerance:g}")
+    if args.max_points < 1:
+        raise UsageError(f"--max-points must be >= 1, got {args.max_points}")
     if args.output:
         check_output_path(args.output, "plot file (-o)")
         try:
