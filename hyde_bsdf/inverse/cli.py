@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_open, atomic_path, check_output_path
+from hyde_bsdf.atomic import atomic_group, atomic_open, atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.inverse._common import Y_WEIGHTS, _log
 from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
@@ -296,9 +296,10 @@ def _cli(argv):
         raise UsageError(f"--reference: {_one_line(exc)}") from None
     res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
                  seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
-    write_history(res, paths[0])
-    plot_history({args.loss: res}, paths[1],
-                 title=f"hyde-bsdf invert ({args.loss} loss, {args.iterations} it, {args.spp} spp)")
+    with atomic_group():      # the CSV and the plot replace the old pair together, or not at all
+        write_history(res, paths[0])
+        plot_history({args.loss: res}, paths[1],
+                     title=f"hyde-bsdf invert ({args.loss} loss, {args.iterations} it, {args.spp} spp)")
     print(f"loss: {args.loss}; {args.iterations} iterations, {res.seconds_per_iteration:.3f} s/iteration "
           f"(first {res.first_iteration_seconds:.1f} s incl. JIT)")
     for p in PARAMETERS:
@@ -373,7 +374,8 @@ def _cli_maps(args):
                           truth=truth, prefix=args.target)
     except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
         raise UsageError(_one_line(exc)) from None
-    _write_map_outputs(res, paths, args)
+    with atomic_group():      # history, maps and plot replace the old set together, or not at all
+        _write_map_outputs(res, paths, args)
     print(f"loss: {args.loss}; {args.iterations} iterations over {len(observations)} image(s), "
           f"{res.seconds_per_iteration:.3f} s/iteration (first {res.first_iteration_seconds:.1f} s incl. JIT)")
     for n in fit:
