@@ -355,7 +355,7 @@ def _ggx_pdf(wi, wo, alpha):
 
 
 def suggest_alpha_sample(params: dict, band: int | None = None, view_deg=(0, 20, 40, 60, 80),
-                         n_theta: int = 240, n_phi: int = 240) -> tuple[float, dict]:
+                         n_theta: int = 160, n_phi: int = 160) -> tuple[float, dict]:
     """The ``alpha_sample`` of :data:`ALPHA_CANDIDATES` with the least mean relative variance of
     Mitsuba's sampling weight f cos / pdf (M00 of the middle band) over the observer angles
     ``view_deg``, by quadrature on a (theta, phi) grid of the light direction.  Returns
