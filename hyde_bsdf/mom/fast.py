@@ -59,6 +59,7 @@ k1 = k0 eta.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 import scipy.linalg
@@ -614,6 +615,9 @@ def solve_fast(x, y, fp, fpp, dx, psi, pols, eta, *, tol=FAST_TOL, method="fb", 
     """
     if method not in ("fb", "gmres"):
         raise ValueError(f"method must be 'fb' or 'gmres', got {method!r}")
+    clock = time.process_time
+    t0 = clock()
+    t_solve = 0.0
     n = x.size
     yc = y - 0.5 * (y.max() + y.min())
     height = float(y.max() - y.min())
@@ -674,7 +678,9 @@ def solve_fast(x, y, fp, fpp, dx, psi, pols, eta, *, tol=FAST_TOL, method="fb", 
         sys = _System(n, bounds, half, kinds, eqs, far)
         bf = np.zeros((sys.nk * n, psi.shape[1]), complex)
         bf[sys.idx[0]] = psi
+        ta = clock()
         sol, res, pinfo = _iterate(sys, bf, tol, max_sweeps, method, reasons, f"{pol}-pol")
+        t_solve += clock() - ta
         pinfo["residual"] = res
         info[pol] = pinfo
         if eta is None:
@@ -683,4 +689,5 @@ def solve_fast(x, y, fp, fpp, dx, psi, pols, eta, *, tol=FAST_TOL, method="fb", 
         else:
             out["u_" + pol], out["v_" + pol] = sys.natural(sol, "u"), sys.natural(sol, "v")
     info["converged"] = all(np.all(info[p]["residual"] <= tol) for p in pols)
+    info["times"] = {"setup": clock() - t0 - t_solve, "solve": t_solve}
     return out

@@ -160,11 +160,12 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 import scipy.special
 
+from hyde_bsdf.mom.dense import solve_dense
+from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast
 from hyde_bsdf.mom.gather import ExecutorError, gather
-from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv, layer_matrices
+from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
 
 __all__ = [
     "scatter",
@@ -418,107 +419,67 @@ def _worker_init():
     _limit_blas_threads(1)
 
 
-def _banded_solve(A, B, band):
-    """Solve A X = B for a banded A (``band`` off-diagonals each side), B dense [N, N]."""
-    n = A.shape[0]
-    ab = np.zeros((2 * band + 1, n), dtype=A.dtype)
-    for d in range(-band, band + 1):
-        # LAPACK band storage: ab[band + i - j, j] = A[i, j]
-        diag = np.diagonal(A, offset=-d)
-        if d >= 0:
-            ab[band + d, : n - d] = diag
-        else:
-            ab[band + d, -d:] = diag
-    return scipy.linalg.solve_banded((band, band), ab, B, check_finite=False)
+def _solve_fields(task, psi, clock):
+    """Stage 3 of a partition: the surface fields u, v by the chosen method, with the fast solver's fallbacks.
 
-
-def _band_sparse(A, band):
-    """The entries of A within ``band`` of the diagonal, as a CSR matrix."""
-    import scipy.sparse
-    n = A.shape[0]
-    offsets = list(range(-band, band + 1))
-    diags = [np.diagonal(A, offset=d) for d in offsets]
-    return scipy.sparse.diags(diags, offsets, shape=(n, n), format="csr")
-
-
-def solve_partition(task):
-    """Solve one partition: fill, LU-factor once per polarisation, solve every theta_i, taper, radiate.
-
-    ``task`` is a dict with x, y, dfdx, d2fdx2 (local coordinates, centred on the
-    partition), dx, theta_i [rad], theta_r [rad], theta_fine [rad] (the power
-    grid), w, pols (tuple of "s"/"p"), eta (None for a PEC, else n - j kappa).
-    Returns a dict with, per polarisation P, the far fields ``F_P``
-    [n_ti, n_tr] and ``Ffine_P`` [n_ti, n_fine] (the F of :mod:`hyde_bsdf.mom.kernels`),
-    the absorbed flux ``absorbed_P`` [n_ti], the incident ``flux`` [n_ti] and
-    the CPU seconds (process time) of each stage (fill, factor, solve, far field).
+    Returns (fields dict with ``u_P``, ``v_P``; times (fill, factor, solve); method used;
+    reasons: every fallback with why).
     """
-    clock = time.process_time  # CPU seconds of this process (its BLAS is single-threaded in the pool)
-    t0 = clock()
     x, y, fp, fpp, dx = task["x"], task["y"], task["dfdx"], task["d2fdx2"], task["dx"]
     pols, eta = task["pols"], task["eta"]
-    n = x.size
-    psi = incident_field(x, y, task["theta_i"])
-    half = 0.5 * np.eye(n)
-    S0, D0, _ = layer_matrices(x, y, fp, fpp, dx, K0, need_S=(eta is not None or "s" in pols),
-                               need_D=(eta is not None or "p" in pols))
-    systems = {}
-    if eta is None:
-        if "s" in pols:
-            systems["s"] = S0            # EFIE (u = 0):  S0 v = psi
-        if "p" in pols:
-            D0 *= -1.0
-            D0 += half                   # MFIE (v = 0):  (1/2 - D0) u = psi
-            systems["p"] = D0
-        Zt = P = None
-    else:
-        S1, D1, band = layer_matrices(x, y, fp, fpp, dx, K0 * eta)
-        D1 += half
-        # interior equation: u = rho Zt v with Zt = (1/2 + D1)^-1 S1 (banded in a metal)
-        banded = 4 * band < n
-        Zt = _banded_solve(D1, S1, band) if banded else scipy.linalg.solve(D1, S1, check_finite=False)
-        del S1, D1
-        D0 *= -1.0
-        D0 += half
-        if banded:
-            # Zt decays like the metal's Green's function: keep 3 bands (the rest is < e^-80 of its diagonal)
-            Zt = _band_sparse(Zt, 3 * band)
-            P = (Zt.T @ D0.T).T          # (1/2 - D0) Zt at the cost of a banded product
+    method = task.get("solver", "dense")
+    reasons = []
+    if method == "fast":
+        t0 = clock()
+        try:
+            sol = solve_fast(x, y, fp, fpp, dx, psi, pols, eta, tol=task.get("tol") or FAST_TOL,
+                             method=task.get("fast_method", "fb"))
+        except FastSolverUnsuitable as exc:
+            if not task.get("dense_ok", True):
+                raise ValueError(f"the fast solver cannot take this surface ({exc}) and a dense solve of "
+                                 f"{x.size} unknowns is refused: use shorter partitions or a smoother surface") \
+                    from None
+            reasons.append(f"fast solver unsuitable ({exc}): dense LU instead")
         else:
-            P = D0 @ Zt                  # (1/2 - D0) Zt
-        del D0
-        for pol in pols:
-            rho = 1.0 if pol == "s" else eta * eta  # d psi_1/dn = rho d psi/dn (p: eps_1 / eps_0)
-            systems[pol] = rho * P + S0
-    t1 = clock()
+            info = sol["info"]
+            reasons += info["reasons"]
+            worst = max(float(np.max(info[p]["residual"])) for p in pols)
+            tol = task.get("tol") or FAST_TOL
+            if info["converged"] or not task.get("dense_ok", True):
+                if not info["converged"]:
+                    reasons.append(f"fast solver stopped at residual {worst:.2g} > tolerance {tol:g} and a dense "
+                                   f"solve of {x.size} unknowns is refused: the result carries that residual")
+                t = info["times"]
+                sol["times"] = (t["setup"], 0.0, t["solve"])
+                sol["residual"] = worst
+                return sol, "fast", reasons
+            reasons.append(f"fast solver did not converge (residual {worst:.2g} > tolerance {tol:g}): dense LU "
+                           "instead")
+        # the fallback's time is counted from the fast attempt on
+        t_lost = clock() - t0
+        sol = solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock)
+        f, fa, so = sol["times"]
+        sol["times"] = (f + t_lost, fa, so)
+        return sol, "dense", reasons
+    sol = solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock)
+    return sol, "dense", reasons
+
+
+def _radiate(task, fields, out):
+    """Stage 4 of a partition: taper (Eq. 22), absorbed power, far field (Eq. 21) of every polarisation."""
+    x, y, fp, dx = task["x"], task["y"], task["dfdx"], task["dx"]
+    pols, eta = task["pols"], task["eta"]
     win = taper(x, 0.0, task["w"])
-    out = {"flux": incident_flux(x, fp, dx, win, task["theta_i"])}
-    t_factor = t_solve = 0.0
-    fields = []
+    out["flux"] = incident_flux(x, fp, dx, win, task["theta_i"])
+    n_ti = np.atleast_1d(task["theta_i"]).size
+    Us, Vs = [], []
     for pol in pols:
-        ta = clock()
-        # factor A^T: its transpose view is Fortran-ordered, so LAPACK works in place (no copy)
-        # and lu_solve(..., trans=1) solves (A^T)^T X = A X = psi
-        lu = scipy.linalg.lu_factor(systems.pop(pol).T, overwrite_a=True, check_finite=False)
-        tb = clock()
-        sol = scipy.linalg.lu_solve(lu, psi, trans=1, check_finite=False)
-        del lu
-        if eta is None:
-            u, v = (None, sol) if pol == "s" else (sol, None)
-            out["absorbed_" + pol] = np.zeros(psi.shape[1])
-        else:
-            rho = 1.0 if pol == "s" else eta * eta
-            v = sol
-            u = rho * (Zt @ v)          # (dense or sparse)
-            out["absorbed_" + pol] = absorbed_flux(u, v, win, dx)
-        zero = np.zeros_like(sol)
-        fields.append((zero if u is None else u * win[:, None], zero if v is None else v * win[:, None]))
-        t_factor += tb - ta
-        t_solve += clock() - tb
+        u, v = fields["u_" + pol], fields["v_" + pol]
+        out["absorbed_" + pol] = np.zeros(n_ti) if eta is None else absorbed_flux(u, v, win, dx)
+        Us.append(np.zeros((x.size, n_ti), complex) if u is None else u * win[:, None])
+        Vs.append(np.zeros((x.size, n_ti), complex) if v is None else v * win[:, None])
     # one far-field pass for all polarisations (the kernel e^{jk(x sin + y cos)} is shared)
-    tc = clock()
-    n_ti = psi.shape[1]
-    U = np.hstack([f[0] for f in fields])
-    V = np.hstack([f[1] for f in fields])
+    U, V = np.hstack(Us), np.hstack(Vs)
     if eta is None:
         U = U if "p" in pols else None
         V = V if "s" in pols else None
@@ -527,8 +488,30 @@ def solve_partition(task):
     for i, pol in enumerate(pols):
         out["F_" + pol] = F[i * n_ti:(i + 1) * n_ti]
         out["Ffine_" + pol] = Ff[i * n_ti:(i + 1) * n_ti]
-    t_far = clock() - tc
-    out["times"] = np.array([t1 - t0, t_factor, t_solve, t_far])
+
+
+def solve_partition(task):
+    """Solve one partition: surface fields by the dense or fast method, taper, radiate.
+
+    ``task`` is a dict with x, y, dfdx, d2fdx2 (local coordinates, centred on the
+    partition), dx, theta_i [rad], theta_r [rad], theta_fine [rad] (the power
+    grid), w, pols (tuple of "s"/"p"), eta (None for a PEC, else n - j kappa) and
+    optionally solver ("dense" or "fast"), tol (the fast solver's residual) and dense_ok
+    (whether the fast solver may fall back to a dense LU).
+    Returns a dict with, per polarisation P, the far fields ``F_P``
+    [n_ti, n_tr] and ``Ffine_P`` [n_ti, n_fine] (the F of :mod:`hyde_bsdf.mom.kernels`),
+    the absorbed flux ``absorbed_P`` [n_ti], the incident ``flux`` [n_ti], the method that
+    solved it (``solver``), the fast solver's fallbacks (``reasons``) and the CPU seconds
+    (process time) of each stage (fill, factor, solve, far field).
+    """
+    clock = time.process_time  # CPU seconds of this process (its BLAS is single-threaded in the pool)
+    psi = incident_field(task["x"], task["y"], task["theta_i"])
+    fields, method, reasons = _solve_fields(task, psi, clock)
+    tc = clock()
+    out = {"solver": method, "reasons": reasons, "residual": fields.get("residual")}
+    _radiate(task, fields, out)
+    fill, factor, solve = fields["times"]
+    out["times"] = np.array([fill, factor, solve, clock() - tc])
     return out
 
 
@@ -752,7 +735,7 @@ MAX_PANELS = 64
 
 def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
             pts_per_wl=10, seed=0, executor=None, *, taper_width_wl=None, progress=None,
-            polarization="s", n=None, k=None, timeout=None):
+            polarization="s", n=None, k=None, timeout=None, solver="auto", tol=None):
     """Incoherent far-field scattering of a 1-D Gaussian rough surface -- paper Eqs. 18-23, both polarisations.
 
     Parameters
@@ -792,6 +775,16 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         while the executor is alive).
     n, k : float or None, keyword-only: the paper's complex index eta = n - j k
         (n > 0, k >= 0; Infragold 0.285, 7.3523).  Neither: a perfect conductor.
+    solver : "auto", "dense" or "fast", keyword-only.  "dense": one LU of the full matrix
+        per polarisation (:mod:`hyde_bsdf.mom.dense`, at most MAX_UNKNOWNS per partition);
+        "fast": forward-backward sweeps with spectral acceleration (:mod:`hyde_bsdf.mom.fast`,
+        O(N) memory, up to MAX_FAST_UNKNOWNS), GMRES where the sweeps diverge or stall and
+        the dense LU where that fails too, each fallback a MoMAccuracyWarning naming why;
+        "auto" (default): fast from AUTO_FAST_UNKNOWNS unknowns per partition on, and
+        wherever the dense path would be refused, if the surface suits it (its height
+        range against the partition length), else dense.  ``params["solver"]`` says which ran.
+    tol : float or None, keyword-only: the fast solver's relative residual
+        ||b - A x|| / ||b|| (default ``fast.FAST_TOL`` = 1e-4; 1e-3 is within 0.01 dB).
 
     Returns
     -------
@@ -813,6 +806,40 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     ENERGY_TOLERANCE (the value is in the message).
     """
     t_wall = time.perf_counter()
+    cfg = _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
+                        pts_per_wl, seed, taper_width_wl, polarization, n, k, timeout, solver, tol)
+    own = executor is None
+    workers = min(os.cpu_count() or 1, cfg["partitions"]) if own else 1
+    surf = _realise_surface(cfg, workers)
+    for r in surf["reasons"]:
+        warnings.warn("MoM failure risk: " + r, MoMAccuracyWarning, stacklevel=2)
+    tasks = _partition_tasks(cfg, surf)
+    del surf["x"], surf["f"], surf["s"], surf["c"]
+    results = _solve_partitions(tasks, executor, workers, cfg, progress)
+    del tasks
+    for r in _solver_reasons(results):
+        warnings.warn("MoM solver fallback: " + r, MoMAccuracyWarning, stacklevel=2)
+    stats = _statistics(results, cfg, surf)
+    post = _energy_check(stats["per"], cfg)
+    for r in post:
+        warnings.warn("MoM failure: " + r, MoMAccuracyWarning, stacklevel=2)
+    return _result(cfg, surf, results, stats, surf["reasons"] + _solver_reasons(results) + post,
+                   time.perf_counter() - t_wall)
+
+
+# ---------------------------------------------------------------------------
+# The stages of scatter: checks, surface, per-partition solve, statistics, energy
+# ---------------------------------------------------------------------------
+
+#: "auto" takes the fast solver from this many unknowns per partition on (the Fig. 6 partitions have 1500)
+AUTO_FAST_UNKNOWNS = 1000
+#: most unknowns per partition for the fast solver
+MAX_FAST_UNKNOWNS = 200000
+
+
+def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, pts_per_wl,
+                  seed, taper_width_wl, polarization, n, k, timeout, solver, tol):
+    """Stage 1: every argument checked (ValueError naming it), the partition geometry and the taper."""
     length_wl = _check_positive("length_wl", length_wl)
     if isinstance(partitions, bool) or not isinstance(partitions, (int, np.integer, float)) \
             or int(partitions) != partitions or partitions < 1:
@@ -826,16 +853,18 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     eta = _check_index(n, k)
     if timeout is not None:
         timeout = _check_positive("timeout", timeout)
+    if solver not in ("auto", "dense", "fast"):
+        raise ValueError(f"solver must be 'auto', 'dense' or 'fast', got {solver!r}")
+    if tol is not None:
+        tol = _check_positive("tol", tol)
+        if not 1e-12 <= tol <= 0.1:
+            raise ValueError(f"tol must be in [1e-12, 0.1] (the fast solver's relative residual), got {tol!r}")
     ti_deg = np.atleast_1d(np.asarray(theta_i_deg, dtype=float))
     tr_deg = np.atleast_1d(np.asarray(theta_r_deg, dtype=float))
     if ti_deg.ndim != 1 or not np.all(np.isfinite(ti_deg)) or np.any(ti_deg < 0) or np.any(ti_deg >= 90):
         raise ValueError(f"theta_i_deg must be finite angles in [0, 90) degrees, got {theta_i_deg!r}")
     if tr_deg.ndim != 1 or not np.all(np.isfinite(tr_deg)) or np.any(np.abs(tr_deg) > 90):
         raise ValueError(f"theta_r_deg must be finite signed angles in [-90, 90] degrees, got {theta_r_deg!r}")
-    theta_i = np.radians(ti_deg)
-    theta_r = np.radians(tr_deg)
-    rough = rms_height_wl > 0.0
-
     part_len = length_wl / partitions
     n_part = int(round(part_len * pts_per_wl))
     if n_part < 4:
@@ -847,43 +876,94 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         if w > part_len:
             raise ValueError(f"taper_width_wl={w:g} must be in (0, {part_len:g}] (the partition length "
                              f"length_wl/partitions; Eq. 22's window must fit in its partition)")
+    return dict(length_wl=length_wl, partitions=partitions, rms_height_wl=rms_height_wl,
+                corr_length_wl=corr_length_wl, pts_per_wl=pts_per_wl, seed=seed, pols=pols, eta=eta,
+                timeout=timeout, solver=solver, tol=tol, ti_deg=ti_deg, theta_i=np.radians(ti_deg),
+                theta_r=np.radians(tr_deg), rough=rms_height_wl > 0.0, part_len=part_len, n_part=n_part, w=w)
 
+
+def _fast_block_wl(height_wl, eta):
+    """The fast solver's block length for a partition of this height range (fast.solve_fast's rule)."""
+    kmax = K0 if eta is None or eta.imag != 0 else K0 * abs(eta)
+    return max(NEAR_WL, kmax * height_wl ** 2 / (4.0 * 0.8 * GROWTH_MAX))
+
+
+def _fast_bytes(n, block_wl, dx, pols, eta):
+    """Peak bytes of one fast solve (plane-wave factors, band, block matrices): O(N), a generous estimate."""
+    b = int(math.ceil(block_wl / dx))
+    q = 400
+    regions = 1 if eta is None else 2
+    nk = 1 if eta is None else 2
+    return 16.0 * n * (7 * q * regions + 4 * (4 * b + 3) * regions + 8 * nk * nk * b + 40)
+
+
+def _choose_solver(cfg, npart, dx, height, workers, budget, why):
+    """The method for partitions of npart unknowns, or a ValueError naming why neither fits."""
+    part_len, pols, eta = cfg["part_len"], cfg["pols"], cfg["eta"]
+    need_dense = _matrices_per_partition(pols, eta) * 16.0 * npart**2 * workers
+    dense_ok = npart <= MAX_UNKNOWNS and need_dense <= budget
+    block = _fast_block_wl(height, eta)
+    fast_fit = 3.0 * block <= part_len
+    fast_ok = fast_fit and npart <= MAX_FAST_UNKNOWNS and _fast_bytes(npart, block, dx, pols, eta) * workers <= budget
+    hint = (" or a smoother surface (smaller rms_height_wl / corr_length_wl)" if why else " or a lower pts_per_wl")
+    if cfg["solver"] == "dense" or (cfg["solver"] == "auto" and not fast_ok):
+        if npart > MAX_UNKNOWNS:
+            raise ValueError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
+                             f"{part_len:g} wavelengths, more than {MAX_UNKNOWNS} (a dense solve of that size takes "
+                             "many CPU minutes per partition)"
+                             + ("" if cfg["solver"] == "dense" else
+                                f", and the fast solver cannot take it (height range {height:.3g} wavelengths needs "
+                                f"blocks of {block:.3g}; at most a third of the partition)")
+                             + ": use shorter partitions (more `partitions`)" + hint)
+        if need_dense > budget:
+            raise ValueError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
+                             f"{part_len:g} wavelengths, {need_dense / 2**30:.1f} GiB for {workers} worker(s), more "
+                             f"than the {budget / 2**30:.1f} GiB available: use shorter partitions (more "
+                             "`partitions`)" + hint)
+        return "dense", dense_ok
+    if cfg["solver"] == "fast" and not fast_ok:
+        if not fast_fit and dense_ok:
+            return "fast", dense_ok      # solve_partition falls back to dense, with a warning naming why
+        raise ValueError(f"solver='fast' cannot take partitions of {part_len:g} wavelengths with {npart} unknowns"
+                         f"{why}: " + (f"the height range {height:.3g} wavelengths needs blocks of {block:.3g}, more "
+                                       "than a third of the partition" if not fast_fit else
+                                       f"more than {MAX_FAST_UNKNOWNS} unknowns or the memory available")
+                         + "; use shorter partitions (more `partitions`)" + hint)
+    if cfg["solver"] == "auto" and npart < AUTO_FAST_UNKNOWNS and dense_ok:
+        return "dense", dense_ok
+    return "fast", dense_ok
+
+
+def _realise_surface(cfg, workers):
+    """Stage 2: the surface realisation, resampled along its arc length where steep; the method; the
+    set-up's failure reasons (sampling, taper, partition, interior wavelength)."""
+    length_wl, partitions, part_len = cfg["length_wl"], cfg["partitions"], cfg["part_len"]
+    pts_per_wl, corr_length_wl, rough, eta = cfg["pts_per_wl"], cfg["corr_length_wl"], cfg["rough"], cfg["eta"]
+    n_part = cfg["n_part"]
     reasons = []
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", MoMAccuracyWarning)  # re-issued below from this frame
+        warnings.simplefilter("ignore", MoMAccuracyWarning)  # re-issued by scatter
         reasons += check_sampling(n_part / part_len, corr_length_wl, rough)
 
     def surface(npart):
         try:
-            return gaussian_surface(length_wl, npart * partitions, rms_height_wl, corr_length_wl, seed,
+            return gaussian_surface(length_wl, npart * partitions, cfg["rms_height_wl"], corr_length_wl, cfg["seed"],
                                     second_derivative=True)
         except ValueError as exc:
             raise ValueError(f"pts_per_wl={pts_per_wl:g} is too coarse for corr_length_wl={corr_length_wl:g} "
                              f"(the surface spectrum needs > {3.9 / corr_length_wl:.3g} points per wavelength): "
                              f"{exc}") from None
 
-    own = executor is None
-    workers = min(os.cpu_count() or 1, partitions) if own else 1
+    def height_range(f, npart):
+        return float(np.max(np.ptp(f.reshape(partitions, npart), axis=1)))
+
     budget = 0.8 * _memory_available()
-
-    def check_memory(npart, why):
-        need = _matrices_per_partition(pols, eta) * 16.0 * npart**2 * workers
-        if npart > MAX_UNKNOWNS:
-            raise ValueError(f"pts_per_wl={pts_per_wl:g}{why} needs {npart} unknowns per partition of "
-                             f"{part_len:g} wavelengths, more than {MAX_UNKNOWNS} (a dense solve of that size takes "
-                             "many CPU minutes per partition): use shorter partitions (more `partitions`)"
-                             + (" or a smoother surface (smaller rms_height_wl / corr_length_wl)" if why else
-                                " or a lower pts_per_wl"))
-        if need > budget:
-            raise ValueError(f"pts_per_wl={pts_per_wl:g}{why} needs {npart} unknowns per partition of "
-                             f"{part_len:g} wavelengths, {need / 2**30:.1f} GiB for {workers} worker(s), more than "
-                             f"the {budget / 2**30:.1f} GiB available: use shorter partitions (more `partitions`)"
-                             + (" or a smoother surface (smaller rms_height_wl / corr_length_wl)" if why else
-                                " or a lower pts_per_wl"))
-
-    check_memory(n_part, "")
+    # a first bound before any allocation: the dense path's size (or the fast path's for long partitions)
+    if n_part > MAX_FAST_UNKNOWNS or (cfg["solver"] == "dense" and n_part > MAX_UNKNOWNS):
+        _choose_solver(cfg, n_part, part_len / n_part, 0.0, workers, budget, "")
     x_all, f_all, s_all, c_all = surface(n_part)
     dx = part_len / n_part
+    method, dense_ok = _choose_solver(cfg, n_part, dx, height_range(f_all, n_part), workers, budget, "")
     if rough:
         # the realised surface: arc length per sample and turn per cell at its steepest point
         stretch = float(np.max(np.hypot(1.0, s_all)))
@@ -891,9 +971,11 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         refine = max(ARC_PTS_MIN * stretch * dx, turn / TURN_MAX)
         if refine > 1.0:
             new = int(math.ceil(n_part * refine * 1.02))
-            check_memory(new, f" on this surface (steepest slope {math.sqrt(stretch**2 - 1):.3g}, "
-                              f"{1.0 / (dx * stretch):.2g} points per wavelength of arc length there; "
-                              f"resampling to >= {ARC_PTS_MIN:g})")
+            method, dense_ok = _choose_solver(
+                cfg, new, part_len / new, height_range(f_all, n_part), workers, budget,
+                f" on this surface (steepest slope {math.sqrt(stretch**2 - 1):.3g}, "
+                f"{1.0 / (dx * stretch):.2g} points per wavelength of arc length there; "
+                f"resampling to >= {ARC_PTS_MIN:g})")
             n_part = new
             dx = part_len / n_part
             x_all, f_all, s_all, c_all = surface(n_part)
@@ -913,39 +995,57 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
                              f"{MAX_PANELS / (K0 * dx):.3g} at this sampling, or the PEC (n=None)")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MoMAccuracyWarning)
-        reasons += check_taper(theta_i, w, part_len)
+        reasons += check_taper(cfg["theta_i"], cfg["w"], part_len)
         reasons += check_partition(part_len, corr_length_wl, rough)
-    for r in reasons:
-        warnings.warn("MoM failure risk: " + r, MoMAccuracyWarning, stacklevel=2)
+    return dict(x=x_all, f=f_all, s=s_all, c=c_all, n_part=n_part, dx=dx, method=method, dense_ok=dense_ok,
+                reasons=reasons, fine=power_grid(cfg["w"]))
 
-    fine = power_grid(w)
+
+def _partition_tasks(cfg, surf):
+    """The partitions as independent tasks, in local coordinates centred on each partition (the incident
+    phase is referred to x_m, so the partition average of F is the coherent field)."""
+    n_part, part_len = surf["n_part"], cfg["part_len"]
     tasks = []
-    for m in range(partitions):
+    for m in range(cfg["partitions"]):
         sl = slice(m * n_part, (m + 1) * n_part)
-        xc = (m + 0.5) * part_len
-        # local coordinates centred on the partition: the incident phase is referred to x_m,
-        # so the partition average of F is the coherent field
-        tasks.append({"x": x_all[sl] - xc, "y": f_all[sl].copy(), "dfdx": s_all[sl].copy(),
-                      "d2fdx2": c_all[sl].copy(), "dx": dx, "theta_i": theta_i, "theta_r": theta_r,
-                      "theta_fine": fine, "w": w, "pols": pols, "eta": eta})
-    del x_all, f_all, s_all, c_all
+        tasks.append({"x": surf["x"][sl] - (m + 0.5) * part_len, "y": surf["f"][sl].copy(),
+                      "dfdx": surf["s"][sl].copy(), "d2fdx2": surf["c"][sl].copy(), "dx": surf["dx"],
+                      "theta_i": cfg["theta_i"], "theta_r": cfg["theta_r"], "theta_fine": surf["fine"],
+                      "w": cfg["w"], "pols": cfg["pols"], "eta": cfg["eta"], "solver": surf["method"],
+                      "tol": cfg["tol"], "dense_ok": surf["dense_ok"]})
+    return tasks
 
+
+def _solve_partitions(tasks, executor, workers, cfg, progress):
+    """Stage 3: every partition solved and radiated (solve_partition) on the executor."""
+    own = executor is None
     ex = process_pool(workers) if own else executor
-    show = (partitions >= 10) if progress is None else bool(progress)
-    bar = _Progress(partitions, show)
+    show = (cfg["partitions"] >= 10) if progress is None else bool(progress)
+    bar = _Progress(cfg["partitions"], show)
     try:
         # never a blind wait: liveness checks, the caller's timeout and a heartbeat (gather.py)
-        results = gather(ex, solve_partition, tasks, timeout=timeout, on_done=bar.update,
-                         heartbeat=progress is not False, what="partition", label="mom.scatter")
-        del tasks
+        return gather(ex, solve_partition, tasks, timeout=cfg["timeout"], on_done=bar.update,
+                      heartbeat=progress is not False, what="partition", label="mom.scatter")
     finally:
         if own:
             ex.shutdown(wait=True, cancel_futures=True)
 
-    M = partitions
+
+def _solver_reasons(results):
+    """The fast solver's fallbacks over all partitions, one line per kind of fallback with a count."""
+    seen = {}
+    for i, r in enumerate(results):
+        for msg in r.get("reasons", ()):
+            key = msg.split(" (")[0]
+            seen.setdefault(key, []).append((i, msg))
+    return [f"{len(v)} of {len(results)} partitions: {v[0][1]} (first: partition {v[0][0]})" for v in seen.values()]
+
+
+def _statistics(results, cfg, surf):
+    """Stage 4: Eq. 23's partition average, standard errors, coherent part, power balance, Mueller elements."""
+    M, w, pols, theta_i, fine = cfg["partitions"], cfg["w"], cfg["pols"], cfg["theta_i"], surf["fine"]
     # Eq. 23 with F = -j k0 (Eq. 21's sum): sigma = |F|^2 / (8 pi w sqrt(pi/2)), partition mean
     norm = 1.0 / (8.0 * math.pi * w * math.sqrt(math.pi / 2.0))
-    times = sum(r["times"] for r in results)
     sum_flux = sum(r["flux"] for r in results)
     cos_i = np.cos(theta_i)
     nominal_flux = M * w * math.sqrt(math.pi / 2.0) * cos_i
@@ -976,13 +1076,12 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         per[pol] = dict(F=F, sigma=sig, se=se, fine=fine_sig, nominal=nominal, power=power, absorbed=absorbed,
                         energy=power + absorbed, coherent=coherent(F, P),
                         power_coherent=np.trapezoid(coherent(Ff, Pf), fine, axis=1) / (2.0 * math.pi * cos_i))
-    first = per[pols[0]]
     for name, d in per.items():
         for key in ("sigma", "power", "absorbed"):
             if not np.all(np.isfinite(d[key])):
                 raise FloatingPointError("MoM produced non-finite values (singular moment matrix?)")
 
-    mueller = mueller_se = mueller_n = mueller_n_se = sigma_sp = None
+    out = dict(per=per, mueller=None, mueller_se=None, mueller_n=None, mueller_n_se=None, sigma_sp=None)
     if len(pols) == 2:
         Fs, Fp = per["s"]["F"], per["p"]["F"]
         X = norm * Fs * np.conj(Fp)
@@ -991,7 +1090,6 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         mueller, mueller_se = {}, {}
         for key, st in stacks.items():
             mueller[key], mueller_se[key] = mean_se(st)
-        sigma_sp = X.mean(axis=0)
         mueller_n, mueller_n_se = {}, {}
         den_sum = stacks["M00"].sum(axis=0)
         for key in ("M01", "M22", "M23"):
@@ -1004,41 +1102,55 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
                 else:
                     se = np.zeros_like(ratio)
             mueller_n[key + "/M00"], mueller_n_se[key + "/M00"] = ratio, se
+        out.update(mueller=mueller, mueller_se=mueller_se, mueller_n=mueller_n, mueller_n_se=mueller_n_se,
+                   sigma_sp=X.mean(axis=0))
+    return out
 
-    # the energy check after every solve: a result that does not conserve energy is never quiet
+
+def _energy_check(per, cfg):
+    """Stage 5: the energy check after every solve -- a result that does not conserve energy is never quiet."""
     post = []
     for pol, d in per.items():
         bad = np.abs(d["energy"] - 1.0) > ENERGY_TOLERANCE
         if np.any(bad):
-            vals = ", ".join(f"{e:.4g} at {t:g} deg" for e, t in zip(d["energy"][bad], ti_deg[bad]))
+            vals = ", ".join(f"{e:.4g} at {t:g} deg" for e, t in zip(d["energy"][bad], cfg["ti_deg"][bad]))
             post.append(f"{pol}-pol reflected + absorbed power is {vals} (should be 1 within {ENERGY_TOLERANCE:g}): "
                         "the solution does not conserve energy; refine pts_per_wl or widen the taper")
-    for r in post:
-        warnings.warn("MoM failure: " + r, MoMAccuracyWarning, stacklevel=2)
-    reasons += post
+    return post
 
-    wall = time.perf_counter() - t_wall
+
+def _result(cfg, surf, results, stats, reasons, wall):
+    """The MoMResult of the stages' outputs."""
+    per, pols, eta, dx = stats["per"], cfg["pols"], cfg["eta"], surf["dx"]
+    first = per[pols[0]]
+    times = sum(r["times"] for r in results)
+    used = sorted({r.get("solver", "dense") for r in results})
+    residuals = [r["residual"] for r in results if r.get("residual") is not None]
     get = lambda pol, key: per[pol][key] if pol in per else None  # noqa: E731
     return MoMResult(
-        theta_i=theta_i, theta_r=theta_r, sigma=first["sigma"], sigma_coherent=first["coherent"],
+        theta_i=cfg["theta_i"], theta_r=cfg["theta_r"], sigma=first["sigma"], sigma_coherent=first["coherent"],
         sigma_incoherent=first["sigma"] - first["coherent"], power_balance=first["power"],
         power_balance_nominal=first["nominal"], power_coherent=first["power_coherent"],
-        fine_theta_r=fine, fine_sigma=first["fine"], sigma_std_error=first["se"],
+        fine_theta_r=surf["fine"], fine_sigma=first["fine"], sigma_std_error=first["se"],
         times={"fill": times[0], "factor": times[1], "solve": times[2], "far_field": times[3], "wall": wall},
-        params={"length_wl": length_wl, "partitions": M, "partition_length_wl": part_len,
-                "unknowns_per_partition": n_part, "dx_wl": dx, "pts_per_wl": 1.0 / dx,
-                "pts_per_wl_requested": pts_per_wl,
-                "taper_width_wl": w, "rms_height_wl": rms_height_wl, "corr_length_wl": corr_length_wl,
-                "rms_slope": math.sqrt(2.0) * rms_height_wl / corr_length_wl, "seed": seed,
+        params={"length_wl": cfg["length_wl"], "partitions": cfg["partitions"], "partition_length_wl": cfg["part_len"],
+                "unknowns_per_partition": surf["n_part"], "dx_wl": dx, "pts_per_wl": 1.0 / dx,
+                "pts_per_wl_requested": cfg["pts_per_wl"],
+                "taper_width_wl": cfg["w"], "rms_height_wl": cfg["rms_height_wl"],
+                "corr_length_wl": cfg["corr_length_wl"],
+                "rms_slope": math.sqrt(2.0) * cfg["rms_height_wl"] / cfg["corr_length_wl"], "seed": cfg["seed"],
                 "polarization": pols, "n": None if eta is None else eta.real,
-                "k": None if eta is None else -eta.imag},
+                "k": None if eta is None else -eta.imag,
+                "solver": used[0] if len(used) == 1 else "+".join(used), "solver_requested": cfg["solver"],
+                "tol": cfg["tol"] or FAST_TOL,
+                "max_residual": max(residuals) if residuals else None},
         warnings=reasons, polarization=pols,
-        sigma_s=get("s", "sigma"), sigma_p=get("p", "sigma"), sigma_sp=sigma_sp,
+        sigma_s=get("s", "sigma"), sigma_p=get("p", "sigma"), sigma_sp=stats["sigma_sp"],
         sigma_s_std_error=get("s", "se"), sigma_p_std_error=get("p", "se"),
         fine_sigma_s=get("s", "fine"), fine_sigma_p=get("p", "fine"),
         power_balance_s=get("s", "power"), power_balance_p=get("p", "power"),
         absorbed_s=get("s", "absorbed"), absorbed_p=get("p", "absorbed"),
         energy_s=get("s", "energy"), energy_p=get("p", "energy"),
-        mueller=mueller, mueller_std_error=mueller_se,
-        mueller_normalised=mueller_n, mueller_normalised_std_error=mueller_n_se,
+        mueller=stats["mueller"], mueller_std_error=stats["mueller_se"],
+        mueller_normalised=stats["mueller_n"], mueller_normalised_std_error=stats["mueller_n_se"],
     )
