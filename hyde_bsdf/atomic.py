@@ -61,7 +61,7 @@ from hyde_bsdf.errors import UsageError
 __all__ = ["atomic_path", "atomic_open", "atomic_group", "atomic_dir", "check_output_path", "check_output_dir",
            "check_name_fits", "OutputWriteError", "Terminated", "install_signal_cleanup",
            "remove_stale_temporaries", "remove_live_temporaries", "read_manifest", "foreign_files",
-           "check_dir_owned", "write_manifest", "write_error", "MANIFEST_NAME", "TEMP_NAME_RE"]
+           "check_dir_owned", "write_manifest", "write_error", "MANIFEST_NAME", "TEMP_NAME_RE", "LEGACY_TEMP_RE"]
 
 #: the manifest atomic_dir keeps in the folders it manages (relative paths of the files it wrote)
 MANIFEST_NAME = ".hyde-manifest.json"
@@ -70,6 +70,10 @@ TEMP_NAME_RE = re.compile(r"^\.(?P<name>.+)\.(?P<host>[0-9a-f]{4})(?P<pid>\d+)-(
                           r"\.(?P<kind>tmp|partial|old)(?P<suffix>\.[^/]*)?$")
 #: a temporary of another host (a shared file system) is stale only when older than this (seconds)
 FOREIGN_HOST_STALE_S = 24 * 3600.0
+#: the names earlier versions gave temporaries (tempfile's 8 random characters, no pid): stale
+#: when older than LEGACY_STALE_S
+LEGACY_TEMP_RE = re.compile(r"^\.(?P<name>.+)\.[a-z0-9_]{8}\.(?:tmp(?:\.[^/]*)?|partial|old)$")
+LEGACY_STALE_S = 3600.0
 
 _HOST = hashlib.sha1(socket.gethostname().encode("utf-8", "replace")).hexdigest()[:4]
 _LIVE: set = set()                      # temporaries of this process still in flight
@@ -223,7 +227,8 @@ def remove_stale_temporaries(folder) -> list[Path]:
 
     A temporary is stale when its process (same host) no longer runs, or runs but started after
     the temporary was last written (a reused pid).  One from another host (a shared file system)
-    is removed only after FOREIGN_HOST_STALE_S.  Nothing else is touched.
+    is removed only after FOREIGN_HOST_STALE_S, one named by an earlier version
+    (``.NAME.XXXXXXXX.tmp.SUFFIX``, no pid) after LEGACY_STALE_S.  Nothing else is touched.
     """
     folder = Path(folder)
     removed = []
@@ -233,13 +238,14 @@ def remove_stale_temporaries(folder) -> list[Path]:
         return removed
     for entry in entries:
         m = TEMP_NAME_RE.match(entry.name)
-        if not m:
+        legacy = m is None and LEGACY_TEMP_RE.match(entry.name)
+        if not m and not legacy:
             continue
         try:
             mtime = entry.stat(follow_symlinks=False).st_mtime
         except OSError:
             continue
-        if _stale(m, mtime):
+        if (time.time() - mtime > LEGACY_STALE_S) if legacy else _stale(m, mtime):
             p = Path(entry.path)
             with contextlib.suppress(OSError):
                 if entry.is_dir(follow_symlinks=False):
@@ -568,7 +574,8 @@ def _move_in(tmp: Path, path: Path, new_files, manifest: str) -> list[Path]:
 def install_signal_cleanup(signals=(signal.SIGTERM, signal.SIGHUP)):
     """Make SIGTERM (and SIGHUP) raise :class:`Terminated` in the main thread, so that every
     ``with`` block above removes its temporaries; return the previous handlers (or {} off the
-    main thread).  The command line installs it for every sub-command."""
+    main thread).  A signal that is ignored (``nohup`` ignores SIGHUP) stays ignored.  The
+    command line installs it for every sub-command."""
     if threading.current_thread() is not threading.main_thread():
         return {}
 
@@ -578,6 +585,8 @@ def install_signal_cleanup(signals=(signal.SIGTERM, signal.SIGHUP)):
     previous = {}
     for sig in signals:
         with contextlib.suppress(ValueError, OSError, AttributeError):
+            if signal.getsignal(sig) is signal.SIG_IGN:
+                continue                # ignored on purpose (nohup ignores SIGHUP): keep it so
             previous[sig] = signal.signal(sig, handler)
     return previous
 

@@ -353,9 +353,9 @@ def test_sigterm_removes_temporaries_and_partial_folders(tmp_path):
 
 
 def test_next_run_removes_what_a_killed_run_left(tmp_path):
-    """Temporaries of a dead process (pid 4194303 cannot exist on Linux by default... or is gone)
-    are removed by the next write into the folder; a live process's, and a user's look-alike
-    files without our pattern, stay."""
+    """Temporaries of a dead process (a child that has exited) are removed by the next run's
+    output check; a live process's, a user's look-alike file without our pattern, and an earlier
+    version's temporary younger than an hour stay."""
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
                           text=True).stdout.strip()
     host = atomic._HOST
@@ -363,13 +363,16 @@ def test_next_run_removes_what_a_killed_run_left(tmp_path):
     stale_dir = tmp_path / f".report.{host}{dead}-abc123.partial"
     live_file = tmp_path / f".b.exr.{host}{os.getppid()}-abc123.tmp.exr"
     user_file = tmp_path / ".a.exr.notours.tmp.exr"
-    for f in (stale_file, live_file, user_file):
+    legacy_old = tmp_path / ".a.exr.k3j_9xq2.tmp.exr"              # an earlier version's, 2 h old
+    legacy_new = tmp_path / ".b.exr.p0q1r2s3.tmp.exr"              # ... and a fresh one: kept
+    for f in (stale_file, live_file, user_file, legacy_old, legacy_new):
         f.write_bytes(b"x")
+    os.utime(legacy_old, (os.path.getmtime(legacy_old) - 7200,) * 2)
     stale_dir.mkdir()
     (stale_dir / "index.html").write_text("half")
     atomic._CLEANED.discard(os.path.abspath(tmp_path))
     check_output_path(tmp_path / "a.exr")                          # before the work of the next run
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live_file.name, user_file.name])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live_file.name, user_file.name, legacy_new.name])
 
 
 def test_check_output_paths_refuse_before_work(tmp_path):
