@@ -8,7 +8,7 @@ Physics and format checked:
 - the frame conversion against Mitsuba's own C++ ``measured_polarized`` eval (scalar variant),
   rotated into the paper's bases by ``hyde_bsdf.mitsuba.frames.eval_paper``: the NumPy lookup
   replica in the paper's bases equals it to 1e-4 (float32 interpolation), including the NaN
-  quirk (a NaN corner blacks out the matrix);
+  quirks (a NaN in M00 at a corner blacks out the matrix, a NaN elsewhere makes it all NaN);
 - Mitsuba's C++ eval of an exported file against the Python ``hyde`` plugin: the error
   statistics equal those the export reported (same geometries) to 3 % of themselves;
 - the refusal of tables larger than Mitsuba's 32-bit index, the free disk or the memory,
@@ -192,6 +192,14 @@ def test_frames_and_lookup_match_mitsubas_measured_polarized(exported, tmp_path)
     N = table_to_paper(th_.interpolate_directions(oi, orr, 550.0), oi, orr)
     assert np.all(A[0] == 0) and np.all(N[0] == 0)          # touches the NaN node
     assert A[1, 0, 0] == pytest.approx(1.0, rel=1e-5) and np.allclose(A[1], N[1], atol=1e-5)
+    # ... but a NaN in another element is not caught: the whole matrix turns NaN, in both
+    M[2, 2, 3, 2, 0, 0] = 1.0
+    M[2, 2, 3, 2, 2, 1] = np.nan
+    _hand_table(hand, M)
+    A = eval_paper(mi.load_dict({"type": "measured_polarized", "filename": str(hand)}), oi, orr, s_i, s_r,
+                   wavelength=550.0)
+    N = table_to_paper(read_pbsdf(hand).interpolate_directions(oi, orr, 550.0), oi, orr)
+    assert np.isnan(A[0]).all() and np.isnan(N[0]).all() and np.isfinite(A[1]).all()
 
 
 def test_cpp_eval_of_the_export_agrees_with_the_hyde_plugin_within_the_reported_error(exported):

@@ -31,9 +31,11 @@ paper's omega_i, and ``si.wi`` to the observer, omega_r):
 
 Loader quirks (measured with Mitsuba 3.9.1): it copies exactly 5 wavelengths and clamps
 queries outside them (450-650 nm in the KAIST files); interpolation is multilinear in
-(phi_d, theta_d, theta_h, wavelength) and a NaN at any of the 16 corners makes M00 NaN,
-which zeroes the whole matrix; theta_h = 0 gives NaN coordinates (0); omega_i = omega_r
-gives NaN frames.  :meth:`PbsdfTable.interpolate` reproduces the lookup in NumPy.
+(phi_d, theta_d, theta_h, wavelength), so a NaN at any of the 16 corners is NaN in the result:
+in M00 (at any of the spectral samples) the whole matrix is zeroed, in any other element it
+stays and the frame rotation spreads it over the whole matrix (a NaN pixel); theta_h = 0 exactly
+gives NaN coordinates, so 0; omega_i = omega_r gives NaN frames, so NaN in every element the
+rotation touches.  :meth:`PbsdfTable.interpolate` reproduces the lookup in NumPy.
 
 Reading for fitting (:func:`read_pbsdf`, :func:`pbsdf_samples`): cells are classified
 below-horizon (either direction at or below the surface: Mitsuba never evaluates there),
