@@ -537,7 +537,7 @@ def _iterate(sys, bf, tol, max_sweeps, method, reasons, label):
     xf = np.zeros_like(bf)
     info = {"sweeps": 0, "gmres_iterations": 0, "method": "fb"}
     history = []
-    best_x, best = xf.copy(), np.full(r, np.inf)
+    best_x, best = xf.copy(), np.ones(r)          # x = 0 has residual 1
     res = None
     if method == "fb":
         why = None
