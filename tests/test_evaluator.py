@@ -4,6 +4,7 @@ import math
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st, HealthCheck
+from conftest import examples
 
 import hyde_bsdf
 from hyde_bsdf.model.evaluator import specular_pbrdf
@@ -274,7 +275,7 @@ def test_bad_angles_raise_naming_the_angle(arg):
 
 
 angles = st.floats(0.0, math.pi)
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(300), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(ti=angles, tr=angles, ph=st.floats(-20.0, 20.0),
        s=st.floats(1e-4, 100.0), n=st.floats(0.0, 1e6), k=st.floats(0.0, 1e6),
        pec=st.booleans(), shadowing=st.sampled_from(["vgroove", "smith", "none"]),

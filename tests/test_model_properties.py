@@ -13,6 +13,7 @@ import warnings
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings, strategies as st
+from conftest import examples
 
 import hyde_bsdf
 from hyde_bsdf.model import dhr
@@ -31,7 +32,7 @@ slope = st.one_of(st.sampled_from([1e-4, 100.0, 1e-4 * (1 - 1e-9), 100.0 * (1 + 
 index = st.one_of(st.sampled_from([0.0, 1e-7, 1e-6, 1.0, INDEX_MAX, INDEX_MAX * (1 + 1e-9), -1e-9, 1e7,
                                    float("nan"), float("inf")]),
                   st.floats(0.0, 1e6), st.floats(0.0, 20.0))
-PROFILE = settings(max_examples=250, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+PROFILE = settings(max_examples=examples(250), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 def pbrdf_accepts(ti, tr, ph, s, n, k, pec, shadowing, diffuse):

@@ -26,6 +26,9 @@ import mitsuba as mi
 
 __all__ = [
     "accurate_cross",
+    "safe_normalize",
+    "snap_to_normal",
+    "MIN_NORM",
     "complex_sqrt_lower",
     "facet_fresnel",
     "fresnel_mueller_entries",
@@ -68,6 +71,41 @@ def accurate_cross(u, v):
     return type(u)(_diff_of_products(u.y, v.z, u.z, v.y),
                    _diff_of_products(u.z, v.x, u.x, v.z),
                    _diff_of_products(u.x, v.y, u.y, v.x))
+
+
+#: below this largest component a vector is taken as 0 by :func:`safe_normalize` (float32's
+#: smallest normal number is 1.18e-38; LLVM may flush smaller ones to 0)
+MIN_NORM = 1e-37
+
+
+def safe_normalize(v, fallback):
+    """``v / |v|``, or ``fallback`` (a unit vector) where ``v`` is (numerically) 0.
+
+    The plain ``dr.normalize`` squares the components: in float32 a vector shorter than
+    ~1e-19 underflows to a zero norm and gives Inf/NaN (for example the cross product of two
+    directions 1e-30 apart, or the half vector of two opposite grazing directions).  Dividing
+    by the largest component first keeps the squared norm in [1, 3], so the direction of any
+    vector whose largest component is >= :data:`MIN_NORM` is exact; smaller ones are collinear
+    to float32 precision and get the caller's named fallback.
+    """
+    m = dr.maximum(dr.maximum(dr.abs(v.x), dr.abs(v.y)), dr.abs(v.z))
+    ok = m >= MIN_NORM
+    u = v / dr.select(ok, m, 1.0)
+    return dr.select(ok, dr.normalize(u), fallback)
+
+
+def snap_to_normal(v):
+    """``v`` with its x and y set to 0 where they are below 1e-15 |v.z| (a direction along the normal).
+
+    Mitsuba's Beckmann ``smith_g1`` (and so ``G``, ``pdf`` and ``sample`` of
+    ``mi.MicrofacetDistribution``) squares alpha v.x: for a direction within ~1e-19 of the
+    normal that square is a float32 denormal and the rational approximation returns NaN
+    (roughconductor shows it too).  For such directions tan(theta) alpha < 1e-13, where the
+    exact G1 is 1 to float precision, and a direction exactly along the normal takes Mitsuba's
+    own "perpendicular incidence" branch (G1 = 1): the snap changes no finite result.
+    """
+    tiny = dr.maximum(dr.abs(v.x), dr.abs(v.y)) < 1e-15 * dr.abs(v.z)
+    return type(v)(dr.select(tiny, 0.0, v.x), dr.select(tiny, 0.0, v.y), v.z)
 
 
 def complex_sqrt_lower(zr, zi):

@@ -16,16 +16,19 @@ import drjit as dr
 import mitsuba as mi
 
 from hyde_bsdf.mitsuba import optics as po
+from hyde_bsdf.mitsuba import param_checks as pc
 
-__all__ = ["register", "plugin_class", "DOC", "SHADOWING", "DIFFUSE", "RMS_RANGE", "ALPHA_RANGE"]
+__all__ = ["register", "plugin_class", "DOC", "SHADOWING", "DIFFUSE", "RMS_RANGE", "ALPHA_RANGE", "INDEX_MAX"]
 
 SHADOWING = ("vgroove", "smith", "none")
 DIFFUSE = ("paper", "reciprocal", "none")
 SQRT2 = math.sqrt(2.0)
 #: accepted rms_slope, the NumPy evaluator's range (:func:`hyde_bsdf.model.roughness.check_rms_slope`)
-RMS_RANGE = po.RMS_RANGE
+RMS_RANGE = pc.RMS_RANGE
 #: the same range as Beckmann alpha = sqrt(2) rms_slope
-ALPHA_RANGE = (SQRT2 * RMS_RANGE[0], SQRT2 * RMS_RANGE[1])
+ALPHA_RANGE = pc.ALPHA_RANGE
+#: largest accepted eta and k
+INDEX_MAX = pc.INDEX_MAX
 
 DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
 
@@ -232,52 +235,6 @@ def _known_materials():
 
 
 # ---------------------------------------------------------------- texture checks
-#: traverse keys of a texture whose values are the texture's own values (not spectral coefficients)
-_DATA_KEYS = ("value", "data", "values")
-
-
-def _texture_data(tex):
-    """{key: float64 array} of a texture's traversable data (all floating-point leaves)."""
-    import numpy as np
-
-    out = {}
-    params = mi.traverse(tex)
-    for key in params.keys():
-        value = params[key]
-        if isinstance(value, (str, bool)) or key.endswith("to_uv") or key.endswith("range"):
-            continue
-        try:
-            arr = np.asarray(value, dtype=float).ravel()
-        except (TypeError, ValueError):
-            continue
-        out[key] = arr
-    return out
-
-
-def _check_finite(name, tex):
-    import numpy as np
-
-    for key, arr in _texture_data(tex).items():
-        if not np.isfinite(arr).all():
-            raise ValueError(f"hyde: parameter '{name}' ({name}.{key}) contains NaN or infinite values")
-
-
-def _check_roughness(name, tex, scale):
-    """Every roughness datum finite and rms = datum * scale within RMS_RANGE (named by the user's key)."""
-    import numpy as np
-
-    lo, hi = (RMS_RANGE if scale == 1.0 else ALPHA_RANGE)
-    for key, arr in _texture_data(tex).items():
-        if key.split(".")[-1] not in _DATA_KEYS or arr.size == 0:
-            continue
-        bad = ~np.isfinite(arr) | (arr * scale < RMS_RANGE[0] * (1 - 1e-6)) | (arr * scale > RMS_RANGE[1] * (1 + 1e-6))
-        if bad.any():
-            worst = arr[bad][0]
-            raise ValueError(f"hyde: {name} must be a finite number in the accepted range "
-                             f"[{lo:.4g}, {hi:.4g}]" + ("" if scale == 1.0 else f" (rms_slope "
-                             f"[{RMS_RANGE[0]:g}, {RMS_RANGE[1]:g}])") + f", got {name}.{key} = {float(worst)!r}" + ("" if arr.size == 1 else f" ({int(bad.sum())} of {arr.size} values)"))
-
-
 def _texture(props, name, default):
     """``props.get_unbounded_texture`` with Mitsuba's own refusal as a one-line ValueError."""
     try:
@@ -290,70 +247,22 @@ def _texture(props, name, default):
 
 def _describe(tex):
     """A constant texture's value as a number (e.g. ``0.3``), else the texture's own string."""
-    data = _texture_data(tex)
+    data = pc.texture_data(tex)
     if list(data) == ["value"] and data["value"].size == 1:
         return f"{float(data['value'][0]):.6g}"
     return str(tex)
 
 
-def _probe(tex):
-    """Values of a spatially uniform spectrum texture (float64 array), None if it varies over the surface.
+def _warn_unreadable(name, tex, clamp):
+    """One warning per texture whose values cannot be read at load (clamped at eval instead)."""
+    import warnings
 
-    Spectral variants: at 48 wavelengths 360-830 nm; RGB: the three channels; mono: one value.
-    """
-    import numpy as np
-
-    if tex.is_spatially_varying():
-        return None
-    wl = np.linspace(360.0, 830.0, 48)
-    if dr.is_jit_v(mi.Float):
-        si = dr.zeros(mi.SurfaceInteraction3f, 12)
-        si.uv = mi.Point2f(0.5, 0.5)
-        if mi.is_spectral:
-            si.wavelengths = mi.UnpolarizedSpectrum(*(mi.Float(wl[j::4]) for j in range(4)))
-        # a constant texture returns one lane: broadcast it to the 12 probed lanes
-        # (channels, lanes) -> lane-major, i.e. wavelength order wl[4 * lane + channel]
-        return np.asarray(tex.eval(si) * dr.full(mi.Float, 1.0, 12), dtype=float).T.ravel()
-    out = []
-    for j in range(12 if mi.is_spectral else 1):
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        si.uv = mi.Point2f(0.5, 0.5)
-        if mi.is_spectral:
-            si.wavelengths = mi.UnpolarizedSpectrum(*map(float, wl[4 * j:4 * j + 4]))
-        out.append(np.asarray(tex.eval(si), dtype=float).ravel())
-    return np.concatenate(out)
-
-
-def _check_index(eta, k):
-    """eta, k >= 0 and not both 0 where they can be read (spatially uniform textures)."""
-    import numpy as np
-
-    _check_finite("eta", eta)
-    _check_finite("k", k)
-    pe, pk = _probe(eta), _probe(k)
-    for name, p in (("eta", pe), ("k", pk)):
-        if p is not None and (p < 0).any():
-            raise ValueError(f"hyde: parameter '{name}' must be >= 0 (index n + i k with k >= 0), "
-                             f"got {p[p < 0][0]:g}")
-    if pe is not None and pk is not None:
-        zero = (pe == 0) & (pk == 0)
-        if zero.all():
-            raise ValueError("hyde: eta and k cannot both be 0 (no material has index 0); "
-                             "a dielectric has k = 0 and eta > 0")
-        if zero.any() and mi.is_spectral and pe.size == pk.size == 48:
-            import warnings
-
-            wl = np.linspace(360.0, 830.0, 48)
-            runs, start = [], None
-            for i, z in enumerate(list(zero) + [False]):
-                if z and start is None:
-                    start = i
-                elif not z and start is not None:
-                    runs.append(f"{wl[start]:.0f}-{wl[i - 1]:.0f} nm")
-                    start = None
-            warnings.warn(f"hyde: eta and k are both 0 at {', '.join(runs)} (a spectrum "
-                          f"is 0 outside the wavelengths it is given at); the index is taken as 1 "
-                          f"there (no reflection): give eta over 360-830 nm", RuntimeWarning, stacklevel=2)
+    if not pc.readable(tex):
+        warnings.warn(f"hyde: the values of {name} ({tex.class_name()}) cannot be read at load; "
+                      f"they are clamped to {clamp} at evaluation (NaN: no reflection)",
+                      RuntimeWarning, stacklevel=4)
+        return True
+    return False
 
 
 _DHR_CACHE: dict = {}
@@ -367,6 +276,12 @@ def _dhr_lookup(shadowing):
 
         _DHR_CACHE[key] = po.DHRLookup(load_table(shadowing))
     return _DHR_CACHE[key]
+
+
+#: Upper bound of the specular lobe's D G / (4 cos theta_i) and of its pdf.  A near-mirror
+#: (alpha 1.4e-4: D(0) = 1.6e7) seen at cos theta_i < 1e-31 would overflow float32 to Inf (and
+#: Inf * 0 = NaN in the Mueller entries); no physical radiance comes near this bound.
+MAX_LOBE = 1e30
 
 
 def _pos(x):
@@ -430,15 +345,13 @@ def _make_class():
             self.m_rough_key = key
             # alpha = sqrt(2) rms_slope: eval converts the texture's alpha into rms_slope
             self.m_rough_scale = 1.0 / SQRT2 if key == "alpha" else 1.0
-            _check_roughness(key, self.m_rough, self.m_rough_scale)
-
-            # ---- index: eta/k or material
-            if "material" in props:
+            # ---- index: eta/k or material ("none": roughconductor's spelling of "eta/k given")
+            material = str(props.get("material", "none")) if "material" in props else "none"
+            if material.lower() != "none":
                 given = [x for x in ("eta", "k") if x in props]
                 if given:
                     raise ValueError(f"hyde: give either material or eta/k, not both "
                                      f"(got material and {', '.join(given)})")
-                material = str(props.get("material"))
                 path = mi.file_resolver().resolve(f"data/ior/{material}.eta.spd")
                 if not os.path.exists(str(path)):
                     raise ValueError(f"hyde: unknown material={material!r}; Mitsuba's data/ior has "
@@ -453,9 +366,14 @@ def _make_class():
                 self.m_eta = _texture(props, "eta", 0.0)
                 self.m_k = _texture(props, "k", 1.0)
                 self.m_material = None
-            _check_index(self.m_eta, self.m_k)
             self.m_specular_reflectance = props.get_texture("specular_reflectance", 1.0)
-            _check_finite("specular_reflectance", self.m_specular_reflectance)
+            self._validate()
+            # textures whose values cannot be read at load: clamped at eval, one warning each
+            lo, hi = ALPHA_RANGE if key == "alpha" else RMS_RANGE
+            _warn_unreadable(key, self.m_rough, f"[{lo:.7g}, {hi:.7g}]")
+            self.m_guard_index = any([_warn_unreadable(name, tex, f"[0, {INDEX_MAX:g}]")
+                                      for name, tex in (("eta", self.m_eta), ("k", self.m_k))])
+            self.m_guard_scale = _warn_unreadable("specular_reflectance", self.m_specular_reflectance, "[0, 1]")
 
             # ---- model switches (Python constants: branching on them is fine)
             shadowing = str(props.get("shadowing", "vgroove")).lower()
@@ -514,9 +432,20 @@ def _make_class():
             """
             if dr.flag(dr.JitFlag.FreezingScope):
                 return
-            _check_roughness(self.m_rough_key, self.m_rough, self.m_rough_scale)
-            _check_index(self.m_eta, self.m_k)
-            _check_finite("specular_reflectance", self.m_specular_reflectance)
+            try:
+                self._validate()
+            except ValueError:
+                # atomic update: a refused value leaves the BSDF as it was before the call
+                self.m_snapshot.restore()
+                raise
+
+        def _validate(self):
+            """The checks of :mod:`hyde_bsdf.mitsuba.param_checks`; on success the values are kept
+            as the state a refused update returns to."""
+            pc.check_roughness(self.m_rough_key, self.m_rough, self.m_rough_scale)
+            pc.check_index(self.m_eta, self.m_k)
+            pc.check_reflectance(self.m_specular_reflectance)
+            self.m_snapshot = pc.Snapshot([self.m_rough, self.m_eta, self.m_k, self.m_specular_reflectance])
 
         def to_string(self):
             index = (f"material={self.m_material!r}" if self.m_material else
@@ -533,12 +462,21 @@ def _make_class():
             alpha unchanged (bit-identical to roughconductor's), rms_slope = alpha / sqrt(2).
             """
             r = self.m_rough.eval_1(si, active)
-            # values were range-checked at load/update where readable (mesh attributes are not)
+            # values were range-checked at load/update where readable (mesh attributes are not);
+            # values below the lower bound (alpha = 0: a mirror) are floored there, and NaN too
+            # (the comparison is false for NaN)
+            lo, hi = ALPHA_RANGE if self.m_rough_key == "alpha" else RMS_RANGE
+            r = dr.minimum(dr.select(r >= lo, r, lo), hi)
             if self.m_rough_key == "alpha":
-                alpha = dr.clip(r, ALPHA_RANGE[0], ALPHA_RANGE[1])
-                return alpha, alpha * (1.0 / SQRT2)
-            rms = dr.clip(r, RMS_RANGE[0], RMS_RANGE[1])
-            return SQRT2 * rms, rms
+                return r, r * (1.0 / SQRT2)
+            return SQRT2 * r, r
+
+        def _scale(self, si, active):
+            """specular_reflectance; values not readable at load are clamped to [0, 1] (NaN: 0)."""
+            scale = self.m_specular_reflectance.eval(si, active)
+            if self.m_guard_scale:
+                scale = dr.select(scale >= 0, dr.minimum(scale, 1.0), 0.0)
+            return scale
 
         def _distr(self, rough):
             return mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, rough[0], self.m_sample_visible)
@@ -552,11 +490,26 @@ def _make_class():
             # (|eta| < 1e-6, eta^2 underflows) is floored at n = 1e-6: the mirror limit of eta -> 0
             tiny = (n < 1e-6) & (k < 1e-6)
             n = dr.select(tiny, dr.select((n == 0) & (k == 0), 1.0, 1e-6), n)
+            if self.m_guard_index:
+                # values not readable at load: clamped to [0, INDEX_MAX]; NaN -> index 1 (no reflection)
+                bad = dr.isnan(n) | dr.isnan(k)
+                n = dr.select(bad, 1.0, dr.clip(n, 0.0, INDEX_MAX))
+                k = dr.select(bad, 0.0, dr.minimum(k, INDEX_MAX))
             return n, k
+
+        @staticmethod
+        def _half_vector(wi, wo):
+            """The facet normal h = normalize(wi + wo).
+
+            Named fallback, "opposite": wi = -wo (both on the horizon, |wi + wo| < 1e-37) has no
+            half vector; the mean normal +z is used (such lanes are inactive: cos theta = 0).
+            """
+            return po.safe_normalize(wi + wo, mi.Vector3f(0, 0, 1))
 
         def _shadowing(self, distr, wi, wo, h):
             if self.m_shadowing == "smith":
-                return distr.G(wi, wo, h)
+                # directions within 1e-15 of the normal: see optics.snap_to_normal (Mitsuba's G is NaN there)
+                return distr.G(po.snap_to_normal(wi), po.snap_to_normal(wo), h)
             if self.m_shadowing == "vgroove":
                 return po.vgroove_g(wi, wo, h)
             # "none": G = 1, but still only facets seen from the front by both directions
@@ -620,10 +573,12 @@ def _make_class():
             # The facet's s axis is perpendicular to its plane of incidence: roughconductor
             # uses h x (-wo_hat) = h x wi_hat, both parallel to wo_hat x wi_hat, which is
             # computed here with a compensated cross product (accurate near backscatter).
-            s_axis = po.accurate_cross(wo_hat, wi_hat)
-            # singular when both directions are collinear with the facet normal: any s axis will do
-            collinear = dr.all(s_axis == mi.Vector3f(0))
-            s_axis = dr.select(collinear, mi.Vector3f(1, 0, 0), dr.normalize(s_axis))
+            # Named fallback, "collinear": wo_hat and wi_hat parallel to float32 precision
+            # (backscatter, or both along the normal; |wo_hat x wi_hat| < 1e-37).  The facet is
+            # then seen at normal incidence, where its Mueller matrix is invariant under a
+            # rotation of the s axis, so any axis perpendicular to both directions is exact:
+            # stokes_basis(-wo_hat) (which makes the input rotation the identity).
+            s_axis = po.safe_normalize(po.accurate_cross(wo_hat, wi_hat), mi.mueller.stokes_basis(-wo_hat))
             s_in = s_out = s_axis
             F = mi.mueller.rotate_mueller_basis(F, -wo_hat, s_in, mi.mueller.stokes_basis(-wo_hat),
                                                 wi_hat, s_out, mi.mueller.stokes_basis(wi_hat))
@@ -641,14 +596,15 @@ def _make_class():
             cos_i = mi.Frame3f.cos_theta(si.wi)
             cos_o = mi.Frame3f.cos_theta(wo)
             active = active & (cos_i > 0) & (cos_o > 0)
-            h = dr.normalize(wo + si.wi)
+            h = self._half_vector(si.wi, wo)
             n, k = self._index(si, active)
-            scale = self.m_specular_reflectance.eval(si, active)
+            scale = self._scale(si, active)
             spec = 0.0
             if spec_on:
                 distr = self._distr(rough)
                 # D G / (4 cos_i) = (Eq. 13 without M) * cos_o
-                spec = distr.eval(h) * self._shadowing(distr, si.wi, wo, h) / (4.0 * _pos(cos_i)) * scale
+                spec = dr.minimum(distr.eval(h) * self._shadowing(distr, si.wi, wo, h) / (4.0 * _pos(cos_i)),
+                                  MAX_LOBE) * scale
             diff = self._diffuse_factor(ctx, si, wo, rough) * cos_o * scale if diff_on else 0.0
             return dr.select(active, self._mueller(ctx, si, wo, h, n, k, spec, diff), 0.0)
 
@@ -658,17 +614,17 @@ def _make_class():
                 return mi.Float(0.0)
             cos_i = mi.Frame3f.cos_theta(si.wi)
             cos_o = mi.Frame3f.cos_theta(wo)
-            h = dr.normalize(wo + si.wi)
+            h = self._half_vector(si.wi, wo)
             active = active & (cos_i > 0) & (cos_o > 0)
             pdf_spec = 0.0
             if not (isinstance(p_spec, float) and p_spec == 0.0):
                 spec_ok = active & (dr.dot(si.wi, h) > 0) & (dr.dot(wo, h) > 0)
                 distr = self._distr(rough)
                 if self.m_sample_visible:
-                    pdf_spec = distr.eval(h) * distr.smith_g1(si.wi, h) / (4.0 * _pos(cos_i))
+                    pdf_spec = distr.eval(h) * distr.smith_g1(po.snap_to_normal(si.wi), h) / (4.0 * _pos(cos_i))
                 else:
-                    pdf_spec = distr.pdf(si.wi, h) / (4.0 * _pos(dr.dot(wo, h)))
-                pdf_spec = dr.select(spec_ok, pdf_spec, 0.0)
+                    pdf_spec = distr.pdf(po.snap_to_normal(si.wi), h) / (4.0 * _pos(dr.dot(wo, h)))
+                pdf_spec = dr.select(spec_ok, dr.minimum(pdf_spec, MAX_LOBE), 0.0)
             if isinstance(p_spec, float) and p_spec == 1.0:
                 return dr.select(active, pdf_spec, 0.0)
             pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo)
@@ -697,7 +653,7 @@ def _make_class():
 
             if isinstance(p_spec, float) and p_spec == 1.0:
                 # specular lobe only: exactly roughconductor's sampling routine
-                m, pdf = distr.sample(si.wi, sample2)
+                m, pdf = distr.sample(po.snap_to_normal(si.wi), sample2)
                 bs.wo = mi.reflect(si.wi, m)
                 bs.eta = 1.0
                 bs.sampled_component = mi.UInt32(0)
@@ -706,21 +662,21 @@ def _make_class():
                 bs.pdf = pdf / (4.0 * _pos(dr.dot(bs.wo, m)))
                 # weight = f cos_o / pdf, written with the sampled m like roughconductor
                 if self.m_shadowing == "smith" and self.m_sample_visible:
-                    g_ratio = distr.smith_g1(bs.wo, m)
+                    g_ratio = distr.smith_g1(po.snap_to_normal(bs.wo), m)
                 elif self.m_sample_visible:
-                    g_ratio = self._shadowing(distr, si.wi, bs.wo, m) / _pos(distr.smith_g1(si.wi, m))
+                    g_ratio = self._shadowing(distr, si.wi, bs.wo, m) / _pos(distr.smith_g1(po.snap_to_normal(si.wi), m))
                 else:
                     g_ratio = (self._shadowing(distr, si.wi, bs.wo, m) * dr.dot(si.wi, m)
                                / _pos(cos_i * mi.Frame3f.cos_theta(m)))
                 n, k = self._index(si, active)
-                g_ratio = g_ratio * self.m_specular_reflectance.eval(si, active)
+                g_ratio = g_ratio * self._scale(si, active)
                 weight = self._mueller(ctx, si, bs.wo, m, n, k, g_ratio, 0.0)
                 bs.pdf = dr.select(active, bs.pdf, 0.0)
                 return bs, dr.select(active, weight, 0.0)
 
             # mixture of the specular (glossy) and diffuse lobes
             choose_spec = sample1 < p_spec
-            m, pdf_m = distr.sample(si.wi, sample2)
+            m, pdf_m = distr.sample(po.snap_to_normal(si.wi), sample2)
             # a back-facing normal (possible without visible-normal sampling) is a failed sample
             # (sample1 >= p_spec), not ~choose_spec: in scalar variants choose_spec is a Python bool
             active = active & ((sample1 >= p_spec) | ((pdf_m != 0) & (dr.dot(si.wi, m) > 0)))

@@ -1,0 +1,309 @@
+"""Checks of the ``hyde`` plugin's parameters, on the values Mitsuba will evaluate.
+
+A texture's traversable data is not always what its ``eval`` returns: an 8-bit PNG bitmap
+stores 0-255 in non-spectral variants (``eval`` divides by 255 and, unless ``raw``, converts
+sRGB to linear), spectral variants store spectral-upsampling coefficients, and mono variants
+take the luminance of RGB texels at evaluation.  So every check here reads the values through
+the texture's own ``eval`` / ``eval_1``:
+
+* constant (spatially uniform) textures: at 48 wavelengths 360-830 nm (spectral), the three
+  channels (RGB) or the one value (mono), :func:`probe`;
+* bitmaps: at the centre of every texel (the inverse of ``to_uv`` applied), every channel, at
+  the same 48 wavelengths, :func:`texel_values`; one vectorised call in JIT variants, one call
+  per distinct texel in scalar variants;
+* anything else (a ``mesh_attribute``, a procedural texture): its values cannot be read at
+  load.  :func:`readable` says so; the plugin then clamps them at evaluation and warns once.
+
+The checks raise ``ValueError("hyde: ...")`` naming the parameter, the texture key, the
+offending value and the accepted range.  :class:`Snapshot` keeps the last accepted values so
+that a refused ``params.update()`` leaves the BSDF as it was.
+"""
+from __future__ import annotations
+
+import math
+import warnings
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from hyde_bsdf.mitsuba import optics as po
+
+__all__ = ["RMS_RANGE", "ALPHA_RANGE", "INDEX_MAX", "probe", "texel_values", "readable",
+           "values_of", "check_roughness", "check_index", "check_reflectance", "Snapshot"]
+
+SQRT2 = math.sqrt(2.0)
+#: accepted rms_slope, the NumPy evaluator's range (:func:`hyde_bsdf.model.roughness.check_rms_slope`)
+RMS_RANGE = po.RMS_RANGE
+#: the same range as Beckmann alpha = sqrt(2) rms_slope
+ALPHA_RANGE = (SQRT2 * RMS_RANGE[0], SQRT2 * RMS_RANGE[1])
+#: largest accepted eta and k (the NumPy evaluator's ``INDEX_MAX``): beyond ~1e9 the float32
+#: Fresnel terms overflow (|eta|^4), and no material comes near 1e6
+INDEX_MAX = 1e6
+#: relative slack on the printed bounds: a bound printed with 7 digits is itself accepted
+_SLACK = 1e-6
+#: wavelengths (nm) at which spectral textures are checked
+_WAVELENGTHS = np.linspace(360.0, 830.0, 48)
+#: lanes per vectorised evaluation of a bitmap's texels
+_CHUNK = 1 << 22
+
+#: traverse keys of a texture whose values are the texture's own values (not spectral coefficients)
+_DATA_KEYS = ("value", "data", "values")
+
+
+def _fmt(x):
+    return f"{x:.7g}"
+
+
+def texture_data(tex):
+    """{key: float64 array} of a texture's traversable floating-point data (raw, as stored)."""
+    out = {}
+    params = mi.traverse(tex)
+    for key in params.keys():
+        value = params[key]
+        if isinstance(value, (str, bool)) or key.endswith("to_uv") or key.endswith("range"):
+            continue
+        try:
+            arr = np.asarray(value, dtype=float).ravel()
+        except (TypeError, ValueError):
+            continue
+        out[key] = arr
+    return out
+
+
+def _is_bitmap(tex):
+    keys = mi.traverse(tex).keys()
+    return "data" in keys and hasattr(tex, "resolution")
+
+
+def _is_constant(tex):
+    """Mitsuba's spatially uniform spectra: ``uniform``, ``srgb``, ``regular``, ``irregular``,
+    ``d65``, ``blackbody`` (a ``mesh_attribute`` also says it is not spatially varying)."""
+    return not tex.is_spatially_varying() and tex.class_name().endswith("Spectrum")
+
+
+def _is_plain_checkerboard(tex):
+    """A ``checkerboard`` of two constants (its two values are read at two points)."""
+    return (tex.class_name() == "Checkerboard"
+            and set(mi.traverse(tex).keys()) <= {"to_uv", "color0.value", "color1.value"})
+
+
+def readable(tex):
+    """True when every value the texture can return is read by :func:`values_of` at load."""
+    return _is_constant(tex) or _is_bitmap(tex) or _is_plain_checkerboard(tex)
+
+
+def _wavelength_sets():
+    """Quadruples of wavelengths covering :data:`_WAVELENGTHS` (spectral variants), else [None]."""
+    if not mi.is_spectral:
+        return [None]
+    return [_WAVELENGTHS[j::12] for j in range(12)]
+
+
+def probe(tex, one=False):
+    """Values of a spatially uniform texture (float64 array); None if it varies over the surface.
+
+    Spectral variants: at 48 wavelengths 360-830 nm; RGB: the three channels; mono: one value.
+    ``one``: read ``eval_1`` (how the plugin reads the roughness) instead of ``eval``.
+    """
+    if not _is_constant(tex):
+        return None
+    return _eval_at(tex, np.array([0.5]), np.array([0.5]), one)
+
+
+def _eval_at(tex, u, v, one):
+    """tex.eval (or eval_1) at the points (u, v) over all wavelength sets: a flat float64 array."""
+    out = []
+    jit = dr.is_jit_v(mi.Float)
+    for wl in _wavelength_sets():
+        if jit:
+            for start in range(0, u.size, _CHUNK):
+                n = min(_CHUNK, u.size - start)
+                si = dr.zeros(mi.SurfaceInteraction3f, n)
+                si.uv = mi.Point2f(mi.Float(u[start:start + n]), mi.Float(v[start:start + n]))
+                if wl is not None:
+                    si.wavelengths = mi.UnpolarizedSpectrum(*(dr.full(mi.Float, float(w), n) for w in wl))
+                val = tex.eval_1(si) if one else tex.eval(si)
+                # a constant texture returns one lane: broadcast it
+                out.append(np.asarray(val * dr.full(mi.Float, 1.0, n), dtype=float).ravel())
+        else:
+            for uu, vv in zip(u, v):
+                si = dr.zeros(mi.SurfaceInteraction3f)
+                si.uv = mi.Point2f(float(uu), float(vv))
+                if wl is not None:
+                    si.wavelengths = mi.UnpolarizedSpectrum(*map(float, wl))
+                val = tex.eval_1(si) if one else tex.eval(si)
+                out.append(np.asarray(val, dtype=float).ravel())
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def texel_values(tex, one=False):
+    """A bitmap's values as ``eval`` (``eval_1`` with ``one``) returns them at every texel centre.
+
+    Returns a flat float64 array, or None when ``tex`` is not a bitmap.  The texel centres
+    ((x + 1/2) / W, (y + 1/2) / H) are mapped back through the inverse of ``to_uv``, so the
+    bitmap is read at its texels whatever its transform and filter.  Scalar variants evaluate
+    one point per distinct texel (8-bit maps have few).
+    """
+    if not _is_bitmap(tex):
+        return None
+    res = [int(x) for x in np.asarray(tex.resolution()).ravel()[:2]]
+    w, h = res[0], res[1]
+    xs, ys = np.meshgrid((np.arange(w) + 0.5) / w, (np.arange(h) + 0.5) / h)
+    u, v = xs.ravel(), ys.ravel()
+    if not dr.is_jit_v(mi.Float):
+        data = np.asarray(mi.traverse(tex)["data"])
+        rows = data.reshape(h * w, -1)
+        _, first = np.unique(rows, axis=0, return_index=True)
+        u, v = u[first], v[first]
+    return _eval_in_texture_space(tex, u, v, one)
+
+
+def _eval_in_texture_space(tex, u, v, one):
+    """Evaluate at texture-space points (u, v): mapped back through the inverse of ``to_uv``."""
+    params = mi.traverse(tex)
+    if "to_uv" in params.keys():
+        inv = params["to_uv"].inverse()
+        m = np.asarray(inv.matrix, dtype=float).reshape(3, 3)
+        pts = m @ np.stack([u, v, np.ones_like(u)])
+        u, v = pts[0] / pts[2], pts[1] / pts[2]
+    return _eval_at(tex, u, v, one)
+
+
+def values_of(tex, one=False):
+    """Every value the texture can return, read through its ``eval``; None when not readable."""
+    if _is_constant(tex):
+        return probe(tex, one)
+    if _is_plain_checkerboard(tex):      # the centres of a color0 and a color1 square
+        return _eval_in_texture_space(tex, np.array([0.25, 0.75]), np.array([0.25, 0.25]), one)
+    return texel_values(tex, one)
+
+
+def _where(name, tex, arr, bad):
+    count = int(bad.sum())
+    kind = "value" if not tex.is_spatially_varying() else "texel value"
+    return f"{kind} {float(arr[bad][0])!r}" + ("" if arr.size == 1 else f" ({count} of {arr.size} values read)")
+
+
+def _raw_finite(name, tex, accepted=""):
+    """Non-finite data anywhere (including leaves of textures that cannot be evaluated at load)."""
+    for key, arr in texture_data(tex).items():
+        if not np.isfinite(arr).all():
+            raise ValueError(f"hyde: parameter '{name}' ({name}.{key}) contains NaN or infinite values"
+                             + (f"; accepted range {accepted}" if accepted else ""))
+
+
+def check_roughness(name, tex, scale):
+    """Roughness values finite, >= 0 and <= the upper bound; values in [0, lower bound) are
+    floored there at evaluation (as a mesh of roughconductor with alpha = 0 renders a mirror),
+    with one warning.  ``scale``: 1 for rms_slope, 1/sqrt(2) for alpha.  Returns the values
+    read (None if not readable)."""
+    lo, hi = (RMS_RANGE if scale == 1.0 else ALPHA_RANGE)
+    rng = f"[{_fmt(lo)}, {_fmt(hi)}]" + ("" if scale == 1.0 else f" (rms_slope [{RMS_RANGE[0]:g}, {RMS_RANGE[1]:g}])")
+    _raw_finite(name, tex, rng)
+    values = values_of(tex, one=True)
+    if values is None:
+        return None
+    bad = ~np.isfinite(values) | (values < 0) | (values > hi * (1 + _SLACK))
+    if bad.any():
+        raise ValueError(f"hyde: {name} must be a finite number in the accepted range {rng}, "
+                         f"got {name} {_where(name, tex, values, bad)}")
+    low = values < lo * (1 - _SLACK)
+    if low.any():
+        warnings.warn(f"hyde: {name} below the lower bound {_fmt(lo)} ({_where(name, tex, values, low)}) "
+                      f"is floored to {_fmt(lo)} (a near-mirror; 0 is roughconductor's mirror limit)",
+                      RuntimeWarning, stacklevel=3)
+    return values
+
+
+def check_index(eta, k):
+    """eta, k finite, in [0, INDEX_MAX] wherever they can be read, and not both 0 everywhere."""
+    _raw_finite("eta", eta, f"[0, {INDEX_MAX:g}]")
+    _raw_finite("k", k, f"[0, {INDEX_MAX:g}]")
+    read = {}
+    for name, tex in (("eta", eta), ("k", k)):
+        values = values_of(tex)
+        read[name] = values
+        if values is None:
+            continue
+        bad = ~np.isfinite(values) | (values < 0) | (values > INDEX_MAX)
+        if bad.any():
+            raise ValueError(f"hyde: parameter '{name}' must be finite and in [0, {INDEX_MAX:g}] "
+                             f"(index n + i k with k >= 0), got {_where(name, tex, values, bad)}")
+    pe, pk = read["eta"], read["k"]
+    if pe is not None and pk is not None and not eta.is_spatially_varying() and not k.is_spatially_varying():
+        zero = (pe == 0) & (pk == 0)
+        if zero.all():
+            raise ValueError("hyde: eta and k cannot both be 0 (no material has index 0); "
+                             "a dielectric has k = 0 and eta > 0")
+        if zero.any() and mi.is_spectral and pe.size == pk.size == _WAVELENGTHS.size:
+            order = np.concatenate(_wavelength_sets())
+            zero_wl = np.sort(order[zero])
+            warnings.warn(f"hyde: eta and k are both 0 at {_runs(zero_wl)} (a spectrum is 0 outside "
+                          f"the wavelengths it is given at); the index is taken as 1 there (no "
+                          f"reflection): give eta over 360-830 nm", RuntimeWarning, stacklevel=3)
+
+
+def _runs(wl):
+    step = _WAVELENGTHS[1] - _WAVELENGTHS[0]
+    runs, start, prev = [], None, None
+    for w in list(wl) + [None]:
+        if w is not None and start is not None and w - prev <= step * 1.01:
+            prev = w
+            continue
+        if start is not None:
+            runs.append(f"{start:.0f}-{prev:.0f} nm")
+        start = prev = w
+    return ", ".join(runs)
+
+
+def check_reflectance(tex):
+    """specular_reflectance finite and >= 0 wherever it can be read (values > 1 are the user's
+    choice, as in roughconductor: not physical)."""
+    _raw_finite("specular_reflectance", tex)
+    values = values_of(tex)
+    if values is None:
+        return
+    bad = ~np.isfinite(values) | (values < 0)
+    if bad.any():
+        raise ValueError("hyde: parameter 'specular_reflectance' must be finite and >= 0, got "
+                         + _where("specular_reflectance", tex, values, bad))
+
+
+class Snapshot:
+    """The last accepted traversable values of a set of textures, restorable after a refusal.
+
+    Dr.Jit arrays are values: keeping a reference to the accepted array is a copy that a
+    later ``params[key] = ...`` does not change.
+    """
+
+    def __init__(self, textures):
+        # traverse hands out the texture's own member: keep a copy (a new reference to the
+        # accepted JIT variable; scalar arrays are copied)
+        self.saved = [(tex, {key: _copy(value) for key, value in _leaves(tex)}) for tex in textures]
+
+    def restore(self):
+        for tex, values in self.saved:
+            params = mi.traverse(tex)
+            changed = False
+            for key, value in values.items():
+                if key in params.keys():
+                    params[key] = _copy(value)
+                    changed = True
+            if changed:
+                params.update()
+
+
+def _copy(value):
+    if isinstance(value, (int, float)):
+        return value
+    return dr.copy(value)
+
+
+def _leaves(tex):
+    params = mi.traverse(tex)
+    for key in params.keys():
+        value = params[key]
+        if isinstance(value, (str, bool)) or key.endswith("to_uv"):
+            continue
+        yield key, value
