@@ -137,6 +137,16 @@ CLI_ROWS = [
     # --- invert (issue 15: a reference scaled by 1e30 ended in a drjit.backward traceback) ---
     ("invert: reference scaled by 1e30", ["invert", "--reference", "{ref1e30}", "--res", "16", "-o", "{tmp}/kept"], 2,
      "ref1e30.exr' has peak |S0| = 1e+30, outside the accepted range [1e-10, 1e+10]", "in"),
+    # --- issue 15: plugin values checked as Mitsuba evaluates them (the scene is checked before the render) ---
+    ("render: eta bitmap with a negative texel (was accepted: furnace 1.99)", ["render", "{negeta}", "-o",
+     "{tmp}/negeta.exr"], 2, "hyde: parameter 'eta' must be finite and in [0, 1e+06] (index n + i k with k >= 0), "
+     "got texel value -1.5", "in"),
+    ("render: eta = 1e10 (was an all-NaN image)", ["render", "{hugeeta}", "-o", "{tmp}/hugeeta.exr"], 2,
+     "hyde: parameter 'eta' must be finite and in [0, 1e+06]", "in"),
+    ("render: an 8-bit PNG alpha map loads (was refused: 'alpha.data = 83.0')", ["render", "{png8}", "-o",
+     "{tmp}/png8.exr", "--variant", "llvm_ad_mono_polarized"], 0, "png8.exr", "in"),
+    ("render: alpha = 0 renders as the lower bound, like roughconductor (was refused)", ["render", "{alpha0}", "-o",
+     "{tmp}/alpha0.exr"], 0, "alpha0.exr", "in"),
     # --- dispatcher ---
     ("unknown command", ["nosuch"], 2, "unknown command 'nosuch'", "in"),
 ]
@@ -203,6 +213,32 @@ def _stokes_exr(path, size, value):
     OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, ch).write(str(path))
 
 
+def _plugin_scenes(tmp):
+    """Scenes whose hyde parameters are textures or values Mitsuba evaluates (issue 15 rows)."""
+    import numpy as np
+    import OpenEXR
+    from PIL import Image
+
+    eta = np.full((2, 2), 1.5, np.float32)
+    eta[1, 0] = -1.5
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                 {"Y": eta}).write(str(tmp / "negeta.exr"))
+    Image.fromarray(np.array([[30, 83], [200, 255]], np.uint8), mode="L").save(tmp / "rough8.png")
+
+    def scene(name, bsdf):
+        (tmp / f"{name}.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', bsdf))
+        return tmp / f"{name}.xml"
+
+    return {
+        "negeta": scene("negeta", f'<bsdf type="hyde"><texture type="bitmap" name="eta"><string name="filename" '
+                                  f'value="{tmp / "negeta.exr"}"/></texture><float name="k" value="0"/></bsdf>'),
+        "hugeeta": scene("hugeeta", '<bsdf type="hyde"><float name="eta" value="1e10"/><float name="k" value="0"/></bsdf>'),
+        "png8": scene("png8", f'<bsdf type="hyde"><texture type="bitmap" name="alpha"><string name="filename" '
+                              f'value="{tmp / "rough8.png"}"/></texture><string name="material" value="Au"/></bsdf>'),
+        "alpha0": scene("alpha0", '<bsdf type="hyde"><float name="alpha" value="0"/></bsdf>'),
+    }
+
+
 @pytest.fixture(scope="module")
 def paths(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("bad")
@@ -256,7 +292,8 @@ def paths(tmp_path_factory):
             "copies": tmp / "copies.csv", "impossible": tmp / "impossible.csv", "crcsv": tmp / "crlines.csv",
             "tmp": tmp, "file": tmp / "file.txt", "tiny": tmp / "tiny.xml", "nosensor": tmp / "nosensor.xml",
             "ptracer": tmp / "ptracer.xml", "inverse": ROOT / "scenes" / "inverse.xml", "csv": tmp / "meas.csv",
-            "notreport": tmp / "notreport", "badhyde": tmp / "badhyde.xml", "ref1e30": tmp / "ref1e30.exr"}
+            "notreport": tmp / "notreport", "badhyde": tmp / "badhyde.xml", "ref1e30": tmp / "ref1e30.exr",
+            **_plugin_scenes(tmp)}
 
 
 def _snapshot(folder):
@@ -343,7 +380,9 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
         assert not lines, err                     # quiet
         return
     assert lines, "no message on stderr"
-    assert lines[-1].startswith(f"hyde-bsdf {argv[0]}"), lines[-1]
+    # a refusal is "hyde-bsdf CMD: ..."; a run that succeeds ends with its own "[CMD] ..." summary
+    assert lines[-1].startswith((f"hyde-bsdf {argv[0]}", f"[{argv[0]}]") if code == 0 else f"hyde-bsdf {argv[0]}"), \
+        lines[-1]
     assert needle in lines[-1], lines[-1]
     assert (paths["tmp"] / "kept" / "invert_history.csv").read_text() == "a previous run's output\n"   # no file lost
     after = _snapshot(paths["tmp"])

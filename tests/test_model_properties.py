@@ -184,3 +184,38 @@ def test_non_finite_result_message_names_the_index(monkeypatch):
     monkeypatch.setattr(evaluator, "_specular", poisoned)
     with pytest.raises(FloatingPointError, match=r"index \[1, 2\]"):
         hyde_bsdf.pbrdf(np.full((2, 3), 0.3), 0.4, 1.0, rms_slope=0.3, pec=True)
+
+
+TINY = st.floats(-38.0, -3.0).map(lambda e: 10.0 ** e)
+#: (theta_i, theta_r, phi) of nearly collinear directions, eps from the normal or from each other
+NEAR = {
+    "wi normal, wo near it": lambda e, a: (0.0, e, a),
+    "wo normal, wi near it": lambda e, a: (e, 0.0, a),
+    "both near the normal": lambda e, a: (e, 2 * e, a),
+    "backscatter + eps": lambda e, a: (0.7, 0.7 + e * math.cos(a), e * math.sin(a)),
+    "mirror + eps": lambda e, a: (0.7, 0.7 + e * math.cos(a), math.pi + e * math.sin(a)),
+    "grazing, opposite + eps": lambda e, a: (HALF_PI - e, HALF_PI - e, math.pi),
+}
+
+
+@settings(max_examples=examples(150), deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(eps=TINY, az=st.floats(0.0, 2 * math.pi), case=st.sampled_from(sorted(NEAR)),
+       s=st.sampled_from([1e-4, 0.3, 100.0]), shadowing=st.sampled_from(["vgroove", "smith", "none"]),
+       metal=st.booleans())
+@example(eps=1e-30, az=0.0, case="wi normal, wo near it", s=0.3, shadowing="vgroove", metal=True)  # issue 15
+def test_pbrdf_near_collinear_directions_are_finite_and_continuous(eps, az, case, s, shadowing, metal):
+    """Directions within 1e-38 ... 1e-3 of the normal and of each other (issue 15): finite, and
+    within eps <= 1e-6 of the normal equal to the value at exact normal incidence (1e-5 relative)."""
+    ti, tr, ph = NEAR[case](eps, az)
+    kw = dict(n=0.2, k=3.0) if metal else dict(n=1.5, k=0.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = np.asarray(hyde_bsdf.pbrdf(ti, tr, ph, rms_slope=s, shadowing=shadowing, **kw))
+    assert np.isfinite(m).all()
+    if case.startswith(("wi normal", "wo normal")) and eps <= 1e-6 and s == 0.3:
+        ref = np.asarray(hyde_bsdf.pbrdf(0.0, 0.0, ph, rms_slope=s, shadowing=shadowing, **kw))
+        # the s/p bases at theta = 0 are the limit at fixed azimuth: compare M00 and the
+        # rotation invariants of the linear block, which do not depend on that choice
+        m, ref = m.reshape(4, 4), ref.reshape(4, 4)
+        assert abs(m[0, 0] - ref[0, 0]) <= 1e-5 * abs(ref[0, 0])
+        assert abs(np.linalg.norm(m[1:3, 1:3]) - np.linalg.norm(ref[1:3, 1:3])) <= 1e-5 * abs(ref[0, 0])
