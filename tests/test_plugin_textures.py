@@ -159,7 +159,7 @@ def test_update_of_bitmap_texels_is_validated():
     data = np.full((2, 3, 1), 0.3, np.float32)
     data[1, 2, 0] = -0.1
     params["rms_slope.data"] = mi.TensorXf(data)
-    with pytest.raises(ValueError, match=r"rms_slope.*range.*rms_slope texel value -0\.1.*1 of 6 values read"):
+    with pytest.raises(ValueError, match=r"rms_slope.*range.*rms_slope\.data texel value -0\.1.*1 of 6 values read"):
         params.update()
     with pytest.raises(Exception, match=r"rms_slope.*range"):
         mi.load_dict({"type": "hyde", "rms_slope": _bitmap(mi, [[0.3, -0.2]])})

@@ -180,9 +180,13 @@ def values_of(tex, one=False):
 
 
 def _where(name, tex, arr, bad):
-    count = int(bad.sum())
-    kind = "value" if not tex.is_spatially_varying() else "texel value"
-    return f"{kind} {float(arr[bad][0])!r}" + ("" if arr.size == 1 else f" ({count} of {arr.size} values read)")
+    """'NAME.KEY = VALUE' (a constant) or 'NAME.KEY texel value VALUE (n of N values read)'."""
+    keys = [k for k in mi.traverse(tex).keys() if k.split(".")[-1] in _DATA_KEYS]
+    key = f"{name}.{keys[0]}" if len(keys) == 1 else name
+    counts = "" if arr.size == 1 else f" ({int(bad.sum())} of {arr.size} values read)"
+    if tex.is_spatially_varying():
+        return f"{key} texel value {float(arr[bad][0])!r}{counts}"
+    return f"{key} = {float(arr[bad][0])!r}{counts}"
 
 
 def _raw_finite(name, tex, accepted=""):
@@ -207,7 +211,7 @@ def check_roughness(name, tex, scale):
     bad = ~np.isfinite(values) | (values < 0) | (values > hi * (1 + _SLACK))
     if bad.any():
         raise ValueError(f"hyde: {name} must be a finite number in the accepted range {rng}, "
-                         f"got {name} {_where(name, tex, values, bad)}")
+                         f"got {_where(name, tex, values, bad)}")
     low = values < lo * (1 - _SLACK)
     if low.any():
         warnings.warn(f"hyde: {name} below the lower bound {_fmt(lo)} ({_where(name, tex, values, low)}) "

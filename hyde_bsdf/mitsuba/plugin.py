@@ -46,13 +46,15 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
    - the paper's roughness sqrt(2) sigma_h / ell (rms facet slope along one axis),
      per shading point (texture ``eval_1(si)``, like roughconductor's alpha);
      useful range 0.02-1.5; accepted [1e-4, 50], with every diffuse term
+     (values in [0, 1e-4) are floored to 1e-4 with a warning)
    - ``rms_slope.value`` (float), ``rms_slope.data`` (bitmap), ``rms_slope.color0.value``
      (checkerboard), ...; differentiable, discontinuous
  * - alpha
    - float or texture
    - (none)
    - Beckmann alpha = sqrt(2) rms_slope = 2 sigma_h / ell (roughconductor's alpha);
-     alternative to rms_slope; accepted [1.414e-4, 70.71]
+     alternative to rms_slope; accepted [0.0001414214, 70.71068]; values in
+     [0, 0.0001414214) (roughconductor's mirror, alpha = 0) are floored with a warning
    - ``alpha.value`` / ``alpha.data`` / ...: Beckmann alpha, as roughconductor;
      differentiable, discontinuous
  * - sigma_h, ell
@@ -65,16 +67,16 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
    - float, spectrum, rgb or texture
    - 0, 1 (a 100 % reflective mirror, as roughconductor)
    - real and imaginary part of the complex index n + i k (Mitsuba's sign;
-     the paper writes the same material as eta = n - j kappa); eta >= 0, k >= 0,
-     not both 0.  ``k = 0`` with any eta is a dielectric (dispersive if eta is a
-     spectrum).  Spatially varying textures (bitmaps) cannot be checked at load.
+     the paper writes the same material as eta = n - j kappa); eta and k in
+     [0, 1e6] (INDEX_MAX), not both 0.  ``k = 0`` with any eta is a dielectric (dispersive if eta is a
+     spectrum).
    - ``eta.value``, ``k.value`` (float; ``eta.values`` for a spectrum, ``eta.data``
      for a bitmap); differentiable, discontinuous
  * - material
    - string
    - (none)
    - a named metal from Mitsuba's ``data/ior`` tables ("Au", "Al", "Cu", "Ag", ...);
-     alternative to eta/k.  Spectral variants use the tabulated spectrum, RGB
+     alternative to eta/k; "none" (roughconductor's spelling) means eta/k.  Spectral variants use the tabulated spectrum, RGB
      variants its unbounded sRGB, mono variants its luminance, as Mitsuba's own
      conductors do
    - ``eta.values`` + ``eta.wavelengths`` (spectral), ``eta.value`` (RGB: a Color3f;
@@ -111,16 +113,19 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
    - sample the specular lobe from the visible Beckmann normals (Heitz & d'Eon 2014)
    - no
 
-Validation.  The constructor and every ``params.update()`` (``parameters_changed``)
-apply the same checks: roughness values (the float, or every texel / value of the
-texture's data: ``value``, ``data``, ``values`` entries) finite and in range,
-eta and k of spatially uniform textures >= 0 and not both 0 (checked at 48
-wavelengths 360-830 nm in spectral variants), no NaN in any texture datum.  Values
-that cannot be read back (a ``mesh_attribute`` texture) are clamped to the
-accepted range at eval.  Where a spectrum is 0 (outside the wavelength range it
-is defined on, Mitsuba's rule) and k is 0 as well, the index is taken as 1
-(no reflection) rather than producing 0/0, with a warning at load (spectral variants:
-give eta over 360-830 nm).
+Validation (:mod:`hyde_bsdf.mitsuba.param_checks`).  The constructor and every
+``params.update()`` (``parameters_changed``) apply the same checks, on the values the textures'
+own ``eval`` returns (an 8-bit PNG is read as 0-1, not as its stored 0-255): the roughness
+finite and in range (values in [0, lower bound) floored with a warning), eta and k finite and
+in [0, 1e6] and not both 0 for a constant, specular_reflectance finite and >= 0; constants at
+48 wavelengths 360-830 nm (spectral), every texel of a bitmap and both colours of a
+checkerboard.  A refused update restores the last accepted values (the update is atomic).
+Values that cannot be read at load (a ``mesh_attribute`` or procedural texture) get one
+warning and are clamped at eval (roughness to its range, eta and k to [0, 1e6],
+specular_reflectance to [0, 1], NaN: no reflection).  Where a spectrum is 0 (outside the
+wavelength range it is defined on, Mitsuba's rule) and k is 0 as well, the index is taken as 1
+(no reflection) rather than producing 0/0, with a warning at load (spectral variants: give eta
+over 360-830 nm).
 
 Model.  f = D(h) M(beta; eta) G / (4 cos theta_i cos theta_o)  +  diffuse (paper
 Eqs. 6, 8, 11, 12, 13, 17), where D is the Beckmann distribution with
@@ -157,8 +162,15 @@ Facet frame.  The facet's s axis (perpendicular to its plane of incidence) is
 wo_hat x wi_hat, parallel to roughconductor's cross(h, -wo_hat), but computed with
 a compensated (Kahan) cross product: near backscatter the plain float32 product
 tilts the Stokes frame by ~eps/|wi x wo| (roughconductor is off the float64
-evaluator by up to 3e-5 there, this plugin by < 2e-6).  Directions collinear
-with the facet normal fall back to the x axis, as in roughconductor.
+evaluator by up to 3e-5 there, this plugin by < 2e-6).  Every normalisation goes
+through :func:`hyde_bsdf.mitsuba.optics.safe_normalize` (no float32 underflow of the
+squared norm) with a named fallback: "collinear" (wo_hat parallel to wi_hat to float32
+precision: backscatter or both along the normal; the facet is then at normal incidence,
+where its Mueller matrix does not depend on the s axis, and s = stokes_basis(-wo_hat))
+and "opposite" (wi = -wo on the horizon: h = +z, an inactive lane).  Directions within
+1e-15 of the normal are snapped onto it before Mitsuba's Smith G1, which is NaN there
+(roughconductor too); D G / (4 cos theta_i) and its pdf are capped at MAX_LOBE = 1e30.
+No direction pair gives NaN (tests: 1e-38 ... 1e-3 from the normal and from each other).
 
 Index.  Textures of eta and k are evaluated per wavelength (spectral), per RGB
 channel (unbounded sRGB) or as luminance (mono); like Mitsuba, |k| is used.
