@@ -112,28 +112,38 @@ def probe(tex, one=False):
 
 
 def _eval_at(tex, u, v, one):
-    """tex.eval (or eval_1) at the points (u, v) over all wavelength sets: a flat float64 array."""
+    """tex.eval (or eval_1) at the points (u, v) over all wavelength sets: a flat float64 array.
+
+    JIT variants: one kernel for all points and wavelengths (in chunks of 2^22 lanes), so a
+    check inside an optimisation loop costs one launch per texture; ``eval_1`` does not depend
+    on the wavelengths and is read once.
+    """
+    sets = [None] if one else _wavelength_sets()
+    if dr.is_jit_v(mi.Float):
+        n_sets = len(sets)
+        uu, vv = np.tile(u, n_sets), np.tile(v, n_sets)
+        wl = None if sets[0] is None else np.repeat(np.asarray(sets, float), u.size, axis=0)  # [lanes, 4]
+        out = []
+        for start in range(0, uu.size, _CHUNK):
+            n = min(_CHUNK, uu.size - start)
+            si = dr.zeros(mi.SurfaceInteraction3f, n)
+            si.uv = mi.Point2f(mi.Float(uu[start:start + n]), mi.Float(vv[start:start + n]))
+            if wl is not None:
+                si.wavelengths = mi.UnpolarizedSpectrum(*(mi.Float(wl[start:start + n, j]) for j in range(4)))
+            val = tex.eval_1(si) if one else tex.eval(si)
+            # a constant texture returns one lane: broadcast it
+            # lane-major (lane, channel): the order of the scalar path below
+            out.append(np.asarray(val * dr.full(mi.Float, 1.0, n), dtype=float).T.ravel())
+        return np.concatenate(out) if out else np.zeros(0)
     out = []
-    jit = dr.is_jit_v(mi.Float)
-    for wl in _wavelength_sets():
-        if jit:
-            for start in range(0, u.size, _CHUNK):
-                n = min(_CHUNK, u.size - start)
-                si = dr.zeros(mi.SurfaceInteraction3f, n)
-                si.uv = mi.Point2f(mi.Float(u[start:start + n]), mi.Float(v[start:start + n]))
-                if wl is not None:
-                    si.wavelengths = mi.UnpolarizedSpectrum(*(dr.full(mi.Float, float(w), n) for w in wl))
-                val = tex.eval_1(si) if one else tex.eval(si)
-                # a constant texture returns one lane: broadcast it
-                out.append(np.asarray(val * dr.full(mi.Float, 1.0, n), dtype=float).ravel())
-        else:
-            for uu, vv in zip(u, v):
-                si = dr.zeros(mi.SurfaceInteraction3f)
-                si.uv = mi.Point2f(float(uu), float(vv))
-                if wl is not None:
-                    si.wavelengths = mi.UnpolarizedSpectrum(*map(float, wl))
-                val = tex.eval_1(si) if one else tex.eval(si)
-                out.append(np.asarray(val, dtype=float).ravel())
+    for wl in sets:
+        for uu, vv in zip(u, v):
+            si = dr.zeros(mi.SurfaceInteraction3f)
+            si.uv = mi.Point2f(float(uu), float(vv))
+            if wl is not None:
+                si.wavelengths = mi.UnpolarizedSpectrum(*map(float, wl))
+            val = tex.eval_1(si) if one else tex.eval(si)
+            out.append(np.asarray(val, dtype=float).ravel())
     return np.concatenate(out) if out else np.zeros(0)
 
 
