@@ -1,20 +1,21 @@
-"""Benchmark of hyde_bsdf.mom.scatter on the paper's Fig. 6 case (a benchmark, not a test).
+"""Benchmark of hyde_bsdf.mom.scatter on the paper's Fig. 6 case: fast and dense solvers against the dense-LU floor.
 
 Default: 15,000 lambda, 100 partitions of 150 lambda, 10 points per wavelength
 (1500 unknowns per partition), theta_i = 10, 30, 45, 60, 75 deg, 359 observation
-angles, the default process pool (one single-threaded-BLAS worker per core).
-Target on 2 cores: <= 30 s wall, <= 2 GiB peak memory.
+angles, both polarisations, the default process pool (one single-threaded-BLAS worker per core).
 
-Runs the PEC case s-only and with both polarisations (s, p) in interleaved rounds and prints
-the median wall-time ratio (s+p must stay <= 2.5 x s-only), then the Infragold (lossy)
-case with both polarisations and its cost breakdown.  Prints the wall time, the worker CPU seconds spent in each stage (matrix fill,
-LU factorisation, the solves for all theta_i, the far field of Eq. 21 on the
-user's and the power-balance grids), the peak resident memory of the parent and
-of the largest worker, and the machine load before and after (other jobs share
-the cores: the load says how many).
+Part 1 (interleaved rounds, medians, all in this process):
+  * the dense-LU floor: 100 LU factorisations of a 1500 x 1500 complex matrix on the same
+    pool (what any dense solver must at least spend, before filling a matrix or solving);
+  * the Fig. 6 run with solver="fast" and with solver="dense".
+  It prints fast / floor (target <= 1.0), dense / floor and fast / dense, and each
+  method's CPU breakdown (fill or set-up, factor, solve, far field).
+Part 2: one partition of N unknowns (Fig. 6 surface statistics, both polarisations, one
+  theta_i), fast against dense CPU seconds for N up to the largest the dense path fits
+  (``--max-dense``, default 6000), then the fast solver alone up to ``--max-fast``.
 
-    .venv/bin/python benchmarks/bench_mom.py [--pts-per-wl 10] [--partitions 100] [--workers N] [--rounds 3]
-        [--lossy-partitions 10]
+    .venv/bin/python benchmarks/bench_mom.py [--rounds 3] [--partitions 100] [--workers N]
+        [--sizes 500,1000,2000,4000,6000] [--fast-sizes 20000,50000,100000] [--skip-fig6] [--skip-sizes]
 """
 from __future__ import annotations
 
@@ -27,6 +28,10 @@ import time
 
 import numpy as np
 
+ELL = 5.0
+SIGMA_H = 0.3 * ELL / math.sqrt(2.0)
+_LU_MATRIX = {}
+
 
 def load():
     try:
@@ -35,107 +40,132 @@ def load():
         return ["?"] * 3
 
 
-def load_reference(rev):
-    """The s-only solver of git revision ``rev`` (e.g. 245d8eb, before both polarisations), as a module."""
-    import importlib.util
-    import subprocess
-    import tempfile
+def lu_task(n):
+    """One LU of an n x n complex matrix (built once per worker; the factorisation copies it)."""
+    import scipy.linalg
 
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    src = subprocess.run(["git", "-C", root, "show", f"{rev}:hyde_bsdf/mom/solver.py"], check=True,
-                         capture_output=True, text=True).stdout
-    path = os.path.join(tempfile.mkdtemp(prefix="bench_mom_"), "reference_solver.py")
-    with open(path, "w") as fh:
-        fh.write(src)
-    spec = importlib.util.spec_from_file_location("reference_solver", path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["reference_solver"] = mod  # the process pool pickles its functions by module name
-    spec.loader.exec_module(mod)
-    return mod
+    if n not in _LU_MATRIX:
+        rng = np.random.default_rng(0)
+        _LU_MATRIX[n] = rng.standard_normal((n, n)) + 1j * rng.standard_normal((n, n))
+    t0 = time.process_time()
+    scipy.linalg.lu_factor(_LU_MATRIX[n], check_finite=False)
+    return time.process_time() - t0
 
 
-def run_case(mom, args, workers, **kw):
-    ell = 5.0
+def lu_floor(mom, n, count, workers):
+    """Wall seconds of ``count`` LUs of n x n on a fresh pool (matrices built before the clock starts)."""
     ex = mom.process_pool(workers)
+    try:
+        list(ex.map(lu_task, [n] * workers))      # warm: every worker builds its matrix
+        t0 = time.perf_counter()
+        cpu = sum(ex.map(lu_task, [n] * count))
+        return time.perf_counter() - t0, cpu
+    finally:
+        ex.shutdown(wait=True)
+
+
+def fig6(mom, args, solver):
+    ex = mom.process_pool(args.workers)
     t0 = time.perf_counter()
     try:
-        res = mom.scatter(args.length_wl, args.partitions, 0.3 * ell / math.sqrt(2.0), ell,
-                          [10.0, 30.0, 45.0, 60.0, 75.0], np.arange(-89.5, 89.51, 0.5),
-                          pts_per_wl=args.pts_per_wl, seed=0, executor=ex, progress=False, **kw)
+        res = mom.scatter(args.length_wl, args.partitions, SIGMA_H, ELL, [10.0, 30.0, 45.0, 60.0, 75.0],
+                          np.arange(-89.5, 89.51, 0.5), pts_per_wl=args.pts_per_wl, seed=0, executor=ex,
+                          progress=False, polarization=("s", "p"), solver=solver)
     finally:
         ex.shutdown(wait=True)
     return res, time.perf_counter() - t0
 
 
-def report(label, res, wall, workers, partitions):
+def cpu_of(res):
     t = res.times
-    cpu = t["fill"] + t["factor"] + t["solve"] + t["far_field"]
-    print(f"{label}: wall {wall:.1f} s, worker CPU {cpu:.1f} s")
-    for k in ("fill", "factor", "solve", "far_field"):
-        print(f"  {k:10s} {t[k]:7.1f} s  ({1000 * t[k] / partitions:6.1f} ms/partition)  {100 * t[k] / cpu:5.1f} %")
-    for pol in res.polarization:
-        print(f"  {pol}-pol reflected + absorbed per theta_i:",
-              " ".join(f"{e:.4f}" for e in getattr(res, "energy_" + pol)))
-    return cpu
+    return t["fill"] + t["factor"] + t["solve"] + t["far_field"]
+
+
+def breakdown(label, res, wall):
+    t = res.times
+    cpu = cpu_of(res)
+    parts = ", ".join(f"{k} {t[k]:.1f} s ({100 * t[k] / cpu:.0f} %)" for k in ("fill", "factor", "solve", "far_field"))
+    print(f"  {label}: wall {wall:.1f} s, worker CPU {cpu:.1f} s: {parts}; solver {res.params['solver']}, "
+          f"max residual {res.params['max_residual']}")
+
+
+def one_partition(mom, n, solver, ppw):
+    """CPU seconds of one partition of n unknowns (s and p, theta_i = 45 deg), in process."""
+    length = n / ppw
+    ex = mom.SerialExecutor()
+    t0 = time.process_time()
+    res = mom.scatter(length, 1, SIGMA_H, ELL, [45.0], [45.0], pts_per_wl=ppw, seed=1, executor=ex,
+                      progress=False, polarization=("s", "p"), solver=solver, taper_width_wl=length / 4)
+    return time.process_time() - t0, res
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description="benchmark hyde_bsdf.mom.scatter on the Fig. 6 case")
+    ap = argparse.ArgumentParser(description="benchmark hyde_bsdf.mom.scatter: fast and dense against the LU floor")
     ap.add_argument("--pts-per-wl", type=float, default=10.0)
     ap.add_argument("--partitions", type=int, default=100)
     ap.add_argument("--length-wl", type=float, default=15000.0)
     ap.add_argument("--workers", type=int, default=os.cpu_count())
-    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds of s-only and s+p (median reported)")
-    ap.add_argument("--reference-rev", default="245d8eb",
-                    help="git revision whose s-only solver is timed too ('' to skip): the ratio to today's s-only")
-    ap.add_argument("--lossy-partitions", type=int, default=10,
-                    help="partitions of the Infragold (n = 0.285, k = 7.3523) s+p run (0: skip)")
+    ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds (median reported)")
+    ap.add_argument("--sizes", default="500,1000,2000,4000,6000", help="N for fast vs dense (one partition)")
+    ap.add_argument("--fast-sizes", default="20000,50000,100000", help="N for the fast solver alone")
+    ap.add_argument("--skip-fig6", action="store_true")
+    ap.add_argument("--skip-sizes", action="store_true")
     args = ap.parse_args(argv)
 
-    from hyde_bsdf import mom
+    import warnings
 
-    load0 = load()
-    ref = load_reference(args.reference_rev) if args.reference_rev else None
-    walls = {"s": [], "sp": [], "ref": []}
-    cpus = {"s": [], "sp": [], "ref": []}
-    for r in range(args.rounds):
-        if ref is not None:
-            res, wall = run_case(ref, args, args.workers)
-            t = res.times
-            cpus["ref"].append(t["fill"] + t["factor"] + t["solve"] + t["far_field"])
-            walls["ref"].append(wall)
-            print(f"[round {r + 1}] reference ({args.reference_rev}) PEC s: wall {wall:.1f} s, "
-                  f"worker CPU {cpus['ref'][-1]:.1f} s")
-        for key, pols in (("s", "s"), ("sp", ("s", "p"))):
-            res, wall = run_case(mom, args, args.workers, polarization=pols)
-            print(f"[round {r + 1}]", end=" ")
-            cpus[key].append(report(f"PEC {'+'.join(pols)}", res, wall, args.workers, args.partitions))
-            walls[key].append(wall)
-    n = res.params["unknowns_per_partition"]
-    med = {k: float(np.median(v)) for k, v in walls.items() if v}
-    medc = {k: float(np.median(v)) for k, v in cpus.items() if v}
-    print(f"case: {args.length_wl:g} lambda, {args.partitions} partitions x {n} unknowns "
-          f"({res.params['pts_per_wl']:g} pts/lambda), 5 theta_i, {res.theta_r.size} + {res.fine_theta_r.size} "
-          f"observation angles, {args.workers} workers, {args.rounds} interleaved rounds")
-    print(f"load average before: {' '.join(load0)}   after: {' '.join(load())}   (cores: {os.cpu_count()})")
-    print(f"median wall: s-only {med['s']:.1f} s, s+p {med['sp']:.1f} s -> ratio {med['sp'] / med['s']:.2f}"
-          f"; median worker CPU ratio {medc['sp'] / medc['s']:.2f}")
-    if ref is not None:
-        print(f"against today's s-only solver ({args.reference_rev}): wall {med['ref']:.1f} s -> s+p / reference "
-              f"{med['sp'] / med['ref']:.2f} (target <= 2.5), worker CPU ratio {medc['sp'] / medc['ref']:.2f}; "
-              f"new s-only / reference {med['s'] / med['ref']:.2f}")
-    if args.lossy_partitions > 0:
-        sub = argparse.Namespace(**vars(args))
-        sub.partitions = args.lossy_partitions
-        sub.length_wl = args.length_wl / args.partitions * args.lossy_partitions
-        res, wall = run_case(mom, sub, args.workers, polarization=("s", "p"), n=0.285, k=7.3523)
-        cpu = report(f"Infragold s+p, {sub.partitions} partitions", res, wall, args.workers, sub.partitions)
-        print(f"lossy cost per partition: {cpu / sub.partitions:.2f} CPU s against the PEC s+p "
-              f"{medc['sp'] / args.partitions:.2f} (fill = both regions' matrices and the interior solve "
-              "(1/2 + D1)^-1 S1 with its banded product; factor = one LU per polarisation)")
-    self_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB -> MiB on Linux
+    from hyde_bsdf import mom
+    from hyde_bsdf.mom.solver import _limit_blas_threads
+
+    warnings.simplefilter("ignore", mom.MoMAccuracyWarning)
+    print(f"load average before: {' '.join(load())} (cores: {os.cpu_count()})")
+    if not args.skip_fig6:
+        n = int(round(args.length_wl / args.partitions * args.pts_per_wl))
+        walls = {"floor": [], "fast": [], "dense": []}
+        cpus = {"floor": [], "fast": [], "dense": []}
+        for r in range(args.rounds):
+            w, cpu = lu_floor(mom, n, args.partitions, args.workers)
+            walls["floor"].append(w)
+            cpus["floor"].append(cpu)
+            print(f"[round {r + 1}] dense-LU floor: {args.partitions} LUs of {n} x {n}: wall {w:.1f} s "
+                  f"(worker CPU {cpu:.1f} s)")
+            for solver in ("fast", "dense"):
+                res, wall = fig6(mom, args, solver)
+                walls[solver].append(wall)
+                cpus[solver].append(cpu_of(res))
+                breakdown(f"[round {r + 1}] Fig. 6 s+p, solver={solver}", res, wall)
+                print(f"    reflected + absorbed s: {' '.join(f'{e:.4f}' for e in res.energy_s)}; "
+                      f"p: {' '.join(f'{e:.4f}' for e in res.energy_p)}")
+        med = {k: float(np.median(v)) for k, v in walls.items()}
+        print(f"Fig. 6 ({args.partitions} x {n} unknowns, s and p, {args.workers} workers, {args.rounds} interleaved "
+              f"rounds), median wall: floor {med['floor']:.1f} s, fast {med['fast']:.1f} s, dense {med['dense']:.1f} s")
+        print(f"  fast / dense-LU floor = {med['fast'] / med['floor']:.2f} (target <= 1.0); dense / floor = "
+              f"{med['dense'] / med['floor']:.2f}; fast / dense = {med['fast'] / med['dense']:.2f}")
+        medc = {k: float(np.median(v)) for k, v in cpus.items()}
+        print(f"  worker CPU seconds (less sensitive to other jobs): floor {medc['floor']:.1f}, fast {medc['fast']:.1f}, "
+              f"dense {medc['dense']:.1f} -> fast / floor {medc['fast'] / medc['floor']:.2f}, dense / floor "
+              f"{medc['dense'] / medc['floor']:.2f}")
+    if not args.skip_sizes:
+        previous = _limit_blas_threads(1)
+        print("one partition (s and p, theta_i = 45 deg, Fig. 6 statistics), CPU seconds, one BLAS thread:")
+        print(f"  {'N':>7s} {'fast':>8s} {'dense':>8s} {'fast/dense':>10s}  fast info")
+        for n in [int(s) for s in args.sizes.split(",") if s]:
+            tf, rf = one_partition(mom, n, "fast", args.pts_per_wl)
+            td, rd = one_partition(mom, n, "dense", args.pts_per_wl)
+            db = 10 * np.log10(rf.sigma_s[0, 0] / rd.sigma_s[0, 0])
+            print(f"  {n:7d} {tf:8.2f} {td:8.2f} {tf / td:10.3f}  sigma_s(45) fast - dense {db:+.4f} dB, "
+                  f"E_s {rf.energy_s[0]:.4f}/{rd.energy_s[0]:.4f}")
+        for n in [int(s) for s in args.fast_sizes.split(",") if s]:
+            tf, rf = one_partition(mom, n, "fast", args.pts_per_wl)
+            t = rf.times
+            print(f"  {n:7d} {tf:8.2f} {'-':>8s} {'-':>10s}  set-up {t['fill']:.1f} s, iterations {t['solve']:.1f} s, "
+                  f"far field {t['far_field']:.1f} s; E_s {rf.energy_s[0]:.4f}, E_p {rf.energy_p[0]:.4f}")
+        from hyde_bsdf.mom.solver import _restore_blas_threads
+        _restore_blas_threads(previous)
+    print(f"load average after: {' '.join(load())}")
+    self_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     child_rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
-    print(f"peak RSS: parent {self_rss:.0f} MiB, largest worker {child_rss:.0f} MiB")
+    print(f"peak RSS: this process {self_rss:.0f} MiB, largest worker {child_rss:.0f} MiB")
     return 0
 
 

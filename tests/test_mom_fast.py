@@ -172,3 +172,36 @@ def test_solver_switch():
         mom.scatter(40.0, 1, 0.0, 1.0, [30.0], [30.0], executor=SERIAL, solver="lu")
     with pytest.raises(ValueError, match="tol"):
         mom.scatter(40.0, 1, 0.0, 1.0, [30.0], [30.0], executor=SERIAL, tol=0.5)
+
+
+def test_flat_far_field_by_nonuniform_fft():
+    """The far field of a flat partition of more than 2000 samples goes through the type-2 non-uniform FFT:
+    equal to the direct sum within 1e-10 (relative), over all observation angles."""
+    n, dx = 2500, 0.1
+    x = (np.arange(n) + 0.5) * dx - 125.0
+    rng = np.random.default_rng(2)
+    u = rng.standard_normal((n, 2)) + 1j * rng.standard_normal((n, 2))
+    v = rng.standard_normal((n, 2)) + 1j * rng.standard_normal((n, 2))
+    theta = np.linspace(-math.pi / 2, math.pi / 2, 1201)
+    fast_ff = kernels.far_field_uv(x, np.zeros(n), np.zeros(n), dx, u, v, theta)
+    direct = kernels.far_field_uv(x, np.full(n, 1e-300), np.zeros(n), dx, u, v, theta)   # not flat: direct sum
+    assert np.max(np.abs(fast_ff - direct)) < 1e-10 * np.max(np.abs(direct))
+
+
+def test_smith_shadowing_of_the_1d_model():
+    """Smith's G for the 1-D Gaussian surface: 1 at normal incidence and observation, in (0, 1], falling towards
+    grazing; the 1-D model's specular DHR with it stays below 1 at 88 deg, while without shadowing it
+    exceeds 1 from 80 deg on (3.9 at 88 deg: the diffuse term of Eq. 16 would have to be negative)."""
+    from hyde_bsdf.mom import model1d
+
+    assert model1d.smith_shadowing(0.0, 0.0, 0.3) == pytest.approx(1.0)
+    tr = np.radians(np.linspace(-89, 89, 179))
+    g = model1d.smith_shadowing(math.radians(80.0), tr, 0.3)
+    assert np.all((g >= 0) & (g <= 1))
+    assert model1d.smith_shadowing(math.radians(88.0), math.radians(88.0), 0.3) < \
+        model1d.smith_shadowing(math.radians(60.0), math.radians(60.0), 0.3)
+    ti = np.radians([80.0, 88.0])
+    assert np.all(model1d.dhr_specular(ti, 0.3, "smith") < 1.0)
+    assert np.all(model1d.dhr_specular(ti, 0.3, False) > 1.0)
+    with pytest.raises(ValueError, match="shadowing"):
+        model1d.brdf_specular(0.1, 0.2, 0.3, shadowing="torrance")

@@ -81,6 +81,7 @@ __all__ = [
     "facet_angles",
     "facet_pdf",
     "vgroove_shadowing",
+    "smith_shadowing",
     "brdf_specular",
     "dhr_specular",
     "brdf_diffuse",
@@ -137,16 +138,55 @@ def vgroove_shadowing(theta_i, theta_r):
     return np.where(cb > 0.0, np.clip(g, 0.0, 1.0), 0.0)
 
 
+def _smith_lambda(theta, rms_slope):
+    """Smith's Lambda for a 1-D Gaussian slope distribution (std rms_slope), mu = cot|theta|:
+    (1/2) [sqrt(2/pi) (s/mu) exp(-mu^2 / (2 s^2)) - erfc(mu / (sqrt(2) s))]; 0 at normal incidence."""
+    import scipy.special
+
+    c = np.abs(np.cos(theta))
+    sn = np.abs(np.sin(theta))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mu = c / sn
+        lam = 0.5 * (math.sqrt(2.0 / math.pi) * (rms_slope / mu) * np.exp(-0.5 * (mu / rms_slope) ** 2)
+                     - scipy.special.erfc(mu / (math.sqrt(2.0) * rms_slope)))
+    return np.where(sn > 0, np.where(c > 1e-12, lam, np.inf), 0.0)
+
+
+def smith_shadowing(theta_i, theta_r, rms_slope):
+    """Smith's (1967) shadowing of a Gaussian surface in the plane: G = 1 / (1 + Lambda(ti) + Lambda(tr)).
+
+    The bistatic form that treats source and observer as uncorrelated (pbrt's), for the 1-D
+    surface's Gaussian slopes (std ``rms_slope``); zero where the facet faces away (cos beta <= 0).
+    The statistical alternative to the V-groove G of Eq. 12 (Ref. 26 of the paper).
+    """
+    _, beta = facet_angles(theta_i, theta_r)
+    g = 1.0 / (1.0 + _smith_lambda(np.asarray(theta_i, float), rms_slope)
+               + _smith_lambda(np.asarray(theta_r, float), rms_slope))
+    return np.where(np.cos(beta) > 0.0, g, 0.0)
+
+
+def _shadowing(theta_i, theta_r, rms_slope, shadowing):
+    """G of the chosen shadowing: True / "vgroove" (Eq. 12), "smith", False / "none" (front-facing facets)."""
+    if shadowing is True or shadowing == "vgroove":
+        return vgroove_shadowing(theta_i, theta_r)
+    if shadowing == "smith":
+        return smith_shadowing(theta_i, theta_r, rms_slope)
+    if shadowing is False or shadowing == "none":
+        return (np.cos(facet_angles(theta_i, theta_r)[1]) > 0).astype(float)
+    raise ValueError(f"shadowing must be True/'vgroove', 'smith' or False/'none', got {shadowing!r}")
+
+
 def brdf_specular(theta_i, theta_r, rms_slope, shadowing=True):
     """1-D counterpart of Eq. 13 for a PEC: f_s = p(alpha) G cos(beta) / (2 cos(ti) cos(tr) cos(alpha)), 1/rad.
 
     theta_i in [0, pi/2), theta_r signed in (-pi/2, pi/2) (radians; broadcast).
-    ``shadowing=False`` drops G (G = 1 for front-facing facets).
+    ``shadowing``: True or "vgroove" (Eq. 12's V-groove G), "smith" (Smith's G,
+    :func:`smith_shadowing`), False or "none" (G = 1 for front-facing facets).
     Returns 0 at |theta_r| = pi/2 (the observer at the horizon sees no facet).
     """
     theta_i, theta_r, rms_slope = _check(theta_i, theta_r, rms_slope)
     alpha, beta = facet_angles(theta_i, theta_r)
-    g = vgroove_shadowing(theta_i, theta_r) if shadowing else (np.cos(beta) > 0).astype(float)
+    g = _shadowing(theta_i, theta_r, rms_slope, shadowing)
     cr = np.cos(theta_r)
     with np.errstate(divide="ignore", invalid="ignore"):  # cos(theta_r) = 0 at the horizon: value set to 0 below
         f = facet_pdf(alpha, rms_slope) * g * np.cos(beta) / (2.0 * np.cos(theta_i) * cr * np.cos(alpha))
