@@ -435,16 +435,18 @@ class _System:
                         if ident and jj == j:
                             sub[np.arange(rows.size), np.arange(rows.size)] += ident
                 blk[jj] = M
-                r, c = np.nonzero(M)
-                rows_all.append(r + self.start[j])
-                cols_all.append(c + self.start[jj])
-                vals_all.append(M[r, c])
+            # the row block's columns (blocks j-1 .. j+1) are contiguous in the block ordering: one dense slab
+            slab = np.hstack([blk[jj] for jj in sorted(blk)])
+            c0 = self.start[min(blk)]
+            rows_all.append(np.full(slab.shape[0], slab.shape[1]))
+            cols_all.append(np.tile(np.arange(c0, c0 + slab.shape[1]), slab.shape[0]))
+            vals_all.append(slab.ravel())
             self.Dinv.append(np.linalg.inv(blk[j]))
             self.Lo.append(self.Dinv[j] @ blk[j - 1] if j > 0 else None)
             self.Up.append(self.Dinv[j] @ blk[j + 1] if j < nb - 1 else None)
         N = nk * n
-        self.near = scipy.sparse.csr_matrix((np.concatenate(vals_all), (np.concatenate(rows_all),
-                                             np.concatenate(cols_all))), shape=(N, N))
+        indptr = np.concatenate([[0], np.cumsum(np.concatenate(rows_all))])
+        self.near = scipy.sparse.csr_matrix((np.concatenate(vals_all), np.concatenate(cols_all), indptr), shape=(N, N))
         self._lu = None
         # per far channel (region, direction): block source matrices [Q, m_j] and Dinv @ receiver [m_j, Q]
         self.channels = []

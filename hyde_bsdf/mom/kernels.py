@@ -461,16 +461,27 @@ def far_field_uv(x, y, fp, dx, u, v, theta, k=K0, chunk=512):
         if v is not None:
             out -= _nufft2(v * dx, t) * phase
         return out.T
+    # the angle factors j k cos(theta) and j k sin(theta) come out of the sum over samples:
+    # F = j k (cos th [K u] - sin th [K f'u]) - [K v], one product of K with the stacked sources
+    src = [a for a in ((u if u is not None else None), (fp[:, None] * u if u is not None else None), v)
+           if a is not None]
+    stacked = np.hstack(src) * dx
     out = np.empty((n_ti, theta.size), complex)
     for c0 in range(0, theta.size, chunk):
         th = theta[c0:c0 + chunk]
         sn, cs = np.sin(th)[:, None], np.cos(th)[:, None]
-        kern = np.exp(1j * k * (sn * x[None, :] + cs * y[None, :])) * dx
+        phase = sn * x[None, :]
+        phase += cs * y[None, :]
+        phase *= k
+        kern = np.empty(phase.shape, complex)
+        kern.real = np.cos(phase)
+        kern.imag = np.sin(phase)
+        prod = kern @ stacked
         acc = np.zeros((th.size, n_ti), complex)
         if u is not None:
-            acc += (kern * (1j * k * (cs - sn * fp[None, :]))) @ u
+            acc += (1j * k) * (cs * prod[:, :n_ti] - sn * prod[:, n_ti:2 * n_ti])
         if v is not None:
-            acc -= kern @ v
+            acc -= prod[:, -n_ti:]
         out[:, c0:c0 + chunk] = acc.T
     return out
 
