@@ -448,24 +448,10 @@ class _System:
         indptr = np.concatenate([[0], np.cumsum(np.concatenate(rows_all))])
         self.near = scipy.sparse.csr_matrix((np.concatenate(vals_all), np.concatenate(cols_all), indptr), shape=(N, N))
         self._lu = None
-        # per far channel (region, direction): block source matrices [Q, m_j] and Dinv @ receiver [m_j, Q]
-        self.channels = []
-        for e, terms in enumerate(far):
-            for region, parts in terms:
-                for direction in ("fwd", "bwd"):
-                    srcT, dr = [], []
-                    for j in range(nb):
-                        s = slice(bounds[j], bounds[j + 1])
-                        m = nk * lens[j]
-                        st = np.zeros((region.q, m), complex)
-                        for kern, kind, coef in parts:
-                            ki = kinds.index(kind)
-                            st[:, ki * lens[j]:(ki + 1) * lens[j]] += coef * region.src[(direction, kern)][s].T
-                        srcT.append(st)
-                        rc = np.zeros((m, region.q), complex)
-                        rc[e * lens[j]:(e + 1) * lens[j]] = region.rcv[direction][s]
-                        dr.append(self.Dinv[j] @ rc)
-                    self.channels.append((region, direction, e, parts, srcT, dr))
+        # far channels (region, direction, equation, parts): factors read from the region's arrays block by block
+        self.lens = lens
+        self.channels = [(region, direction, e, parts) for e, terms in enumerate(far) for region, parts in terms
+                         for direction in ("fwd", "bwd")]
 
     def natural(self, xf, kind):
         """[N, r] values of one kind from the flat vector."""
@@ -497,25 +483,37 @@ class _System:
         st = self.start
         fwd = direction == "fwd"
         order = range(nb) if fwd else range(nb - 1, -1, -1)
-        accs = [np.zeros((ch[0].q, xf.shape[1]), complex) for ch in self.channels if ch[1] == direction]
+        r = xf.shape[1]
         chans = [ch for ch in self.channels if ch[1] == direction]
+        accs = [np.zeros((ch[0].q, r), complex) for ch in chans]
         pend = [[None] * nb for _ in chans]
+        kind_of = {kind: i for i, kind in enumerate(self.kinds)}
         for step, j in enumerate(order):
             s = slice(st[j], st[j + 1])
-            xj = self.Dinv[j] @ c[s]
+            rhs = c[s]
+            if step >= 2:
+                rhs = rhs.copy()
+                src_blk = j - 2 if fwd else j + 2
+                mid = j - 1 if fwd else j + 1
+                samples = slice(self.bounds[j], self.bounds[j + 1])
+                L = self.lens[j]
+                for t, (region, _, e, _) in enumerate(chans):
+                    accs[t] = (accs[t] + pend[t][src_blk]) * region.prop[mid][:, None]
+                    rhs[e * L:(e + 1) * L] -= region.rcv[direction][samples] @ accs[t]
+            xj = self.Dinv[j] @ rhs
             if j > 0:
                 xj -= self.Lo[j] @ xf[st[j - 1]:st[j]]
             if j < nb - 1:
                 xj -= self.Up[j] @ xf[st[j + 1]:st[j + 2]]
-            if step >= 2:
-                src_blk = j - 2 if fwd else j + 2
-                mid = j - 1 if fwd else j + 1
-                for t, (region, _, _, _, srcT, dr) in enumerate(chans):
-                    accs[t] = (accs[t] + pend[t][src_blk]) * region.prop[mid][:, None]
-                    xj -= dr[j] @ accs[t]
             xf[s] = xj
-            for t, (_, _, _, _, srcT, _) in enumerate(chans):
-                pend[t][j] = srcT[j] @ xj
+            samples = slice(self.bounds[j], self.bounds[j + 1])
+            L = self.lens[j]
+            for t, (region, _, _, parts) in enumerate(chans):
+                acc = 0.0
+                for kern, kind, coef in parts:
+                    ki = kind_of[kind]
+                    acc = acc + region.src[(direction, kern)][samples].T @ (coef * xj[ki * L:(ki + 1) * L])
+                pend[t][j] = acc
         return xf
 
     def lu(self):

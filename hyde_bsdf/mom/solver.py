@@ -163,7 +163,7 @@ import numpy as np
 import scipy.special
 
 from hyde_bsdf.mom.dense import solve_dense
-from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast
+from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast, spectral_rule
 from hyde_bsdf.mom.gather import ExecutorError, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
 
@@ -888,13 +888,16 @@ def _fast_block_wl(height_wl, eta):
     return max(NEAR_WL, kmax * height_wl ** 2 / (4.0 * 0.8 * GROWTH_MAX))
 
 
-def _fast_bytes(n, block_wl, dx, pols, eta):
-    """Peak bytes of one fast solve (plane-wave factors, band, block matrices): O(N), a generous estimate."""
+def _fast_bytes(n, block_wl, dx, height, part_len, eta):
+    """Peak bytes of one fast solve: plane-wave factors (Q per sample and direction), the strong part's
+    band, the block matrices.  O(N Q); Q from the plane-wave rule itself.  Raises FastSolverUnsuitable."""
     b = int(math.ceil(block_wl / dx))
-    q = 400
-    regions = 1 if eta is None else 2
+    q = spectral_rule(K0, (b - 1) * dx, part_len, height)[0].size
+    interior_far = eta is not None and eta.imag == 0
     nk = 1 if eta is None else 2
-    return 16.0 * n * (7 * q * regions + 4 * (4 * b + 3) * regions + 8 * nk * nk * b + 40)
+    planes = q * (7 + 8) * (2 if interior_far else 1)     # 7 kept per region, ~8 temporaries while set up
+    bands = (4 * b + 3) * (2 if eta is None else 4)
+    return 16.0 * n * (planes + 1.5 * bands + 6 * nk * nk * b + 40)
 
 
 def _choose_solver(cfg, npart, dx, height, workers, budget, why):
@@ -904,7 +907,13 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
     dense_ok = npart <= MAX_UNKNOWNS and need_dense <= budget
     block = _fast_block_wl(height, eta)
     fast_fit = 3.0 * block <= part_len
-    fast_ok = fast_fit and npart <= MAX_FAST_UNKNOWNS and _fast_bytes(npart, block, dx, pols, eta) * workers <= budget
+    need_fast = math.inf
+    if fast_fit and npart <= MAX_FAST_UNKNOWNS:
+        try:
+            need_fast = _fast_bytes(npart, block, dx, height, part_len, eta) * workers
+        except FastSolverUnsuitable:
+            fast_fit = False
+    fast_ok = fast_fit and need_fast <= budget
     hint = (" or a smoother surface (smaller rms_height_wl / corr_length_wl)" if why else " or a lower pts_per_wl")
     if cfg["solver"] == "dense" or (cfg["solver"] == "auto" and not fast_ok):
         if npart > MAX_UNKNOWNS:
@@ -927,7 +936,9 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
         raise ValueError(f"solver='fast' cannot take partitions of {part_len:g} wavelengths with {npart} unknowns"
                          f"{why}: " + (f"the height range {height:.3g} wavelengths needs blocks of {block:.3g}, more "
                                        "than a third of the partition" if not fast_fit else
-                                       f"more than {MAX_FAST_UNKNOWNS} unknowns or the memory available")
+                                       f"more than {MAX_FAST_UNKNOWNS} unknowns" if npart > MAX_FAST_UNKNOWNS else
+                                       f"{need_fast / 2**30:.1f} GiB for {workers} worker(s), more than the "
+                                       f"{budget / 2**30:.1f} GiB available")
                          + "; use shorter partitions (more `partitions`)" + hint)
     if cfg["solver"] == "auto" and npart < AUTO_FAST_UNKNOWNS and dense_ok:
         return "dense", dense_ok
