@@ -286,6 +286,10 @@ def test_alpha_sample_suggestion_uses_mitsubas_own_sampling_density(exported):
     mi = _mitsuba()
     import drjit as dr
     from hyde_bsdf.fit.pbsdf_export import _ggx_pdf, suggest_alpha_sample
+    from hyde_bsdf.fit.pbsdf_export import band_index
+
+    # Mitsuba's data/ior is found once mitsuba is imported too (the module is then its alias .so)
+    assert band_index(material="Au")[0][2] == pytest.approx(0.3504, abs=1e-3)
 
     path, _ = exported
     rng = np.random.default_rng(5)

@@ -119,10 +119,21 @@ def _check_resolution(resolution):
 # the index per band
 
 def _ior_folder() -> Path | None:
-    spec = importlib.util.find_spec("mitsuba")
-    if spec is None or not spec.submodule_search_locations:
+    """Mitsuba's ``data/ior`` folder, found without importing Mitsuba (once imported, ``mitsuba``
+    is its alias extension module, whose spec has no package folder but an origin inside it)."""
+    try:
+        spec = importlib.util.find_spec("mitsuba")
+    except (ImportError, ValueError):
         return None
-    return Path(list(spec.submodule_search_locations)[0]) / "data" / "ior"
+    if spec is None:
+        return None
+    if spec.submodule_search_locations:
+        folder = Path(list(spec.submodule_search_locations)[0])
+    elif spec.origin:
+        folder = Path(spec.origin).parent
+    else:
+        return None
+    return folder / "data" / "ior"
 
 
 def _read_spd(path: Path):

@@ -357,17 +357,21 @@ def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str 
     fig, axes = plt.subplots(4, 4, figsize=(12, 11))
     cmap = plt.get_cmap("viridis")
     K = data.wavelengths.size
+    model = np.stack([result.model(data.theta_i[rows], data.theta_r[rows], data.phi[rows], b) for b in range(K)])
+    table = data.F[:, rows]
+    colours = np.repeat([cmap(b / max(K - 1, 1)) for b in range(K)], rows.size, axis=0)
+    for j in range(4):
+        for k in range(4):
+            a = axes[j, k]
+            if (j, k) == (0, 0):       # one scatter per panel (every band at once): drawing is the cost
+                a.scatter(table[..., 0, 0].ravel(), model[..., 0, 0].ravel(), s=2, c=colours, lw=0)
+                a.set_xscale("log")
+                a.set_yscale("log")
+            else:
+                a.scatter((table[..., j, k] / table[..., 0, 0]).ravel(), (model[..., j, k] / model[..., 0, 0]).ravel(),
+                          s=2, c=colours, lw=0)
     for b in range(K):
-        F = result.model(data.theta_i[rows], data.theta_r[rows], data.phi[rows], b)
-        D = data.F[b, rows]
-        colour = cmap(b / max(K - 1, 1))
-        for j in range(4):
-            for k in range(4):
-                a = axes[j, k]
-                if (j, k) == (0, 0):
-                    a.loglog(D[:, 0, 0], F[:, 0, 0], ".", ms=2, color=colour, label=f"{data.wavelengths[b]:g} nm")
-                else:
-                    a.plot(D[:, j, k] / D[:, 0, 0], F[:, j, k] / F[:, 0, 0], ".", ms=2, color=colour)
+        axes[0, 0].plot([], [], ".", color=cmap(b / max(K - 1, 1)), label=f"{data.wavelengths[b]:g} nm")
     for j in range(4):
         for k in range(4):
             a = axes[j, k]
@@ -380,14 +384,14 @@ def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str 
                 a.set_xlabel("table", fontsize=8)
             if k == 0:
                 a.set_ylabel("fitted model", fontsize=8)
-    axes[0, 0].legend(fontsize=6, markerscale=3)
+    axes[0, 0].legend(fontsize=6, markerscale=2)
     fig.suptitle((title + "\n" if title else "") +
                  f"rms_slope = {result.rms_slope:.4g}; n = {', '.join(f'{v:.3g}' for v in result.n)}; "
                  f"k = {', '.join(f'{v:.3g}' for v in result.k)} ({len(rows)} of {len(data)} geometries)", fontsize=9)
     fig.subplots_adjust(left=0.06, right=0.98, bottom=0.05, top=0.92, wspace=0.3, hspace=0.35)
     path = check_output_path(path, "plot file")
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".").lower() or "png")
+        fig.savefig(tmp, dpi=90, format=path.suffix.lstrip(".").lower() or "png")
     plt.close(fig)
     return path
 
