@@ -170,8 +170,9 @@ def figure(runs, path):
                             label=f"model {name}" if stem == "pec" else None)
                 for ax, key in zip(row[1:], RATIOS):
                     ax.plot(c, md[key][0] / np.where(m00 > 0, m00, np.nan), color=col, ls=styles[name], lw=0.8)
+            seen = mb["M00"] >= 1e-3 * mb["M00"].max()    # ratios of the MoM where it scatters (> -30 dB of its peak)
             for ax, key in zip(row[1:], RATIOS):
-                ax.plot(c, mb[key] / mb["M00"], color=col, lw=1.2)
+                ax.plot(c, np.where(seen, mb[key] / mb["M00"], np.nan), color=col, lw=1.2)
         row[0].set(ylim=(-35, 20), ylabel=f"theta_i = {ti:g} deg\nM00 (dB, sigma units)")
         for ax, key in zip(row[1:], RATIOS):
             ax.set(ylim=(-1.05, 1.05), title=f"{key}/M00" if ti == angles[0] else None)
