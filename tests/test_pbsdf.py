@@ -309,3 +309,22 @@ def test_alpha_sample_suggestion_uses_mitsubas_own_sampling_density(exported):
     params = dict(rms_slope=0.3, n=PARAMS["n"], k=PARAMS["k"], shadowing="vgroove", diffuse="paper")
     alpha, score = suggest_alpha_sample(params, n_theta=80, n_phi=80)
     assert 0.15 <= alpha <= 0.6 and score[alpha] <= min(score[0.005], score[1.0]) / 2
+
+
+@pytest.mark.parametrize("args, message", [
+    (["export", "{tmp}", "--rms-slope", "0.3", "--n", "1.5"], "is a directory"),
+    (["export", "{tmp}/a.pbsdf", "--rms-slope", "0.3", "--n", "1.5", "--resolution", "10x10"], "resolution"),
+    (["export", "{tmp}/a.pbsdf", "--n", "1.5"], "--rms-slope"),
+    (["export", "{tmp}/a.pbsdf", "--rms-slope", "0.3", "--material", "Au", "--n", "1"], "either material or n"),
+    (["export", "{tmp}/a.pbsdf", "--rms-slope", "0.3", "--n", "1.5,x"], "--n must be"),
+    (["fit", "{tmp}/text.pbsdf"], "not a Mitsuba tensor file"),
+    (["fit", "{tmp}/text.pbsdf", "--fit", "n,q"], "fit must be"),
+    (["fit", "{tmp}/text.pbsdf", "--theta-max", "95"], "--theta-max"),
+])
+def test_cli_mistakes_are_one_line_exit_2_and_write_nothing(tmp_path, capsys, args, message):
+    (tmp_path / "text.pbsdf").write_text("theta_i_deg,theta_r_deg\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code = main([a.replace("{tmp}", str(tmp_path)) for a in args])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and err.count("\n") == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
