@@ -14,7 +14,7 @@ taper Thorsos' criterion asks for at 88 deg needs partitions of 50,000 unknowns)
 2. Rough surface, the Fig. 6 statistics (rms slope 0.3, ell = 5 lambda), PEC and Infragold on
    the same realisation, theta_i = 70, 80, 85, 88 deg, both polarisations, observation angles to
    +-89.75 deg; the taper for Thorsos' parameter 0.015 (partitions of 150, 220, 840, 5300 lambda;
-   full mode 40, 24, 6, 1 of them; quick mode 80 deg, one partition).  The MoM's M00 (1-deg
+   full mode 12, 8, 3, 1 of them, 1800-5300 lambda per angle; quick mode 80 deg, one partition).  The MoM's M00 (1-deg
    bins, sigma units) and M01/M00, M22/M00, M23/M00 against the 1-D model
    (:func:`hyde_bsdf.mom.model1d.mueller_sigma`, specular + diffuse) with V-groove (Eq. 12),
    Smith and no shadowing: rms dB over the MoM's lobe (bins >= 10 % of its peak), the mean dB
@@ -84,7 +84,7 @@ def rough_runs(quick):
     """Part 2: per theta_i, one scatter call on the Fig. 6 statistics (same seed for PEC and Infragold)."""
     from hyde_bsdf import mom
 
-    plan = [(80.0, 1)] if quick else [(70.0, 40), (80.0, 24), (85.0, 6), (88.0, 1)]
+    plan = [(80.0, 1)] if quick else [(70.0, 12), (80.0, 8), (85.0, 3), (88.0, 1)]
     runs = {}
     for ti, parts in plan:
         w = thorsos_width(ti, 0.015)
