@@ -245,7 +245,7 @@ def validate(outdir="out/validation", quick=False):
         # ---- figure
         fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
         for rms, mk in ((0.3, "o"), (0.1, "s")):
-            sel = [r for r in rows if r["rms_slope"] == rms]
+            sel = sorted((r for r in rows if r["rms_slope"] == rms), key=lambda r: r["mbytes"])
             if not sel:
                 continue
             mb = [r["mbytes"] for r in sel]
@@ -255,6 +255,10 @@ def validate(outdir="out/validation", quick=False):
             if rms == 0.3:
                 for r in sel:
                     axes[0].annotate(r["resolution"], (r["mbytes"], 100 * r["m00_l1"]), fontsize=6)
+            for r in sel:
+                if r["res"] == tuple(DEFAULT_RESOLUTION):
+                    axes[0].plot(r["mbytes"], 100 * r["m00_l1"], "k*", ms=12, mfc="none",
+                                 label="default" if rms == 0.3 else None)
             axes[1].loglog(mb, [r["seconds"] for r in sel], mk + "-", color="C3", label=f"export time, rms {rms}")
         axes[0].axhline(100 * TARGET_L1, color="k", lw=0.5)
         axes[0].set_xlabel("file size (MB)")
@@ -268,11 +272,15 @@ def validate(outdir="out/validation", quick=False):
         names = list(rt)
         axes[2].bar(range(len(names)), [rt[n][1] / ref for n in names], color=["C7", "C0", "C1"])
         axes[2].set_xticks(range(len(names)), [n.replace(" (", "\n(") for n in names], fontsize=7)
+        axes[2].set_yscale("log")
+        for i, n in enumerate(names):
+            axes[2].text(i, rt[n][1] / ref, f"{rt[n][1] / ref:.1f}x", ha="center", va="bottom", fontsize=8)
         axes[2].set_ylabel("render time / roughconductor")
         axes[2].set_title(f"render time, one run ({variant}); first render:\n" +
                           ", ".join(f"{rt[n][0]:.1f} s" for n in names), fontsize=8)
         fig.suptitle(("recommended (smallest with M00 L1 <= 1 %, p95 <= 2 % at every roughness): " +
-                      (f"{rec['resolution']} ({rec['mbytes']:.0f} MB)" if rec else "none of this sweep"))
+                      (f"{rec['resolution']} ({rec['mbytes']:.0f} MB)" if rec else
+                       "none of this sweep" + (" (quick mode: small tables only)" if quick else "")))
                      + f"; default {'x'.join(map(str, DEFAULT_RESOLUTION))}", fontsize=9)
         fig.tight_layout()
         save_figure(fig, out / "pbsdf_export.png")
