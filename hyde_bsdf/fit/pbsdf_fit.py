@@ -121,7 +121,7 @@ class PbsdfFitResult:
 
         out = [f"pBRDF fit to a measured_polarized table (paper Eq. 17; shadowing={self.shadowing!r}, "
                f"diffuse={self.diffuse!r}): {self.n_geometries} geometries x {len(self.wavelengths)} bands",
-               f"  converged: {self.success} ({self.message}; {self.nfev} model evaluations)",
+               f"  converged: {self.success} ({self.message}; {self.nfev} residual evaluations, Jacobians included)",
                f"  rms_slope = {pm(self.rms_slope, self.stderr['rms_slope'])}"]
         for b, wl in enumerate(self.wavelengths):
             out.append(f"  {wl:5.0f} nm: n = {pm(self.n[b], self.stderr['n'][b])}, "
@@ -333,7 +333,7 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         rms_slope=values["rms_slope"], n=np.array([values[("n", b)] for b in range(K)]),
         k=np.array([values[("k", b)] for b in range(K)]), wavelengths=data.wavelengths.copy(),
         stderr=stderr, fitted=tuple(fit), correlation=corr, names=names, sigma_m00=s00, sigma_elements=sel,
-        chi2=chi2, dof=m - p, success=bool(res.success), message=str(res.message), nfev=nfev,
+        chi2=chi2, dof=m - p, success=bool(res.success), message=str(res.message), nfev=state["calls"],
         n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
         rms_m00=np.sqrt(np.mean(r00 ** 2, axis=1)), rms_elements=np.sqrt(np.mean(rel ** 2, axis=(1, 2))))
     if diag:
