@@ -183,7 +183,7 @@ class _Problem:
             F = pbrdf(self.ti, self.tr, self.ph, rms_slope=v["rms_slope"], n=v[("n", b)], k=v[("k", b)], **self.opts)
             m00 = F[:, 0, 0]
             r00.append(np.log(m00 + self.floor[i]) - self.log_data[i])
-            N = F / m00[:, None, None]
+            N = F / np.where(m00 > 0, m00, np.inf)[:, None, None]   # F00 underflows far from a lobe without diffuse
             rel.append(np.stack([N[:, j, k] - self.norm[i, :, j, k] for j, k in ELEMENTS], 0))
         return np.array(r00), np.array(rel)
 
