@@ -140,7 +140,7 @@ CLI_ROWS = [
     # --- issue 15: plugin values checked as Mitsuba evaluates them (the scene is checked before the render) ---
     ("render: eta bitmap with a negative texel (was accepted: furnace 1.99)", ["render", "{negeta}", "-o",
      "{tmp}/negeta.exr"], 2, "hyde: parameter 'eta' must be finite and in [0, 1e+06] (index n + i k with k >= 0), "
-     "got texel value -1.5", "in"),
+     "got eta.data texel value -1.5", "in"),
     ("render: eta = 1e10 (was an all-NaN image)", ["render", "{hugeeta}", "-o", "{tmp}/hugeeta.exr"], 2,
      "hyde: parameter 'eta' must be finite and in [0, 1e+06]", "in"),
     ("render: an 8-bit PNG alpha map loads (was refused: 'alpha.data = 83.0')", ["render", "{png8}", "-o",

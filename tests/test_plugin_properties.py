@@ -2,7 +2,7 @@
 
 Inputs include directions at, just above and below the horizon, normal and grazing incidence,
 rms_slope (or alpha) at the ends of the accepted range and beyond it, k = 0 (dielectrics) up to
-1e7, eta = 0, every shadowing/diffuse switch, both transport modes and sample values at 0 and
+1e7 (beyond the accepted 1e6), eta = 0, every shadowing/diffuse switch, both transport modes and sample values at 0 and
 just below 1.  The property: a parameter outside the accepted range is refused at load with a
 ``ValueError`` naming it; everything else gives finite values (never NaN or Inf), pdf >= 0, and
 a sample weight that is finite and zero where the pdf is.
@@ -85,7 +85,7 @@ def test_eval_pdf_sample_finite_or_refused(rough, spelling, eta, k, shadowing, d
 
     set_variant("scalar_spectral_polarized", fallback=False)
     hyde_bsdf.register("scalar_spectral_polarized")
-    from hyde_bsdf.mitsuba.plugin import ALPHA_RANGE, RMS_RANGE, plugin_class
+    from hyde_bsdf.mitsuba.plugin import ALPHA_RANGE, INDEX_MAX, RMS_RANGE, plugin_class
 
     lo, hi = RMS_RANGE if spelling == "rms_slope" else ALPHA_RANGE
     props = mi.Properties("hyde")
@@ -93,7 +93,9 @@ def test_eval_pdf_sample_finite_or_refused(rough, spelling, eta, k, shadowing, d
     props["eta"], props["k"] = eta, k
     props["shadowing"], props["diffuse"], props["sample_visible"] = shadowing, diffuse, visible
     # textures hold float32: an index that rounds to 0 is 0
-    invalid = (not lo * (1 - 1e-6) <= rough <= hi * (1 + 1e-6)) or k < 0 \
+    # below the lower bound (>= 0) is floored with a warning; eta, k in [0, INDEX_MAX]
+    invalid = (not 0.0 <= rough <= hi * (1 + 1e-6)) or k < 0 or np.float32(k) > INDEX_MAX \
+        or np.float32(eta) > INDEX_MAX \
         or (np.float32(eta) == 0 and np.float32(k) == 0) \
         or (diffuse == "reciprocal" and shadowing == "none")
     if invalid:
@@ -127,7 +129,7 @@ def test_llvm_batch_at_edges_is_finite():
     s2 = mi.Point2f(mi.Float(rng.uniform(0, 1, n).astype(np.float32)),
                     mi.Float(np.where(np.arange(n) % 5 == 0, 1 - 2 ** -24, rng.uniform(0, 1, n)).astype(np.float32)))
     for rough in (1e-4, 50.0):
-        for eta, k in ((1.5, 0.0), (0.0, 1e7), (0.285, 7.35)):
+        for eta, k in ((1.5, 0.0), (0.0, 1e6), (0.285, 7.35)):
             for shadowing, diffuse in (("vgroove", "paper"), ("smith", "reciprocal"), ("none", "paper")):
                 b = mi.load_dict({"type": "hyde", "rms_slope": rough, "eta": eta, "k": k,
                                   "shadowing": shadowing, "diffuse": diffuse})
