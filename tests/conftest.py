@@ -40,3 +40,12 @@ settings.load_profile(PROFILE)
 def examples(n: int) -> int:
     """A test's example count: ``n`` in the ``ci`` profile, ``THOROUGH_FACTOR * n`` in ``thorough``."""
     return n * (THOROUGH_FACTOR if PROFILE == "thorough" else 1)
+
+
+#: the longest tests, started first so that the other worker runs the rest meanwhile (pytest-xdist
+#: hands tests out in collection order)
+LONGEST_FIRST = ("test_report.py::test_quick_report_builds_and_all_checks_pass",)
+
+
+def pytest_collection_modifyitems(config, items):
+    items.sort(key=lambda item: 0 if item.nodeid.endswith(LONGEST_FIRST) else 1)
