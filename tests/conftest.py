@@ -44,8 +44,8 @@ def examples(n: int) -> int:
 
 #: the longest tests, started first so that the other worker runs the rest meanwhile (pytest-xdist
 #: hands tests out in collection order)
-LONGEST_FIRST = ("test_report.py::test_quick_report_builds_and_all_checks_pass",)
+LONGEST_FIRST = ("test_report.py::test_quick_report_of_each_script", "test_docs.py::test_code_blocks_run")
 
 
 def pytest_collection_modifyitems(config, items):
-    items.sort(key=lambda item: 0 if item.nodeid.endswith(LONGEST_FIRST) else 1)
+    items.sort(key=lambda item: 0 if LONGEST_FIRST[0] in item.nodeid else 1 if LONGEST_FIRST[1] in item.nodeid else 2)
