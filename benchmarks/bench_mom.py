@@ -12,10 +12,11 @@ Part 1 (interleaved rounds, medians, all in this process):
   method's CPU breakdown (fill or set-up, factor, solve, far field).
 Part 2: one partition of N unknowns (Fig. 6 surface statistics, both polarisations, one
   theta_i), fast against dense CPU seconds for N up to the largest the dense path fits
-  (``--max-dense``, default 6000), then the fast solver alone up to ``--max-fast``.
+  (``--sizes``, default up to 8000; the dense path is refused above 10,000), then the fast solver alone
+  (``--fast-sizes``, default 20,000-100,000).
 
     .venv/bin/python benchmarks/bench_mom.py [--rounds 3] [--partitions 100] [--workers N]
-        [--sizes 500,1000,2000,4000,6000] [--fast-sizes 20000,50000,100000] [--skip-fig6] [--skip-sizes]
+        [--sizes 500,1000,2000,4000,8000] [--fast-sizes 20000,50000,100000] [--skip-fig6] [--skip-sizes]
 """
 from __future__ import annotations
 
@@ -106,7 +107,7 @@ def main(argv=None):
     ap.add_argument("--length-wl", type=float, default=15000.0)
     ap.add_argument("--workers", type=int, default=os.cpu_count())
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds (median reported)")
-    ap.add_argument("--sizes", default="500,1000,2000,4000,6000", help="N for fast vs dense (one partition)")
+    ap.add_argument("--sizes", default="500,1000,2000,4000,8000", help="N for fast vs dense (one partition; the dense path is refused above 10000)")
     ap.add_argument("--fast-sizes", default="20000,50000,100000", help="N for the fast solver alone")
     ap.add_argument("--skip-fig6", action="store_true")
     ap.add_argument("--skip-sizes", action="store_true")
