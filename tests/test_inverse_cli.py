@@ -122,6 +122,22 @@ def test_maps_mode_end_to_end_progress_and_atomic_outputs(capsys, tmp_path):
     assert rows[0].startswith("iteration,loss,data_loss,regularizer") and len(rows) == 1 + 3
     assert (tmp_path / "invert_maps.png").stat().st_size > 5_000 and (tmp_path / "alpha.exr").stat().st_size > 0
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]     # no temporary files left
+    se = np.load(tmp_path / "alpha_stderr.npy")                               # the standard-error map
+    assert se.shape == (8, 8) and np.all(se[np.isfinite(se)] > 0)
+
+
+def test_maps_preset_dielectric_end_to_end(capsys, tmp_path):
+    """--preset dielectric: the designed acquisition (7 pictures) of the built-in sample on a 2 x 2 map,
+    eta and alpha fitted, standard-error maps written and their medians printed."""
+    rc, out, err = _run(capsys, ["--maps", "--preset", "dielectric", "--map-size", "2", "--res", "8", "--spp-ref", "16",
+                                 "--iterations", "3", "-o", str(tmp_path)])
+    assert rc == 0, err
+    assert "preset: 7 pictures of 8x8 px (0 behind a polarizer)" in err
+    for n in ("alpha", "eta"):
+        assert np.load(tmp_path / f"{n}.npy").shape == (2, 2) and (tmp_path / f"{n}_stderr.exr").stat().st_size > 0
+    assert out.count("relative standard error: median") == 2
+    rc, _, err = _run(capsys, ["--maps", "--preset", "dielectric", "--fit", "alpha,k", "-o", str(tmp_path / "x")])
+    assert rc == 2 and "--fit: the dielectric preset fits alpha, eta and specular_reflectance" in err
 
 
 def test_ctrl_c_exits_130_with_a_short_message(tmp_path):

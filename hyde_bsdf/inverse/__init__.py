@@ -6,7 +6,9 @@ It uses the renderer and produces parameter maps, so it sits right of ``render``
 ``loss``          the Stokes-image loss (:class:`StokesLoss`), its mask, the map regulariser
 ``scalar``        one global rms_slope, eta, k from one image (:func:`invert`; spectral polarized)
 ``observations``  :class:`Observation`, texture keys, Stokes renders, the UV-coverage pass, the plane scene
-``maps``          per-texel maps (:func:`invert_maps`)
+``acquisition``   the designed observation set: views, lights, polarizer states (:func:`design_acquisition`)
+``maps``          per-texel maps (:func:`invert_maps`): set-up, loss, step, update, uncertainty
+``uncertainty``   per-texel standard errors (Gauss-Newton information, forward-mode AD), warnings
 ``cli``           ``hyde-bsdf invert``
 
 Every public name of these modules is importable from ``hyde_bsdf.inverse`` itself.
@@ -37,23 +39,33 @@ writes OUTDIR/invert_history.csv and OUTDIR/invert.png (loss and parameter traje
 Texture mode::
 
     hyde-bsdf invert --maps [--scene S1.xml --reference R1.exr [--mask M1.png] ...
+                     | --preset dielectric|metal [--noise 0.01]
                      | (built-in plane, 3 views x 2 lights, truth map of --map-size 32)]
-                     [--fit alpha[,eta,k]] [--start alpha=0.3] [--regularizer tv|l2 --weight 0.1]
+                     [--fit alpha[,eta,k][,specular_reflectance]] [--start alpha=0.3,eta=1.6]
+                     [--regularizer tv|l2 --weight 0.1] [--no-uncertainty]
                      [--iterations 100] [--spp 4] [--spp-ref 64] [--res 80] [--sensor 0] [-o OUTDIR]
 
 writes OUTDIR/invert_maps_history.csv, OUTDIR/NAME.npy and NAME.exr per fitted map (rows along
-v; load the EXR as a ``bitmap`` texture with ``raw`` true) and OUTDIR/invert_maps.png.
+v; load the EXR as a ``bitmap`` texture with ``raw`` true), NAME_stderr.npy/.exr (per-texel
+standard errors) and OUTDIR/invert_maps.png.  ``--preset`` captures the built-in synthetic sample
+(:func:`example_material`) in the designed acquisition (:func:`design_acquisition`; --res default
+4 x --map-size, so that texels span pure pixels) and reports the errors against its truth.
 """
 
 from hyde_bsdf.inverse._common import Y_WEIGHTS, _log  # noqa: F401  (_log: the scripts' progress lines)
 from hyde_bsdf.inverse.cli import (AD_BYTES_FIXED, AD_BYTES_PER_SAMPLE, check_memory, cli_main, estimate_memory)
 from hyde_bsdf.inverse.loss import (REFERENCE_RANGE, StokesLoss, channel_names, check_reference_scale,
                                     interior_mask, smoothness, stokes_images)
-from hyde_bsdf.inverse.maps import MapInversionResult, invert_maps
+from hyde_bsdf.inverse.acquisition import (Acquisition, Configuration, acquisition_scene_dict,
+                                           design_acquisition, example_material, fixed_rig_acquisition,
+                                           synthetic_observations)
+from hyde_bsdf.inverse.maps import LogAdam, MapInversionResult, MapProblem, invert_maps, map_loss, map_step, map_uncertainty
+from hyde_bsdf.inverse.uncertainty import STDERR_THRESHOLD, Uncertainty, UnidentifiedParameterWarning
 from hyde_bsdf.inverse.observations import _obs_mask  # noqa: F401
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, VIEW_AZIMUTHS, Observation,
                                             example_maps, film_channels, map_keys, plane_scene_dict,
-                                            render_stokes, render_stokes_np, texel_coverage)
+                                            pixel_texels, render_stokes, render_stokes_np,
+                                            texel_coverage)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, VARIANT, InversionResult,
                                       check_gradients, finite_difference_gradient, invert, load_scene, loss_and_gradient,
                                       parameter_keys, plot_history, prepare, render_reference, scene_dict,
@@ -65,5 +77,7 @@ __all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scen
            "InversionResult", "invert", "check_gradients", "loss_and_gradient", "finite_difference_gradient",
            "plot_history", "write_history", "MAP_PARAMETERS", "MAP_VARIANT", "map_keys", "film_channels",
            "render_stokes", "render_stokes_np", "Observation", "texel_coverage", "smoothness",
-           "MapInversionResult", "invert_maps", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",
+           "MapInversionResult", "invert_maps", "MapProblem", "map_loss", "map_step", "LogAdam", "map_uncertainty",
+           "Uncertainty", "UnidentifiedParameterWarning", "STDERR_THRESHOLD", "pixel_texels", "Configuration",
+           "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",
            "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "Y_WEIGHTS", "cli_main"]

@@ -15,6 +15,7 @@ import numpy as np
 from hyde_bsdf.atomic import atomic_group, atomic_open, atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.inverse._common import Y_WEIGHTS, _log
+from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
 from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
 from hyde_bsdf.inverse.maps import invert_maps
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, Observation, example_maps,
@@ -128,6 +129,14 @@ def build_parser():
                     "--maps: 80 per view)")
     ap.add_argument("--map-size", type=int, default=32, help="--maps, built-in scene: texels per side of the "
                     "truth map (default 32)")
+    ap.add_argument("--preset", default=None, choices=("dielectric", "metal"),
+                    help="--maps: capture the built-in synthetic sample (an eta map; or n and k maps of a metal) in "
+                         "the designed acquisition (5 mirror pairs at facet angles 10-70 deg + 2 off-specular "
+                         "pairs; metal: a 45 deg polarizer on the light); --map-size texels, --res px per picture")
+    ap.add_argument("--noise", type=float, default=0.01, help="--preset: camera noise added to the references, as a "
+                    "fraction of the median S0 (default 0.01)")
+    ap.add_argument("--no-uncertainty", action="store_true", help="--maps: skip the standard-error maps and the "
+                    "Gauss-Newton polish (NAME_stderr.npy/.exr are written otherwise)")
     ap.add_argument("--lr", type=float, default=0.05, help="Adam learning rate (on log parameters)")
     ap.add_argument("--regularizer", default=None, choices=("tv", "l2"),
                     help="--maps: smoothness term on each fitted map (total variation or squared gradient)")
@@ -141,7 +150,7 @@ def build_parser():
 def _check_args(args):
     maps = args.maps
     d = {"iterations": 100 if maps else 200, "spp": 4 if maps else 16, "spp_ref": 64 if maps else 512,
-         "res": 80 if maps else 64}
+         "res": (4 * args.map_size if args.preset else 80) if maps else 64}
     for k, v in d.items():
         if getattr(args, k) is None:
             setattr(args, k, v)
@@ -174,6 +183,10 @@ def _check_args(args):
             raise UsageError(f"{path!r} is not an existing file")
     if args.truth is not None and refs:
         pass                                   # errors are reported against it
+    if (args.preset or args.no_uncertainty) and not maps:
+        raise UsageError("--preset and --no-uncertainty need --maps")
+    if not (math.isfinite(args.noise) and 0 <= args.noise <= 1):
+        raise UsageError(f"--noise must be a fraction in [0, 1], got {args.noise}")
     if maps and args.truth is not None:
         raise UsageError("--truth is for scalar mode; --maps renders its references from the built-in "
                          "truth map or reads --reference")
@@ -316,13 +329,19 @@ def _cli(argv):
 def _cli_maps(args):
     names = tuple(MAP_PARAMETERS)
     ranges = {n: MAP_PARAMETERS[n][1] for n in names}
-    fit = tuple(s.strip() for s in (args.fit or "alpha").split(",") if s.strip())
+    preset_fit = {"dielectric": "alpha,eta", "metal": "alpha,eta,k"}
+    fit = tuple(s.strip() for s in (args.fit or preset_fit.get(args.preset, "alpha")).split(",") if s.strip())
     bad = [p for p in fit if p not in names]
     if bad or not fit:
         raise UsageError(f"--fit must list parameters from {', '.join(names)}, got {args.fit!r}")
     if "alpha" in fit and "rms_slope" in fit:
         raise UsageError("--fit: alpha and rms_slope are the same roughness; fit one of them")
     start = {n: 0.3 for n in fit if n in ("alpha", "rms_slope")}
+    if args.preset:             # constant start maps away from the built-in sample's values
+        start.update({"eta": 1.6 if args.preset == "dielectric" else 0.8, "k": 4.0, "specular_reflectance": 1.0})
+        start = {n: v for n, v in start.items() if n in fit}
+    elif "specular_reflectance" in fit:
+        start["specular_reflectance"] = 1.0
     start.update(_parse_values(args.start or "", "--start", names, ranges))
     missing = [n for n in fit if n not in start]
     if missing:
@@ -333,6 +352,9 @@ def _cli_maps(args):
     for n in fit:
         outputs[n + ".npy"] = f"{n}.npy"
         outputs[n + ".exr"] = f"{n}.exr"
+        if not args.no_uncertainty:
+            outputs[n + "_stderr.npy"] = f"{n}_stderr.npy"
+            outputs[n + "_stderr.exr"] = f"{n}_stderr.exr"
     paths = {k: _check_out(out / v) for k, v in outputs.items()}
     try:
         prepare(MAP_VARIANT)
@@ -341,7 +363,26 @@ def _cli_maps(args):
     import mitsuba as mi
 
     truth = None
-    if args.scene:
+    observations = []
+    if args.preset:
+        if args.scene:
+            raise UsageError("--preset renders the built-in sample; with --scene give the references of your own "
+                             "acquisition instead")
+        if "rms_slope" in fit or ("k" in fit and args.preset == "dielectric"):
+            raise UsageError(f"--fit: the {args.preset} preset fits alpha, eta"
+                             f"{', k' if args.preset == 'metal' else ''} and specular_reflectance; got {args.fit!r}")
+        material = example_material(args.preset, args.map_size)
+        if "specular_reflectance" not in fit:
+            material["specular_reflectance"] = 1.0
+        truth = {n: np.asarray(material[n], float) for n in fit}
+        acq = design_acquisition(args.preset)
+        check_memory(args.res, args.res, args.spp, "--spp or --res")
+        _log(f"{args.preset} preset: {len(acq.configurations)} pictures of {args.res}x{args.res} px "
+             f"({acq.polarized()} behind a polarizer), references at {args.spp_ref} spp + {100 * args.noise:g} % noise")
+        observations = synthetic_observations(acq, material, start, res=args.res, spp=args.spp, spp_ref=args.spp_ref,
+                                              noise=args.noise, seed=args.seed)
+        scenes = []
+    elif args.scene:
         scenes = [_load_user_scene(p) for p in args.scene]
     else:
         truth_map = example_maps(args.map_size)
@@ -351,7 +392,6 @@ def _cli_maps(args):
                              "--fit alpha (give --scene/--reference for other fits)")
         scenes = [mi.load_dict(plane_scene_dict(truth_map, light=j, res=args.res, spp=args.spp))
                   for j in range(len(LIGHTS))]
-    observations = []
     for i, scene in enumerate(scenes):
         if args.sensor >= len(scene.sensors()):
             raise UsageError(f"--sensor {args.sensor}: scene {i} has {len(scene.sensors())} sensor(s)")
@@ -371,7 +411,7 @@ def _cli_maps(args):
     try:
         res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
                           seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
-                          truth=truth, prefix=args.target)
+                          truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
     except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
         raise UsageError(_one_line(exc)) from None
     with atomic_group():      # history, maps and plot replace the old set together, or not at all
@@ -388,8 +428,14 @@ def _cli_maps(args):
             line += (f"; per-texel error over the {int(res.seen.sum())} seen texels: median "
                      f"{100 * np.median(e):.2f} %, 90th percentile {100 * np.percentile(e, 90):.2f} %")
         print(line)
+        if n in res.rel_stderr:
+            rel = res.rel_stderr[n][res.seen] if res.seen is not None else res.rel_stderr[n].ravel()
+            print(f"  {'':9s} relative standard error: median {100 * np.median(rel):.3g} %, 90th percentile "
+                  f"{100 * np.percentile(rel, 90):.3g} %")
     if res.seen is not None:
         print(f"  texels seen by the images: {int(res.seen.sum())} of {res.seen.size}")
+    for message in res.warnings:
+        print(f"  warning: {message}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     return 0
 
@@ -412,6 +458,13 @@ def _write_map_outputs(res, paths, args):
                 np.save(fh, v)
         with atomic_path(paths[n + ".exr"]) as tmp:
             mi.Bitmap(v[..., None] if v.ndim == 2 else np.full((1, 1, 1), v, np.float32)).write(str(tmp))
+        if n + "_stderr.npy" in paths and n in res.stderr:
+            se = np.asarray(res.stderr[n], np.float32)
+            with atomic_path(paths[n + "_stderr.npy"]) as tmp:
+                with open(tmp, "wb") as fh:
+                    np.save(fh, se)
+            with atomic_path(paths[n + "_stderr.exr"]) as tmp:
+                mi.Bitmap(se[..., None]).write(str(tmp))
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

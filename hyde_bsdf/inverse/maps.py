@@ -1,5 +1,10 @@
-"""Texture-valued (SVBRDF) inverse rendering: per-texel roughness and index maps from several
-Stokes images (:func:`invert_maps`).
+"""Texture-valued (SVBRDF) inverse rendering: per-texel roughness, index and scale maps from several
+Stokes images (:func:`invert_maps`), with per-texel standard errors.
+
+:func:`invert_maps` runs four steps, each its own function: the observation set-up
+(:meth:`MapProblem.build`), the loss (:func:`map_loss`) and its gradient (:func:`map_step`), the
+update (:class:`LogAdam`), and the uncertainty (:func:`map_uncertainty`,
+:mod:`hyde_bsdf.inverse.uncertainty`).
 
 May import: the other modules of ``hyde_bsdf.inverse`` except ``cli``.
 """
@@ -14,16 +19,21 @@ import numpy as np
 
 from hyde_bsdf.inverse._common import _first_line, _log
 from hyde_bsdf.inverse.loss import StokesLoss, smoothness
+from hyde_bsdf.inverse.observations import (MAP_PARAMETERS, _obs_mask, film_channels, map_keys, render_stokes,
+                                            texel_coverage)
 from hyde_bsdf.inverse.scalar import check_gradients
-from hyde_bsdf.inverse.observations import (MAP_PARAMETERS, _obs_mask, film_channels, map_keys,
-                                            render_stokes, texel_coverage)
+from hyde_bsdf.inverse.uncertainty import (STDERR_THRESHOLD, Uncertainty, gauss_newton_step,
+                                           identification_warnings, information_blocks, standard_errors,
+                                           warn_unidentified)
 
-__all__ = ["MapInversionResult", "invert_maps"]
+__all__ = ["MapInversionResult", "MapProblem", "map_loss", "map_step", "LogAdam", "map_uncertainty",
+           "invert_maps"]
 
 
 @dataclass
 class MapInversionResult:
-    """Outcome of :func:`invert_maps`: final maps/values (NumPy), per-iteration history, texel mask."""
+    """Outcome of :func:`invert_maps`: final maps/values (NumPy), per-iteration history, texel mask,
+    and the per-texel standard errors (absolute and relative, NaN where unseen) with the warnings."""
 
     fitted: tuple
     final: dict                      # name -> ndarray (rows, cols) for maps, float for constants
@@ -34,6 +44,11 @@ class MapInversionResult:
     history: list = field(default_factory=list)  # iteration, loss, data_loss, regularizer, seconds, [errors]
     seconds_per_iteration: float = float("nan")
     first_iteration_seconds: float = float("nan")
+    stderr: dict = field(default_factory=dict)      # name -> (rows, cols) standard error of the final map
+    rel_stderr: dict = field(default_factory=dict)  # name -> (rows, cols) stderr / value
+    warnings: list = field(default_factory=list)    # messages of parameters the data do not determine
+    uncertainty: Uncertainty | None = None
+    adam_final: dict = field(default_factory=dict)  # the averaged Adam iterate before the polish
 
     def texel_errors(self, name: str = "alpha") -> np.ndarray:
         """|final / truth - 1| over the seen texels of map ``name`` (1-D array)."""
@@ -42,12 +57,247 @@ class MapInversionResult:
         rel = np.abs(np.asarray(self.final[name]) / np.asarray(self.truth[name]) - 1.0)
         return rel[self.seen] if self.seen is not None and rel.shape == self.seen.shape else rel.ravel()
 
+    def pulls(self, name: str) -> np.ndarray:
+        """(final - truth) / stderr over the seen texels (1-D): standard normal when the errors are right."""
+        if not self.truth or name not in self.truth or name not in self.stderr:
+            raise ValueError(f"no truth or standard error for {name!r}")
+        z = (np.asarray(self.final[name]) - np.asarray(self.truth[name])) / self.stderr[name]
+        return z[self.seen] if self.seen is not None else z.ravel()
+
+
+@dataclass
+class MapProblem:
+    """Step 1, the observation set-up: the checked observations, their losses and weights, the
+    scenes (each once) with their traverse keys, the texture shapes, the seen texels."""
+
+    observations: list
+    losses: list
+    weights: list                     # o.weight / sum of weights
+    scenes: list
+    all_params: list
+    keys: list                        # per scene: name -> traverse key
+    names: tuple                      # fitted, then held fixed
+    fit: tuple
+    shapes: dict                      # name -> texture shape (rows, cols, 1) or None (a constant)
+    scene_of: list                    # observation -> index into scenes
+    channels: list                    # observation -> film channel names
+    seen: np.ndarray | None
+    prefix: str | None
+    components: str
+
+    @property
+    def map_shape(self):
+        return next((self.shapes[n][:2] for n in self.fit if self.shapes[n] is not None), None)
+
+    @classmethod
+    def build(cls, observations, start: dict, fit, *, components: str = "stokes", prefix: str | None = None,
+              seen=None) -> "MapProblem":
+        """Check the inputs (one-line ValueErrors naming the parameter) and set the start values
+        into every scene."""
+        import mitsuba as mi
+
+        observations = list(observations)
+        if not observations:
+            raise ValueError("observations must hold at least one Observation")
+        fit = tuple(fit)
+        if not fit:
+            raise ValueError(f"fit must name at least one of {tuple(MAP_PARAMETERS)}")
+        for name in fit:
+            if name not in MAP_PARAMETERS:
+                raise ValueError(f"fit: unknown parameter {name!r}; use {', '.join(MAP_PARAMETERS)}")
+            if name not in start:
+                raise ValueError(f"start must give a value for every fitted parameter; missing {name!r}")
+        for o in observations:
+            ref = np.asarray(o.reference)
+            if ref.ndim != 3 or ref.shape[0] != 4:
+                raise ValueError(f"reference must have shape (4, H, W), got {ref.shape}")
+            W, H = o.scene.sensors()[int(o.sensor)].film().crop_size()
+            if ref.shape[1:] != (H, W):
+                raise ValueError(f"reference is {ref.shape[2]}x{ref.shape[1]} pixels but sensor {o.sensor}'s "
+                                 f"film is {W}x{H}")
+            if not np.isfinite(ref).all():
+                raise ValueError("reference contains NaN or infinite pixels")
+        losses = [StokesLoss(o.reference, mask=_obs_mask(o), components=components) for o in observations]
+        wsum = float(sum(o.weight for o in observations))
+        if not wsum > 0:
+            raise ValueError("the observations' weights must sum to > 0")
+        scenes = []
+        for o in observations:
+            if all(o.scene is not s for s in scenes):
+                scenes.append(o.scene)
+        all_params = [mi.traverse(s) for s in scenes]
+        names = tuple(dict.fromkeys(list(fit) + [n for n in start if n not in fit]))
+        keys = [map_keys(p, names, prefix) for p in all_params]
+        shapes = {}
+        for name in names:
+            cur = all_params[0][keys[0][name]]
+            shapes[name] = tuple(cur.shape) if isinstance(cur, mi.TensorXf) else None
+        problem = cls(observations, losses, [o.weight / wsum for o in observations], scenes, all_params, keys,
+                      names, fit, shapes, [next(i for i, s in enumerate(scenes) if s is o.scene) for o in observations],
+                      [film_channels(o.scene, o.sensor) for o in observations], None, prefix, components)
+        if seen is None and problem.map_shape is not None:
+            seen = sum(texel_coverage(o, problem.map_shape, prefix) for o in observations) > 0
+        problem.seen = seen
+        for name in names:
+            try:
+                value = problem.as_value(name, start[name])
+            except ValueError:
+                raise ValueError(f"start[{name!r}] must be a number or an array of the texture's shape "
+                                 f"{shapes[name][:2]}") from None
+            problem.write({name: value})
+        return problem
+
+    def as_value(self, name, v):
+        """``v`` (a number or a (rows, cols) array) as the Dr.Jit value of parameter ``name``, clamped
+        to its range (:data:`MAP_PARAMETERS`)."""
+        import mitsuba as mi
+
+        lo, hi = MAP_PARAMETERS[name][1]
+        shape = self.shapes[name]
+        if shape is None:
+            return mi.Float(float(np.clip(float(np.mean(v)), lo, hi)))
+        arr = np.broadcast_to(np.asarray(v, np.float64).reshape(shape[:2] + (1,))
+                              if np.ndim(v) else np.asarray(v, np.float64), shape)
+        return mi.TensorXf(np.clip(arr, lo, hi).astype(np.float32))
+
+    def write(self, values: dict) -> None:
+        """Set parameter values (Dr.Jit arrays) into every scene."""
+        for p, k in zip(self.all_params, self.keys):
+            for name, v in values.items():
+                p[k[name]] = v
+            p.update()
+
+
+def map_loss(problem: MapProblem, values: dict, spp: int, seed0, tensors, regularizer=None, weight=0.0):
+    """Step 2, the loss: render every observation (seed ``seed0 + j``) and return (loss, data, reg)
+    = sum_j w_j L_j + weight * sum_maps R(map) (differentiable in ``values``)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    data = 0.0
+    for j, (o, fn) in enumerate(zip(problem.observations, problem.losses)):
+        si = problem.scene_of[j]
+        S = render_stokes(problem.scenes[si], o.sensor, spp, seed0 + j, params=problem.all_params[si],
+                          names=problem.channels[j])
+        data = data + problem.weights[j] * fn(S, tensors[j])
+    reg = dr.zeros(mi.Float, 1)
+    if regularizer is not None and weight > 0:
+        for name in problem.fit:
+            if problem.shapes[name] is not None:
+                reg = reg + weight * smoothness(values[name], regularizer)
+    return data + reg, data, reg
+
+
+def map_step(problem: MapProblem, spp: int, regularizer=None, weight=0.0):
+    """The loss and its gradient as one function ``step(scenes, values, seed0, tensors)`` (the
+    arguments a ``dr.freeze`` recording needs as inputs); the gradient lands in ``values``."""
+    import drjit as dr
+
+    def step(scenes_in, values_in, seed0, tensors_in):
+        loss, data, reg = map_loss(problem, values_in, spp, seed0, tensors_in, regularizer, weight)
+        dr.backward(loss)
+        return loss, data, reg
+
+    return step
+
+
+class LogAdam:
+    """Step 3, the update: Adam on log(value) per texel (values stay positive, one learning rate
+    fits every texel), clamped to :data:`MAP_PARAMETERS`' ranges; lr constant for the first half of
+    ``iterations``, then decaying geometrically to lr/10; the mean of the iterates over the last
+    ``average_last`` iterations (Polyak averaging) is the result."""
+
+    def __init__(self, problem: MapProblem, start: dict, lr: float, iterations: int, average_last: int):
+        import drjit as dr
+        import mitsuba as mi
+
+        # beta_2 = 0.9 (not Adam's 0.999): a texel's gradient falls by orders of magnitude as it
+        # converges, and a long memory of the early large gradients stalls it (measured: with 0.999 the
+        # alpha = 0.6 square of the validation map sat 11 % high after 60 iterations; with 0.9, < 1 %);
+        # beta_1 = 0.8: less momentum, less overshoot of the texels that move far
+        self.opt = mi.ad.Adam(lr=lr, beta_1=0.8, beta_2=0.9)
+        self.problem, self.lr, self.iterations, self.average_last = problem, lr, iterations, average_last
+        for name in problem.fit:
+            self.opt[name] = dr.log(problem.as_value(name, start[name]))
+        self.sums, self.n_avg = {}, 0
+
+    def values(self) -> dict:
+        """Clamp, then write exp(latent) into every scene as gradient-enabled leaves (a frozen step
+        sees them as inputs; the chain rule to log(value) is applied in :meth:`step`)."""
+        import drjit as dr
+
+        for name in self.problem.fit:
+            lo, hi = MAP_PARAMETERS[name][1]
+            self.opt[name] = dr.clip(self.opt[name], math.log(lo), math.log(hi))
+        values = {}
+        for name in self.problem.fit:
+            values[name] = dr.exp(dr.detach(self.opt[name]))
+            dr.enable_grad(values[name])
+        self.problem.write(values)
+        return values
+
+    def snapshot(self, name):
+        v = np.exp(np.asarray(self.opt[name], dtype=np.float64))
+        return v[..., 0] if self.problem.shapes[name] is not None else float(v.ravel()[0])
+
+    def step(self, it: int, values: dict) -> dict:
+        """The Adam step of iteration ``it`` from the gradients in ``values``; returns the iterate
+        before the step (NumPy) and adds it to the average over the last iterations."""
+        import drjit as dr
+
+        if it >= self.iterations // 2:
+            span = max(1, self.iterations - 1 - self.iterations // 2)
+            self.opt.set_learning_rate(self.lr * 0.1 ** ((it - self.iterations // 2) / span))
+        for name in self.problem.fit:
+            dr.set_grad(self.opt[name], dr.grad(values[name]) * dr.detach(values[name]))
+        check_gradients({n: dr.grad(self.opt[n]) for n in self.problem.fit}, it)
+        current = {n: self.snapshot(n) for n in self.problem.fit}
+        self.opt.step()
+        if it >= self.iterations - self.average_last:
+            for n in self.problem.fit:
+                self.sums[n] = self.sums.get(n, 0.0) + current[n]
+            self.n_avg += 1
+        return current
+
+    def average(self) -> dict:
+        return {n: self.sums[n] / self.n_avg for n in self.problem.fit}
+
+
+def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: int = 0, noise=None,
+                    polish: int = 2, threshold: float = STDERR_THRESHOLD, max_step: float = 0.25):
+    """Step 4, the uncertainty of the fitted *maps* at ``final`` (see :mod:`hyde_bsdf.inverse.uncertainty`):
+    ``polish`` Gauss-Newton steps per texel (0: none), then the standard errors at the last point
+    whose information was computed.  Returns (final maps, :class:`Uncertainty`)."""
+    names = tuple(n for n in problem.fit if problem.shapes[n] is not None)
+    if not names:
+        return final, None
+    rows, cols = problem.map_shape
+    seen = problem.seen if problem.seen is not None else np.ones((rows, cols), bool)
+    final = dict(final)
+    for k in range(max(1, int(polish))):
+        problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
+        A, B, g, noise_std, n_data = information_blocks(problem, names, spp=spp, seed=seed + 1000 * k, noise=noise)
+        if polish:
+            d = gauss_newton_step(A, g, seen, max_step=max_step)
+            for i, n in enumerate(names):
+                lo, hi = MAP_PARAMETERS[n][1]
+                final[n] = np.clip(np.asarray(final[n]) * np.exp(d[:, i].reshape(rows, cols)), lo, hi)
+    problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
+    rel = standard_errors(A, B, seen, dof=(n_data, len(names) * int(np.asarray(seen).sum())))
+    rel_maps = {n: rel[:, i].reshape(rows, cols) for i, n in enumerate(names)}
+    found = identification_warnings(rel_maps, seen, threshold)
+    unc = Uncertainty(names, {n: rel_maps[n] * np.asarray(final[n]) for n in names}, rel_maps, A, B, g, noise_std,
+                      {n: f for n, (f, _) in found.items()}, threshold)
+    return final, unc
+
 
 def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 100, lr: float = 0.05,
                 spp: int = 4, seed: int = 0, components: str = "stokes", regularizer: str | None = None,
                 weight: float = 0.0, truth: dict | None = None, prefix: str | None = None,
                 average_last: int | None = None, progress: bool = True,
-                seen: np.ndarray | None = None, freeze: bool = True) -> MapInversionResult:
+                seen: np.ndarray | None = None, freeze: bool = True, uncertainty: bool = True,
+                uncertainty_spp: int = 16, polish: int = 2, noise=None,
+                threshold: float = STDERR_THRESHOLD) -> MapInversionResult:
     """Optimise texture-valued BSDF parameters (a roughness map, optionally index maps) to match
     one or more reference Stokes images.
 
@@ -84,151 +334,58 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     measured max |difference| 5e-8 in alpha after 10 iterations; ~8x faster per iteration on the
     8 x 8 test problem).  If Dr.Jit cannot record the step (a scene object it cannot traverse)
     the run continues unfrozen, with a note on stderr.
+
+    Uncertainty (``uncertainty=True``, the default, for every fitted texture; see
+    :mod:`hyde_bsdf.inverse.uncertainty`): after the last iteration, per-texel blocks of the
+    Gauss-Newton information from forward-mode AD at ``uncertainty_spp`` samples, ``polish``
+    Gauss-Newton steps per texel from the averaged iterate (default 2; 0 skips them, as a
+    regulariser does, which the steps do not know), and the standard errors ``result.stderr`` / ``result.rel_stderr``
+    (maps; NaN where unseen).  A parameter whose relative standard error exceeds ``threshold``
+    in some seen texels raises an :class:`~hyde_bsdf.inverse.uncertainty.UnidentifiedParameterWarning`
+    naming it and the fraction of texels (also in ``result.warnings``).  ``noise``: the references'
+    noise standard deviation per observation (a number or 4 numbers, S0..S3) when known; otherwise
+    estimated from the residuals.
+
+    The steps, each its own function: :meth:`MapProblem.build` (observation set-up: checks, losses,
+    traverse keys, texel coverage), :func:`map_loss` (renders and the loss), :func:`map_step` (the
+    loss and its gradient, the frozen function), :class:`LogAdam` (the update in log values, the
+    learning-rate schedule, the average), :func:`map_uncertainty` (the information, the polish, the
+    standard errors and warnings).
     """
     import drjit as dr
     import mitsuba as mi
 
-    observations = list(observations)
-    if not observations:
-        raise ValueError("observations must hold at least one Observation")
-    fit = tuple(fit)
-    if not fit:
-        raise ValueError(f"fit must name at least one of {tuple(MAP_PARAMETERS)}")
-    for name in fit:
-        if name not in MAP_PARAMETERS:
-            raise ValueError(f"fit: unknown parameter {name!r}; use {', '.join(MAP_PARAMETERS)}")
-        if name not in start:
-            raise ValueError(f"start must give a value for every fitted parameter; missing {name!r}")
     if not (isinstance(iterations, int) and iterations >= 1):
         raise ValueError(f"iterations must be an integer >= 1, got {iterations!r}")
     if regularizer not in (None, "tv", "l2"):
         raise ValueError(f"regularizer must be None, 'tv' or 'l2', got {regularizer!r}")
     if not (math.isfinite(weight) and weight >= 0):
         raise ValueError(f"weight must be a finite number >= 0, got {weight!r}")
-    for o in observations:
-        ref = np.asarray(o.reference)
-        if ref.ndim != 3 or ref.shape[0] != 4:
-            raise ValueError(f"reference must have shape (4, H, W), got {ref.shape}")
-        W, H = o.scene.sensors()[int(o.sensor)].film().crop_size()
-        if ref.shape[1:] != (H, W):
-            raise ValueError(f"reference is {ref.shape[2]}x{ref.shape[1]} pixels but sensor {o.sensor}'s "
-                             f"film is {W}x{H}")
-        if not np.isfinite(ref).all():
-            raise ValueError("reference contains NaN or infinite pixels")
-    losses = [StokesLoss(o.reference, mask=_obs_mask(o), components=components) for o in observations]
-    wsum = float(sum(o.weight for o in observations))
-    if not wsum > 0:
-        raise ValueError("the observations' weights must sum to > 0")
-
-    scenes = []
-    for o in observations:
-        if all(o.scene is not s for s in scenes):
-            scenes.append(o.scene)
-    all_params = [mi.traverse(s) for s in scenes]
-    names = tuple(dict.fromkeys(list(fit) + [n for n in start if n not in fit]))
-    keys = [map_keys(p, names, prefix) for p in all_params]
-    shapes = {}
-    for name in names:
-        cur = all_params[0][keys[0][name]]
-        shapes[name] = tuple(cur.shape) if isinstance(cur, mi.TensorXf) else None
-
-    def as_value(name, v):
-        lo, hi = MAP_PARAMETERS[name][1]
-        if shapes[name] is None:
-            return mi.Float(float(np.clip(float(np.mean(v)), lo, hi)))
-        arr = np.broadcast_to(np.asarray(v, np.float64).reshape(shapes[name][:2] + (1,))
-                              if np.ndim(v) else np.asarray(v, np.float64), shapes[name])
-        return mi.TensorXf(np.clip(arr, lo, hi).astype(np.float32))
-
-    if seen is None:
-        map_shape = next((shapes[n][:2] for n in fit if shapes[n] is not None), None)
-        if map_shape is not None:
-            cover = sum(texel_coverage(o, map_shape, prefix) for o in observations)
-            seen = cover > 0
-
-    for name in names:
-        try:
-            value = as_value(name, start[name])
-        except ValueError:
-            raise ValueError(f"start[{name!r}] must be a number or an array of the texture's shape "
-                             f"{shapes[name][:2]}") from None
-        for p, k in zip(all_params, keys):
-            p[k[name]] = value
-    for p in all_params:
-        p.update()
-
-    # beta_2 = 0.9 (not Adam's 0.999): a texel's gradient falls by orders of magnitude as it
-    # converges, and a long memory of the early large gradients stalls it (measured: with 0.999 the
-    # alpha = 0.6 square of the validation map sat 11 % high after 60 iterations; with 0.9, < 1 %);
-    # beta_1 = 0.8: less momentum, less overshoot of the texels that move far
-    opt = mi.ad.Adam(lr=lr, beta_1=0.8, beta_2=0.9)
-    for name in fit:
-        opt[name] = dr.log(as_value(name, start[name]))
+    problem = MapProblem.build(observations, start, fit, components=components, prefix=prefix, seen=seen)
+    fit, seen, n_obs = problem.fit, problem.seen, len(problem.observations)
+    average_last = max(1, iterations // 4) if average_last is None else max(1, int(average_last))
+    adam = LogAdam(problem, start, lr, iterations, average_last)
     truth_np = {n: np.asarray(v, np.float64) for n, v in (truth or {}).items()}
-
-    def snapshot(name):
-        v = np.exp(np.asarray(opt[name], dtype=np.float64))
-        return v[..., 0] if shapes[name] is not None else float(v.ravel()[0])
-
-    scene_of = [next(i for i, s in enumerate(scenes) if s is o.scene) for o in observations]
-    channels = [film_channels(o.scene, o.sensor) for o in observations]
-
-    def step(scenes_in, values_in, seed0, tensors_in):
-        """Render every observation, the loss, and its gradient (into ``values_in``)."""
-        data = 0.0
-        for j, (o, fn) in enumerate(zip(observations, losses)):
-            S = render_stokes(scenes_in[scene_of[j]], o.sensor, spp, seed0 + j, params=all_params[scene_of[j]],
-                              names=channels[j])
-            data = data + (o.weight / wsum) * fn(S, tensors_in[j])
-        reg = dr.zeros(mi.Float, 1)
-        if regularizer is not None and weight > 0:
-            for name in fit:
-                if shapes[name] is not None:
-                    reg = reg + weight * smoothness(values_in[name], regularizer)
-        loss = data + reg
-        dr.backward(loss)
-        return loss, data, reg
-
+    step = map_step(problem, spp, regularizer, weight)
     # dr.freeze records the step's kernels once and replays them (no Python re-tracing of the
     # integrator and the BSDF per iteration); results equal the unfrozen step's
     step_fn = dr.freeze(step) if freeze else step
-
-    def set_values():
-        # the render differentiates with respect to the value itself (a leaf, so that a frozen
-        # step sees it as an input); the chain rule to log(value) is applied after the step
-        values = {}
-        for name in fit:
-            values[name] = dr.exp(dr.detach(opt[name]))
-            dr.enable_grad(values[name])
-        for p, k in zip(all_params, keys):
-            for name in fit:
-                p[k[name]] = values[name]
-            p.update()
-        return values
-    history, sums, n_avg = [], {}, 0
-    average_last = max(1, iterations // 4) if average_last is None else max(1, int(average_last))
+    tensors = [fn.tensors for fn in problem.losses]
+    history = []
     t0 = time.perf_counter()
     t_first = None
-    n_obs = len(observations)
     for it in range(iterations):
         t_it = time.perf_counter()
-        if it >= iterations // 2:
-            # geometric decay from lr (half-way) to lr/10 (last iteration)
-            span = max(1, iterations - 1 - iterations // 2)
-            opt.set_learning_rate(lr * 0.1 ** ((it - iterations // 2) / span))
-        for name in fit:
-            lo, hi = MAP_PARAMETERS[name][1]
-            opt[name] = dr.clip(opt[name], math.log(lo), math.log(hi))
         seed_it = dr.opaque(mi.UInt32, seed + 1 + it * n_obs)
         try:
-            values = set_values()
+            values = adam.values()
             if step_fn is not step:
                 # release what is pending first: arrays made from NumPy memory and waiting for
                 # the garbage collector are freed through host callbacks, which a recording
                 # cannot hold (Dr.Jit aborts the process)
                 gc.collect()
                 dr.sync_thread()
-            loss, data, reg = step_fn(scenes, values, seed_it, [fn.tensors for fn in losses])
+            loss, data, reg = step_fn(problem.scenes, values, seed_it, tensors)
         except RuntimeError as exc:
             if step_fn is step or it > 0:
                 raise
@@ -236,28 +393,20 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
             # run unfrozen, which gives the same results, only slower
             _log(f"dr.freeze could not record the step ({_first_line(exc)}); running unfrozen")
             step_fn = step
-            values = set_values()
-            loss, data, reg = step_fn(scenes, values, seed_it, [fn.tensors for fn in losses])
-        for name in fit:
-            dr.set_grad(opt[name], dr.grad(values[name]) * dr.detach(values[name]))
-        check_gradients({n: dr.grad(opt[n]) for n in fit}, it)
+            values = adam.values()
+            loss, data, reg = step_fn(problem.scenes, values, seed_it, tensors)
         row = {"iteration": it, "loss": float(np.asarray(loss).ravel()[0]),
                "data_loss": float(np.asarray(data).ravel()[0]),
                "regularizer": float(np.asarray(reg).ravel()[0])}
         if not math.isfinite(row["loss"]):
             raise FloatingPointError(f"the loss became {row['loss']} at iteration {it}")
-        current = {n: snapshot(n) for n in fit}
+        current = adam.step(it, values)
         for n in truth_np:
             if n in current and np.ndim(current[n]) == 2:
                 rel = np.abs(current[n] / truth_np[n] - 1.0)
                 rel = rel[seen] if seen is not None else rel.ravel()
                 row[f"{n}_median_error"] = float(np.median(rel))
                 row[f"{n}_p90_error"] = float(np.percentile(rel, 90))
-        opt.step()
-        if it >= iterations - average_last:
-            for n in fit:
-                sums[n] = sums.get(n, 0.0) + current[n]
-            n_avg += 1
         dt = time.perf_counter() - t_it
         if t_first is None:
             t_first = dt
@@ -267,15 +416,27 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
             err = "".join(f"  {n} median err {100 * row[n + '_median_error']:.1f} %" for n in fit
                           if n + "_median_error" in row)
             _log(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.4e}{err}  ({row['seconds']:.1f} s)")
-    final = {n: sums[n] / n_avg for n in fit}
-    for n in names:
+    final = adam.average()
+    adam_final = dict(final)
+    unc = None
+    if uncertainty:
+        if progress:
+            _log(f"uncertainty: forward-mode information of {', '.join(fit)} at {uncertainty_spp} spp"
+                 + (f", {polish} Gauss-Newton step(s)" if polish and regularizer is None else ""))
+        final, unc = map_uncertainty(problem, final, spp=uncertainty_spp, seed=seed + 1 + iterations * n_obs,
+                                     noise=noise, polish=polish if (regularizer is None or weight == 0) else 0,
+                                     threshold=threshold)
+    for n in problem.names:
         if n not in fit:
             final[n] = np.asarray(start[n], np.float64) if np.ndim(start[n]) else float(start[n])
     per_it = ((history[-1]["seconds"] - history[0]["seconds"]) / (len(history) - 1)
               if len(history) > 1 else float("nan"))
-    return MapInversionResult(fitted=fit, final=final, start=dict(start), components=components, seen=seen,
-                              truth=truth, history=history, seconds_per_iteration=per_it,
-                              first_iteration_seconds=t_first)
-
-
-# the SVBRDF scene: a textured plane, three views in one batch sensor, one point light per scene
+    res = MapInversionResult(fitted=fit, final=final, start=dict(start), components=components, seen=seen,
+                             truth=truth, history=history, seconds_per_iteration=per_it,
+                             first_iteration_seconds=t_first, adam_final=adam_final, uncertainty=unc)
+    if unc is not None:
+        res.stderr, res.rel_stderr = unc.stderr, unc.rel_stderr
+        found = identification_warnings(unc.rel_stderr, seen, threshold)
+        res.warnings = [m for _, m in found.values()]
+        warn_unidentified(found)
+    return res

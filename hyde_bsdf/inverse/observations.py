@@ -15,17 +15,20 @@ from hyde_bsdf.inverse.loss import interior_mask, stokes_images
 from hyde_bsdf.inverse.scalar import RANGES, _unique_key
 
 __all__ = ["MAP_PARAMETERS", "MAP_VARIANT", "map_keys", "film_channels", "render_stokes", "render_stokes_np",
-           "Observation", "texel_coverage", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS"]
+           "Observation", "texel_coverage", "pixel_texels", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS"]
 
 
 #: texture-valued parameters: name -> (traverse-key suffixes, accepted range).  ``alpha`` is the
 #: Beckmann alpha (roughconductor's meaning and key; hyde's ``alpha`` texture), ``rms_slope`` hyde's
-#: own roughness texture (alpha = sqrt(2) rms_slope), ``eta``, ``k`` the index (Mitsuba's n + ik).
+#: own roughness texture (alpha = sqrt(2) rms_slope), ``eta``, ``k`` the index (Mitsuba's n + ik),
+#: ``specular_reflectance`` the plugin's multiplier of the whole BSDF (an unknown per-texel scale).
 MAP_PARAMETERS = {
     "alpha": ((".alpha.data", ".alpha.value"), (SQRT2 * 0.011, SQRT2 * 2.9)),
     "rms_slope": ((".rms_slope.data", ".rms_slope.value", ".rms_slope"), RANGES["rms_slope"]),
     "eta": ((".eta.data", ".eta.value"), RANGES["eta"]),
     "k": ((".k.data", ".k.value"), (1e-4, RANGES["k"][1])),
+    # a multiplier of the whole BSDF: an unknown albedo or an uncalibrated light, per texel
+    "specular_reflectance": ((".specular_reflectance.data", ".specular_reflectance.value"), (1e-3, 1e3)),
 }
 #: the variant of the SVBRDF validation, tests and benchmark: monochromatic polarized.  The
 #: scenes there have white lights and a wavelength-independent index, so one wavelength holds
@@ -104,7 +107,15 @@ def texel_coverage(obs: Observation, shape, prefix: str | None = None, sub: int 
     lookup does (column = floor(u W), row = floor(v H); ``to_uv`` is assumed identity).
     Returns counts (rows, columns); a texel with 0 is never seen, so it carries no information.
     """
-    import drjit as dr
+    pixel, texel = pixel_texels(obs, shape, prefix, sub)
+    return np.bincount(texel, minlength=int(shape[0]) * int(shape[1])).reshape(tuple(shape))
+
+
+def pixel_texels(obs: Observation, shape, prefix: str | None = None, sub: int = 4):
+    """The (pixel, texel) pair of every camera sub-sample of :func:`texel_coverage` that hits the target
+    shape: two int arrays, pixel = row * W + column of the film, texel = row * columns + column of the
+    map.  ``sub`` x ``sub`` sub-samples per masked pixel; a pixel's share of texel t is its count of
+    pairs (pixel, t) / sub**2 (what :mod:`hyde_bsdf.inverse.uncertainty` uses)."""
     import mitsuba as mi
 
     scene = obs.scene
@@ -116,6 +127,7 @@ def texel_coverage(obs: Observation, shape, prefix: str | None = None, sub: int 
     ox, oy = np.meshgrid(o, o)
     px = (xs[:, None] + ox.ravel()[None, :]).ravel() / W
     py = (ys[:, None] + oy.ravel()[None, :]).ravel() / H
+    pix = np.repeat(ys * W + xs, sub * sub)
     target = _target_shape(scene, prefix)
     # the film positions go in as Python lists: Dr.Jit then owns copies.  Arrays made straight from
     # NumPy memory stay referenced by the sensor's state and are released later through a host
@@ -125,12 +137,10 @@ def texel_coverage(obs: Observation, shape, prefix: str | None = None, sub: int 
     si = scene.ray_intersect(ray)
     hit = np.array(si.is_valid() & (si.shape == mi.ShapePtr(target)), dtype=bool)
     uv = np.array([np.array(si.uv.x, dtype=np.float64), np.array(si.uv.y, dtype=np.float64)])
-    rows, cols = shape
+    rows, cols = int(shape[0]), int(shape[1])
     c = np.clip(np.floor(uv[0][hit] * cols).astype(int), 0, cols - 1)
     r = np.clip(np.floor(uv[1][hit] * rows).astype(int), 0, rows - 1)
-    counts = np.zeros((rows, cols), int)
-    np.add.at(counts, (r, c), 1)
-    return counts
+    return pix[hit], r * cols + c
 
 
 def _target_shape(scene, prefix):
@@ -185,18 +195,21 @@ LIGHTS = ((60.0, 60.0, 5.0), (240.0, 60.0, 5.0))
 
 
 def plane_scene_dict(alpha, *, bsdf: str = "hyde", eta: float = 1.5, k: float = 3.0, light: int = 0,
-                     res: int = 96, spp: int = 4, diffuse: str = "paper", views=VIEW_AZIMUTHS) -> dict:
+                     res: int = 96, spp: int = 4, diffuse: str = "paper", views=VIEW_AZIMUTHS,
+                     shadowing: str | None = None) -> dict:
     """A 2 x 2 plane (shape id ``plane``, UV = (x + 1, y + 1) / 2) with the roughness map ``alpha``
     (Beckmann alpha, rows along v, nearest-neighbour lookup) and a constant index, seen by
     ``len(views)`` cameras side by side in one ``batch`` sensor (film ``len(views) * res`` x ``res``),
-    lit by point light ``LIGHTS[light]``.  ``bsdf``: ``hyde`` or ``roughconductor`` (Beckmann,
-    the same alpha, eta, k).  Direct light only (``stokes`` around ``path``, max_depth 2)."""
+    lit by point light ``LIGHTS[light]``.  ``bsdf``: ``hyde`` (``shadowing`` passed on when given) or
+    ``roughconductor`` (Beckmann, the same alpha, eta, k).  Direct light only (``stokes`` around ``path``, max_depth 2)."""
     import mitsuba as mi
 
     tex = {"type": "bitmap", "bitmap": mi.Bitmap(np.asarray(alpha, np.float32)[..., None]), "raw": True,
            "filter_type": "nearest"}
     if bsdf == "hyde":
         material = {"type": "hyde", "alpha": tex, "eta": float(eta), "k": float(k), "diffuse": diffuse}
+        if shadowing is not None:
+            material["shadowing"] = shadowing
     elif bsdf == "roughconductor":
         material = {"type": "roughconductor", "distribution": "beckmann", "alpha": tex,
                     "eta": float(eta), "k": float(k)}

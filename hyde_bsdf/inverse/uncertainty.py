@@ -1,0 +1,228 @@
+"""Per-texel standard errors of fitted parameter maps from the Gauss-Newton (Fisher) information of
+the Stokes loss, a Gauss-Newton polishing step, and the warning for parameters the data do not
+determine.
+
+Model.  The fit minimises L(theta) = sum_i w_i (S_i(theta) - R_i)^2 over pixels i and Stokes
+components (:class:`~hyde_bsdf.inverse.loss.StokesLoss`: w = mask / (pixels x norm) per component and
+observation).  With the reference R_i = S_i(theta*) + e_i, Var(e_i) = sigma_i^2, the linearised
+least-squares estimate has the sandwich covariance
+
+    Cov(theta_hat) = A^-1 B A^-1,   A = sum_i w_i J_i J_i^T,   B = sum_i w_i^2 sigma_i^2 J_i J_i^T
+
+(A: the Gauss-Newton matrix of the loss; with w_i = 1 / sigma_i^2 it is the Fisher information and
+Cov = A^-1).  J_i = dS_i / d log(theta): parameters are log values, so the standard errors are
+relative.  With nearest-neighbour textures a pixel depends only on the texels its footprint covers.
+One forward-mode AD pass per parameter -- tangent theta (that is, d log theta = 1) on every texel at
+once -- gives sum_t dS_i / d log theta_t, which for a pixel whose footprint lies inside one texel
+(all SUB x SUB camera sub-samples of :func:`~hyde_bsdf.inverse.observations.pixel_texels` in it) is
+exactly dS_i / d log theta_t.  The information and the polishing steps use those *pure* pixels only:
+the information is then exactly block-diagonal per texel (P x P blocks for P fitted maps), and the
+standard errors are slightly conservative (the pixels straddling texel edges, which the fit also
+uses, are left out).  Splitting a straddling pixel's derivative by its sub-sample shares instead was
+measured wrong where neighbours differ (a sharp alpha edge 0.12 | 0.48: pulls of -8 to -18 at the
+edge texels), so it is not done.  Texels need a few pixels across in some view to get any.
+
+Noise.  ``noise`` (per observation, the standard deviation of each Stokes component of the
+reference) if the caller knows it; otherwise sigma^2 is estimated per observation and component from
+the residuals at the solution, mean(r^2) x n / (n - p) over the masked pixels, with the Monte-Carlo
+variance of the rendering itself (from a second render with another seed) subtracted (reported as
+``noise``).  The polishing step uses the residual of a render with its own sampling noise, so B
+uses the reference's variance plus that render's.
+
+Polishing.  Gauss-Newton steps per texel, d = -(A + 1e-6 tr(A)/P) ^-1 g (g = sum w J r, half the loss
+gradient in log parameters; each component clipped to +-``max_step``), move the Adam iterate (which
+still carries the jitter of its few-sample renders, and lags where a texel had far to go) to the
+least-squares solution that the covariance describes.
+
+Identifiability.  A parameter is *not determined* in a texel when its relative standard error
+exceeds :data:`STDERR_THRESHOLD` (10 %: the data then fix it no better than a guess would).
+:func:`identification_warnings` names the parameter and the fraction of seen texels affected, and
+:func:`~hyde_bsdf.inverse.maps.invert_maps` issues them as :class:`UnidentifiedParameterWarning`.
+
+May import: ``hyde_bsdf.inverse.observations``, ``hyde_bsdf.inverse.loss``.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hyde_bsdf.inverse.observations import pixel_texels, render_stokes
+
+__all__ = ["STDERR_THRESHOLD", "UnidentifiedParameterWarning", "Uncertainty", "stokes_tangents",
+           "information_blocks", "standard_errors", "gauss_newton_step", "identification_warnings"]
+
+#: relative standard error above which a parameter counts as not determined in a texel
+STDERR_THRESHOLD = 0.10
+#: camera sub-samples per pixel side of the pixel -> texel shares
+SUB = 4
+
+
+class UnidentifiedParameterWarning(UserWarning):
+    """A fitted parameter map that the data do not determine in some texels."""
+
+
+@dataclass
+class Uncertainty:
+    """Per-texel standard errors of fitted maps (NaN where no image sees the texel)."""
+
+    names: tuple
+    stderr: dict                          # name -> (rows, cols) absolute standard error
+    rel_stderr: dict                      # name -> (rows, cols) standard error of log(value)
+    A: np.ndarray                         # (texels, P, P) Gauss-Newton matrix (log parameters)
+    B: np.ndarray                         # (texels, P, P) noise term of the sandwich
+    gradient: np.ndarray                  # (texels, P) loss gradient (log parameters)
+    noise: list = field(default_factory=list)        # per observation: (4,) reference noise std
+    unidentified: dict = field(default_factory=dict)  # name -> fraction of seen texels above threshold
+    threshold: float = STDERR_THRESHOLD
+
+
+def stokes_tangents(scene, params, keys: dict, names, sensor: int, spp: int, seed: int, channels=None):
+    """Stokes images S (4, H, W) and their tangents dS/dlog(theta) (P, 4, H, W) for the map
+    parameters ``names`` (``keys[name]``: the traverse key of its texture data), one forward-mode
+    pass each with the same ``seed`` (so every pass renders the same primal samples)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    tangents, S = [], None
+    for name in names:
+        x = mi.TensorXf(dr.detach(params[keys[name]]))
+        dr.enable_grad(x)
+        params[keys[name]] = x
+        params.update()
+        img = render_stokes(scene, sensor, spp, seed, params=params, names=channels)
+        dr.set_grad(x, dr.detach(x))          # d theta = theta: a unit step in log(theta) on every texel
+        dr.forward_from(x)
+        tangents.append(np.array([np.asarray(dr.grad(s), dtype=np.float64) for s in img]))
+        if S is None:
+            S = np.array([np.asarray(dr.detach(s), dtype=np.float64) for s in img])
+        params[keys[name]] = dr.detach(x)
+        params.update()
+    return S, np.array(tangents)
+
+
+def _weights(loss, obs_weight: float):
+    """Per component (4,) weight maps of a StokesLoss: w = obs_weight * mask / (pixels * norm)."""
+    m = loss.mask_np.astype(np.float64) / loss.mask_np.size
+    w = [obs_weight * m / loss.norm0]
+    for _ in range(3):
+        w.append(obs_weight * m / loss.normp if loss.components == "stokes" else 0.0 * m)
+    return np.array(w)
+
+
+def information_blocks(problem, names, *, spp: int = 16, seed: int = 0, noise=None):
+    """Accumulate the per-texel blocks A, B (texels, P, P) and g = sum_i w_i J_i r_i (texels, P; half the
+    loss gradient, r = S - R) over the
+    observations of a :class:`~hyde_bsdf.inverse.maps.MapProblem` at its current values.
+
+    Returns (A, B, g, noise_std per observation, number of data values n)."""
+    rows, cols = problem.map_shape
+    T, P = rows * cols, len(names)
+    A = np.zeros((T, P, P))
+    B = np.zeros((T, P, P))
+    g = np.zeros((T, P))
+    noise_out = []
+    n_data = 0
+    for j, (o, loss) in enumerate(zip(problem.observations, problem.losses)):
+        si = problem.scene_of[j]
+        scene, params, keys = problem.scenes[si], problem.all_params[si], problem.keys[si]
+        S, J = stokes_tangents(scene, params, keys, names, o.sensor, spp, seed + 2 * j, problem.channels[j])
+        S2 = np.array([np.asarray(s, dtype=np.float64) for s in
+                       render_stokes(scene, o.sensor, spp, seed + 2 * j + 1, names=problem.channels[j])])
+        R = loss.ref_np
+        mask = loss.mask_np
+        r = S - R
+        comps = 4 if loss.components == "stokes" else 1
+        n_pix = int(mask.sum())
+        mc_var = np.array([np.mean((S[c] - S2[c])[mask] ** 2) / 2.0 for c in range(4)])
+        res_var = np.array([np.mean(r[c][mask] ** 2) for c in range(4)])
+        if noise is not None:
+            ref_var = np.broadcast_to(np.asarray(noise[j], np.float64) ** 2, (4,)).copy()
+        else:
+            ref_var = np.maximum(res_var - mc_var, 0.0)
+        noise_out.append(np.sqrt(ref_var))
+        total_var = ref_var + mc_var           # the polishing render's own noise enters the estimate
+        n_data += n_pix * comps
+        w = _weights(loss, problem.weights[j])
+        pix, tex = pixel_texels(o, (rows, cols), problem.prefix, sub=SUB)
+        key, counts = np.unique(pix.astype(np.int64) * T + tex, return_counts=True)
+        pure = counts == SUB * SUB            # every sub-sample of the pixel lands in this one texel
+        p_i, t_i = key[pure] // T, key[pure] % T
+        frac = np.ones(p_i.size)
+        H, W = mask.shape
+        Jf = J.reshape(P, 4, H * W)[:, :, p_i]            # (P, 4, pairs)
+        rf = r.reshape(4, H * W)[:, p_i]                  # (4, pairs)
+        wf = w.reshape(4, H * W)[:, p_i]                  # (4, pairs)
+        for c in range(comps):
+            jc = Jf[:, c, :] * frac[None, :]              # (P, pairs): d S_i / d log theta_t
+            outer = np.einsum("ak,bk->kab", jc, jc)
+            np.add.at(A, t_i, wf[c][:, None, None] * outer)
+            np.add.at(B, t_i, (wf[c] ** 2 * total_var[c])[:, None, None] * outer)
+            np.add.at(g, t_i, (wf[c] * rf[c])[:, None] * jc.T)
+    return A, B, g, noise_out, n_data
+
+
+def standard_errors(A, B, seen=None, dof=None):
+    """Relative standard errors (texels, P): sqrt(diag(A^-1 B A^-1)); inf where A is singular.
+
+    ``dof``: (n, p) -- B is scaled by n / (n - p) (residual degrees of freedom)."""
+    T, P = A.shape[0], A.shape[1]
+    out = np.full((T, P), np.nan)
+    scale = 1.0
+    if dof is not None and dof[0] > dof[1]:
+        scale = dof[0] / (dof[0] - dof[1])
+    idx = range(T) if seen is None else np.flatnonzero(np.asarray(seen).ravel())
+    for t in idx:
+        a = A[t]
+        tr = np.trace(a)
+        if not tr > 0:
+            out[t] = np.inf
+            continue
+        ev, V = np.linalg.eigh(a)
+        good = ev > 1e-10 * ev.max()
+        inv = (V[:, good] / ev[good]) @ V[:, good].T
+        cov = inv @ (B[t] * scale) @ inv
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        # a direction with no information: the parameters in it are not determined at all
+        if not good.all():
+            weak = np.abs(V[:, ~good]).max(axis=1) > 1e-3
+            se = np.where(weak, np.inf, se)
+        out[t] = se
+    return out
+
+
+def gauss_newton_step(A, g, seen=None, max_step: float = 0.1):
+    """Per texel d = -(A + 1e-6 tr(A)/P I)^-1 g (log parameters; g = sum w J r is half the loss gradient,
+    A half its Gauss-Newton Hessian), each component clipped to +-max_step."""
+    T, P = g.shape
+    d = np.zeros((T, P))
+    idx = range(T) if seen is None else np.flatnonzero(np.asarray(seen).ravel())
+    for t in idx:
+        tr = np.trace(A[t])
+        if not tr > 0:
+            continue
+        d[t] = -np.linalg.solve(A[t] + 1e-6 * tr / P * np.eye(P), g[t])
+    return np.clip(d, -max_step, max_step)
+
+
+def identification_warnings(rel_stderr: dict, seen, threshold: float = STDERR_THRESHOLD) -> dict:
+    """{name: (fraction of seen texels with relative standard error > threshold, message)} for every
+    parameter where the fraction is > 0."""
+    out = {}
+    seen = np.ones_like(next(iter(rel_stderr.values())), bool) if seen is None else np.asarray(seen, bool)
+    n = int(seen.sum())
+    for name, rel in rel_stderr.items():
+        bad = ~(np.asarray(rel)[seen] <= threshold)
+        frac = float(bad.mean()) if n else 0.0
+        if frac > 0:
+            med = float(np.median(np.asarray(rel)[seen]))
+            out[name] = (frac, f"{name} is not determined by the data in {100 * frac:.0f} % of the {n} seen texels "
+                               f"(relative standard error > {100 * threshold:g} %; median {100 * med:.3g} %): "
+                               f"its values there are not measurements")
+    return out
+
+
+def warn_unidentified(found: dict) -> None:
+    for name, (frac, message) in found.items():
+        warnings.warn(message, UnidentifiedParameterWarning, stacklevel=3)
