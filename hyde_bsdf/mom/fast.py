@@ -54,7 +54,10 @@ range, L_s the block length), so a very rough surface gets long blocks, and when
 block would exceed a third of the partition the fast solver declines
 (:class:`FastSolverUnsuitable`).  A lossy interior (a metal) is banded and needs no far
 part; a lossless or weakly lossy one (glass) gets its own spectral far part with
-k1 = k0 eta.
+k1 = k0 eta.  The contour is the lossless saddle's (45 deg): for an interior that is
+neither (a decay length longer than a block and a loss angle arg(eta) of tens of degrees,
+e.g. eta = 0.5 - 0.3 j) no rule reaches the tolerance and the partition goes to the dense
+LU with that reason (rotating the contour by arg(eta)/2 would take it).
 """
 from __future__ import annotations
 
