@@ -169,9 +169,6 @@ class _Blocks:
         self.of = np.repeat(np.arange(self.nb), np.diff(self.bounds))   # block of each sample
         self.width = int(np.max(np.diff(self.bounds)))
 
-    def sl(self, j):
-        return slice(self.bounds[j], self.bounds[j + 1])
-
 
 # ---------------------------------------------------------------------------
 # The strong part: the dense matrix's entries in the block band
@@ -304,7 +301,6 @@ def _direction_factors(x, y_factor, fp, dx, k, bounds, cphi, sphi, w, need_S, ne
     folded as in the dense path) and prop [nb, Q] (exp(-j k L cos phi) across each block).
     ``y_factor`` is exp(j k y sin phi) [N, Q] (shared by both directions).
     """
-    n = x.size
     nb = bounds.size - 1
     of = np.repeat(np.arange(nb), np.diff(bounds))
     edges = np.append(x[bounds[:-1]] - 0.5 * dx, x[-1] + 0.5 * dx)

@@ -178,7 +178,6 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.special
 
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast, spectral_rule
