@@ -29,6 +29,10 @@ Measured 2026-12-01 on the shared 2-core machine (load 2-4), 80 px per view: fro
 0.176 s vs roughconductor 0.169 s (ratio 1.04; diffuse "none" 1.00; 7 rounds x 6); unfrozen,
 0.602 vs 0.529 s (1.14; diffuse "none" 1.04; 5 rounds x 6).  Under heavy load (6 on 2 cores) the
 ratios scattered 0.8-1.3 between runs: compare only the ratios of one run.
+2026-12-02 (load ~7), 48 px per view, frozen, 3 rounds x 4: hyde 0.902 s (1.31), diffuse "none"
+1.11, smith + diffuse "none" (the model roughconductor evaluates) 1.13, roughconductor 0.689 s.
+The diffuse term (its DHR texture lookup and M00) is the ~0.2 between hyde and diffuse "none";
+the shadowing choice costs nothing measurable.
 
     python benchmarks/bench_inverse.py [--res 80] [--rounds 7] [--iterations 6] [--variant V] [--csv F]
 """

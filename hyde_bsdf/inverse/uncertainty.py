@@ -22,8 +22,8 @@ uses, are left out).  Splitting a straddling pixel's derivative by its sub-sampl
 measured wrong where neighbours differ (a sharp alpha edge 0.12 | 0.48: pulls of -8 to -18 at the
 edge texels), so it is not done.  Texels need a few pixels across in some view to get any.
 
-Noise.  ``noise`` (per observation, the standard deviation of each Stokes component of the
-reference) if the caller knows it; otherwise sigma^2 is estimated per observation and component from
+Noise.  ``noise`` (the standard deviation of the reference's Stokes components: one number, or per
+observation a number or 4 numbers S0..S3) if the caller knows it; otherwise sigma^2 is estimated per observation and component from
 the residuals at the solution, mean(r^2) x n / (n - p) over the masked pixels, with the Monte-Carlo
 variance of the rendering itself (from a second render with another seed) subtracted (reported as
 ``noise``).  The polishing step uses the residual of a render with its own sampling noise, so B
@@ -138,7 +138,8 @@ def information_blocks(problem, names, *, spp: int = 16, seed: int = 0, noise=No
         mc_var = np.array([np.mean((S[c] - S2[c])[mask] ** 2) / 2.0 for c in range(4)])
         res_var = np.array([np.mean(r[c][mask] ** 2) for c in range(4)])
         if noise is not None:
-            ref_var = np.broadcast_to(np.asarray(noise[j], np.float64) ** 2, (4,)).copy()
+            nj = noise if np.ndim(noise) == 0 else noise[j]          # one number for all, or one per observation
+            ref_var = np.broadcast_to(np.asarray(nj, np.float64) ** 2, (4,)).copy()
         else:
             ref_var = np.maximum(res_var - mc_var, 0.0)
         noise_out.append(np.sqrt(ref_var))
