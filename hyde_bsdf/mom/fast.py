@@ -54,10 +54,10 @@ range, L_s the block length), so a very rough surface gets long blocks, and when
 block would exceed a third of the partition the fast solver declines
 (:class:`FastSolverUnsuitable`).  A lossy interior (a metal) is banded and needs no far
 part; a lossless or weakly lossy one (glass) gets its own spectral far part with
-k1 = k0 eta.  The contour is the lossless saddle's (45 deg): for an interior that is
-neither (a decay length longer than a block and a loss angle arg(eta) of tens of degrees,
-e.g. eta = 0.5 - 0.3 j) no rule reaches the tolerance and the partition goes to the dense
-LU with that reason (rotating the contour by arg(eta)/2 would take it).
+k1 = k0 eta, on the contour turned by -arg(k1)/2 (the steepest-descent line of a lossy
+saddle); a rule whose plane waves would grow along x, or that does not reach its tolerance
+(eta = 0.5 - 0.3j on a surface with a 4.5-lambda height range stalls at 1.6e-4: the turned
+line's truncation), is refused and the partition goes to the dense LU with the reason.
 """
 from __future__ import annotations
 
@@ -94,14 +94,18 @@ class FastSolverUnsuitable(ValueError):
 # The plane-wave (spectral) representation of the Green's function
 # ---------------------------------------------------------------------------
 
-def _rule_nodes(h0, h_far, hu=0.1):
-    """Nodes phi = s (1 + j) and weights of d phi, s = s1 asinh((c / s1) sinh u) on a uniform u grid.
+def _rule_nodes(h0, h_far, hu=0.1, tilt=0.0):
+    """Nodes phi = s (1 + j) e^{j tilt} and weights of d phi, s = s1 asinh((c / s1) sinh u) on a uniform u grid.
 
     Step in s about h0 near s = 0, h_far for |s| >> h_far / hu (analytic map: the trapezoid
-    rule keeps its exponential convergence).
+    rule keeps its exponential convergence); |Re phi| <= pi/2.  ``tilt`` turns the line
+    through the saddle by -arg(k)/2 for a lossy k (the steepest-descent direction).
     """
+    direction = (1 + 1j) if tilt == 0.0 else math.sqrt(2.0) * complex(math.cos(math.pi / 4 + tilt),
+                                                                        math.sin(math.pi / 4 + tilt))
+    s_end = 0.5 * math.pi / direction.real
     c, s1 = h0 / hu, h_far / hu
-    U = math.asinh((s1 / c) * math.sinh(0.5 * math.pi / s1)) if 0.5 * math.pi / s1 < 700 else 700.0
+    U = math.asinh((s1 / c) * math.sinh(s_end / s1)) if s_end / s1 < 700 else 700.0
     n = int(math.ceil(U / hu))
     u = np.linspace(-U, U, 2 * n + 1)
     du = u[1] - u[0]
@@ -109,8 +113,8 @@ def _rule_nodes(h0, h_far, hu=0.1):
     s = s1 * np.arcsinh((c / s1) * sh)
     with np.errstate(over="ignore"):
         ds = c * np.cosh(u) / np.sqrt(1.0 + ((c / s1) * sh) ** 2)
-    keep = np.abs(s) <= 0.5 * math.pi
-    return (s[keep] * (1 + 1j)), (ds[keep] * du * (1 + 1j))
+    keep = np.abs(s) <= s_end
+    return (s[keep] * direction), (ds[keep] * du * direction)
 
 
 def _rule_error(phi, w, k, near_wl, length_wl, height_wl):
@@ -141,9 +145,13 @@ def spectral_rule(k, near_wl, length_wl, height_wl, tol=1e-7):
     h0 = 0.6 / math.sqrt(kk * max(length_wl, near_wl))
     h_far = min(0.06, 1.0 / (kk * max(height_wl, 0.5)))
     h0 = min(h0, h_far)
+    tilt = max(0.0, -0.5 * math.atan2(complex(k).imag, complex(k).real))   # a lossy k turns the saddle
     err = math.inf
     for _ in range(10):
-        phi, w = _rule_nodes(h0, h_far)
+        phi, w = _rule_nodes(h0, h_far, tilt=tilt)
+        if np.any((-1j * k * np.cos(phi)).real > 1e-12):
+            raise FastSolverUnsuitable(f"the plane waves of k={k} grow along x on the contour (tilt "
+                                       f"{math.degrees(tilt):.1f} deg)")
         err = _rule_error(phi, w, k, near_wl, length_wl, height_wl)
         if err <= tol:
             return phi, w
