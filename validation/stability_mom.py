@@ -60,7 +60,7 @@ def validate(outdir="out/validation", quick=False):
     ppws = [1, 1.5, 2, 3, 4, 5, 6, 8, 10] if quick else [1, 1.5, 2, 2.5, 3, 4, 5, 6, 8, 10, 15, 20]
     angles = [0, 30, 60, 75, 85, 89.5] if quick else [0, 15, 30, 45, 60, 70, 75, 80, 85, 88, 89.5]
     lengths = [10, 25, 50, 75] if quick else [10, 15, 25, 50, 75, 150]
-    fast_slopes = [0.3, 1.0, 3.0] if quick else [0.1, 0.3, 0.6, 1.0, 1.5, 2.0, 3.0, 5.0]
+    fast_slopes = [0.3, 1.0] if quick else [0.1, 0.3, 0.6, 1.0, 1.5, 2.0, 3.0, 5.0]
     fast_angles = [30, 85] if quick else [0, 30, 60, 75, 80, 85, 88, 89.5]
     sweeps = [("points per wavelength (theta_i = 30 deg)", ppws, lambda v: classify(450.0, 6, 30.0, v)),
               ("theta_i (deg), 10 pts/lambda", angles, lambda v: classify(450.0, 6, v, 10)),
