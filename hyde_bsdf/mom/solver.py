@@ -495,13 +495,13 @@ def _radiate(task, fields, out):
         out["absorbed_" + pol] = np.zeros(n_ti) if eta is None else absorbed_flux(u, v, win, dx)
         Us.append(np.zeros((x.size, n_ti), complex) if u is None else u * win[:, None])
         Vs.append(np.zeros((x.size, n_ti), complex) if v is None else v * win[:, None])
-    # one far-field pass for all polarisations (the kernel e^{jk(x sin + y cos)} is shared)
+    # one far-field pass for all polarisations and both angle grids (the kernel e^{jk(x sin + y cos)} and
+    # the segments' Fourier coefficients are shared; a PEC's zero u or v columns are skipped)
     U, V = np.hstack(Us), np.hstack(Vs)
     if eta is None:
         U = U if "p" in pols else None
         V = V if "s" in pols else None
-    F = far_field_uv(x, y, fp, dx, U, V, task["theta_r"])
-    Ff = far_field_uv(x, y, fp, dx, U, V, task["theta_fine"])
+    F, Ff = far_field_uv(x, y, fp, dx, U, V, [task["theta_r"], task["theta_fine"]])
     for i, pol in enumerate(pols):
         out["F_" + pol] = F[i * n_ti:(i + 1) * n_ti]
         out["Ffine_" + pol] = Ff[i * n_ti:(i + 1) * n_ti]
