@@ -124,8 +124,8 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
              spp_ref=512, res=64):
     """Run parts A and B; write the PNG/CSV files; return the report's checks.
 
-    ``quick`` (the report's quick mode, ~30 s): part A at 32 x 32 px with the Stokes loss only
-    (300 iterations, learning rate 0.1), part B without the two 1000-iteration runs (landscape 5 x 5, the valley
+    ``quick`` (the report's quick mode, ~25 s): part A at 32 x 32 px with the Stokes loss only
+    (180 iterations, learning rate 0.12), part B without the two 1000-iteration runs (landscape 5 x 5, the valley
     profile and the end-point losses at the truth only).
     """
     out = Path(outdir)
@@ -133,7 +133,7 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
     it, itd, grid_n = iterations, iterations_directional, 15
     runs_a, runs_b, lr_a = ("stokes", "s0"), ("stokes", "s0"), 0.05
     if quick:
-        it, res, grid_n, runs_a, runs_b, lr_a = 300, 32, 5, ("stokes",), (), 0.1
+        it, res, grid_n, runs_a, runs_b, lr_a = 180, 32, 5, ("stokes",), (), 0.12
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -299,7 +299,7 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--spp-ref", type=int, default=512)
     ap.add_argument("--res", type=int, default=64)
-    ap.add_argument("--quick", action="store_true", help="the report's quick mode (~30 s)")
+    ap.add_argument("--quick", action="store_true", help="the report's quick mode (~25 s)")
     args = ap.parse_args(argv)
     checks = validate(args.outdir, quick=args.quick, iterations=args.iterations,
                       iterations_directional=args.iterations_directional, spp=args.spp, spp_ref=args.spp_ref,
