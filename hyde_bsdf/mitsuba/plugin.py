@@ -712,6 +712,9 @@ def _make_class():
 
 
 _CLASSES: dict = {}
+#: variants in which ``hyde`` is registered in this process (a repeated ``register()`` skips them:
+#: switching through every variant to register again cost ~1 s per call)
+_REGISTERED: set = set()
 
 
 def plugin_class():
@@ -748,6 +751,9 @@ def register(variant: str | None = None) -> list[str]:
     done = []
     try:
         for v in targets:
+            if v in _REGISTERED:        # Mitsuba keeps a registration for the process: no variant switch
+                done.append(v)
+                continue
             try:
                 if mi.variant() != v:
                     mi.set_variant(v)
@@ -758,6 +764,7 @@ def register(variant: str | None = None) -> list[str]:
                 continue
             cls = plugin_class()
             mi.register_bsdf("hyde", lambda props, cls=cls: cls(props))
+            _REGISTERED.add(v)
             done.append(v)
     finally:
         if current is not None and mi.variant() != current:
