@@ -264,14 +264,17 @@ def _band_fill(x, y, fp, fpp, dx, k, bounds, half, need_S, need_D):
     reg = np.array([j for j in range(2, nb - 2) if lens[j - 1] == lens[j] == lens[j + 1] == bsz], dtype=int)
     if reg.size:
         i = np.arange(bsz)
-        m = bounds[reg][:, None, None] + i[None, :, None]                         # [nr, b, 1]
-        cell = (bounds[reg - 1] - 1)[:, None, None] + np.arange(3 * bsz + 2)[None, None, :]
-        ws, wd = weights(m, cell)
         t = np.arange(3 * bsz)
         bcol = (t[None, :] - bsz - i[:, None] + half)[None]                      # [1, b, 3b]
-        for M, wts in ((S, ws), (D, wd)):
-            if M is not None:
-                M[m, bcol] = spread(wts)[:, :, 2:2 + 3 * bsz]
+        per = max(1, 65536 // (bsz * (3 * bsz + 2)))                             # blocks at a time (cache-sized)
+        for g0 in range(0, reg.size, per):
+            grp = reg[g0:g0 + per]
+            m = bounds[grp][:, None, None] + i[None, :, None]                     # [nr, b, 1]
+            cell = (bounds[grp - 1] - 1)[:, None, None] + np.arange(3 * bsz + 2)[None, None, :]
+            ws, wd = weights(m, cell)
+            for M, wts in ((S, ws), (D, wd)):
+                if M is not None:
+                    M[m, bcol] = spread(wts)[:, :, 2:2 + 3 * bsz]
     done = set(reg.tolist())
     for j in range(nb):
         if j in done:
@@ -381,6 +384,13 @@ def _interp_sources(g, w0, wp, wm, bounds, prop, edge):
     return acc
 
 
+def _dfac_rows(k, sphi, cphi, fp_rows, sign, name):
+    """The double layer's plane-wave factor j k (sin phi - sign f' cos phi) on some rows (1 for the single layer)."""
+    if name == "S":
+        return 1.0
+    return (1j * k) * (sphi[None, :] - sign * fp_rows[:, None] * cphi[None, :])
+
+
 class _Far:
     """Far part of one region's S and D, both directions, in the natural sample order.
 
@@ -393,10 +403,13 @@ class _Far:
     and all incidence angles).
     """
 
+    #: rows of the plane-wave factors formed at a time (x Q complex numbers: the temporaries stay in cache)
+    CHUNK_ELEMENTS = 32768
+
     def __init__(self, x, y, fp, dx, k, bounds, phi, w, need_S, need_D):
         cphi, sphi = np.cos(phi), np.sin(phi)
         n = x.size
-        self.q = phi.size
+        q = self.q = phi.size
         self.bounds = bounds
         nb = self.nb = bounds.size - 1
         lens = np.diff(bounds)
@@ -404,53 +417,85 @@ class _Far:
         loc = np.arange(n) - bounds[of]
         table = np.exp((-1j * k * dx) * (np.arange(int(lens.max())) + 0.5)[:, None] * cphi[None, :])
         self.prop = np.exp((-1j * k * dx) * lens[:, None] * cphi[None, :])   # across block j (either way)
-        yf, yfi = _exp_pair((1j * k) * y[:, None] * sphi[None, :])
-        from_left = table[loc]                      # exp(-j k (x - left edge) cos phi)
-        from_right = table[lens[of] - 1 - loc]      # exp(-j k (right edge - x) cos phi)
+        i_left = loc                      # table[i_left] = exp(-j k (x - left edge) cos phi)
+        i_right = lens[of] - 1 - loc      # table[i_right] = exp(-j k (right edge - x) cos phi)
         coef = (-0.25j / math.pi) * w
-        rf = from_left * yfi
-        rf *= coef
-        rb = from_right * yfi
-        rb *= coef
-        del yfi
-        self.rcv = {"fwd": rf, "bwd": rb}
-        self.src = {("fwd", "S"): None, ("fwd", "D"): None, ("bwd", "S"): None, ("bwd", "D"): None}
-        if not (need_S or need_D):
-            return
-        # cell moments: a = -(k dx / 2)(cos phi +- f' sin phi) (fwd +, mirrored -), e^{+-ja} from shared factors
         half = -0.5 * k * dx
         ac = half * cphi[None, :]
-        af = (half * fp)[:, None] * sphi[None, :]
         ec, eci = _exp_pair(1j * ac)
-        ef, efi = _exp_pair(1j * af)
+        kinds = [name for name, need in (("S", need_S), ("D", need_D)) if need]
+
+        def factors(rows):
+            """Per row set: exp(+-j k y sin phi), and per (direction, kernel) the cell weights and the plane-wave
+            factor G of each cell (times j k (sin phi -+ f' cos phi) for the double layer)."""
+            yf, yfi = _exp_pair((1j * k) * y[rows, None] * sphi[None, :])
+            out = {}
+            if kinds:
+                af = (half * fp[rows])[:, None] * sphi[None, :]
+                ef, efi = _exp_pair(1j * af)
+                for direction, sign, idx in (("fwd", 1.0, i_right), ("bwd", -1.0, i_left)):
+                    # cell moments: a = -(k dx / 2)(cos phi +- f' sin phi) (fwd +, the mirrored surface -)
+                    if sign > 0:
+                        wts = _cell_weights(ac + af, ec * ef, eci * efi, dx)
+                    else:
+                        wts = _cell_weights(ac - af, ec * efi, eci * ef, dx)
+                    g = table[idx[rows]] * yf    # fwd: exp(j k (x - right edge) cos phi) e^{j k y sin phi}; bwd: mirrored
+                    for name in kinds:
+                        if name == "S":
+                            out[(direction, name)] = (wts, g)
+                        else:
+                            dfac = (1j * k) * (sphi[None, :] - sign * fp[rows, None] * cphi[None, :])
+                            out[(direction, name)] = (wts, g * dfac)
+            return yf, yfi, out
+
+        rcv = {"fwd": np.empty((n, q), complex), "bwd": np.empty((n, q), complex)}
+        src = {(d, name): np.empty((n, q), complex) for d in ("fwd", "bwd") for name in kinds}
+        step = max(16, self.CHUNK_ELEMENTS // max(q, 1))
+        for r0 in range(0, n, step):
+            r1 = min(n, r0 + step)
+            lo, hi = max(r0 - 1, 0), min(r1 + 1, n)          # one row either side: the interpolant's neighbours
+            yf, yfi, fac = factors(slice(lo, hi))
+            o, m = r0 - lo, r1 - r0
+            yfi *= coef
+            rcv["fwd"][r0:r1] = table[i_left[r0:r1]] * yfi[o:o + m]
+            rcv["bwd"][r0:r1] = table[i_right[r0:r1]] * yfi[o:o + m]
+            for (direction, name), ((w0, wp, wm), G) in fac.items():
+                acc = src[(direction, name)][r0:r1]
+                np.multiply(w0[o:o + m], G[o:o + m], out=acc)
+                # fwd: column c collects cell c-1's v_{n+1} weight and cell c+1's v_{n-1} weight; the mirrored
+                # direction, read in natural order, the other way round
+                before, after = (wp, wm) if direction == "fwd" else (wm, wp)
+                t0 = 1 if r0 == 0 else 0                    # rows with a cell c - 1
+                acc[t0:] += before[o + t0 - 1:o + m - 1] * G[o + t0 - 1:o + m - 1]
+                t1 = m - 1 if r1 == n else m                # rows with a cell c + 1
+                acc[:t1] += after[o + 1:o + t1 + 1] * G[o + 1:o + t1 + 1]
+        # partition ends (folded into the end columns) and block edges (the reference edge changes), from the
+        # factors of the few rows concerned
         first = bounds[1:-1]
-        edge_f = yf[first] / table[0] if first.size else None          # against the previous block's right edge
-        mb = n - bounds[::-1]
-        first_b = mb[1:-1]
-        for direction in ("fwd", "bwd"):
+        rows = np.concatenate([[0, n - 1], first - 1, first])
+        yf, _, fac = factors(rows)
+        nf = first.size
+        e_last = yf[2:2 + nf] / table[0]           # first - 1 against block j's left edge (mirrored frame)
+        e_first = yf[2 + nf:] / table[0]           # first against block j-1's right edge
+        for (direction, name), ((w0, wp, wm), G) in fac.items():
+            acc = src[(direction, name)]
             if direction == "fwd":
-                a = ac + af
-                wts = _cell_weights(a, ec * ef, eci * efi, dx)
-                g = from_right * yf                    # exp(j k (x - right edge) cos phi) e^{j k y sin phi}
-                dfac = (1j * k) * (sphi[None, :] - fp[:, None] * cphi[None, :]) if need_D else None
-                frame = lambda arr: arr                # noqa: E731
-                fb, pr, edge = bounds, self.prop, edge_f
+                acc[0] += wm[0] * G[0]
+                acc[n - 1] += wp[1] * G[1]
+                if nf:
+                    gl, gf = G[2:2 + nf], G[2 + nf:]
+                    acc[first] += wp[2:2 + nf] * gl * (self.prop[1:] - 1.0)
+                    acc[first - 1] += wm[2 + nf:] * (e_first * _dfac_rows(k, sphi, cphi, fp[first], 1.0, name) - gf)
             else:
-                a = ac - af
-                wts = _cell_weights(a, ec * efi, eci * ef, dx)
-                g = from_left * yf
-                dfac = (1j * k) * (sphi[None, :] + fp[:, None] * cphi[None, :]) if need_D else None
-                frame = lambda arr: arr[::-1]          # noqa: E731
-                fb, pr = mb, self.prop[::-1]
-                edge = yf[::-1][first_b] / table[0] if first_b.size else None
-            del a
-            w0, wp, wm = (frame(t) for t in wts)
-            for name, need in (("S", need_S), ("D", need_D)):
-                if not need:
-                    continue
-                gg = frame(g) if name == "S" else frame(g * dfac)
-                ed = edge if name == "S" or edge is None else edge * frame(dfac)[fb[1:-1]]
-                self.src[(direction, name)] = frame(_interp_sources(gg, w0, wp, wm, fb, pr, ed))
+                acc[n - 1] += wm[1] * G[1]
+                acc[0] += wp[0] * G[0]
+                if nf:
+                    gl, gf = G[2:2 + nf], G[2 + nf:]
+                    acc[first - 1] += wp[2 + nf:] * gf * (self.prop[:-1] - 1.0)
+                    acc[first] += wm[2:2 + nf] * (e_last * _dfac_rows(k, sphi, cphi, fp[first - 1], -1.0, name) - gl)
+        self.rcv = rcv
+        self.src = {("fwd", "S"): src.get(("fwd", "S")), ("fwd", "D"): src.get(("fwd", "D")),
+                    ("bwd", "S"): src.get(("bwd", "S")), ("bwd", "D"): src.get(("bwd", "D"))}
 
     def _blocked(self, arr):
         """[N, ...] -> ([nb - 1, B, ...] view of the equal blocks, the last block [L, ...])."""

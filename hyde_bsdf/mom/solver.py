@@ -435,7 +435,7 @@ def _restore_blas_threads(previous):
 def _keep_freed_memory():
     """glibc only: keep freed blocks up to 256 MiB in the heap instead of returning them to the system (each
     partition allocates and frees the same temporaries; handing them back costs a page fault per 4 KiB on the
-    next use: 13 % of a Fig. 6 partition's CPU time was system time).  For pool workers only (process-wide)."""
+    next use: a tenth of a Fig. 6 partition's CPU time was system time).  For pool workers only (process-wide)."""
     try:
         libc = ctypes.CDLL("libc.so.6")
         libc.mallopt(-3, 256 * 2**20)      # M_MMAP_THRESHOLD
