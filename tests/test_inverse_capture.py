@@ -37,16 +37,23 @@ def test_presets_cover_facet_angles_and_polarizer_states():
         acq = inv.design_acquisition(preset)
         beta = acq.facet_angles()
         assert beta.min() <= 10.0 + 1e-9 and beta.max() >= 70.0 - 1e-9
-        assert len(acq.configurations) == 7
+        mirrors = 5 if preset == "dielectric" else 7          # the metal's 2 circular states are mirror pairs
+        assert len(acq.configurations) == mirrors + 2
         tilts = sorted(c.half_vector_tilt for c in acq.configurations)
-        assert tilts[:5] == pytest.approx([0.0] * 5, abs=1e-6) and tilts[5] == pytest.approx(10.0, abs=1e-6)
-        assert tilts[6] == pytest.approx(12.5, abs=1e-6)
+        assert tilts[:mirrors] == pytest.approx([0.0] * mirrors, abs=1e-6)
+        assert tilts[mirrors:] == pytest.approx([10.0, 12.5], abs=1e-6)
     metal = inv.design_acquisition("metal")
-    assert metal.polarized() == 5 and all("M22" in c.elements for c in metal.configurations if c.polarizer == 45.0)
+    assert metal.polarized() == 7 and all("M22" in c.elements for c in metal.configurations if c.polarizer == 45.0)
+    circular = [c for c in metal.configurations if c.retarder is not None]
+    assert [c.facet_angle for c in circular] == pytest.approx(list(acqm.METAL_RETARDER_FACET_ANGLES))
+    assert all(c.polarizer == 0.0 and c.retarder == 45.0 and "M23" in c.elements for c in circular)
     assert inv.design_acquisition("dielectric").polarized() == 0
+    assert len(inv.design_acquisition("metal", retarder=()).configurations) == 7
     circ = inv.design_acquisition("metal", retarder=True, polarizer_angles=(0.0, 45.0, 90.0))
     assert len(circ.configurations) == 5 * 4 + 2 and sum(c.retarder is not None for c in circ.configurations) == 5
     assert "M23" in next(c for c in circ.configurations if c.retarder is not None).elements
+    with pytest.raises(ValueError, match="retarder facet angles must be"):
+        inv.design_acquisition("metal", retarder=(50.0, 95.0))
     with pytest.raises(ValueError, match="facet_angles must be angles in"):
         inv.design_acquisition("dielectric", facet_angles=(10, 95))
     with pytest.raises(ValueError, match="preset must be one of"):
@@ -76,7 +83,7 @@ def _tiny_problem(case="dielectric", n=2, res=12, fit=("alpha", "eta"), componen
     if not scale:
         truth["specular_reflectance"] = 1.0
     acq = (inv.fixed_rig_acquisition(case, tilts=(-10.0, 0.0, 10.0)) if rig else
-           inv.design_acquisition(case, facet_angles=facet_angles, off_specular=((35.0, 15.0),)))
+           inv.design_acquisition(case, facet_angles=facet_angles, off_specular=((35.0, 15.0),), retarder=()))
     if configs is not None:
         acq.configurations = acq.configurations[:configs]
     start = {k: truth[k] for k in fit}
@@ -108,6 +115,59 @@ def test_information_block_matches_finite_differences():
     A, B, g, noise, n_data = information_blocks(problem, ("alpha", "eta"), spp=16, seed=5)
     assert A.shape == (4, 2, 2) and np.all(np.linalg.eigvalsh(A) > 0)
     assert np.all(np.isfinite(B)) and len(noise) == 1 and n_data > 0
+
+
+def _model_stokes(config, alpha, n, k, irradiance=2.0):
+    """The reflected Stokes vector of a mirror-pair texel from the NumPy evaluator (an independent
+    derivation of the plugin): F(beta, beta, pi) S_in cos(beta) E, S_in of a 45 deg polarizer."""
+    import math
+
+    from hyde_bsdf import pbrdf
+
+    b = math.radians(config.facet_angle)
+    F = pbrdf(b, b, math.pi, rms_slope=alpha / math.sqrt(2.0), n=n, k=k)
+    return F @ (np.array([1.0, 0.0, 1.0, 0.0]) / 2.0) * math.cos(b) * irradiance
+
+
+def test_fisher_information_matches_the_numpy_model():
+    """The Fisher blocks (weights 1 / noise variance) of a metal plane seen by one mirror pair at
+    beta = 55 deg behind the 45 deg polarizer equal, texel by texel, those built from the NumPy
+    evaluator's Stokes derivatives (central differences in log alpha, n, k) times the number of
+    pixels lying wholly inside the texel over sigma^2 -- so the standard errors are those of the
+    model, not of the renderer's sampling noise or of pixels straddling two texels (5 %).  The
+    pixels counted inside one texel have sampling noise far below the camera's (edge sub-samples)."""
+    fit = ("alpha", "eta", "k")
+    truth = acqm.example_material("metal", 4)
+    truth["specular_reflectance"] = 1.0
+    acq = inv.Acquisition([inv.Configuration((55.0, 0.0), (55.0, 180.0), 45.0)], "metal")
+    obs = inv.synthetic_observations(acq, truth, {k: truth[k] for k in fit}, res=16, spp=4, spp_ref=16,
+                                     noise=0.01, seed=2)
+    problem = inv.MapProblem.build(obs, {k: truth[k] for k in fit}, fit)
+    sigma = obs[0].noise_std
+    A, B, g, noise, n_data = information_blocks(problem, fit, spp=8, seed=3, noise=sigma)
+    assert np.allclose(A, B, rtol=1e-9)
+    pix, tex = inv.pixel_texels(obs[0], (4, 4), None, sub=4, edges=True)
+    key, counts = np.unique(pix.astype(np.int64) * 16 + tex, return_counts=True)
+    inside = np.bincount(key[counts == 16] % 16, minlength=16)
+    h = 1e-4
+    checked = 0
+    for t in range(16):
+        if inside[t] < 3:
+            continue
+        th = [float(np.ravel(truth[k])[t]) for k in fit]
+        J = []
+        for i in range(3):
+            up, dn = list(th), list(th)
+            up[i] *= np.exp(h)
+            dn[i] *= np.exp(-h)
+            J.append((_model_stokes(acq.configurations[0], *up) - _model_stokes(acq.configurations[0], *dn)) / (2 * h))
+        J = np.array(J)
+        A_model = inside[t] * J @ J.T / sigma ** 2
+        se = np.sqrt(np.diag(np.linalg.inv(A[t])))
+        se_model = np.sqrt(np.diag(np.linalg.inv(A_model)))
+        assert se == pytest.approx(se_model, rel=0.10), (t, se, se_model)
+        checked += 1
+    assert checked >= 4
 
 
 def test_unknown_scale_s0_leaves_the_index_undetermined():

@@ -68,7 +68,11 @@ from hyde_bsdf.inverse.acquisition import (design_acquisition, example_material,
 TARGETS = {"eta": (0.01, 0.03), "alpha": (0.03, 0.08), "n": (0.03, 0.10), "k": (0.03, 0.10)}
 PULL_BAND = (0.8, 1.25)
 NOISE = 0.01
-RUNS = (("stokes", False), ("s0", False), ("stokes", True), ("s0", True))
+CASES = ("metal", "dielectric")
+#: the full run's fits (case, loss, unknown scale) in the order they run: the targets' Stokes fits
+#: first, then the unknown-scale pairs, then the S0 fits with the scale known
+RUNS = tuple((c, "stokes", False) for c in CASES) + tuple((c, l, True) for c in CASES for l in ("stokes", "s0")) \
+    + tuple((c, "s0", False) for c in CASES)
 #: the unknown-scale runs' fixed rig: one facet angle (deg) for every picture
 RIG_FACET_ANGLE = {"dielectric": 50.0, "metal": 60.0}
 
@@ -101,7 +105,7 @@ def observations(case: str, scale: bool, *, n: int, res: int, spp_ref: int, face
 
 
 def run_case(case: str, loss: str, prepared, *, iterations: int, uncertainty_spp: int, polish: int = 2,
-             seed: int = 0):
+             seed: int = 0, freeze: bool = True):
     """One fit of ``prepared`` (:func:`observations`); returns (result, truth of the fitted maps, caught
     warning messages, seconds)."""
     truth, start, fit, obs = prepared
@@ -110,9 +114,32 @@ def run_case(case: str, loss: str, prepared, *, iterations: int, uncertainty_spp
         warnings.simplefilter("always", inv.UnidentifiedParameterWarning)
         res_ = inv.invert_maps(obs, start, fit=fit, iterations=iterations, spp=4, seed=seed + 7, components=loss,
                                truth={k: np.asarray(truth[k], float) for k in fit}, progress=False,
-                               uncertainty_spp=uncertainty_spp, polish=polish)
+                               uncertainty_spp=uncertainty_spp, polish=polish, freeze=freeze)
     msgs = [str(w.message) for w in caught if issubclass(w.category, inv.UnidentifiedParameterWarning)]
     return res_, {k: truth[k] for k in fit}, msgs, time.perf_counter() - t0
+
+
+CSV_HEADER = ["case", "loss", "parameter", "median_rel_err", "p90_rel_err", "pull_std", "median_rel_stderr",
+              "fraction_flagged", "seconds"]
+
+
+def _stats(key, result, stats) -> list:
+    """The CSV rows of one run ``key`` = (case, loss); fills ``stats[(case, loss, name)]``."""
+    (case, loss), (r, truth, msgs, secs) = key, result
+    rows = []
+    for name in truth:
+        e = r.texel_errors(name)
+        z = r.pulls(name)
+        z = z[np.isfinite(z)]
+        rel = r.rel_stderr[name][r.seen]
+        flagged = float(np.mean(~(rel <= r.uncertainty.threshold)))
+        st = dict(median=float(np.median(e)), p90=float(np.percentile(e, 90)),
+                  pull_std=float(np.std(z)) if z.size > 2 else float("nan"),
+                  rel_se=float(np.median(rel)), flagged=flagged, warned=any(m.startswith(name + " ") for m in msgs))
+        stats[(case, loss, name)] = st
+        rows.append([case, loss, _label(case, name), f"{st['median']:.5f}", f"{st['p90']:.5f}",
+                     f"{st['pull_std']:.3f}", f"{st['rel_se']:.5f}", f"{flagged:.3f}", f"{secs:.1f}"])
+    return rows
 
 
 def _label(case, name):
@@ -126,51 +153,41 @@ def validate(outdir="out/validation", quick=False):
     out.mkdir(parents=True, exist_ok=True)
     previous = mi.variant()
     inv.prepare(inv.MAP_VARIANT)
-    if quick:      # 4 x 4 texels of 4 x 4 px, 5 pictures; the two unknown-scale runs of each case only
-        cfg = dict(n=4, res=16, iterations=15, spp_ref=64, uncertainty_spp=8, facet_angles=(10.0, 40.0, 70.0),
-                   polish=0)
-        runs = (("stokes", True), ("s0", True))
+    if quick:      # 4 x 4 texels of 4 x 4 px, the fixed rig's 2 pictures; the unknown-scale runs only
+        cfg = dict(n=4, res=16, iterations=2, spp_ref=32, uncertainty_spp=4, facet_angles=(10.0, 40.0, 70.0),
+                   polish=0, freeze=False)
+        runs = tuple((c, loss, True) for c in CASES for loss in ("stokes", "s0"))
     else:
-        cfg = dict(n=32, res=128, iterations=120, spp_ref=256, uncertainty_spp=16, polish=2)
+        cfg = dict(n=32, res=128, iterations=60, spp_ref=256, uncertainty_spp=8, polish=2)
         runs = RUNS
     results = {}
-    fitcfg = {k: cfg[k] for k in ("iterations", "uncertainty_spp", "polish")}
+    fitcfg = {k: cfg[k] for k in ("iterations", "uncertainty_spp", "polish", "freeze") if k in cfg}
     obscfg = {k: cfg[k] for k in ("n", "res", "spp_ref") if k in cfg}
     obscfg["facet_angles"] = cfg.get("facet_angles")
+    rows, stats = [], {}
     try:
-        for case in ("dielectric", "metal"):
-            prepared = {}
-            for loss, scale in runs:
+        prepared = {}
+        for case, loss, scale in runs:
+            if True:
                 key = (case, loss + ("+scale" if scale else ""))
                 inv._log(f"[svbrdf_index] {key[0]}, {key[1]} loss ({cfg['n']}x{cfg['n']} maps, "
                          f"{cfg['res']} px per view, {cfg['iterations']} iterations)")
-                if scale not in prepared:
-                    prepared[scale] = observations(case, scale, **obscfg)
-                results[key] = run_case(case, loss, prepared[scale], **fitcfg)
+                if (case, scale) not in prepared:
+                    prepared = {(case, scale): observations(case, scale, **obscfg)}     # one case's pictures at a time
+                results[key] = run_case(case, loss, prepared[(case, scale)], **fitcfg)
+                rows += _stats(key, results[key], stats)
+                # the table so far (a long full run leaves its finished rows behind if stopped)
+                write_csv(out / "svbrdf_index.csv", CSV_HEADER, rows)
+                inv._log(f"[svbrdf_index] {key[0]}, {key[1]}: {results[key][3]:.0f} s; " + "; ".join(
+                    f"{r[2]} {100 * float(r[3]):.2f} % / {100 * float(r[4]):.2f} %, pulls {r[5]}"
+                    for r in rows if (r[0], r[1]) == key))
+                _plot(out / "svbrdf_index.png", results, cfg)
     finally:
         if previous is not None and previous != mi.variant():
             mi.set_variant(previous)
 
-    rows, stats = [], {}
-    for (case, loss), (r, truth, msgs, secs) in results.items():
-        for name in truth:
-            e = r.texel_errors(name)
-            z = r.pulls(name)
-            z = z[np.isfinite(z)]
-            rel = r.rel_stderr[name][r.seen]
-            flagged = float(np.mean(~(rel <= r.uncertainty.threshold)))
-            st = dict(median=float(np.median(e)), p90=float(np.percentile(e, 90)),
-                      pull_std=float(np.std(z)) if z.size > 2 else float("nan"),
-                      rel_se=float(np.median(rel)), flagged=flagged, warned=any(m.startswith(name + " ") for m in msgs))
-            stats[(case, loss, name)] = st
-            rows.append([case, loss, _label(case, name), f"{st['median']:.5f}", f"{st['p90']:.5f}",
-                         f"{st['pull_std']:.3f}", f"{st['rel_se']:.5f}", f"{flagged:.3f}", f"{secs:.1f}"])
-    write_csv(out / "svbrdf_index.csv", ["case", "loss", "parameter", "median_rel_err", "p90_rel_err", "pull_std",
-                                         "median_rel_stderr", "fraction_flagged", "seconds"], rows)
-    _plot(out / "svbrdf_index.png", results, cfg)
-
     checks = []
-    for case in ("dielectric", "metal"):
+    for case in CASES:
         if not quick:          # the targets of the issue, on 32 x 32 maps
             for name in ("alpha", "eta") + (("k",) if case == "metal" else ()):
                 lab = _label(case, name)
@@ -212,15 +229,20 @@ def _plot(path, results, cfg):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    # every run present so far (a full run draws its picture after each run)
     panels = []
-    for case in ("dielectric", "metal"):
+    for case in CASES:
         full = (case, "stokes") in results
+        if (case, "stokes" if full else "stokes+scale") not in results:
+            continue
         r, truth, _, _ = results[(case, "stokes" if full else "stokes+scale")]
-        r0 = results[(case, "s0" if full else "s0+scale")][0]
+        r0 = results.get((case, "s0" if full else "s0+scale"), (None,))[0]
         for name in truth:
             panels.append((case, name, r, r0, truth[name]))
+    scale_cases = [c for c in CASES if (c, "stokes+scale") in results and (c, "s0+scale") in results]
     ncol = 6
-    fig, axes = plt.subplots(len(panels) + 2, ncol, figsize=(3.0 * ncol, 2.7 * (len(panels) + 2)), layout="constrained")
+    nrow = max(1, len(panels) + len(scale_cases))
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.0 * ncol, 2.7 * nrow), layout="constrained", squeeze=False)
     kw = dict(origin="lower", extent=(0, 1, 0, 1))
     for row, (case, name, r, r0, t) in enumerate(panels):
         lab = _label(case, name)
@@ -239,13 +261,15 @@ def _plot(path, results, cfg):
         im = ax[3].imshow(100 * r.rel_stderr[name], cmap="magma", **kw)
         ax[3].set_title("standard error %, Stokes", fontsize=8)
         fig.colorbar(im, ax=ax[3], shrink=0.7)
+        if r0 is None:
+            continue
         ax[4].imshow(r0.final[name], vmin=vmin, vmax=vmax, **kw)
         ax[4].set_title("recovered, S0 loss", fontsize=8)
         e0 = 100 * (r0.final[name] / t - 1)
         im = ax[5].imshow(e0, cmap="RdBu_r", vmin=-lim, vmax=lim, **kw)
         ax[5].set_title("error %, S0 loss", fontsize=8)
         fig.colorbar(im, ax=ax[5], shrink=0.7)
-    for k, case in enumerate(("dielectric", "metal")):
+    for k, case in enumerate(scale_cases):
         ax = axes[len(panels) + k]
         rs, truth, _, _ = results[(case, "stokes+scale")]
         r0 = results[(case, "s0+scale")][0]
@@ -267,11 +291,13 @@ def _plot(path, results, cfg):
         for a in ax[c:]:
             a.axis("off")
     for a in axes.ravel():
+        if not a.images:
+            a.axis("off")
         a.set_xticks([])
         a.set_yticks([])
     fig.suptitle(f"Per-texel index, roughness and scale from designed Stokes observations "
-                 f"({cfg['n']}x{cfg['n']} maps, 7 views x lights, {cfg['res']} px, {cfg['iterations']} iterations + "
-                 f"2 Gauss-Newton steps; noise {100 * NOISE:g} % of S0)", fontsize=10)
+                 f"({cfg['n']}x{cfg['n']} maps, {cfg['res']} px per picture, {cfg['iterations']} iterations + "
+                 f"{cfg['polish']} Gauss-Newton steps; noise {100 * NOISE:g} % of S0)", fontsize=10)
     save_figure(fig, path, dpi=80)
 
 

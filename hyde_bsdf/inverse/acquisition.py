@@ -68,7 +68,7 @@ import numpy as np
 
 __all__ = ["Configuration", "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition",
            "PRESETS",
-           "MIRROR_FACET_ANGLES", "OFF_SPECULAR"]
+           "MIRROR_FACET_ANGLES", "OFF_SPECULAR", "METAL_RETARDER_FACET_ANGLES"]
 
 #: facet angles (deg) of the presets' mirror pairs
 MIRROR_FACET_ANGLES = (10.0, 25.0, 40.0, 55.0, 70.0)
@@ -76,6 +76,9 @@ MIRROR_FACET_ANGLES = (10.0, 25.0, 40.0, 55.0, 70.0)
 #: sides (their half-vectors tilt by 10 and 12.5 deg from the normal)
 OFF_SPECULAR = ((35.0, 15.0), (35.0, 60.0))
 PRESETS = ("dielectric", "metal")
+#: facet angles (deg) of the ``"metal"`` preset's circular states (polarizer 0 deg + quarter-wave
+#: retarder at 45 deg), where a metal's retardance carries n best for the pictures' cost
+METAL_RETARDER_FACET_ANGLES = (50.0, 65.0)
 #: distances (scene units) from the sample of the cameras, the polarizer and the retarder sheets
 CAMERA_DISTANCE, POLARIZER_DISTANCE, RETARDER_DISTANCE = 30.0, 100.0, 90.0
 
@@ -148,17 +151,19 @@ class Acquisition:
 
 
 def design_acquisition(preset: str = "dielectric", *, facet_angles=MIRROR_FACET_ANGLES,
-                       off_specular=OFF_SPECULAR, polarizer_angles=None, retarder: bool = False) -> Acquisition:
+                       off_specular=OFF_SPECULAR, polarizer_angles=None, retarder=None) -> Acquisition:
     """The observation set for a material sample (see the module docstring for what each
     configuration constrains).
 
     ``preset``: ``"dielectric"`` (unpolarized light) or ``"metal"`` (mirror pairs behind a linear
-    polarizer at 45 deg, so that the retardance elements M22, M32 enter).  ``facet_angles``: the
-    mirror pairs' beta (deg, in (0, 89)); ``off_specular``: (view polar, light polar) pairs for the
-    roughness; ``polarizer_angles``: the polarizer states of the mirror pairs (default: none for
-    "dielectric", (45,) for "metal"; None in the tuple means unpolarized); ``retarder``: add, per
-    mirror pair, a polarizer at 0 deg followed by a quarter-wave retarder at 45 deg (circular light:
-    M23, M33).
+    polarizer at 45 deg, so that the retardance elements M22, M32 enter, plus circular light at
+    :data:`METAL_RETARDER_FACET_ANGLES`).  ``facet_angles``: the mirror pairs' beta (deg, in (0, 89));
+    ``off_specular``: (view polar, light polar) pairs for the roughness; ``polarizer_angles``: the
+    polarizer states of the mirror pairs (default: none for "dielectric", (45,) for "metal"; None in
+    the tuple means unpolarized); ``retarder``: circular states -- a polarizer at 0 deg followed by a
+    quarter-wave retarder at 45 deg (M23, M33) -- at these facet angles (deg; ``True``: at every
+    mirror pair, ``False`` or ``()``: none; default: none for "dielectric",
+    :data:`METAL_RETARDER_FACET_ANGLES` for "metal").
     """
     if preset not in PRESETS:
         raise ValueError(f"preset must be one of {PRESETS}, got {preset!r}")
@@ -170,12 +175,17 @@ def design_acquisition(preset: str = "dielectric", *, facet_angles=MIRROR_FACET_
     for a in polarizer_angles:
         if a is not None and not math.isfinite(float(a)):
             raise ValueError(f"polarizer_angles must be finite angles in deg or None, got {polarizer_angles}")
+    if retarder is None:
+        retarder = () if preset == "dielectric" else METAL_RETARDER_FACET_ANGLES
+    circular = list(betas) if retarder is True else [] if retarder is False else [float(b) for b in retarder]
+    if not all(0.0 < b < 89.0 for b in circular):
+        raise ValueError(f"retarder facet angles must be angles in (0, 89) deg, got {tuple(circular)}")
     configs = []
     for b in betas:
         for a in polarizer_angles:
             configs.append(Configuration((b, 0.0), (b, 180.0), None if a is None else float(a)))
-        if retarder:
-            configs.append(Configuration((b, 0.0), (b, 180.0), 0.0, 45.0))
+    for b in circular:
+        configs.append(Configuration((b, 0.0), (b, 180.0), 0.0, 45.0))
     for tv, tl in off_specular:
         if not (0.0 <= tv < 89.0 and 0.0 <= tl < 89.0):
             raise ValueError(f"off_specular polar angles must be in [0, 89) deg, got {(tv, tl)}")

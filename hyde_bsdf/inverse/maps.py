@@ -266,8 +266,11 @@ class LogAdam:
 def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: int = 0, noise=None,
                     polish: int = 2, threshold: float = STDERR_THRESHOLD, max_step: float = 0.25):
     """Step 4, the uncertainty of the fitted *maps* at ``final`` (see :mod:`hyde_bsdf.inverse.uncertainty`):
-    ``polish`` Gauss-Newton steps per texel (0: none), then the standard errors at the last point
-    whose information was computed.  Returns (final maps, :class:`Uncertainty`)."""
+    ``polish`` Gauss-Newton steps per texel (0: none) on the noise-weighted least squares (weights
+    1 / variance per observation and Stokes component: the efficient estimate, which the loss's own
+    normalisation is not), then the standard errors at the last point whose information was computed
+    (the inverse Fisher information after polishing; the sandwich with the loss's weights without).
+    Returns (final maps, :class:`Uncertainty`)."""
     names = tuple(n for n in problem.fit if problem.shapes[n] is not None)
     if not names:
         return final, None
@@ -276,7 +279,11 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
     final = dict(final)
     for k in range(max(1, int(polish))):
         problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
-        A, B, g, noise_std, n_data = information_blocks(problem, names, spp=spp, seed=seed + 1000 * k, noise=noise)
+        # with polishing steps the result is the weighted least-squares estimate (weights 1 / noise
+        # variance, the efficient one); without, Adam's minimiser of the loss, whose covariance is the
+        # sandwich with the loss's own weights
+        A, B, g, noise_std, n_data = information_blocks(problem, names, spp=spp, seed=seed + 1000 * k, noise=noise,
+                                                        weighting="fisher" if polish else "loss")
         if polish:
             d = gauss_newton_step(A, g, seen, max_step=max_step)
             for i, n in enumerate(names):

@@ -111,11 +111,16 @@ def texel_coverage(obs: Observation, shape, prefix: str | None = None, sub: int 
     return np.bincount(texel, minlength=int(shape[0]) * int(shape[1])).reshape(tuple(shape))
 
 
-def pixel_texels(obs: Observation, shape, prefix: str | None = None, sub: int = 4):
+def pixel_texels(obs: Observation, shape, prefix: str | None = None, sub: int = 4, edges: bool = False):
     """The (pixel, texel) pair of every camera sub-sample of :func:`texel_coverage` that hits the target
     shape: two int arrays, pixel = row * W + column of the film, texel = row * columns + column of the
     map.  ``sub`` x ``sub`` sub-samples per masked pixel; a pixel's share of texel t is its count of
-    pairs (pixel, t) / sub**2 (what :mod:`hyde_bsdf.inverse.uncertainty` uses)."""
+    pairs (pixel, t) / sub**2.  ``edges=True`` puts the outer sub-samples on the pixel's border
+    (inset by 1e-3 pixel) instead of at the centres of a sub x sub grid: a pixel whose sub-samples all
+    land in one texel then lies inside it entirely (its corners do, and a texel is convex), which is
+    how :mod:`hyde_bsdf.inverse.uncertainty` picks the pixels that depend on one texel only (with the
+    centred grid, pixels reaching up to 1/(2 sub) of their width into the next texel passed, and
+    carried its value and its sampling noise)."""
     import mitsuba as mi
 
     scene = obs.scene
@@ -123,7 +128,7 @@ def pixel_texels(obs: Observation, shape, prefix: str | None = None, sub: int = 
     W, H = sensor.film().crop_size()
     mask = _obs_mask(obs)
     ys, xs = np.nonzero(mask)
-    o = (np.arange(sub) + 0.5) / sub
+    o = np.linspace(1e-3, 1.0 - 1e-3, sub) if edges else (np.arange(sub) + 0.5) / sub
     ox, oy = np.meshgrid(o, o)
     px = (xs[:, None] + ox.ravel()[None, :]).ravel() / W
     py = (ys[:, None] + oy.ravel()[None, :]).ravel() / H

@@ -111,12 +111,23 @@ def _weights(loss, obs_weight: float):
     return np.array(w)
 
 
-def information_blocks(problem, names, *, spp: int = 16, seed: int = 0, noise=None):
-    """Accumulate the per-texel blocks A, B (texels, P, P) and g = sum_i w_i J_i r_i (texels, P; half the
-    loss gradient, r = S - R) over the
-    observations of a :class:`~hyde_bsdf.inverse.maps.MapProblem` at its current values.
+def information_blocks(problem, names, *, spp: int = 16, seed: int = 0, noise=None, weighting: str = "fisher"):
+    """Accumulate the per-texel blocks A, B (texels, P, P) and g = sum_i w_i J_i r_i (texels, P; r = S - R)
+    over the observations of a :class:`~hyde_bsdf.inverse.maps.MapProblem` at its current values.
+
+    ``weighting="loss"``: w_i the loss's weights (A is half the loss's Gauss-Newton Hessian, g half its
+    gradient; A^-1 B A^-1 is the covariance of the loss's minimiser).  ``weighting="fisher"``: w_i =
+    1 / sigma_i^2 (the reference's variance plus the render's, per observation and Stokes component):
+    A = B is the Fisher information, A^-1 the covariance of the weighted least-squares estimate that
+    Gauss-Newton steps with these blocks converge to -- the efficient one.  The two differ where the
+    loss weighs components unlike their noise: the Stokes loss normalises S1..S3 by their own energy,
+    which for an unpolarized picture (S1 small, S2 = S3 = 0) weighs its S1 thousands of times above
+    its noise (measured on the metal design: n's standard error 4.6 % with the loss's weights, 1.5 %
+    with the Fisher weights, on a texel with 3-9 pixels per picture).
 
     Returns (A, B, g, noise_std per observation, number of data values n)."""
+    if weighting not in ("fisher", "loss"):
+        raise ValueError(f"weighting must be 'fisher' or 'loss', got {weighting!r}")
     rows, cols = problem.map_shape
     T, P = rows * cols, len(names)
     A = np.zeros((T, P, P))
@@ -134,9 +145,21 @@ def information_blocks(problem, names, *, spp: int = 16, seed: int = 0, noise=No
         mask = loss.mask_np
         r = S - R
         comps = 4 if loss.components == "stokes" else 1
-        n_pix = int(mask.sum())
-        mc_var = np.array([np.mean((S[c] - S2[c])[mask] ** 2) / 2.0 for c in range(4)])
-        res_var = np.array([np.mean(r[c][mask] ** 2) for c in range(4)])
+        w = _weights(loss, problem.weights[j])
+        pix, tex = pixel_texels(o, (rows, cols), problem.prefix, sub=SUB, edges=True)
+        key, counts = np.unique(pix.astype(np.int64) * T + tex, return_counts=True)
+        pure = counts == SUB * SUB            # the whole pixel lies in this one texel
+        p_i, t_i = key[pure] // T, key[pure] % T
+        H, W = mask.shape
+        if p_i.size == 0:                     # no pixel inside one texel: no information from this picture
+            noise_out.append(np.full(4, np.nan))
+            continue
+        # the variances on the pixels that enter the information: a pixel straddling two texels has a
+        # sampling noise of the order of the texels' difference, which is not these pixels' noise
+        n_pix = int(p_i.size)
+        Sf, S2f, rr = S.reshape(4, H * W)[:, p_i], S2.reshape(4, H * W)[:, p_i], r.reshape(4, H * W)[:, p_i]
+        mc_var = np.mean((Sf - S2f) ** 2, axis=1) / 2.0
+        res_var = np.mean(rr ** 2, axis=1)
         if noise is not None:
             nj = noise if np.ndim(noise) == 0 else noise[j]          # one number for all, or one per observation
             ref_var = np.broadcast_to(np.asarray(nj, np.float64) ** 2, (4,)).copy()
@@ -145,16 +168,16 @@ def information_blocks(problem, names, *, spp: int = 16, seed: int = 0, noise=No
         noise_out.append(np.sqrt(ref_var))
         total_var = ref_var + mc_var           # the polishing render's own noise enters the estimate
         n_data += n_pix * comps
-        w = _weights(loss, problem.weights[j])
-        pix, tex = pixel_texels(o, (rows, cols), problem.prefix, sub=SUB)
-        key, counts = np.unique(pix.astype(np.int64) * T + tex, return_counts=True)
-        pure = counts == SUB * SUB            # every sub-sample of the pixel lands in this one texel
-        p_i, t_i = key[pure] // T, key[pure] % T
         frac = np.ones(p_i.size)
-        H, W = mask.shape
         Jf = J.reshape(P, 4, H * W)[:, :, p_i]            # (P, 4, pairs)
         rf = r.reshape(4, H * W)[:, p_i]                  # (4, pairs)
-        wf = w.reshape(4, H * W)[:, p_i]                  # (4, pairs)
+        if weighting == "fisher":
+            # 1 / variance per component (floored far below any camera's noise: a noiseless synthetic
+            # component must not divide by zero)
+            floor = 1e-12 * max(float(np.mean(Sf[0] ** 2)), 1e-30)
+            wf = (1.0 if problem.weights[j] > 0 else 0.0) / np.maximum(total_var, floor)[:, None] * np.ones((4, n_pix))
+        else:
+            wf = w.reshape(4, H * W)[:, p_i]              # (4, pairs)
         for c in range(comps):
             jc = Jf[:, c, :] * frac[None, :]              # (P, pairs): d S_i / d log theta_t
             outer = np.einsum("ak,bk->kab", jc, jc)
