@@ -170,6 +170,26 @@ def test_fisher_information_matches_the_numpy_model():
     assert checked >= 4
 
 
+def test_predicted_stderr_designs_the_metal_acquisition():
+    """The Fisher prediction from the NumPy evaluator (no rendering): on the validation's metal map
+    (8 x 8 texels, 1 % noise, 3.8 px per texel side) unpolarized mirror pairs leave n undetermined
+    (the reflectance ratio B/A mixes n and k: median relative standard error > 10 %); the 45 deg
+    polarizer (retardance C, S) determines it (< 3.5 %), the preset's two circular states add to it
+    (median 2.9 % -> 2.5 %, measured), and alpha, k stay below 1 %; a single 45 deg picture at
+    beta = 55 deg already gives n to < 5 %."""
+    m = acqm.example_material("metal", 8)
+    ppt = (128 / 32 / 1.05) ** 2
+    med = lambda acq: {k: float(np.median(v)) for k, v in inv.predicted_stderr(acq, m, pixels_per_texel=ppt).items()}
+    unpol = med(inv.design_acquisition("metal", polarizer_angles=(None,), retarder=()))
+    linear = med(inv.design_acquisition("metal", retarder=()))
+    preset = med(inv.design_acquisition("metal"))
+    single = med(inv.design_acquisition("metal", facet_angles=(55.0,), retarder=()))
+    assert unpol["eta"] > 0.10 and linear["eta"] < 0.035 and preset["eta"] < 0.9 * linear["eta"]
+    assert single["eta"] < 0.05 and preset["alpha"] < 0.01 and preset["k"] < 0.01
+    with pytest.raises(ValueError, match="values must give alpha and eta"):
+        inv.predicted_stderr(inv.design_acquisition("metal"), {"alpha": 0.2})
+
+
 def test_unknown_scale_s0_leaves_the_index_undetermined():
     """Information at the truth (no optimisation), fixed rig (one facet angle, 50 deg): with a
     per-texel scale fitted, the S0 loss's relative standard error of eta is above the 10 % threshold

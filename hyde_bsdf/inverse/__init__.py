@@ -58,7 +58,7 @@ from hyde_bsdf.inverse.loss import (REFERENCE_RANGE, StokesLoss, channel_names, 
                                     interior_mask, smoothness, stokes_images)
 from hyde_bsdf.inverse.acquisition import (Acquisition, Configuration, acquisition_scene_dict,
                                            design_acquisition, example_material, fixed_rig_acquisition,
-                                           synthetic_observations)
+                                           predicted_stderr, synthetic_observations)
 from hyde_bsdf.inverse.maps import LogAdam, MapInversionResult, MapProblem, invert_maps, map_loss, map_step, map_uncertainty
 from hyde_bsdf.inverse.uncertainty import STDERR_THRESHOLD, Uncertainty, UnidentifiedParameterWarning
 from hyde_bsdf.inverse.observations import _obs_mask  # noqa: F401
@@ -79,5 +79,5 @@ __all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scen
            "render_stokes", "render_stokes_np", "Observation", "texel_coverage", "smoothness",
            "MapInversionResult", "invert_maps", "MapProblem", "map_loss", "map_step", "LogAdam", "map_uncertainty",
            "Uncertainty", "UnidentifiedParameterWarning", "STDERR_THRESHOLD", "pixel_texels", "Configuration",
-           "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",
+           "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition", "predicted_stderr", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",
            "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "Y_WEIGHTS", "cli_main"]

@@ -30,26 +30,41 @@ polarizer 0 deg + retarder at 45 deg   (1, 0, 0, +-1) / 2          M00, M10, M23
 An intensity camera (the S0-only loss) measures the first row only: M00 unpolarized, M00 +- M01
 behind a polarizer at 0/90 deg, and nothing of C, S.
 
-What each parameter set needs (N = a texel's unknowns):
+What each parameter set needs (N = a texel's unknowns; the numbers are median relative standard
+errors over the validation's 8 x 8 maps from :func:`predicted_stderr` -- the Fisher information of
+the NumPy evaluator at 1 % camera noise per Stokes component and 3.8 pixels per texel side, which
+the rendered information matches to ~6 %):
 
 * roughness alpha: the lobe's width -- at least two configurations whose half-vectors tilt from
   the normal by different angles (off-specular pairs; mirror pairs all see the lobe's peak, whose
-  height 1/(pi alpha^2) a per-texel scale absorbs);
+  height 1/(pi alpha^2) a per-texel scale absorbs).  The presets' two off-specular pairs give
+  0.2-0.4 %;
 * dielectric index eta (k = 0): the degree of linear polarization B/A against beta, which does not
-  depend on an intensity scale; one facet angle determines eta, two to four spanning 10-70 deg make
-  it robust (near Brewster's angle B/A changes fastest).  Unpolarized light suffices;
-* metal n and k: B/A alone mixes n and k; the retardance C, S (a 45 deg polarizer on the light)
-  separates them -- at least two facet angles above ~40 deg with the polarizer at 45 deg;
+  depend on an intensity scale; one facet angle determines eta (one unpolarized mirror pair at 55
+  deg + the 2 off-specular pairs: 0.14 %), two to five spanning 10-70 deg make it robust (0.12 %;
+  near Brewster's angle B/A changes fastest).  Unpolarized light suffices;
+* metal n and k: the reflectance A and the ratio B/A alone mix n and k (unpolarized mirror pairs at
+  10-70 deg: n 25 %, k 13 % -- not determined); the retardance C, S (a polarizer at 45 deg, or
+  circular light) separates them.  n is the weak one: it sets the metal's small absorption 1 - R
+  and the phase, both weakly.  One mirror pair behind the 45 deg polarizer at any beta in 40-70 deg
+  + the off-specular pairs: n 3.5-4 %, k 1.2 %; five at 10-70 deg: n 2.9 %
+  (90th percentile 6.5 %); the ``"metal"`` preset (those five + circular light at 50 and 65 deg,
+  9 pictures): n 2.5 % (5.3 %), k 0.6 %; adding polarizer states at 0 and 90 deg (19 pictures):
+  n 1.9 % (3.5 %).  A circular state carries the same information as a 45 deg one (C and S swap
+  roles), a state at 0 or 90 deg less.  The facet angles below 40 deg add little for n (a mirror
+  pair at 10 deg alone: n 43 %), and those above ~75 deg foreshorten a texel to less than one pixel
+  at 3.8 px per side, so they need more pixels per texel, not more pictures;
 * a per-texel scale (``specular_reflectance``: an unknown albedo or an uncalibrated light): it
   multiplies every element alike, so it is determined by S0 and leaves only ratios -- B/A, C/A,
   S/A -- to determine the index.  With an intensity camera and unpolarized light the index then
-  rests on the shape of M00 against beta alone.
+  rests on the shape of M00 against beta alone, and on one facet angle (:func:`fixed_rig_acquisition`)
+  not at all.
 
 Presets (:func:`design_acquisition`): ``"dielectric"`` -- five mirror pairs at beta = 10, 25, 40,
 55, 70 deg plus two off-specular pairs, unpolarized (7 pictures); ``"metal"`` -- the same mirror
-pairs behind a polarizer at 45 deg plus the off-specular pairs unpolarized (7 pictures);
-``polarizer_angles`` adds more states (e.g. (0, 45, 90)), ``retarder=True`` a circular state per
-mirror pair.
+pairs behind a polarizer at 45 deg, circular light (polarizer 0 deg + quarter-wave retarder at 45
+deg) at beta = 50 and 65 deg, and the off-specular pairs unpolarized (9 pictures);
+``polarizer_angles`` adds more states (e.g. (0, 45, 90)), ``retarder`` sets the circular states.
 
 Scenes (:func:`acquisition_scene_dict`): Mitsuba's ``polarizer`` and ``retarder`` plugins are
 sheets (rectangles) perpendicular to the light, 100 and 90 units out along it, outside every
@@ -57,7 +72,8 @@ camera's view (the cameras sit 30 units from the sample).  A point light behind 
 renders black with ``stokes`` + ``path`` (its shadow rays are blocked), so a configuration with a
 sheet uses ``stokes`` + ``volpath`` (which transmits through them); the others use ``path``.
 
-May import: ``hyde_bsdf.inverse.observations`` and the standard library.
+May import: ``hyde_bsdf.inverse.observations``, ``hyde_bsdf.model`` (the Fisher prediction) and the
+standard library.
 """
 from __future__ import annotations
 
@@ -68,7 +84,7 @@ import numpy as np
 
 __all__ = ["Configuration", "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition",
            "PRESETS",
-           "MIRROR_FACET_ANGLES", "OFF_SPECULAR", "METAL_RETARDER_FACET_ANGLES"]
+           "MIRROR_FACET_ANGLES", "OFF_SPECULAR", "METAL_RETARDER_FACET_ANGLES", "predicted_stderr"]
 
 #: facet angles (deg) of the presets' mirror pairs
 MIRROR_FACET_ANGLES = (10.0, 25.0, 40.0, 55.0, 70.0)
@@ -220,6 +236,80 @@ def fixed_rig_acquisition(preset: str = "dielectric", *, facet_angle: float = 50
         for a in polarizer_angles:
             configs.append(Configuration(view, light, None if a is None else float(a)))
     return Acquisition(configs, f"{preset} (fixed rig, beta {b:g} deg)")
+
+
+def _input_stokes(config: Configuration) -> np.ndarray:
+    """The light's Stokes vector after the configuration's polarizer and retarder (unit S0 before
+    them; an ideal polarizer passes half of unpolarized light, a quarter-wave retarder with its fast
+    axis at angle t has the Mueller matrix below)."""
+    if config.polarizer is None:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    a = math.radians(2.0 * config.polarizer)
+    s = np.array([1.0, math.cos(a), math.sin(a), 0.0]) / 2.0
+    if config.retarder is not None:
+        r = math.radians(2.0 * config.retarder)
+        c, sn = math.cos(r), math.sin(r)
+        s = np.array([[1, 0, 0, 0], [0, c * c, c * sn, -sn], [0, c * sn, sn * sn, c], [0, sn, -c, 0]]) @ s
+    return s
+
+
+def predicted_stderr(acquisition: Acquisition, values: dict, *, fit=("alpha", "eta", "k"), noise: float = 0.01,
+                     pixels_per_texel: float = 16.0, diffuse: str = "paper") -> dict:
+    """Relative standard errors that ``acquisition`` would give a texel, from the Fisher information
+    of the NumPy evaluator (:func:`hyde_bsdf.pbrdf`, an independent derivation of the plugin) -- in
+    milliseconds, before rendering anything: the tool for designing an acquisition.
+
+    ``values``: the texel's ``alpha`` (Beckmann), ``eta``, ``k`` and ``specular_reflectance`` (numbers
+    or equal-shaped arrays: one prediction per entry); ``fit``: the parameters fitted (the others
+    held at their values); ``noise``: the camera's noise standard deviation on each Stokes component,
+    as a fraction of the texel's S0 in each picture; ``pixels_per_texel``: pixels covering a texel
+    seen along the normal.  A picture with view polar angle theta_v sees the texel foreshortened,
+    and only the pixels lying wholly inside it count (as in :mod:`hyde_bsdf.inverse.uncertainty`):
+    (side - 1) (side cos theta_v - 1) of them, side = sqrt(pixels_per_texel).  Every configuration
+    is taken as a mirror or off-specular pair in the plane of incidence (the presets').  Returns
+    name -> relative standard error (inf where the information is singular).  Agrees with the
+    rendered information of :func:`~hyde_bsdf.inverse.uncertainty.information_blocks` to ~6 %
+    (tests/test_inverse_capture.py)."""
+    from hyde_bsdf.model.evaluator import pbrdf
+
+    names = ("alpha", "eta", "k", "specular_reflectance")
+    for n in fit:
+        if n not in names:
+            raise ValueError(f"fit names must be from {names}, got {n!r}")
+    if not (noise > 0 and pixels_per_texel > 0):
+        raise ValueError(f"noise and pixels_per_texel must be > 0, got {noise}, {pixels_per_texel}")
+    if "alpha" not in values or "eta" not in values:
+        raise ValueError(f"values must give alpha and eta, got {sorted(values)}")
+    v = {n: np.asarray(values.get(n, {"k": 0.0, "specular_reflectance": 1.0}.get(n)), np.float64) for n in names}
+    shape = np.broadcast_shapes(*(x.shape for x in v.values()))
+    v = {n: np.broadcast_to(x, shape).ravel() for n, x in v.items()}
+    side = math.sqrt(float(pixels_per_texel))
+
+    def stokes(cfg, a, eta, k, scale):
+        ti, tv = math.radians(cfg.light[0]), math.radians(cfg.view[0])
+        F = pbrdf(ti, tv, math.pi, rms_slope=a / math.sqrt(2.0), n=eta, k=max(k, 0.0), diffuse=diffuse)
+        return scale * (F @ _input_stokes(cfg)) * math.cos(ti)
+
+    P, h = len(fit), 1e-4
+    out = np.full((v["alpha"].size, P), np.inf)
+    for t in range(v["alpha"].size):
+        theta = {n: float(v[n][t]) for n in names}
+        info = np.zeros((P, P))
+        for cfg in acquisition.configurations:
+            count = max(side - 1.0, 0.0) * max(side * math.cos(math.radians(cfg.view[0])) - 1.0, 0.0)
+            S = stokes(cfg, *theta.values())
+            J = []
+            for n in fit:
+                up, dn = dict(theta), dict(theta)
+                up[n] *= math.exp(h)
+                dn[n] *= math.exp(-h)
+                J.append((stokes(cfg, *up.values()) - stokes(cfg, *dn.values())) / (2.0 * h))
+            J = np.array(J)
+            info += count * J @ J.T / (noise * S[0]) ** 2
+        ev = np.linalg.eigvalsh(info)
+        if ev.min() > 1e-12 * max(ev.max(), 1e-300):
+            out[t] = np.sqrt(np.diag(np.linalg.inv(info)))
+    return {n: out[:, i].reshape(shape) if shape else float(out[0, i]) for i, n in enumerate(fit)}
 
 
 def _texture(value):
