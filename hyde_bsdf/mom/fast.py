@@ -603,7 +603,13 @@ class _System:
         """Blocks j in ``reg`` (neighbours j - 1, j + 1 of b samples too), all at once: the row slab over the
         columns of blocks j-1 .. j+1 (kind-major within each block) gathered from the bands, the diagonal
         blocks inverted in one batched call, Dinv times the neighbours' columns."""
-        nk, nr = self.nk, reg.size
+        nk = self.nk
+        per = max(1, 32768 // (3 * nk * nk * b * b))          # blocks at a time (cache-sized)
+        if reg.size > per:
+            for g0 in range(0, reg.size, per):
+                self._regular_blocks(reg[g0:g0 + per], b, half, kinds, eqs, rows_all, cols_all, vals_all)
+            return
+        nr = reg.size
         i = np.arange(b)
         off = (np.arange(3 * b) - b)[None, :] - i[:, None] + half            # [b, 3b], the same for every block
         rows = self.bounds[reg][:, None, None] + i[None, :, None]            # [nr, b, 1]
