@@ -30,7 +30,9 @@ The partition is cut into blocks of ``B`` samples (at least ``near_wl`` waveleng
   near-grazing path, decaying at both ends), with a trapezoid rule in a stretched
   variable (fine near s = 0 where the long-range interactions live, coarse elsewhere;
   :func:`spectral_rule`) checked against the Hankel function on the partition's range
-  of distances and heights before it is used.  Each source cell is integrated exactly
+  of distances and heights before it is used.  The samples are uniform in x, so a plane
+  wave's x-dependence within a block is one table; the factors are formed in cache-sized
+  row chunks, complex exponentials in real arithmetic.  Each source cell is integrated exactly
   per plane wave against the quadratic interpolant of the samples (the dense path's
   cell moments), the double layer carries j k (sin phi - f' cos phi).  A block's
   sources are summed into Q plane-wave amplitudes, propagated block to block by
@@ -39,10 +41,15 @@ The partition is cut into blocks of ``B`` samples (at least ``near_wl`` waveleng
 * **Forward-backward iteration**: a block symmetric Gauss-Seidel sweep (forward
   through the blocks with the updated values behind and the previous ones ahead, then
   backward), the method of moments' "forward-backward method" (FBM), all incidence
-  angles at once.  After each sweep the true residual ||b - A x|| / ||b|| is computed
-  (one full product); below ``tol`` it stops.
+  angles at once.  Each directional sweep accumulates its own far part on the way (for the
+  final values: every block's far sources are two or more blocks behind), which is the other
+  direction's "ahead" part: no extra product.  The true residual ||b - A x|| / ||b|| (one
+  product of the strong part and one far direction) is computed after the first two sweeps and
+  wherever the estimate from the step size (linear convergence: the residual falls as the step)
+  says converged, rising or stalling; below ``tol`` it stops.
 * **Guards**: a sweep that raises the residual (a steep or re-entrant realisation,
-  multiple scattering that the sweep order cannot follow) or stalls (less than 10 %
+  multiple scattering that the sweep order cannot follow: Infragold V-grooves with flanks of
+  slope 6 diverge in p at sweep 2, ``tests/test_mom_fast.py``) or stalls (less than 10 %
   gain per sweep over three sweeps), or ``max_sweeps`` reached, hands the best iterate
   to restarted GMRES preconditioned by the sparse LU of the strong part (the same fast
   product); if GMRES does not reach ``tol`` either, the caller falls back to the
