@@ -12,12 +12,15 @@ off-specular pairs; ``llvm_ad_mono_polarized``):
 * ``metal``: n from gold-like 0.45 to aluminium-like 1.2 along u, k from 2.4 to 6.7 along v, a
   sharp patch (n 0.7, k 4.0), an alpha map; the mirror pairs behind a linear polarizer at 45 deg
   (Mitsuba's ``polarizer`` sheet, ``stokes`` + ``volpath``), so the retardance elements M22, M32
-  enter.
+  enter, plus circular light (polarizer 0 deg + ``retarder`` quarter-wave at 45 deg: M23, M33) at
+  beta = 50 and 65 deg -- 9 pictures, the ``"metal"`` preset, designed with
+  :func:`hyde_bsdf.inverse.predicted_stderr` for n, the weakly determined parameter.
 
 References: rendered from the truth at ``spp_ref`` samples plus Gaussian camera noise (1 % of the
 median lit S0, on each Stokes component).  Each case is fitted four times from constant start maps
 (alpha 0.3, eta 1.6 / n 0.8, k 4, scale 1) with :func:`hyde_bsdf.inverse.invert_maps` (Adam in log
-values, 4 spp, then 2 Gauss-Newton steps and the standard errors from forward-mode AD):
+values, 4 spp, 60 iterations, then 2 Gauss-Newton steps weighted by the noise and the standard
+errors from forward-mode AD at 8 spp):
 
 * ``stokes``: the Stokes loss, scale known (``specular_reflectance`` = 1);
 * ``s0``: the S0-only loss, scale known;
@@ -36,9 +39,11 @@ values, 4 spp, then 2 Gauss-Newton steps and the standard errors from forward-mo
 Errors are per texel over the texels the pictures see (every texel here); the pull
 (fit - truth) / standard error over those texels has a standard deviation near 1 when the standard
 errors are right (checked 0.8-1.25 in the full run, with the accuracy targets).  The quick run (the
-report's quick mode: 4 x 4 texels of 4 x 4 px, 3 or 2 pictures, 15 iterations, no polishing step;
-the two unknown-scale runs of each case only) checks the identifiability statements only: S0 flags
-the index, the Stokes images determine it (relative standard error 10x smaller).
+report's quick mode, ~15 s: the dielectric's two unknown-scale runs only, 4 x 4 texels of 4 x 4 px,
+a fixed rig of 2 pictures at tilts 0 and 12 deg, 10 unfrozen iterations + 2 Gauss-Newton steps)
+checks the identifiability statements: S0 flags eta, the Stokes images determine it (relative
+standard error <= 10 % and 10x smaller).  The metal's quick form is in tests/test_inverse_capture.py
+(its volpath pictures cost more than the quick report may spend).
 
 Writes ``svbrdf_index.png`` (per case and map: truth, recovered, error and standard error for the
 Stokes loss; recovered and error for the S0 loss; the index error and standard error of the two
@@ -47,6 +52,9 @@ unknown-scale runs) and ``svbrdf_index.csv`` (one row per case, loss and paramet
 error, the fraction of texels flagged, seconds).
 
     python validation/svbrdf_index.py [-o OUTDIR] [--quick]
+
+The full run writes the CSV and the picture after each of its 8 fits (the metal's and the
+dielectric's Stokes fits first), so a run stopped early leaves what it finished.
 """
 from __future__ import annotations
 
@@ -61,6 +69,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import cli, save_figure, write_csv  # noqa: E402
 
 from hyde_bsdf import inverse as inv  # noqa: E402
+from hyde_bsdf.inverse.uncertainty import STDERR_THRESHOLD  # noqa: E402
 from hyde_bsdf.inverse.acquisition import (design_acquisition, example_material,  # noqa: E402
                                            fixed_rig_acquisition, synthetic_observations)
 
@@ -69,6 +78,10 @@ TARGETS = {"eta": (0.01, 0.03), "alpha": (0.03, 0.08), "n": (0.03, 0.10), "k": (
 PULL_BAND = (0.8, 1.25)
 NOISE = 0.01
 CASES = ("metal", "dielectric")
+QUICK_ITERATIONS = 10
+#: the quick rig's two tilts (deg): unequal half-vector tilts, so that the lobe's width and the scale
+#: are told apart (two symmetric tilts see one lobe value: alpha and the scale then trade off)
+QUICK_TILTS = (0.0, 12.0)
 #: the full run's fits (case, loss, unknown scale) in the order they run: the targets' Stokes fits
 #: first, then the unknown-scale pairs, then the S0 fits with the scale known
 RUNS = tuple((c, "stokes", False) for c in CASES) + tuple((c, l, True) for c in CASES for l in ("stokes", "s0")) \
@@ -97,7 +110,7 @@ def observations(case: str, scale: bool, *, n: int, res: int, spp_ref: int, face
         start["specular_reflectance"] = 1.0
     if scale:        # one facet angle for every picture: the scale absorbs F(beta; index) in S0
         acq = fixed_rig_acquisition(case, facet_angle=RIG_FACET_ANGLE[case],
-                                    tilts=(-16.0, -8.0, 0.0, 8.0, 16.0) if facet_angles is None else (-10.0, 10.0))
+                                    tilts=(-16.0, -8.0, 0.0, 8.0, 16.0) if facet_angles is None else QUICK_TILTS)
     else:
         acq = design_acquisition(case, **({} if facet_angles is None else {"facet_angles": facet_angles}))
     obs = synthetic_observations(acq, truth, start, res=res, spp=4, spp_ref=spp_ref, noise=NOISE, seed=seed)
@@ -153,10 +166,10 @@ def validate(outdir="out/validation", quick=False):
     out.mkdir(parents=True, exist_ok=True)
     previous = mi.variant()
     inv.prepare(inv.MAP_VARIANT)
-    if quick:      # 4 x 4 texels of 4 x 4 px, the fixed rig's 2 pictures; the unknown-scale runs only
-        cfg = dict(n=4, res=16, iterations=2, spp_ref=32, uncertainty_spp=4, facet_angles=(10.0, 40.0, 70.0),
-                   polish=0, freeze=False)
-        runs = tuple((c, loss, True) for c in CASES for loss in ("stokes", "s0"))
+    if quick:      # the dielectric's unknown-scale runs: 4 x 4 texels of 4 x 4 px, the fixed rig's 2 pictures
+        cfg = dict(n=4, res=16, iterations=QUICK_ITERATIONS, spp_ref=32, uncertainty_spp=4,
+                   facet_angles=(10.0, 40.0, 70.0), polish=2, freeze=False)
+        runs = tuple(("dielectric", loss, True) for loss in ("stokes", "s0"))
     else:
         cfg = dict(n=32, res=128, iterations=60, spp_ref=256, uncertainty_spp=8, polish=2)
         runs = RUNS
@@ -187,7 +200,7 @@ def validate(outdir="out/validation", quick=False):
             mi.set_variant(previous)
 
     checks = []
-    for case in CASES:
+    for case in [c for c in CASES if (c, "s0+scale", "eta") in stats or not quick]:
         if not quick:          # the targets of the issue, on 32 x 32 maps
             for name in ("alpha", "eta") + (("k",) if case == "metal" else ()):
                 lab = _label(case, name)
@@ -215,7 +228,8 @@ def validate(outdir="out/validation", quick=False):
                 name=f"{case}, unknown per-texel scale, fixed rig: the Stokes images determine {lab} "
                      f"(median relative standard error, Stokes / S0)",
                 value=f"{100 * st['rel_se']:.3g} % / {100 * s0['rel_se']:.3g} %",
-                tolerance="Stokes < S0 / 10", passed=st["rel_se"] < s0["rel_se"] / 10))
+                tolerance=f"Stokes <= {100 * STDERR_THRESHOLD:g} % and < S0 / 10",
+                passed=st["rel_se"] <= STDERR_THRESHOLD and st["rel_se"] < s0["rel_se"] / 10))
     print(f"{'case':11s} {'loss':13s} {'param':6s} {'median':>8s} {'p90':>8s} {'pull sd':>8s} {'rel SE':>8s} "
           f"{'flagged':>8s}")
     for (case, loss, name), st in stats.items():

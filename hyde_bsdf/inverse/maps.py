@@ -22,8 +22,8 @@ from hyde_bsdf.inverse.loss import StokesLoss, smoothness
 from hyde_bsdf.inverse.observations import (MAP_PARAMETERS, _obs_mask, film_channels, map_keys, render_stokes,
                                             texel_coverage)
 from hyde_bsdf.inverse.scalar import check_gradients
-from hyde_bsdf.inverse.uncertainty import (STDERR_THRESHOLD, Uncertainty, gauss_newton_step,
-                                           identification_warnings, information_blocks, standard_errors,
+from hyde_bsdf.inverse.uncertainty import (STDERR_THRESHOLD, Uncertainty, accumulate_blocks, gauss_newton_step,
+                                           identification_warnings, pixel_records, standard_errors,
                                            warn_unidentified)
 
 __all__ = ["MapInversionResult", "MapProblem", "map_loss", "map_step", "LogAdam", "map_uncertainty",
@@ -269,7 +269,8 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
     ``polish`` Gauss-Newton steps per texel (0: none) on the noise-weighted least squares (weights
     1 / variance per observation and Stokes component: the efficient estimate, which the loss's own
     normalisation is not), then the standard errors at the last point whose information was computed
-    (the inverse Fisher information after polishing; the sandwich with the loss's weights without).
+    (the inverse Fisher information after polishing, with the noise estimated from the residuals
+    linearised after the last step; the sandwich with the loss's weights without).
     Returns (final maps, :class:`Uncertainty`)."""
     names = tuple(n for n in problem.fit if problem.shapes[n] is not None)
     if not names:
@@ -277,18 +278,27 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
     rows, cols = problem.map_shape
     seen = problem.seen if problem.seen is not None else np.ones((rows, cols), bool)
     final = dict(final)
+    # with polishing steps the result is the weighted least-squares estimate (weights 1 / noise
+    # variance, the efficient one); without, Adam's minimiser of the loss, whose covariance is the
+    # sandwich with the loss's own weights
+    weighting = "fisher" if polish else "loss"
     for k in range(max(1, int(polish))):
         problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
-        # with polishing steps the result is the weighted least-squares estimate (weights 1 / noise
-        # variance, the efficient one); without, Adam's minimiser of the loss, whose covariance is the
-        # sandwich with the loss's own weights
-        A, B, g, noise_std, n_data = information_blocks(problem, names, spp=spp, seed=seed + 1000 * k, noise=noise,
-                                                        weighting="fisher" if polish else "loss")
+        records = pixel_records(problem, names, spp=spp, seed=seed + 1000 * k, noise=noise)
+        A, B, g, noise_std, n_data = accumulate_blocks(records, (rows, cols), len(names), weighting=weighting)
         if polish:
             d = gauss_newton_step(A, g, seen, max_step=max_step)
+            applied = np.zeros_like(d)
             for i, n in enumerate(names):
                 lo, hi = MAP_PARAMETERS[n][1]
-                final[n] = np.clip(np.asarray(final[n]) * np.exp(d[:, i].reshape(rows, cols)), lo, hi)
+                old = np.asarray(final[n], np.float64)
+                final[n] = np.clip(old * np.exp(d[:, i].reshape(rows, cols)), lo, hi)
+                applied[:, i] = np.log(final[n] / old).ravel()
+    if polish:
+        # the blocks after the last step, linearised (no further render): its residuals r + J d give the
+        # noise estimate without the misfit the step removed
+        A, B, g, noise_std, n_data = accumulate_blocks(records, (rows, cols), len(names), weighting=weighting,
+                                                       step=applied)
     problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
     rel = standard_errors(A, B, seen, dof=(n_data, len(names) * int(np.asarray(seen).sum())))
     rel_maps = {n: rel[:, i].reshape(rows, cols) for i, n in enumerate(names)}
