@@ -21,7 +21,7 @@ Part 2: one partition of N unknowns (Fig. 6 surface statistics, both polarisatio
 
 Measured (docs/validation.md, "The fast solver"): Fig. 6 s+p, fast 0.80 x the floor in worker CPU
 and 0.88 x in wall, dense 3.9 x / 3.7 x (2 rounds at load 4.4-5.2); one partition: fast / dense
-0.29 at 1000 unknowns, 0.037 at 4000; 20,000 / 50,000 / 100,000 unknowns 2.7 / 9.5 / 21.7 CPU s.
+0.26 at 1000 unknowns, 0.029 at 4000; 20,000 / 50,000 / 100,000 unknowns 2.3 / 7.8 / 20.1 CPU s.
 """
 from __future__ import annotations
 
