@@ -19,7 +19,7 @@ off-specular pairs; ``llvm_ad_mono_polarized``):
 References: rendered from the truth at ``spp_ref`` samples plus Gaussian camera noise (1 % of the
 median lit S0, on each Stokes component).  Each case is fitted four times from constant start maps
 (alpha 0.3, eta 1.6 / n 0.8, k 4, scale 1) with :func:`hyde_bsdf.inverse.invert_maps` (Adam in log
-values, 4 spp, 60 iterations, then 2 Gauss-Newton steps weighted by the noise and the standard
+values, 4 spp, 60 iterations, then 3 Gauss-Newton steps weighted by the noise and the standard
 errors from forward-mode AD at 8 spp):
 
 * ``stokes``: the Stokes loss, scale known (``specular_reflectance`` = 1);
@@ -171,7 +171,7 @@ def validate(outdir="out/validation", quick=False):
                    facet_angles=(10.0, 40.0, 70.0), polish=2, freeze=False)
         runs = tuple(("dielectric", loss, True) for loss in ("stokes", "s0"))
     else:
-        cfg = dict(n=32, res=128, iterations=60, spp_ref=256, uncertainty_spp=8, polish=2)
+        cfg = dict(n=32, res=128, iterations=60, spp_ref=256, uncertainty_spp=8, polish=3)
         runs = RUNS
     results = {}
     fitcfg = {k: cfg[k] for k in ("iterations", "uncertainty_spp", "polish", "freeze") if k in cfg}
