@@ -536,7 +536,12 @@ def _far_sums_segmented(x, y, src, grids, ns, k=K0, chunk_bytes=64 * 2**20):
             d = coef * np.exp(1j * ells * th0)
             vals = _czt(d, h, m) * np.exp(-1j * t * h * np.arange(m))   # [seg, r, m]: G_s on the grid
             th = th0 + h * np.arange(m)
-            shift = np.exp(1j * k * (xc[s0:s1, None] * np.sin(th)[None, :] + yc[s0:s1, None] * np.cos(th)[None, :]))
+            ph = xc[s0:s1, None] * np.sin(th)[None, :]
+            ph += yc[s0:s1, None] * np.cos(th)[None, :]
+            ph *= k
+            shift = np.empty(ph.shape, complex)      # e^{j k (x_s sin th + y_s cos th)} in real arithmetic
+            np.cos(ph, out=shift.real)
+            np.sin(ph, out=shift.imag)
             out += np.einsum("sm,srm->rm", shift, vals)
     return [o.T for o in outs]
 
