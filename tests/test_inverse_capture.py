@@ -7,7 +7,10 @@ span facet angles 10-70 deg and the metal preset puts a 45 deg polarizer on its 
 M22, M32 enter); a 45 deg polarizer halves S0 of unpolarized light and turns the reflected light's
 S2 from 0 to about -C/2; dS/dlog(theta) from forward-mode AD equals a central difference of renders
 with the same samples (1 %), so the Gauss-Newton block of a texel equals the one built from finite
-differences; with an unknown per-texel scale the S0 loss leaves the index undetermined (warning
+differences; the Fisher blocks of a metal texel behind the 45 deg polarizer equal those of the NumPy
+evaluator (an independent derivation) over the camera noise (10 %), and the NumPy Fisher prediction
+(predicted_stderr) says unpolarized light leaves a metal's n undetermined and the 45 deg polarizer
+and circular states determine it; with an unknown per-texel scale the S0 loss leaves the index undetermined (warning
 naming eta and the fraction of texels) while the Stokes loss determines it; both validation cases
 (dielectric eta, metal n and k) are recovered on a 4 x 4 map from 3 pictures.
 """
