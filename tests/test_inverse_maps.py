@@ -147,3 +147,20 @@ def test_frozen_step_equals_unfrozen(problem):
             for f in (True, False)]
     assert [h["loss"] for h in runs[0].history] == pytest.approx([h["loss"] for h in runs[1].history], rel=1e-5)
     assert np.abs(runs[0].final["alpha"] - runs[1].final["alpha"]).max() < 1e-5
+
+
+def test_a_run_leaves_no_gradient_state_behind(problem):
+    """A run without the uncertainty pass, then a run with it on new scenes: the second one's
+    forward-mode pass (inside mi.render's isolated AD scope) must not reach the first run's
+    gradient-enabled leaves (it failed with 'ad_traverse(): ... outside of the current
+    dr.isolate_grad() scope' when the scenes kept them)."""
+    truth, obs = problem
+    first = inv.invert_maps(obs, {"alpha": 0.3}, iterations=3, spp=4, seed=1, progress=False, uncertainty=False)
+    assert np.array_equal(np.asarray(mi.traverse(obs[0].scene)["plane.bsdf.alpha.data"])[..., 0],
+                          first.final["alpha"].astype(np.float32))            # the scenes keep the result
+    again = []
+    for light in range(2):
+        scene = mi.load_dict(inv.plane_scene_dict(truth, bsdf=BSDF, light=light, res=RES, views=(0.0, 180.0)))
+        again.append(inv.Observation(scene, inv.render_stokes_np(scene, 0, 64, seed=0)))
+    second = inv.invert_maps(again, {"alpha": 0.3}, iterations=2, spp=4, seed=1, progress=False)
+    assert np.isfinite(second.rel_stderr["alpha"]).any()

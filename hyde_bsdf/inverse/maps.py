@@ -435,6 +435,11 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
             _log(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.4e}{err}  ({row['seconds']:.1f} s)")
     final = adam.average()
     adam_final = dict(final)
+    # the scenes keep the result, detached: the last iteration's gradient-enabled leaves must not
+    # outlive the run (a later forward-mode pass, here or in the caller's next problem, would
+    # otherwise reach their edges from inside mi.render's isolated AD scope and fail)
+    problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
+    del values
     unc = None
     if uncertainty:
         if progress:
