@@ -33,6 +33,9 @@ ratios scattered 0.8-1.3 between runs: compare only the ratios of one run.
 1.11, smith + diffuse "none" (the model roughconductor evaluates) 1.13, roughconductor 0.689 s.
 The diffuse term (its DHR texture lookup and M00) is the ~0.2 between hyde and diffuse "none";
 the shadowing choice costs nothing measurable.
+2026-12-02 08:41, quiet (load 0.6-1.4): frozen 80 px 5 x 6: hyde 1.15, diffuse "none" 1.06, smith +
+"none" 1.04 (roughconductor 0.111 s); frozen 48 px 7 x 6: 1.24, 1.05, 1.03 (0.070 s); spectral
+unfrozen 48 px 3 x 3: 1.03, 1.06, 1.04 (0.539 s, IQRs overlapping).
 
     python benchmarks/bench_inverse.py [--res 80] [--rounds 7] [--iterations 6] [--variant V] [--csv F]
 """
