@@ -215,6 +215,20 @@ def test_unknown_scale_s0_leaves_the_index_undetermined():
     assert found["eta"][1].startswith("eta is not determined by the data in 100 % of the 4 seen texels")
 
 
+def test_texels_without_a_whole_pixel_are_unknown_not_undetermined():
+    """A texel no picture has a whole pixel inside gets no information computed: its standard error is
+    NaN and the warning says so apart from the texels whose pixels carry no information (inf) or too
+    little (> 10 %), which are 'not determined'."""
+    rel = {"alpha": np.array([[0.01, np.nan], [0.5, np.inf]]), "eta": np.array([[0.01, np.nan], [0.02, 0.03]])}
+    found = inv.uncertainty.identification_warnings(rel, None)
+    frac, msg = found["alpha"]
+    assert frac == 0.5 and msg.startswith("alpha is not determined by the data in 50 % of the 4 seen texels")
+    assert "alpha: no standard error in 25 % of the 4 seen texels (no picture has a whole pixel" in msg
+    frac, msg = found["eta"]
+    assert frac == 0.0 and msg.startswith("eta: no standard error in 25 %")
+    assert "not determined" not in msg
+
+
 def test_invert_maps_warns_for_an_unidentified_parameter():
     truth, obs = _tiny_problem(scale=True, fit=("alpha", "eta", "specular_reflectance"), rig=True)
     start = {"alpha": 0.3, "eta": 1.6, "specular_reflectance": 1.0}

@@ -148,7 +148,7 @@ def _stats(key, result, stats) -> list:
         flagged = float(np.mean(~(rel <= r.uncertainty.threshold)))
         st = dict(median=float(np.median(e)), p90=float(np.percentile(e, 90)),
                   pull_std=float(np.std(z)) if z.size > 2 else float("nan"),
-                  rel_se=float(np.median(rel)), flagged=flagged, warned=any(m.startswith(name + " ") for m in msgs))
+                  rel_se=float(np.nanmedian(rel)) if (~np.isnan(rel)).any() else float("nan"), flagged=flagged, warned=any(m.startswith(name + " ") for m in msgs))
         stats[(case, loss, name)] = st
         rows.append([case, loss, _label(case, name), f"{st['median']:.5f}", f"{st['p90']:.5f}",
                      f"{st['pull_std']:.3f}", f"{st['rel_se']:.5f}", f"{flagged:.3f}", f"{secs:.1f}"])

@@ -430,8 +430,10 @@ def _cli_maps(args):
         print(line)
         if n in res.rel_stderr:
             rel = res.rel_stderr[n][res.seen] if res.seen is not None else res.rel_stderr[n].ravel()
-            print(f"  {'':9s} relative standard error: median {100 * np.median(rel):.3g} %, 90th percentile "
-                  f"{100 * np.percentile(rel, 90):.3g} %")
+            rel = rel[~np.isnan(rel)]            # NaN: no whole pixel in the texel, said in the warnings
+            if rel.size:
+                print(f"  {'':9s} relative standard error: median {100 * np.median(rel):.3g} %, 90th percentile "
+                      f"{100 * np.percentile(rel, 90):.3g} %")
     if res.seen is not None:
         print(f"  texels seen by the images: {int(res.seen.sum())} of {res.seen.size}")
     for message in res.warnings:

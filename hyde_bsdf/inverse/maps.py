@@ -301,6 +301,12 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
                                                        step=applied)
     problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
     rel = standard_errors(A, B, seen, dof=(n_data, len(names) * int(np.asarray(seen).sum())))
+    # a texel no picture has a whole pixel inside got no information computed: unknown, not undetermined
+    whole = np.zeros(rows * cols, np.int64)
+    for rec in records:
+        if rec is not None:
+            np.add.at(whole, rec["t"], 1)
+    rel[whole == 0] = np.nan
     rel_maps = {n: rel[:, i].reshape(rows, cols) for i, n in enumerate(names)}
     found = identification_warnings(rel_maps, seen, threshold)
     unc = Uncertainty(names, {n: rel_maps[n] * np.asarray(final[n]) for n in names}, rel_maps, A, B, g, noise_std,

@@ -29,7 +29,9 @@ the information is then exactly block-diagonal per texel (P x P blocks for P fit
 standard errors are slightly conservative (the pixels straddling texel edges, which the fit also
 uses, are left out).  Splitting a straddling pixel's derivative by its sub-sample shares instead was
 measured wrong where neighbours differ (a sharp alpha edge 0.12 | 0.48: pulls of -8 to -18 at the
-edge texels), so it is not done.  Texels need a few pixels across in some view to get any.
+edge texels), so it is not done.  Texels need a few pixels across in some view to get any: a seen
+texel with no whole pixel in any picture gets NaN standard errors and a warning of its own (its value is
+fitted, its uncertainty unknown), apart from "not determined".
 
 Noise.  ``noise`` (the standard deviation of the reference's Stokes components: one number, or per
 observation a number or 4 numbers S0..S3) if the caller knows it; otherwise sigma^2 is estimated per observation and component from
@@ -272,19 +274,36 @@ def gauss_newton_step(A, g, seen=None, max_step: float = 0.1):
 
 def identification_warnings(rel_stderr: dict, seen, threshold: float = STDERR_THRESHOLD) -> dict:
     """{name: (fraction of seen texels with relative standard error > threshold, message)} for every
-    parameter where the fraction is > 0."""
+    parameter where that fraction is > 0 or where some seen texel has no standard error at all (NaN:
+    no picture has a whole pixel inside it, so its information was not computed -- that is said
+    apart, since the data may well determine the value there)."""
     out = {}
     seen = np.ones_like(next(iter(rel_stderr.values())), bool) if seen is None else np.asarray(seen, bool)
     n = int(seen.sum())
     for name, rel in rel_stderr.items():
-        bad = ~(np.asarray(rel)[seen] <= threshold)
+        r = np.asarray(rel)[seen]
+        unknown = np.isnan(r)
+        bad = r > threshold                       # inf included: a texel whose pixels carry no information
         frac = float(bad.mean()) if n else 0.0
+        parts = []
         if frac > 0:
-            med = float(np.median(np.asarray(rel)[seen]))
-            out[name] = (frac, f"{name} is not determined by the data in {100 * frac:.0f} % of the {n} seen texels "
-                               f"(relative standard error > {100 * threshold:g} %; median {100 * med:.3g} %): "
-                               f"its values there are not measurements")
+            med = float(np.median(r[~unknown])) if (~unknown).any() else float("nan")
+            parts.append(f"{name} is not determined by the data in {_percent(frac)} % of the {n} seen texels "
+                         f"(relative standard error > {100 * threshold:g} %; median {100 * med:.3g} %): "
+                         f"its values there are not measurements")
+        if unknown.any():
+            parts.append(f"{name}: no standard error in {_percent(unknown.mean())} % of the {n} seen texels "
+                         f"(no picture has a whole pixel inside them; give some view >= 2 pixels per texel): "
+                         f"their values are fitted but their uncertainty is unknown")
+        if parts:
+            out[name] = (frac, "; ".join(parts))
     return out
+
+
+def _percent(fraction: float) -> str:
+    """A fraction as a percentage: whole per cent from 1 % on, two significant digits below (a few
+    texels of a large map must not read as '0 %')."""
+    return f"{100 * fraction:.0f}" if fraction >= 0.01 else f"{100 * fraction:.2g}"
 
 
 def warn_unidentified(found: dict) -> None:
