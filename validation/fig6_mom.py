@@ -34,6 +34,7 @@ fig6_mom.npz (the raw MoM result, reused by mom_1d_model.py).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import math
 import os
@@ -206,17 +207,25 @@ def _read_table(path):
 QUICK_LENGTH_WL, QUICK_PARTITIONS = 3000.0, 20
 
 
-def validate(outdir="out/validation", quick=False):
-    """The report's checks: power balance (1 %), MoM vs the model's 1-D reduction (dB), and the
-    paper's comparison with Eq. 17 (reported; see the README for why it differs at 60-75 deg)."""
+@contextlib.contextmanager
+def surface(quick):
+    """The Fig. 6 surface of the run inside the block: the quick report's (QUICK_LENGTH_WL,
+    QUICK_PARTITIONS) when ``quick``, else the paper's; yields the paper's (length, partitions)."""
     global LENGTH_WL, PARTITIONS
     saved = LENGTH_WL, PARTITIONS
     if quick:
         LENGTH_WL, PARTITIONS = QUICK_LENGTH_WL, QUICK_PARTITIONS
     try:
-        main(["-o", str(outdir)])
+        yield saved
     finally:
         LENGTH_WL, PARTITIONS = saved
+
+
+def validate(outdir="out/validation", quick=False):
+    """The report's checks: power balance (1 %), MoM vs the model's 1-D reduction (dB), and the
+    paper's comparison with Eq. 17 (reported; see the README for why it differs at 60-75 deg)."""
+    with surface(quick) as saved:
+        main(["-o", str(outdir)])
     table = _read_table(os.path.join(str(outdir), "fig6_mom_table.csv"))
     size = f"{QUICK_LENGTH_WL:g} lambda / {QUICK_PARTITIONS}" if quick else f"{saved[0]:g} lambda / {saved[1]}"
     checks = []

@@ -137,13 +137,8 @@ def main(argv=None):
 def validate(outdir="out/validation", quick=False):
     """Reuses fig6_mom.py's MoM result (OUTDIR/fig6_mom.npz) when the report ran it first, else runs
     it; ``quick`` uses fig6_mom's quick surface (3000 lambda / 20 partitions), as its quick mode does."""
-    saved = fig6_mom.LENGTH_WL, fig6_mom.PARTITIONS
-    if quick:
-        fig6_mom.LENGTH_WL, fig6_mom.PARTITIONS = fig6_mom.QUICK_LENGTH_WL, fig6_mom.QUICK_PARTITIONS
-    try:
+    with fig6_mom.surface(quick):
         main(["-o", str(outdir)])
-    finally:
-        fig6_mom.LENGTH_WL, fig6_mom.PARTITIONS = saved
     with open(os.path.join(str(outdir), "mom_1d_model_table.csv"), newline="") as fh:
         table = [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
     tol = 2.5 if quick else 1.5

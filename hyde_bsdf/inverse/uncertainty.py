@@ -287,7 +287,7 @@ def identification_warnings(rel_stderr: dict, seen, threshold: float = STDERR_TH
         frac = float(bad.mean()) if n else 0.0
         parts = []
         if frac > 0:
-            med = float(np.median(r[~unknown])) if (~unknown).any() else float("nan")
+            med = float(np.median(r[~unknown]))      # frac > 0: some texels have a standard error
             parts.append(f"{name} is not determined by the data in {_percent(frac)} % of the {n} seen texels "
                          f"(relative standard error > {100 * threshold:g} %; median {100 * med:.3g} %): "
                          f"its values there are not measurements")
