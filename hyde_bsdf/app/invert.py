@@ -5,16 +5,15 @@ The options and outputs are described in :mod:`hyde_bsdf.inverse`; the plot is
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 
+from hyde_bsdf.app.args import Parser, quiet_option
 from hyde_bsdf.app.plots import plot_history
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, one_line
 from hyde_bsdf.inverse._common import Y_WEIGHTS
 from hyde_bsdf.inverse.memory import check_memory
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
@@ -30,13 +29,6 @@ from hyde_bsdf.progress import stderr_lines
 __all__ = ["cli_main", "build_parser"]
 
 _log = stderr_lines("[invert]")
-
-
-EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
-
-
-def _one_line(exc) -> str:
-    return " | ".join(p.strip() for p in str(exc).strip().splitlines() if p.strip())
 
 
 def _parse_values(text, what, names=PARAMETERS, ranges=None):
@@ -60,15 +52,8 @@ def _parse_values(text, what, names=PARAMETERS, ranges=None):
     return out
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse, but a bad argument is one UsageError line (not usage text + exit)."""
-
-    def error(self, message):
-        raise UsageError(message)
-
-
 def build_parser():
-    ap = _Parser(
+    ap = Parser(
         prog="hyde-bsdf invert",
         description="Recover the hyde BSDF's roughness and index from Stokes images by differentiable "
                     "rendering.  Scalar mode (default): rms_slope, eta, k (Mitsuba n + ik; the paper's "
@@ -118,6 +103,7 @@ def build_parser():
                     "per map unit (tv) or squared map unit (l2); 0.1 mild, >= 1 flattens; default 0)")
     ap.add_argument("--seed", type=int, default=0, help="random seed (integer >= 0)")
     ap.add_argument("-o", "--output", default="out/invert", help="output folder (default out/invert)")
+    quiet_option(ap)
     return ap
 
 
@@ -171,7 +157,7 @@ def _check_out(path):
     try:
         return check_output_path(path, "-o/--output file")
     except ValueError as exc:
-        raise UsageError(_one_line(exc)) from None
+        raise UsageError(one_line(exc)) from None
 
 
 def _read_reference(path, width, height, what="--reference"):
@@ -181,7 +167,7 @@ def _read_reference(path, width, height, what="--reference"):
     try:
         st = read_stokes_exr(path)
     except (ValueError, OSError, RuntimeError) as exc:
-        raise UsageError(f"{what} {str(path)!r}: {_one_line(exc)}") from None
+        raise UsageError(f"{what} {str(path)!r}: {one_line(exc)}") from None
     ref = np.array([np.asarray(st[s], np.float64) @ np.array(Y_WEIGHTS) for s in ("S0", "S1", "S2", "S3")])
     h, w = ref.shape[1:]
     if (w, h) != (width, height):
@@ -190,7 +176,7 @@ def _read_reference(path, width, height, what="--reference"):
     try:
         check_reference_scale(ref, f"{what} {str(path)!r}")
     except ValueError as exc:
-        raise UsageError(_one_line(exc)) from None
+        raise UsageError(one_line(exc)) from None
     return ref
 
 
@@ -204,7 +190,7 @@ def _read_mask(path, shape):
 
             m = mpimg.imread(str(path))
     except (OSError, ValueError) as exc:
-        raise UsageError(f"--mask {str(path)!r}: cannot read it ({_one_line(exc)}); give a PNG or .npy") from None
+        raise UsageError(f"--mask {str(path)!r}: cannot read it ({one_line(exc)}); give a PNG or .npy") from None
     m = np.asarray(m)
     if m.ndim == 3:
         m = m[..., :3].max(axis=2)
@@ -218,30 +204,17 @@ def _load_user_scene(path):
     try:
         return load_scene(path)
     except (RuntimeError, ValueError) as exc:
-        raise UsageError(f"--scene {str(path)!r}: Mitsuba could not load it: {_one_line(exc)[:400]}") from None
+        raise UsageError(f"--scene {str(path)!r}: Mitsuba could not load it: {one_line(exc)[:400]}") from None
 
 
 def cli_main(argv=None) -> int:
-    """``hyde-bsdf invert``: one-line errors (exit 2), Ctrl-C exit 130, progress on stderr."""
+    """``hyde-bsdf invert``: 0 on success; user errors raise UsageError, a diverging run
+    FloatingPointError (with a hint), Ctrl-C KeyboardInterrupt -- :func:`hyde_bsdf.app.cli.main`
+    turns each into one line and an exit status.  Progress per iteration on stderr."""
     try:
         return _cli(argv)
-    except KeyboardInterrupt:
-        print("hyde-bsdf invert: interrupted (no output written for this run)", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except UsageError as exc:
-        print(f"hyde-bsdf invert: error: {_one_line(exc)}", file=sys.stderr)
-        return EXIT_USAGE
     except FloatingPointError as exc:
-        print(f"hyde-bsdf invert: error: {_one_line(exc)} (try a smaller --lr or more --spp)", file=sys.stderr)
-        return 1
-    except RuntimeError as exc:
-        cause = exc
-        while cause is not None:               # Ctrl-C inside mi.render comes back wrapped
-            if isinstance(cause, KeyboardInterrupt):
-                print("hyde-bsdf invert: interrupted (no output written for this run)", file=sys.stderr)
-                return EXIT_INTERRUPTED
-            cause = cause.__cause__ or cause.__context__
-        raise
+        raise FloatingPointError(f"{one_line(exc)} (try a smaller --lr or more --spp)") from exc
 
 
 def _cli(argv):
@@ -260,14 +233,14 @@ def _cli(argv):
     try:
         prepare()
     except RuntimeError as exc:
-        raise UsageError(_one_line(exc)) from None
+        raise UsageError(one_line(exc)) from None
     import mitsuba as mi
 
     scene = (load_scene(None, res=args.res, spp=args.spp) if not args.scene else _load_user_scene(args.scene[0]))
     try:
         parameter_keys(mi.traverse(scene), PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
     except ValueError as exc:
-        raise UsageError(_one_line(exc)) from None
+        raise UsageError(one_line(exc)) from None
     W, H = scene.sensors()[0].film().crop_size()
     check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
     if args.reference:
@@ -280,7 +253,7 @@ def _cli(argv):
     try:
         loss_fn = StokesLoss(ref, components=args.loss)
     except ValueError as exc:
-        raise UsageError(f"--reference: {_one_line(exc)}") from None
+        raise UsageError(f"--reference: {one_line(exc)}") from None
     res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
                  seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
     with atomic_group():      # the CSV and the plot replace the old pair together, or not at all
@@ -333,7 +306,7 @@ def _cli_maps(args):
     try:
         prepare(MAP_VARIANT)
     except RuntimeError as exc:
-        raise UsageError(_one_line(exc)) from None
+        raise UsageError(one_line(exc)) from None
     import mitsuba as mi
 
     truth = None
@@ -372,7 +345,7 @@ def _cli_maps(args):
         try:
             map_keys(mi.traverse(scene), fit, args.target)
         except ValueError as exc:
-            raise UsageError(f"scene {i}: {_one_line(exc)}") from None
+            raise UsageError(f"scene {i}: {one_line(exc)}") from None
         W, H = scene.sensors()[args.sensor].film().crop_size()
         check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
         if args.reference:
@@ -387,7 +360,7 @@ def _cli_maps(args):
                           seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
                           truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
     except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
-        raise UsageError(_one_line(exc)) from None
+        raise UsageError(one_line(exc)) from None
     with atomic_group():      # history, maps and plot replace the old set together, or not at all
         _write_map_outputs(res, paths, args)
     print(f"loss: {args.loss}; {args.iterations} iterations over {len(observations)} image(s), "
