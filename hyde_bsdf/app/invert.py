@@ -13,7 +13,7 @@ import numpy as np
 
 from hyde_bsdf.app.args import Parser, quiet_option
 from hyde_bsdf.app.plots import plot_history
-from hyde_bsdf.errors import UsageError, one_line
+from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
 from hyde_bsdf.inverse.memory import check_memory
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
@@ -273,14 +273,15 @@ def _cli(argv):
     return 0
 
 
-def _cli_maps(args):
+def _maps_fit_and_start(args):
+    """The fitted map names and their start values, from --fit, --preset and --start."""
     names = tuple(MAP_PARAMETERS)
     ranges = {n: MAP_PARAMETERS[n][1] for n in names}
     preset_fit = {"dielectric": "alpha,eta", "metal": "alpha,eta,k"}
     fit = tuple(s.strip() for s in (args.fit or preset_fit.get(args.preset, "alpha")).split(",") if s.strip())
     bad = [p for p in fit if p not in names]
     if bad or not fit:
-        raise UsageError(f"--fit must list parameters from {', '.join(names)}, got {args.fit!r}")
+        raise UsageError(f"--fit must list parameters from {', '.join(names)}, got {shorten(args.fit)}")
     if "alpha" in fit and "rms_slope" in fit:
         raise UsageError("--fit: alpha and rms_slope are the same roughness; fit one of them")
     start = {n: 0.3 for n in fit if n in ("alpha", "rms_slope")}
@@ -294,6 +295,11 @@ def _cli_maps(args):
     if missing:
         raise UsageError(f"--start must give a start value for {', '.join(missing)} (e.g. --start "
                          f"{','.join(f'{n}=1.5' for n in missing)})")
+    return fit, start
+
+
+def _maps_outputs(args, fit) -> dict:
+    """Every file the maps mode writes, checked before any work: {key: path}."""
     out = Path(args.output)
     outputs = {"history": "invert_maps_history.csv", "png": "invert_maps.png"}
     for n in fit:
@@ -302,43 +308,46 @@ def _cli_maps(args):
         if not args.no_uncertainty:
             outputs[n + "_stderr.npy"] = f"{n}_stderr.npy"
             outputs[n + "_stderr.exr"] = f"{n}_stderr.exr"
-    paths = {k: _check_out(out / v) for k, v in outputs.items()}
-    try:
-        prepare(MAP_VARIANT)
-    except RuntimeError as exc:
-        raise UsageError(one_line(exc)) from None
+    return {k: _check_out(out / v) for k, v in outputs.items()}
+
+
+def _preset_observations(args, fit, start):
+    """--preset: the built-in sample captured in the designed acquisition; (observations, truth)."""
+    if args.scene:
+        raise UsageError("--preset renders the built-in sample; with --scene give the references of your own "
+                         "acquisition instead")
+    if "rms_slope" in fit or ("k" in fit and args.preset == "dielectric"):
+        raise UsageError(f"--fit: the {args.preset} preset fits alpha, eta"
+                         f"{', k' if args.preset == 'metal' else ''} and specular_reflectance; got {shorten(args.fit)}")
+    material = example_material(args.preset, args.map_size)
+    if "specular_reflectance" not in fit:
+        material["specular_reflectance"] = 1.0
+    truth = {n: np.asarray(material[n], float) for n in fit}
+    acq = design_acquisition(args.preset)
+    check_memory(args.res, args.res, args.spp, "--spp or --res")
+    _log(f"{args.preset} preset: {len(acq.configurations)} pictures of {args.res}x{args.res} px "
+         f"({acq.polarized()} behind a polarizer), references at {args.spp_ref} spp + {100 * args.noise:g} % noise")
+    observations = synthetic_observations(acq, material, start, res=args.res, spp=args.spp, spp_ref=args.spp_ref,
+                                          noise=args.noise, seed=args.seed)
+    return observations, truth
+
+
+def _scene_observations(args, fit):
+    """--scene (the user's) or the built-in textured plane: (observations, truth or None)."""
     import mitsuba as mi
 
     truth = None
-    observations = []
-    if args.preset:
-        if args.scene:
-            raise UsageError("--preset renders the built-in sample; with --scene give the references of your own "
-                             "acquisition instead")
-        if "rms_slope" in fit or ("k" in fit and args.preset == "dielectric"):
-            raise UsageError(f"--fit: the {args.preset} preset fits alpha, eta"
-                             f"{', k' if args.preset == 'metal' else ''} and specular_reflectance; got {args.fit!r}")
-        material = example_material(args.preset, args.map_size)
-        if "specular_reflectance" not in fit:
-            material["specular_reflectance"] = 1.0
-        truth = {n: np.asarray(material[n], float) for n in fit}
-        acq = design_acquisition(args.preset)
-        check_memory(args.res, args.res, args.spp, "--spp or --res")
-        _log(f"{args.preset} preset: {len(acq.configurations)} pictures of {args.res}x{args.res} px "
-             f"({acq.polarized()} behind a polarizer), references at {args.spp_ref} spp + {100 * args.noise:g} % noise")
-        observations = synthetic_observations(acq, material, start, res=args.res, spp=args.spp, spp_ref=args.spp_ref,
-                                              noise=args.noise, seed=args.seed)
-        scenes = []
-    elif args.scene:
+    if args.scene:
         scenes = [_load_user_scene(p) for p in args.scene]
     else:
-        truth_map = example_maps(args.map_size)
-        truth = {"alpha": truth_map} if fit == ("alpha",) else None
         if fit != ("alpha",):
             raise UsageError("the built-in --maps scene has a known index (eta 1.5, k 3) and an alpha map: "
                              "--fit alpha (give --scene/--reference for other fits)")
+        truth_map = example_maps(args.map_size)
+        truth = {"alpha": truth_map}
         scenes = [mi.load_dict(plane_scene_dict(truth_map, light=j, res=args.res, spp=args.spp))
                   for j in range(len(LIGHTS))]
+    observations = []
     for i, scene in enumerate(scenes):
         if args.sensor >= len(scene.sensors()):
             raise UsageError(f"--sensor {args.sensor}: scene {i} has {len(scene.sensors())} sensor(s)")
@@ -355,22 +364,18 @@ def _cli_maps(args):
             ref = render_stokes_np(scene, args.sensor, args.spp_ref, seed=args.seed)
         mask = _read_mask(args.mask[i], (H, W)) if args.mask else None
         observations.append(Observation(scene, ref, sensor=args.sensor, mask=mask))
-    try:
-        res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
-                          seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
-                          truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
-    except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
-        raise UsageError(one_line(exc)) from None
-    with atomic_group():      # history, maps and plot replace the old set together, or not at all
-        _write_map_outputs(res, paths, args)
-    print(f"loss: {args.loss}; {args.iterations} iterations over {len(observations)} image(s), "
+    return observations, truth
+
+
+def _print_maps_result(res, args, fit, start, n_images, paths) -> None:
+    print(f"loss: {args.loss}; {args.iterations} iterations over {n_images} image(s), "
           f"{res.seconds_per_iteration:.3f} s/iteration (first {res.first_iteration_seconds:.1f} s incl. JIT)")
     for n in fit:
         v = np.asarray(res.final[n])
         line = f"  {n:9s} start {start[n]:.4g} -> "
         line += (f"map {v.shape[1]}x{v.shape[0]}, {v.min():.4g}..{v.max():.4g} (median {np.median(v):.4g})"
                  if v.ndim == 2 else f"{float(v):.5g}")
-        if truth and n in truth:
+        if res.truth and n in res.truth:
             e = res.texel_errors(n)
             line += (f"; per-texel error over the {int(res.seen.sum())} seen texels: median "
                      f"{100 * np.median(e):.2f} %, 90th percentile {100 * np.percentile(e, 90):.2f} %")
@@ -386,6 +391,29 @@ def _cli_maps(args):
     for message in res.warnings:
         print(f"  warning: {message}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
+
+
+def _cli_maps(args):
+    """``hyde-bsdf invert --maps``: check, gather the observations, invert, write, report."""
+    fit, start = _maps_fit_and_start(args)
+    paths = _maps_outputs(args, fit)
+    try:
+        prepare(MAP_VARIANT)
+    except RuntimeError as exc:
+        raise UsageError(one_line(exc)) from None
+    if args.preset:
+        observations, truth = _preset_observations(args, fit, start)
+    else:
+        observations, truth = _scene_observations(args, fit)
+    try:
+        res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
+                          seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
+                          truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
+    except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
+        raise UsageError(one_line(exc)) from None
+    with atomic_group():      # history, maps and plot replace the old set together, or not at all
+        _write_map_outputs(res, paths, args)
+    _print_maps_result(res, args, fit, start, len(observations), paths)
     return 0
 
 
