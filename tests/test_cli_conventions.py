@@ -117,3 +117,27 @@ def test_help_exits_zero(argv, capsys):
     except SystemExit as exc:                  # argparse's --help exits after printing
         code = exc.code
     assert code == 0 and "usage" in capsys.readouterr().out
+
+
+def test_quiet_silences_progress_deep_in_the_library(capsys, monkeypatch):
+    """``-q`` reaches work no command passes a callback to: the DHR table's build (its default
+    progress=True means stderr lines) reports every chunk here (throttle period 0), and while
+    quiet none of those reports reaches stderr."""
+    import hyde_bsdf.progress as progress
+    from hyde_bsdf.model import dhr
+
+    calls = []
+
+    def counted(value, prefix="[hyde-bsdf]"):
+        real = progress.as_callback(value, prefix)
+        return None if real is None else (lambda message: (calls.append(message), real(message)))
+
+    monkeypatch.setattr(dhr, "as_callback", counted)
+    monkeypatch.setattr(dhr, "Throttle", lambda callback, seconds=0.0: progress.Throttle(callback, 0.0))
+    old = progress.set_quiet(True)
+    try:
+        dhr.build_table("none")
+    finally:
+        progress.set_quiet(old)
+    assert len(calls) > 5 and "building DHR table (none)" in calls[0], calls[:2]
+    assert capsys.readouterr().err == ""

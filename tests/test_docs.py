@@ -364,7 +364,7 @@ def _check_command(cmd: str, commands: dict) -> list[str]:
             elif len(tok) > 1 and tok[1] == "test":
                 problems += _check_pytest_args(tok[2:], part)
         elif prog == "hyde-bsdf":
-            if len(tok) < 2 or tok[1] in ("-h", "--help"):
+            if len(tok) < 2 or tok[1] in ("-h", "--help", "--version", "-V"):
                 continue
             sub = tok[1]
             if sub not in commands:
