@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.app.args import Parser, quiet_option
+from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
@@ -154,10 +154,8 @@ def _check_args(args):
 
 def _check_out(path):
     """An output file checked writable before any long work (a UsageError naming -o otherwise)."""
-    try:
+    with user_input():
         return check_output_path(path, "-o/--output file")
-    except ValueError as exc:
-        raise UsageError(one_line(exc)) from None
 
 
 def _read_reference(path, width, height, what="--reference"):
@@ -173,10 +171,8 @@ def _read_reference(path, width, height, what="--reference"):
     if (w, h) != (width, height):
         raise UsageError(f"{what} {str(path)!r} is {w}x{h} pixels but the scene's film is {width}x{height}: "
                          f"render the reference with the same scene and film")
-    try:
+    with user_input():
         check_reference_scale(ref, f"{what} {str(path)!r}")
-    except ValueError as exc:
-        raise UsageError(one_line(exc)) from None
     return ref
 
 
@@ -237,10 +233,8 @@ def _cli(argv):
     import mitsuba as mi
 
     scene = (load_scene(None, res=args.res, spp=args.spp) if not args.scene else _load_user_scene(args.scene[0]))
-    try:
+    with user_input():
         parameter_keys(mi.traverse(scene), PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
-    except ValueError as exc:
-        raise UsageError(one_line(exc)) from None
     W, H = scene.sensors()[0].film().crop_size()
     check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
     if args.reference:
@@ -250,10 +244,8 @@ def _cli(argv):
         _log(f"rendering the reference at {truth} ({args.spp_ref} spp)")
         ref = render_reference(scene, truth, args.spp_ref, seed=args.seed, prefix=args.target)
         truth_known = True
-    try:
+    with user_input("--reference"):
         loss_fn = StokesLoss(ref, components=args.loss)
-    except ValueError as exc:
-        raise UsageError(f"--reference: {one_line(exc)}") from None
     res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
                  seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
     with atomic_group():      # the CSV and the plot replace the old pair together, or not at all
@@ -351,10 +343,8 @@ def _scene_observations(args, fit):
     for i, scene in enumerate(scenes):
         if args.sensor >= len(scene.sensors()):
             raise UsageError(f"--sensor {args.sensor}: scene {i} has {len(scene.sensors())} sensor(s)")
-        try:
+        with user_input(f"scene {i}"):
             map_keys(mi.traverse(scene), fit, args.target)
-        except ValueError as exc:
-            raise UsageError(f"scene {i}: {one_line(exc)}") from None
         W, H = scene.sensors()[args.sensor].film().crop_size()
         check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
         if args.reference:
@@ -405,12 +395,10 @@ def _cli_maps(args):
         observations, truth = _preset_observations(args, fit, start)
     else:
         observations, truth = _scene_observations(args, fit)
-    try:
+    with user_input():                     # the inputs (masks, start shapes) found inconsistent
         res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
                           seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
                           truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
-    except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
-        raise UsageError(one_line(exc)) from None
     with atomic_group():      # history, maps and plot replace the old set together, or not at all
         _write_map_outputs(res, paths, args)
     _print_maps_result(res, args, fit, start, len(observations), paths)
