@@ -54,7 +54,7 @@ def _one_error_line(err):
     (["--iterations", "0"], ["--iterations", ">= 1"]),
     (["--lr", "nan"], ["--lr", "> 0"]),
     (["--start", "rms_slope=abc"], ["--start", "not a number"]),
-    (["--start", "rms_slope=9"], ["--start", "outside the accepted range"]),
+    (["--start", "rms_slope=60"], ["--start", "outside the accepted range"]),
     (["--fit", "sigma"], ["--fit", "rms_slope, eta, k"]),
     (["--regularizer", "tv"], ["--regularizer", "--maps"]),
     (["--maps", "--regularizer", "tikhonov"], ["--regularizer", "invalid choice"]),

@@ -67,6 +67,7 @@ from hyde_bsdf.fit.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, pa
                                       read_pbsdf, rusinkiewicz_to_directions, table_frame_x,
                                       table_nbytes, table_to_paper, paper_to_table)
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N
 from hyde_bsdf.model.shadowing import SHADOWING
 
 __all__ = ["DEFAULT_RESOLUTION", "edge_deg", "ALPHA_CANDIDATES", "ExportReport", "grids",
@@ -167,11 +168,11 @@ def band_index(wavelengths=KAIST_WAVELENGTHS, n=None, k=None, material=None):
         a = np.atleast_1d(np.asarray(v, dtype=float))
         if a.ndim != 1 or a.size not in (1, wl.size):
             raise UsageError(f"{name} must be one value or {wl.size} (one per band {wl.tolist()} nm), got {v!r}")
-        if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a > 1e6):
-            raise UsageError(f"{name} must be finite and in [0, 1e6], got {v!r}")
+        if not np.all(np.isfinite(a)) or np.any(a < N.lo) or np.any(a > N.hi):
+            raise UsageError(f"{name} must be finite and in {N.text()}, got {v!r}")
         vals.append(np.broadcast_to(a, wl.shape).astype(float))
-    if np.any(np.hypot(*vals) < 1e-6):
-        raise UsageError("n and k cannot both be 0 (|eta| >= 1e-6) in any band")
+    if np.any(np.hypot(*vals) < INDEX_MIN):
+        raise UsageError(f"n and k cannot both be 0 (|eta| >= {INDEX_MIN:g}) in any band")
     return vals[0], vals[1]
 
 
@@ -471,8 +472,8 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     res = _check_resolution(resolution)
     if not (isinstance(error_samples, (int, np.integer)) and 0 <= error_samples <= 10**7):
         raise UsageError(f"error_samples must be an integer in [0, 1e7], got {error_samples!r}")
-    if alpha_sample is not None and not (isinstance(alpha_sample, (int, float)) and 1e-4 <= alpha_sample <= 10):
-        raise UsageError(f"alpha_sample must be in [1e-4, 10], got {alpha_sample!r}")
+    if alpha_sample is not None and not (isinstance(alpha_sample, (int, float)) and ALPHA_SAMPLE.contains(alpha_sample)):
+        raise UsageError(f"alpha_sample must be in {ALPHA_SAMPLE.text()}, got {alpha_sample!r}")
     path = check_output_path(path, "pBSDF file")
     nbytes = check_table_size(path, res, len(wavelengths))
     pd, td, th = grids(res)

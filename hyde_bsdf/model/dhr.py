@@ -72,6 +72,7 @@ import numpy as np
 
 from hyde_bsdf.atomic import atomic_open
 from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
+from hyde_bsdf.model.parameters import DHR_TABLE_RMS_SLOPE
 from hyde_bsdf.model import shadowing as _shadowing_module
 from hyde_bsdf.model.shadowing import SHADOWING, g1_smith_beckmann
 
@@ -90,7 +91,7 @@ TABLE_X_REFINE = 4
 TABLE_THETA_POINTS = (round(TABLE_X_REFINE_FROM * TABLE_X_STEPS)          # 120 coarse nodes
                       + round((1 - TABLE_X_REFINE_FROM) * TABLE_X_STEPS * TABLE_X_REFINE) + 1)  # + 33 fine
 TABLE_SLOPE_POINTS = 121       # 20 per decade over 6 decades
-TABLE_SLOPE_RANGE = (1e-4, 100.0)
+TABLE_SLOPE_RANGE = DHR_TABLE_RMS_SLOPE   # wider than the accepted RMS_SLOPE (parameters.py)
 _TABLE_VERSION = 7             # bump when the quadrature or the grid changes
 #: stored rho and rho re-integrated at load must agree to this (same rule, same nodes)
 _SPOT_TOL = 1e-9

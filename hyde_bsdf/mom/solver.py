@@ -179,6 +179,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyde_bsdf.model.parameters import NATURAL_INDEX, paper_eta
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast, spectral_rule
 from hyde_bsdf.mom.gather import ExecutorError, gather
@@ -726,9 +727,10 @@ def _check_index(n, k):
         return None
     n = _check_positive("n", n)
     k = 0.0 if k is None else _check_positive("k", k, allow_zero=True)
-    if n > 1e3 or k > 1e3:
-        raise ValueError(f"n and k must be <= 1000 (use the PEC, n=None, for a better conductor), got n={n:g}, k={k:g}")
-    return complex(n, -k)
+    if not (NATURAL_INDEX.contains(n) and NATURAL_INDEX.contains(k)):
+        raise ValueError(f"n and k must be <= {NATURAL_INDEX.hi:g} (use the PEC, n=None, for a better conductor), "
+                         f"got n={n:g}, k={k:g}")
+    return paper_eta(n, k)
 
 
 def _memory_available():
