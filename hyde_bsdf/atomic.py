@@ -371,13 +371,32 @@ def atomic_group():
     group.commit()
 
 
+def _keep_owner_and_mode(tmp: Path, path: Path, mode) -> None:
+    """Give ``tmp`` the permission bits ``mode``; by default those of the regular file it replaces
+    (a 0600 file stays 0600) and, where allowed, its owner and group, else what open() gives."""
+    try:
+        old = os.lstat(path)
+    except OSError:
+        old = None
+    if old is not None and not (old.st_mode & 0o170000 == 0o100000):
+        old = None                                   # only a regular file passes on its mode
+    if mode is None:
+        mode = (old.st_mode & 0o7777) if old is not None else 0o666 & ~_umask()
+    if old is not None and (old.st_uid, old.st_gid) != (os.geteuid(), os.getegid()):
+        with contextlib.suppress(OSError):           # root: owner and group; others: a group of theirs
+            os.chown(tmp, old.st_uid if os.geteuid() == 0 else -1, old.st_gid)
+    os.chmod(tmp, mode)
+
+
 @contextlib.contextmanager
-def atomic_path(path):
+def atomic_path(path, mode: int | None = None):
     """Yield a temporary path beside ``path`` (ending in the same suffix, so writers that choose
     the format from the extension still work); on normal exit it replaces ``path`` (inside
     :func:`atomic_group`: when the group ends), on an exception (KeyboardInterrupt included) it
     is removed and ``path`` is left as it was.  An OSError of the write, or a writer's
-    RuntimeError (OpenEXR), becomes :class:`OutputWriteError` naming ``path``."""
+    RuntimeError (OpenEXR), becomes :class:`OutputWriteError` naming ``path``.  The new file
+    keeps the mode (and, where the user may, the owner and group) of the regular file it
+    replaces, or gets ``mode`` when given, or what ``open`` gives (0666 & ~umask)."""
     path = Path(path)
     _sweep_once(path.parent)
     try:
@@ -388,7 +407,7 @@ def atomic_path(path):
     try:
         try:
             yield tmp
-            os.chmod(tmp, 0o666 & ~_umask())       # 0600 at creation; give what open() would give
+            _keep_owner_and_mode(tmp, path, mode)   # 0600 at creation
             with open(tmp, "rb+") as f:
                 os.fsync(f.fileno())                # the data is on disk before the name points at it
             if group is None:
@@ -414,11 +433,12 @@ def _looks_like_io(exc: BaseException) -> bool:
 
 
 @contextlib.contextmanager
-def atomic_open(path, mode: str = "w", **kwargs):
-    """``open(path, mode)`` that becomes visible under ``path`` only once the block completes."""
+def atomic_open(path, mode: str = "w", *, permissions: int | None = None, **kwargs):
+    """``open(path, mode)`` that becomes visible under ``path`` only once the block completes
+    (``permissions``: the new file's mode bits, see :func:`atomic_path`)."""
     if not mode.startswith("w"):
         raise ValueError(f"atomic_open: mode must be a write mode ('w', 'wb'), got {mode!r}")
-    with atomic_path(path) as tmp:
+    with atomic_path(path, permissions) as tmp:
         with open(tmp, mode, **kwargs) as f:
             yield f
 
