@@ -57,6 +57,7 @@ import time
 from pathlib import Path
 
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.output_gate import check_folder, check_target
 
 __all__ = ["atomic_path", "atomic_open", "atomic_group", "atomic_dir", "check_output_path", "check_output_dir",
            "check_name_fits", "OutputWriteError", "Terminated", "install_signal_cleanup",
@@ -646,6 +647,8 @@ def check_output_path(path, what: str = "output file", create_parent: bool = Tru
     check_name_fits(path, what)
     if path.is_dir():
         raise UsageError(f"{what} {str(path)!r} is a directory; give a file name")
+    if os.path.lexists(path):
+        path = check_target(path, what)       # the output gate: special files, links, mounts, sticky
     parent = path.parent
     if not parent.exists():
         if not create_parent:
@@ -667,6 +670,7 @@ def check_output_dir(path, what: str = "output folder", create: bool = True) -> 
     check_name_fits(path, what)
     if path.exists() and not path.is_dir():
         raise UsageError(f"{what} {str(path)!r} is a regular file, not a folder")
+    check_folder(path, what)                  # the output gate: a mount point, a sticky folder
     if not path.exists():
         if not create:
             raise UsageError(f"{what} {str(path)!r} does not exist")

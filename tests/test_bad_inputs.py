@@ -72,7 +72,7 @@ CLI_ROWS = [
      2, "film is too large", "in"),
     ("render: memory estimate above MemAvailable",
      ["render", "{inverse}", "-o", "{tmp}/a.exr", "-D", "res=5000", "--spp", "1"], 2,
-     "GiB is available (MemAvailable); lower the film's width and height (the scene's $res; set it with -D res=N)",
+     "2 GiB is available; lower the film's width and height (the scene's $res; set it with -D res=N)",
      "lowmem"),
     ("render: spp beyond 2^16 passes", ["render", "{tiny}", "-o", "{tmp}/a.exr", "--spp", "100000000000"], 2,
      "lower --spp to <=", "in"),

@@ -53,7 +53,6 @@ import importlib.util
 import json
 import math
 import os
-import shutil
 import sys
 import time
 from dataclasses import dataclass, field
@@ -63,6 +62,8 @@ import numpy as np
 
 from hyde_bsdf.atomic import atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.memory import check_memory, format_bytes
+from hyde_bsdf.io.output_gate import check_free_space
 from hyde_bsdf.fit.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, paper_angles,
                                       read_pbsdf, rusinkiewicz_to_directions, table_frame_x,
                                       table_nbytes, table_to_paper, paper_to_table)
@@ -179,17 +180,6 @@ def band_index(wavelengths=KAIST_WAVELENGTHS, n=None, k=None, material=None):
 # ---------------------------------------------------------------------------------------------
 # size checks
 
-def _mem_available() -> int | None:
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError):
-        pass
-    return None
-
-
 def check_table_size(path, resolution, bands: int = len(KAIST_WAVELENGTHS), free_disk=None,
                      free_memory=None) -> int:
     """Refuse (UsageError, before any work) a table that Mitsuba cannot index (>= 2^32 floats), that
@@ -200,21 +190,14 @@ def check_table_size(path, resolution, bands: int = len(KAIST_WAVELENGTHS), free
     elements = n_pd * n_td * n_th * bands * 16
     nbytes = table_nbytes(n_pd, n_td, n_th, bands) + _JSON_BYTES
     res = f"{n_pd}x{n_td}x{n_th}"
-    gib = lambda b: f"{b / 2**30:.2f} GiB"
     if elements > MAX_ELEMENTS:
         raise UsageError(f"resolution {res}: {elements} table values exceed Mitsuba's 32-bit index "
                          f"limit ({MAX_ELEMENTS}); choose a smaller resolution")
     folder = Path(path).parent if str(Path(path).parent) else Path(".")
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent
-    disk = shutil.disk_usage(folder).free if free_disk is None else int(free_disk)
-    if nbytes > disk:
-        raise UsageError(f"resolution {res}: the file needs {gib(nbytes)} and {str(folder)!r} has "
-                         f"{gib(disk)} free; choose a smaller resolution or another folder")
-    mem = _mem_available() if free_memory is None else int(free_memory)
-    if mem is not None and LOADER_COPIES * nbytes > mem:
-        raise UsageError(f"resolution {res}: a {gib(nbytes)} table needs about {gib(LOADER_COPIES * nbytes)} "
-                         f"of memory to load in Mitsuba and {gib(mem)} is available; choose a smaller resolution")
+    check_free_space(folder, nbytes, f"resolution {res}: the file", "choose a smaller resolution or another folder",
+                     free=free_disk)
+    check_memory(LOADER_COPIES * nbytes, f"loading the {res} table ({format_bytes(nbytes)}) in Mitsuba",
+                 "choose a smaller resolution", available=free_memory)
     return nbytes
 
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from hyde_bsdf.atomic import atomic_group, atomic_open, atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.memory import available_bytes, check_memory as memory_check
 from hyde_bsdf.inverse._common import Y_WEIGHTS, _log
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
 from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
@@ -40,24 +41,16 @@ def estimate_memory(width: int, height: int, spp: int) -> int:
 
 
 def _mem_available():
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
+    return available_bytes()
 
 
 def check_memory(width: int, height: int, spp: int, hint: str) -> int:
     """UsageError when :func:`estimate_memory` exceeds the available memory; returns the estimate."""
     need, avail = estimate_memory(width, height, spp), _mem_available()
-    if avail is not None and need > avail:
-        raise UsageError(f"one optimisation step on the {width}x{height} film at {spp} spp needs about "
-                         f"{need / 2**30:.1f} GiB ({AD_BYTES_PER_SAMPLE} B per sample + "
-                         f"{AD_BYTES_FIXED // 2**20} MiB), but only {avail / 2**30:.1f} GiB is available; "
-                         f"lower {hint}")
+    if avail is not None:
+        memory_check(need, f"one optimisation step on the {width}x{height} film at {spp} spp "
+                     f"({AD_BYTES_PER_SAMPLE} B per sample + {AD_BYTES_FIXED // 2**20} MiB)", f"lower {hint}",
+                     available=avail)
     return need
 
 

@@ -179,6 +179,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyde_bsdf.io.memory import available_bytes, format_bytes
 from hyde_bsdf.model.parameters import NATURAL_INDEX, paper_eta
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast, spectral_rule
@@ -734,15 +735,10 @@ def _check_index(n, k):
 
 
 def _memory_available():
-    """Bytes of memory available to new allocations (Linux /proc/meminfo), or 8 GiB if unknown."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return 8 * 2**30
+    """Bytes of memory available to new allocations (:func:`hyde_bsdf.io.memory.available_bytes`),
+    or 8 GiB if unknown."""
+    value = available_bytes()
+    return 8 * 2**30 if value is None else value
 
 
 def _matrices_per_partition(pols, eta):
@@ -958,8 +954,8 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
                              + ": use shorter partitions (more `partitions`)" + hint)
         if need_dense > budget:
             raise ValueError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
-                             f"{part_len:g} wavelengths, {need_dense / 2**30:.1f} GiB for {workers} worker(s), more "
-                             f"than the {budget / 2**30:.1f} GiB available: use shorter partitions (more "
+                             f"{part_len:g} wavelengths, {format_bytes(need_dense)} for {workers} worker(s), more "
+                             f"than the {format_bytes(budget)} available: use shorter partitions (more "
                              "`partitions`)" + hint)
         return "dense", dense_ok
     if cfg["solver"] == "fast" and not fast_ok:
@@ -969,8 +965,8 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
                          f"{why}: " + (f"the height range {height:.3g} wavelengths needs blocks of {block:.3g}, more "
                                        "than a third of the partition" if not fast_fit else
                                        f"more than {MAX_FAST_UNKNOWNS} unknowns" if npart > MAX_FAST_UNKNOWNS else
-                                       f"{need_fast / 2**30:.1f} GiB for {workers} worker(s), more than the "
-                                       f"{budget / 2**30:.1f} GiB available")
+                                       f"{format_bytes(need_fast)} for {workers} worker(s), more than the "
+                                       f"{format_bytes(budget)} available")
                          + "; use shorter partitions (more `partitions`)" + hint)
     if cfg["solver"] == "auto" and npart < AUTO_FAST_UNKNOWNS and dense_ok:
         return "dense", dense_ok

@@ -53,6 +53,7 @@ import numpy as np
 
 from hyde_bsdf.atomic import atomic_group, check_output_path
 from hyde_bsdf.errors import UsageError, one_line
+from hyde_bsdf.io.memory import available_bytes, check_memory
 from hyde_bsdf.render.stokes_io import (STOKES_NAMES, polarization_png_paths, save_polarization_pngs,
                                         save_rgb_png, write_stokes_exr)
 
@@ -269,15 +270,8 @@ def _stokes_integrator(scene):
 
 
 def mem_available() -> int | None:
-    """``MemAvailable`` of /proc/meminfo in bytes (None where there is no /proc/meminfo)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
+    """Memory available to new allocations, bytes (:func:`hyde_bsdf.io.memory.available_bytes`)."""
+    return available_bytes()
 
 
 def estimate_memory(width: int, height: int, polarized: bool = True) -> int:
@@ -318,12 +312,12 @@ def _check_film(scene, polarized: bool, info=None) -> tuple[int, int]:
         raise UsageError(f"the {width}x{height} film is too large: {width * height * channels:.3g} values, "
                          f"Dr.Jit arrays hold at most 2^32 = {MAX_FILM_VALUES + 1:.3g}; at most "
                          f"{MAX_FILM_VALUES // channels:.3g} pixels{hint}")
-    need, avail = estimate_memory(width, height, polarized), mem_available()
-    if avail is not None and need > avail:
-        per_px = BYTES_PER_PIXEL_STOKES if polarized else BYTES_PER_PIXEL_COLOUR
-        raise UsageError(f"rendering the {width}x{height} film needs about {need / 2**30:.1f} GiB of memory "
-                         f"(~{per_px} B/pixel), but only {avail / 2**30:.1f} GiB is available (MemAvailable); "
-                         f"lower the film's width and height{hint or ' (its <film> width/height, or -D)'}")
+    per_px = BYTES_PER_PIXEL_STOKES if polarized else BYTES_PER_PIXEL_COLOUR
+    avail = mem_available()
+    if avail is not None:
+        check_memory(estimate_memory(width, height, polarized), f"rendering the {width}x{height} film "
+                     f"(~{per_px} B/pixel)", f"lower the film's width and height"
+                     f"{hint or ' (its <film> width/height, or -D)'}", available=avail)
     return width, height
 
 

@@ -38,6 +38,7 @@ from pathlib import Path
 from hyde_bsdf.atomic import (TEMP_NAME_RE, atomic_dir, atomic_open, check_dir_owned, check_name_fits,
                               check_output_dir, read_manifest, write_manifest)
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.memory import format_bytes, total_bytes
 
 __all__ = ["SECTIONS", "MANIFEST", "build_report", "check_report_dir", "cli_main"]
 
@@ -134,11 +135,8 @@ def machine_info() -> dict:
         info["CPU"] = cpu
     except (OSError, StopIteration):
         info["CPU"] = platform.processor() or platform.machine()
-    try:
-        mem = next(int(line.split()[1]) for line in open("/proc/meminfo") if line.startswith("MemTotal"))
-        info["memory"] = f"{mem / 2**20:.1f} GiB"
-    except (OSError, StopIteration):
-        pass
+    if total_bytes() is not None:
+        info["memory"] = format_bytes(total_bytes())
     info["load average at start"] = f"{os.getloadavg()[0]:.2f}"
     for mod in ("numpy", "scipy", "matplotlib", "mitsuba", "drjit"):
         try:
