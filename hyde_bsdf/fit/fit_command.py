@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.input_gate import STDIN, check_input
+
 __all__ = ["is_pbsdf", "cli_main"]
 
 
@@ -16,6 +19,11 @@ def is_pbsdf(path) -> bool:
     p = Path(path)
     if p.suffix.lower() == ".pbsdf":
         return True
+    try:       # sniff regular files only: a FIFO would block, stdin would lose its first bytes
+        if check_input(p, "data file") == STDIN:
+            return False
+    except UsageError:
+        return False        # the CSV reader's input gate refuses it with one line
     try:
         with open(p, "rb") as f:
             return f.read(12) == b"tensor_file\0"

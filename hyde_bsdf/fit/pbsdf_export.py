@@ -49,7 +49,6 @@ May import: ``hyde_bsdf.model``, ``hyde_bsdf.fit``, ``hyde_bsdf.atomic``, ``hyde
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import math
 import os
@@ -62,6 +61,7 @@ import numpy as np
 
 from hyde_bsdf.atomic import atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.io.memory import check_memory, format_bytes
 from hyde_bsdf.io.output_gate import check_free_space
 from hyde_bsdf.fit.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, paper_angles,
@@ -120,24 +120,6 @@ def _check_resolution(resolution):
 # ---------------------------------------------------------------------------------------------
 # the index per band
 
-def _ior_folder() -> Path | None:
-    """Mitsuba's ``data/ior`` folder, found without importing Mitsuba (once imported, ``mitsuba``
-    is its alias extension module, whose spec has no package folder but an origin inside it)."""
-    try:
-        spec = importlib.util.find_spec("mitsuba")
-    except (ImportError, ValueError):
-        return None
-    if spec is None:
-        return None
-    if spec.submodule_search_locations:
-        folder = Path(list(spec.submodule_search_locations)[0])
-    elif spec.origin:
-        folder = Path(spec.origin).parent
-    else:
-        return None
-    return folder / "data" / "ior"
-
-
 def _read_spd(path: Path):
     data = np.loadtxt(path, comments="#")
     return data[:, 0], data[:, 1]
@@ -151,15 +133,9 @@ def band_index(wavelengths=KAIST_WAVELENGTHS, n=None, k=None, material=None):
     if material is not None:
         if n is not None or k is not None:
             raise UsageError("give either material or n and k, not both")
-        folder = _ior_folder()
-        eta_file = None if folder is None else folder / f"{material}.eta.spd"
-        if eta_file is None or not eta_file.is_file() or "/" in str(material):
-            known = sorted(p.name[:-8] for p in folder.glob("*.eta.spd")) if folder and folder.is_dir() else []
-            raise UsageError(f"material {material!r} is not one of Mitsuba's data/ior tables"
-                             + (f" ({', '.join(known)})" if known else " (Mitsuba is not installed)"))
         out = []
-        for suffix in (".eta.spd", ".k.spd"):
-            x, y = _read_spd(folder / f"{material}{suffix}")
+        for spd in material_files(material):          # data/ior names only (no ../)
+            x, y = _read_spd(spd)
             out.append(np.interp(wl, x, y))
         return out[0], out[1]
     if n is None:

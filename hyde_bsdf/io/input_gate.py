@@ -73,7 +73,7 @@ def check_input(path, what: str = "input file", limit: int = DEFAULT_LIMIT) -> P
     try:
         st = os.stat(path)
     except FileNotFoundError:
-        raise UsageError(f"{what} {short(path)}: no such file") from None
+        raise UsageError(f"{what} {short(path)} does not exist") from None
     except OSError as exc:
         raise UsageError(f"{what} {short(path)}: cannot be read ({exc.strerror or exc})") from None
     if not stat.S_ISREG(st.st_mode):
@@ -140,8 +140,9 @@ def csv_rows(text: str, what: str = "CSV file", field_limit: int = CSV_FIELD_LIM
         for row in reader:
             rows.append(row)
     except csv.Error as exc:
-        raise UsageError(f"{what}: row {reader.line_num}: {short(exc, 120)} (fields are limited to "
-                         f"{field_limit} characters)") from None
+        why = (f"a field is longer than the {field_limit} characters accepted" if "field limit" in str(exc)
+               else f"{short(exc, 120)} (fields are limited to {field_limit} characters)")
+        raise UsageError(f"{what}: row {reader.line_num}: {why}") from None
     finally:
         csv.field_size_limit(old)
     return rows

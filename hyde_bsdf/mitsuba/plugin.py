@@ -10,11 +10,11 @@ class docstring).
 from __future__ import annotations
 
 import math
-import os
 
 import drjit as dr
 import mitsuba as mi
 
+from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.mitsuba import optics as po
 from hyde_bsdf.mitsuba import param_checks as pc
 from hyde_bsdf.model.parameters import ALPHA, DHR_TABLE_RMS_SLOPE, ETA, INDEX_MIN, RMS_SLOPE
@@ -244,15 +244,6 @@ def _ior_texture(path):
     return mi.load_dict({"type": "srgb", "color": color, "unbounded": True})
 
 
-def _known_materials():
-    folder = os.path.join(os.path.dirname(mi.__file__), "data", "ior")
-    try:
-        names = sorted({f[:-len(".eta.spd")] for f in os.listdir(folder) if f.endswith(".eta.spd")})
-    except OSError:
-        names = []
-    return names
-
-
 # ---------------------------------------------------------------- texture checks
 def _texture(props, name, default):
     """``props.get_unbounded_texture`` with Mitsuba's own refusal as a one-line ValueError."""
@@ -371,12 +362,12 @@ def _make_class():
                 if given:
                     raise ValueError(f"hyde: give either material or eta/k, not both "
                                      f"(got material and {', '.join(given)})")
-                path = mi.file_resolver().resolve(f"data/ior/{material}.eta.spd")
-                if not os.path.exists(str(path)):
-                    raise ValueError(f"hyde: unknown material={material!r}; Mitsuba's data/ior has "
-                                     f"{', '.join(_known_materials())}")
-                self.m_eta = _ior_texture(str(path))
-                self.m_k = _ior_texture(str(path).replace(".eta.spd", ".k.spd"))
+                try:
+                    eta_file, k_file = material_files(material)     # data/ior names only (no ../)
+                except ValueError as exc:
+                    raise ValueError(f"hyde: {exc}") from None
+                self.m_eta = _ior_texture(str(eta_file))
+                self.m_k = _ior_texture(str(k_file))
                 self.m_material = material
             else:
                 for name in ("eta", "k"):

@@ -183,7 +183,7 @@ from hyde_bsdf.io.memory import available_bytes, format_bytes
 from hyde_bsdf.model.parameters import NATURAL_INDEX, paper_eta
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast, spectral_rule
-from hyde_bsdf.mom.gather import ExecutorError, gather
+from hyde_bsdf.mom.gather import ExecutorError, check_executor, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
 
 __all__ = [
@@ -836,7 +836,7 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     t_wall = time.perf_counter()
     cfg = _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
                         pts_per_wl, seed, taper_width_wl, polarization, n, k, timeout, solver, tol)
-    own = executor is None
+    own = check_executor(executor) is None
     workers = min(os.cpu_count() or 1, cfg["partitions"]) if own else 1
     surf = _realise_surface(cfg, workers)
     for r in surf["reasons"]:
