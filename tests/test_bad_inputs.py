@@ -22,6 +22,7 @@ Append a row for each new mistake; ``API_ROWS`` does the same for Python calls
 import errno
 import os
 import signal
+import stat
 import subprocess
 import sys
 import threading
@@ -149,6 +150,48 @@ CLI_ROWS = [
      "{tmp}/alpha0.exr"], 0, "alpha0.exr", "in"),
     # --- dispatcher ---
     ("unknown command", ["nosuch"], 2, "unknown command 'nosuch'", "in"),
+    # --- issue 24: the output gate (an existing target that is not a regular file is never replaced) ---
+    ("render: -o is a FIFO (was replaced by a file, exit 0)", ["render", "{tiny}", "-o", "{tmp}/out_fifo.exr"], 2,
+     "out_fifo.exr' exists and is a FIFO (named pipe), not a regular file: not replaced", "in"),
+    ("render: -o is a symlink into /proc/self/fd (was replaced)", ["render", "{tiny}", "-o", "{tmp}/link_fd.exr"],
+     2, "link_fd.exr' is a symbolic link to", "in"),
+    ("render: -o is a symlink up out of its folder (new)", ["render", "{tiny}", "-o", "{tmp}/sub/link_up.exr"], 2,
+     "outside its folder: not replaced", "in"),
+    ("render: -o is a socket (new)", ["render", "{tiny}", "-o", "{tmp}/sock.exr"], 2,
+     "sock.exr' exists and is a socket, not a regular file", "in"),
+    ("render: a PNG of the set is a FIFO (new)", ["render", "{tiny}", "-o", "{tmp}/b.exr"], 2,
+     "b_dolp.png' exists and is a FIFO (named pipe)", "in"),
+    ("fit: -o plot is a FIFO (new)", ["fit", "{csv}", "-o", "{tmp}/plot_fifo.png"], 2,
+     "plot_fifo.png' exists and is a FIFO", "in"),
+    ("export: the .pbsdf output is /dev/null (new: a device)", ["export", "/dev/null", "--rms-slope", "0.3",
+     "--n", "1.5"], 2, "'/dev/null' exists and is a character device, not a regular file: not replaced", "in"),
+    # --- issue 24: the input gate (regular files or '-', never a FIFO or a device; size and field limits) ---
+    ("fit: the CSV is a FIFO (was a hang)", ["fit", "{tmp}/pipe.csv"], 2,
+     "pipe.csv' is a FIFO (named pipe), not a regular file; give a file, or '-' to read standard input", "in"),
+    ("fit: /dev/zero (was unbounded memory)", ["fit", "/dev/zero"], 2,
+     "'/dev/zero' is a character device, not a regular file", "in"),
+    ("fit: /dev/urandom (new)", ["fit", "/dev/urandom"], 2, "'/dev/urandom' is a character device", "in"),
+    ("fit: the CSV is a socket (new)", ["fit", "{tmp}/sock.csv"], 2, "sock.csv' is a socket, not a regular file", "in"),
+    ("fit: the CSV is a folder (new)", ["fit", "{tmp}/kept"], 2, "kept' is a directory, not a regular file", "in"),
+    ("fit: a 200 KB cell (was a traceback)", ["fit", "{tmp}/bigcell.csv"], 2,
+     "bigcell.csv, line 3: a field is longer than the 4096 characters accepted", "in"),
+    ("fit: a 200 KB header name (new)", ["fit", "{tmp}/bighead.csv"], 2,
+     "bighead.csv, line 1: a field is longer than the 4096 characters accepted", "in"),
+    ("render: a bitmap texture that is a FIFO (was a hang)", ["render", "{fifotex}", "-o", "{tmp}/ft.exr"], 2,
+     "tex_fifo.png' is a FIFO (named pipe), not a regular file; give a file", "in"),
+    ("render: a bitmap texture that is /dev/zero (new)", ["render", "{devtex}", "-o", "{tmp}/dt.exr"], 2,
+     "file '/dev/zero' is a character device", "in"),
+    ("render: the scene is a FIFO (new)", ["render", "{tmp}/scene_fifo.xml", "-o", "{tmp}/sf.exr"], 2,
+     "scene file", "in"),
+    # --- issue 24: material names are Mitsuba's data/ior names only, in the plugin as in export ---
+    ("export: material escaping data/ior with ../", ["export", "{tmp}/m.pbsdf", "--rms-slope", "0.3",
+     "--material", "../../../../etc/passwd"], 2, "material '../../../../etc/passwd' is not one of Mitsuba's data/ior", "in"),
+    ("export: a 100 KB material name is cut in the message", ["export", "{tmp}/m.pbsdf", "--rms-slope", "0.3",
+     "--material", "A" * 100_000], 2, "... (100000 characters) is not one of Mitsuba's data/ior tables", "in"),
+    ("render: the plugin's material with ../ (was followed out of data/ior)", ["render", "{dotdotmat}", "-o",
+     "{tmp}/dm.exr"], 2, "hyde: material '../ior/Au' is not one of Mitsuba's data/ior tables", "in"),
+    ("render: the plugin's 100 KB material name is cut (new)", ["render", "{longmat}", "-o", "{tmp}/lm.exr"], 2,
+     "... (100000 characters) is not one of", "in"),
 ]
 
 
@@ -293,13 +336,55 @@ def paths(tmp_path_factory):
             "tmp": tmp, "file": tmp / "file.txt", "tiny": tmp / "tiny.xml", "nosensor": tmp / "nosensor.xml",
             "ptracer": tmp / "ptracer.xml", "inverse": ROOT / "scenes" / "inverse.xml", "csv": tmp / "meas.csv",
             "notreport": tmp / "notreport", "badhyde": tmp / "badhyde.xml", "ref1e30": tmp / "ref1e30.exr",
-            **_plugin_scenes(tmp)}
+            **_plugin_scenes(tmp), **_gate_files(tmp)}
+
+
+def _gate_files(tmp):
+    """Special files, huge cells and hostile names for the issue 24 rows."""
+    import socket
+
+    for name in ("out_fifo.exr", "pipe.csv", "plot_fifo.png", "b_dolp.png", "tex_fifo.png", "scene_fifo.xml"):
+        os.mkfifo(tmp / name)
+    for name in ("sock.exr", "sock.csv"):
+        s = socket.socket(socket.AF_UNIX)
+        s.bind(str(tmp / name))
+        s.close()                              # the socket file stays
+    os.symlink("/proc/self/fd/1", tmp / "link_fd.exr")
+    (tmp / "sub").mkdir()
+    os.symlink("../file.txt", tmp / "sub" / "link_up.exr")
+    head = "theta_i_deg,theta_r_deg,phi_deg,M01"
+    (tmp / "bigcell.csv").write_text(f"{head}\n20,20,180,0.1\n30,30,180,{'x' * 200_000}\n")
+    (tmp / "bighead.csv").write_text(f"{head},{'M' * 200_000}\n20,20,180,0.1,0\n")
+
+    def scene(name, bsdf):
+        (tmp / f"{name}.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', bsdf))
+        return tmp / f"{name}.xml"
+
+    bitmap = '<bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="{}"/>' \
+             '</texture></bsdf>'
+    return {"fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
+            "devtex": scene("devtex", bitmap.format("/dev/zero")),
+            "dotdotmat": scene("dotdotmat", '<bsdf type="hyde"><string name="material" value="../ior/Au"/></bsdf>'),
+            "longmat": scene("longmat", f'<bsdf type="hyde"><string name="material" value="{"A" * 100_000}"/></bsdf>')}
 
 
 def _snapshot(folder):
-    """{relative path: bytes} of every file under ``folder`` except our own temporaries."""
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file() and not any(TEMP_NAME_RE.match(part) for part in p.relative_to(folder).parts)}
+    """{relative path: (bytes, mode)} of every regular file under ``folder`` except our own
+    temporaries, (kind, inode) of every FIFO, socket or device, and ("link", target) of every
+    symlink: "nothing changed or lost" covers contents, modes and special files alike."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        rel = p.relative_to(folder)
+        if any(TEMP_NAME_RE.match(part) for part in rel.parts):
+            continue
+        st = os.lstat(p)
+        if stat.S_ISREG(st.st_mode):
+            out[str(rel)] = (p.read_bytes(), stat.S_IMODE(st.st_mode))
+        elif stat.S_ISLNK(st.st_mode):
+            out[str(rel)] = ("link", os.readlink(p))
+        elif not stat.S_ISDIR(st.st_mode):
+            out[str(rel)] = (stat.S_IFMT(st.st_mode), st.st_ino)
+    return out
 
 
 def _fill(argv, paths):

@@ -53,7 +53,7 @@ def test_no_other_module_reads_proc_meminfo():
 def test_fifo_device_and_folder_inputs_are_refused_without_opening(tmp_path):
     fifo = tmp_path / "x.csv"
     os.mkfifo(fifo)
-    for path, kind in ((fifo, "FIFO"), ("/dev/zero", "character device"), (tmp_path, "folder")):
+    for path, kind in ((fifo, "FIFO"), ("/dev/zero", "character device"), (tmp_path, "directory")):
         with pytest.raises(UsageError, match=kind):
             input_gate.read_input(path, "measurement file")     # would block or never end if opened
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode)

@@ -45,7 +45,7 @@ DEFAULT_LIMIT = 1 << 30
 CSV_FIELD_LIMIT = 4096
 _STDIN_NAMES = {"-", "/dev/stdin", "/dev/fd/0", "/proc/self/fd/0"}
 _KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
-          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a folder"))
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a directory"))
 
 
 def short(value, limit: int = 80) -> str:
@@ -64,10 +64,11 @@ def _kind(mode: int) -> str:
     return next((name for test, name in _KINDS if test(mode)), "not a regular file")
 
 
-def check_input(path, what: str = "input file", limit: int = DEFAULT_LIMIT) -> Path | str:
-    """``path`` (or :data:`STDIN`) after the gate's checks that need no read: it exists, is a
-    regular file (following symlinks) of at most ``limit`` bytes.  UsageError otherwise."""
-    if is_stdin(path):
+def check_input(path, what: str = "input file", limit: int = DEFAULT_LIMIT, stdin: bool = True) -> Path | str:
+    """``path`` (or :data:`STDIN`, where ``stdin`` allows it) after the gate's checks that need no
+    read: it exists, is a regular file (following symlinks) of at most ``limit`` bytes.  UsageError
+    otherwise."""
+    if stdin and is_stdin(path):
         return STDIN
     path = Path(path)
     try:
@@ -77,8 +78,8 @@ def check_input(path, what: str = "input file", limit: int = DEFAULT_LIMIT) -> P
     except OSError as exc:
         raise UsageError(f"{what} {short(path)}: cannot be read ({exc.strerror or exc})") from None
     if not stat.S_ISREG(st.st_mode):
-        raise UsageError(f"{what} {short(path)} is {_kind(st.st_mode)}, not a regular file; give a file, "
-                         f"or '-' to read standard input")
+        raise UsageError(f"{what} {short(path)} is {_kind(st.st_mode)}, not a regular file; give a file"
+                         + (", or '-' to read standard input" if stdin else ""))
     if st.st_size > limit:
         raise UsageError(f"{what} {short(path)} is {format_bytes(st.st_size)}, more than the "
                          f"{format_bytes(limit)} accepted")

@@ -40,6 +40,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import os
 import re
 import signal
 import sys
@@ -53,6 +54,7 @@ import numpy as np
 
 from hyde_bsdf.atomic import atomic_group, check_output_path
 from hyde_bsdf.errors import UsageError, one_line
+from hyde_bsdf.io.input_gate import check_input
 from hyde_bsdf.io.memory import available_bytes, check_memory
 from hyde_bsdf.render.stokes_io import (STOKES_NAMES, polarization_png_paths, save_polarization_pngs,
                                         save_rgb_png, write_stokes_exr)
@@ -176,9 +178,29 @@ class _SceneXML:
         m = _PARAM.fullmatch(self.raw.get(key, "") or "")
         return f" (the scene's ${m.group(1)}; set it with -D {m.group(1)}=N)" if m else ""
 
+    def files(self) -> list[Path]:
+        """The files the scene names (``<string name="filename">``, ``$name`` resolved, relative to
+        the scene's folder): inputs of the run, which no output may overwrite."""
+        if self.tree is None:
+            return []
+        out = []
+        for el in self.tree.getroot().iter("string"):
+            if el.get("name") == "filename" and el.get("value"):
+                p = Path(self.resolve(el.get("value"))).expanduser()
+                out.append(p if p.is_absolute() else self.path.parent / p)
+        return out
+
+    def check_files(self) -> None:
+        """Each existing file the scene names through the input gate: a FIFO or a device as a
+        texture or mesh is refused here, before Mitsuba would wait on it forever."""
+        for p in self.files():
+            if os.path.lexists(p):
+                check_input(p, f"scene {str(self.path)!r}: file", stdin=False)
+
     def check(self) -> None:
         if self.tree is None:
             return
+        self.check_files()
         where = f"scene {str(self.path)!r}"
         if not self.sensors and not self.has_include:
             raise UsageError(f"{where} has no <sensor>: add a camera, e.g. <sensor type=\"perspective\"> "
@@ -231,8 +253,7 @@ def _load_scene(path, params=None, polarized=None):
     import mitsuba as mi
 
     path = Path(path)
-    if not path.is_file():
-        raise UsageError(f"scene file {str(path)!r} does not exist")
+    check_input(path, "scene file", stdin=False)   # the input gate: a regular file, size-limited
     if path.suffix.lower() != ".xml":
         raise UsageError(f"scene must be a Mitsuba .xml file, got {str(path)!r}")
     kwargs = {str(k): str(v) for k, v in (params or {}).items()}
