@@ -144,7 +144,7 @@ def test_free_space_is_checked_before_the_work(tmp_path):
 
 
 def test_a_replaced_file_keeps_its_mode(tmp_path):
-    from hyde_bsdf.atomic import atomic_open
+    from hyde_bsdf.io.atomic import atomic_open
     target = tmp_path / "secret.csv"
     target.write_text("old")
     os.chmod(target, 0o600)

@@ -1,9 +1,19 @@
 """The bottom layer: files in and out.
 
+``input_gate``    every input: regular files or ``-`` (stdin read once), size and field limits,
+                  table dimensions checked before allocation
+``output_gate``   every output: no special files, no input overwritten, locks, folder checks
+``memory``        the one memory check (``/proc/meminfo`` read here only)
 ``trust``         caches the package reads back: ownership, permissions and file type checked as
                   ssh does; the per-user secret that seals them
+``ior``           Mitsuba's ``data/ior`` material names and files
+``atomic``        atomic writes (temporary file + rename), output-path checks, signal clean-up
+``stokes_exr``    Stokes images as OpenEXR files
+``pbsdf_file``    Mitsuba ``measured_polarized`` tables (``.pbsdf``): reader, writer, coordinates
+``measurements``  the Mueller-matrix measurement CSV that ``hyde-bsdf fit`` reads
 
-May import: the standard library, NumPy and :mod:`hyde_bsdf.errors`.  Every other part of the
-package may import this one; it imports none of them.  The modules are imported by their own
-names (``from hyde_bsdf.io.trust import open_trusted``): importing this package loads nothing.
+May import: the standard library, NumPy, :mod:`hyde_bsdf.errors`, :mod:`hyde_bsdf.progress`
+(and OpenEXR or Mitsuba lazily, inside a reader that needs them).  Every other part of the package
+may import this one; it imports none of them.  The modules are imported by their own names
+(``from hyde_bsdf.io.atomic import atomic_path``): importing this package loads nothing.
 """

@@ -9,7 +9,7 @@ Rules (``docs/troubleshooting.md``, "The file gates"):
 * no output may be an input of the same run (same file, whatever the spelling: compared by
   device and inode, and by resolved path for files not yet written);
 * a replaced file keeps its mode, and its owner where the user may set it
-  (:func:`hyde_bsdf.atomic.atomic_path`);
+  (:func:`hyde_bsdf.io.atomic.atomic_path`);
 * the folder must be writable, a target in a sticky folder (``/tmp``) must be the user's own,
   a target that is a mount point cannot be renamed over, and the folder's file system must have
   the free space the outputs need -- all checked before any work;
