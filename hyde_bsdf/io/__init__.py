@@ -3,7 +3,7 @@
 ``input_gate``    every input: regular files or ``-`` (stdin read once), size and field limits,
                   table dimensions checked before allocation
 ``output_gate``   every output: no special files, no input overwritten, locks, folder checks
-``memory``        the one memory check (``/proc/meminfo`` read here only)
+``memory``        the one memory check (the only reader of the kernel's memory figures)
 ``trust``         caches the package reads back: ownership, permissions and file type checked as
                   ssh does; the per-user secret that seals them
 ``ior``           Mitsuba's ``data/ior`` material names and files
