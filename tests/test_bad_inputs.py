@@ -19,6 +19,7 @@ before the output paths and the scene have been checked.
 Append a row for each new mistake; ``API_ROWS`` does the same for Python calls
 ``(id, call(paths), exception type, needle)``.
 """
+import contextlib
 import errno
 import os
 import signal
@@ -140,7 +141,7 @@ CLI_ROWS = [
      "ref1e30.exr' has peak |S0| = 1e+30, outside the accepted range [1e-10, 1e+10]", "in"),
     # --- issue 15: plugin values checked as Mitsuba evaluates them (the scene is checked before the render) ---
     ("render: eta bitmap with a negative texel (was accepted: furnace 1.99)", ["render", "{negeta}", "-o",
-     "{tmp}/negeta.exr"], 2, "hyde: parameter 'eta' must be finite and in [0, 1e+06] (index n + i k with k >= 0), "
+     "{tmp}/negeta_out.exr"], 2, "hyde: parameter 'eta' must be finite and in [0, 1e+06] (index n + i k with k >= 0), "
      "got eta.data texel value -1.5", "in"),
     ("render: eta = 1e10 (was an all-NaN image)", ["render", "{hugeeta}", "-o", "{tmp}/hugeeta.exr"], 2,
      "hyde: parameter 'eta' must be finite and in [0, 1e+06]", "in"),
@@ -192,6 +193,31 @@ CLI_ROWS = [
      "{tmp}/dm.exr"], 2, "hyde: material '../ior/Au' is not one of Mitsuba's data/ior tables", "in"),
     ("render: the plugin's 100 KB material name is cut (new)", ["render", "{longmat}", "-o", "{tmp}/lm.exr"], 2,
      "... (100000 characters) is not one of", "in"),
+    # --- issue 24: no output is an input of the same run ---
+    ("invert --maps -o DIR beside the scene's alpha.exr (was overwritten)", ["invert", "--maps", "--scene",
+     "{tmp}/invscene/scene.xml", "--reference", "{tmp}/invscene/ref.exr", "-o", "{tmp}/invscene"], 2,
+     "alpha.exr' is the input", "in"),
+    ("render -o the scene's own texture (new)", ["render", "{tmp}/invscene/scene.xml", "-o",
+     "{tmp}/invscene/alpha.exr"], 2, "alpha.exr' is the input", "in"),
+    ("invert: the reference named like an output (new)", ["invert", "--reference", "{tmp}/inref/invert.png",
+     "-o", "{tmp}/inref"], 2, "invert.png' is the input", "in"),
+    # --- issue 24: one writer per output set ---
+    ("render: another run is writing the same outputs (was a mixed set)", ["render", "{tiny}", "-o",
+     "{tmp}/locked.exr"], 2, "is being written by another run (pid", "locked"),
+    ("fit: another run is writing the same plot (new)", ["fit", "{csv}", "-o", "{tmp}/locked.png"], 2,
+     "is being written by another run (pid", "locked"),
+    # --- issue 24: memory and table dimensions checked before allocation, sensible units ---
+    ("invert --maps --map-size 100000 (was 74.5 GiB allocated)", ["invert", "--maps", "--map-size", "100000",
+     "-o", "{tmp}/mapsize"], 2, "of memory needed, but only", "in"),
+    ("fit: a .pbsdf whose dimensions overflow (new)", ["fit", "{tmp}/overflow.pbsdf"], 2,
+     "field 'M': dimensions", "in"),
+    ("fit: a valid but huge .pbsdf (sparse 1.25 TiB)", ["fit", "{huge}"], 2,
+     "TiB of memory needed, but only", "in"),
+    # --- issue 24: options checked before the work, one line ---
+    ("fit --seed -3 on a table (was a traceback)", ["fit", "{tmp}/small.pbsdf", "--seed", "-3"], 2,
+     "--seed must be an integer in [0, 2^63), got -3", "in"),
+    ("fit --seed 2^64 on a table (new)", ["fit", "{tmp}/small.pbsdf", "--seed", str(2**64)], 2,
+     "--seed must be an integer in [0, 2^63)", "in"),
 ]
 
 
@@ -339,6 +365,38 @@ def paths(tmp_path_factory):
             **_plugin_scenes(tmp), **_gate_files(tmp)}
 
 
+def _table_layout(m_shape):
+    import numpy as np
+
+    layout = {n: (np.dtype(np.float32), (1, 3)) for n in ("theta_h", "theta_d", "phi_d")}
+    layout["wvls"] = (np.dtype(np.uint16), (5,))
+    layout["M"] = (np.dtype(np.float32), m_shape)
+    return layout
+
+
+def _tables(tmp):
+    """small.pbsdf (a real 4x4x4 export); overflow.pbsdf: M's dimensions multiply past 2^64."""
+    from hyde_bsdf.fit.pbsdf_export import export_pbsdf
+    from hyde_bsdf.io.pbsdf_file import _header
+
+    export_pbsdf(tmp / "small.pbsdf", rms_slope=0.3, n=1.5, resolution=(4, 4, 4), progress=False)
+    head, offsets, _ = _header(_table_layout((2**40, 2**40, 2**40, 5, 4, 4)))
+    (tmp / "overflow.pbsdf").write_bytes(head.ljust(offsets["M"], b"\0"))
+
+
+def _huge_table(folder):
+    """A valid 4096x1024x1024 table, 1.25 TiB, as a sparse file (no disk used), outside the
+    snapshot folder (the snapshot reads every file)."""
+    from hyde_bsdf.io.pbsdf_file import _header
+
+    folder.mkdir(exist_ok=True)
+    head, _, total = _header(_table_layout((4096, 1024, 1024, 5, 4, 4)))
+    with open(folder / "huge.pbsdf", "wb") as fh:
+        fh.write(head)
+        fh.truncate(total)
+    return folder / "huge.pbsdf"
+
+
 def _gate_files(tmp):
     """Special files, huge cells and hostile names for the issue 24 rows."""
     import socket
@@ -362,7 +420,17 @@ def _gate_files(tmp):
 
     bitmap = '<bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="{}"/>' \
              '</texture></bsdf>'
+    _tables(tmp)
+    inv = tmp / "invscene"                        # a user's scene folder: scene.xml, its alpha.exr, a reference
+    inv.mkdir()
+    _stokes_exr(inv / "alpha.exr", 4, 0.3)
+    _stokes_exr(inv / "ref.exr", 16, 1.0)
+    (inv / "scene.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', '<bsdf type="hyde"><texture '
+                                   'type="bitmap" name="alpha"><string name="filename" value="alpha.exr"/></texture></bsdf>'))
+    (tmp / "inref").mkdir()
+    _stokes_exr(tmp / "inref" / "invert.png", 16, 1.0)
     return {"fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
+            "huge": _huge_table(tmp.parent / f"{tmp.name}_sparse"),
             "devtex": scene("devtex", bitmap.format("/dev/zero")),
             "dotdotmat": scene("dotdotmat", '<bsdf type="hyde"><string name="material" value="../ior/Au"/></bsdf>'),
             "longmat": scene("longmat", f'<bsdf type="hyde"><string name="material" value="{"A" * 100_000}"/></bsdf>')}
@@ -445,6 +513,10 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
             return real_fsync(fd)
 
         monkeypatch.setattr(os, "fsync", fsync)
+    lock = contextlib.nullcontext()
+    if how == "locked":                           # another run holds the outputs (same pid here)
+        from hyde_bsdf.io.output_gate import OutputLock
+        lock = OutputLock([paths["tmp"] / "locked.exr", paths["tmp"] / "locked.png"])
     if how in ("sub", "sigint", "sigterm", "pipe"):
         got, out, err = _subprocess(argv, how)
     else:
@@ -454,7 +526,8 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
             monkeypatch.setattr("hyde_bsdf.app.report.build.VALIDATION_DIR", paths["tmp"] / "no_validation")
         monkeypatch.chdir(paths["tmp"])
         try:
-            got = cli.main(argv)
+            with lock:
+                got = cli.main(argv)
         except SystemExit as exc:                 # argparse errors of commands that do not catch them
             got = exc.code
         out, err = capsys.readouterr()

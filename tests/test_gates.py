@@ -87,7 +87,7 @@ def test_table_dimensions_overflow_and_memory_are_checked_before_allocation():
     dims = (2**40, 2**40, 2**40)      # the product overflows int64; Python integers do not
     with pytest.raises(UsageError, match="file holds only"):
         input_gate.check_dimensions(dims, 4, "pbsdf table", available_in_file=10**6)
-    with pytest.raises(UsageError, match="needs about"):
+    with pytest.raises(UsageError, match="of memory needed"):
         input_gate.check_dimensions((2**20, 2**20), 8, "pbsdf table")
     assert input_gate.check_dimensions((3, 4), 8, "pbsdf table", available_in_file=96) == 96
 

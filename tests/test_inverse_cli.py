@@ -103,7 +103,7 @@ def test_memory_estimate_refused_with_the_flag(capsys, monkeypatch, tmp_path):
     rc, _, err = _run(capsys, TINY + ["-o", str(tmp_path)])
     assert rc == 2
     line = _one_error_line(err)
-    assert "needs about" in line and "64 MiB is available" in line and "--spp" in line and "--res" in line
+    assert "of memory needed" in line and "64 MiB is available" in line and "--spp" in line and "--res" in line
     rc, _, err = _run(capsys, ["--maps"] + TINY + ["-o", str(tmp_path)])
     assert rc == 2 and "--spp" in _one_error_line(err)
     assert inv.estimate_memory(64, 64, 16) == inv.AD_BYTES_FIXED + inv.AD_BYTES_PER_SAMPLE * 64 * 64 * 16

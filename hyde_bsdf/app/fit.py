@@ -19,6 +19,7 @@ every few seconds (``-q``: none).
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import sys
 import warnings
@@ -28,6 +29,7 @@ from hyde_bsdf.app.args import Parser
 from hyde_bsdf.app.plots import PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.input_gate import STDIN, check_input
+from hyde_bsdf.io.output_gate import output_gate
 from hyde_bsdf.fit.mueller_fit import (FitDataWarning, IllPosedFitError, IllPosedFitWarning, check_options,
                                        fit_measurements)
 from hyde_bsdf.fit.pbsdf_fit import _check, fit_pbsdf
@@ -108,6 +110,23 @@ def csv_main(argv=None) -> int:
     returns 2.
     """
     args = csv_parser().parse_args(argv)
+    try:
+        with _output_gate(args):
+            return _csv_run(args)
+    except UsageError as exc:          # the output gate's refusal, before the file is read
+        print(f"hyde-bsdf fit: error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _output_gate(args):
+    """The output gate on ``-o`` for the whole run: not the data file, one writer at a time."""
+    if not args.output:
+        return contextlib.nullcontext()
+    check_plot_path(args.output)
+    return output_gate([args.output], inputs=[args.data], what="-o plot")
+
+
+def _csv_run(args) -> int:
     opts = dict(fit=args.fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
                 shadowing=args.shadowing, diffuse=args.diffuse)
     try:
@@ -173,6 +192,11 @@ def pbsdf_parser() -> Parser:
 def pbsdf_main(argv=None) -> int:
     """``hyde-bsdf fit FILE.pbsdf``: read, mask, subsample, fit, print, plot."""
     args = pbsdf_parser().parse_args(argv)
+    with _output_gate(args):
+        return _pbsdf_run(args)
+
+
+def _pbsdf_run(args) -> int:
     fit = _check(args.fit, args.rms_slope, args.n0, args.k0, args.shadowing, args.diffuse)
     if not 0 < args.theta_max <= 90:
         raise UsageError(f"--theta-max must be in (0, 90] degrees, got {args.theta_max:g}")
@@ -180,6 +204,8 @@ def pbsdf_main(argv=None) -> int:
         raise UsageError(f"--tolerance must be in [0, 1], got {args.tolerance:g}")
     if args.max_points < 1:
         raise UsageError(f"--max-points must be >= 1, got {args.max_points}")
+    if not 0 <= args.seed < 2**63:
+        raise UsageError(f"--seed must be an integer in [0, 2^63), got {args.seed}")
     if args.output:
         check_plot_path(args.output)
     table = read_pbsdf(args.data)

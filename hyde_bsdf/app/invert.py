@@ -25,6 +25,9 @@ from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT,
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, invert, load_scene, parameter_keys,
                                       prepare, render_reference, write_history)
 from hyde_bsdf.io.atomic import atomic_group, atomic_open, atomic_path, check_output_path
+from hyde_bsdf.io.memory import check_memory as memory_check
+from hyde_bsdf.io.output_gate import output_gate
+from hyde_bsdf.render.renderer import scene_inputs
 from hyde_bsdf.progress import stderr_lines
 
 __all__ = ["cli_main", "build_parser"]
@@ -166,6 +169,29 @@ def _check_args(args):
                          "truth map or reads --reference")
 
 
+#: bytes per texel of a built-in sample's maps (float64): the truth map, and per fitted parameter
+#: its value, gradient, Adam's two moments and the running average
+MAP_BYTES_PER_TEXEL_FIXED, MAP_BYTES_PER_TEXEL_FITTED = 8, 5 * 8
+
+
+def _check_map_memory(args, fit):
+    """--map-size checked against the available memory before any map is allocated."""
+    if args.scene:
+        return                          # a user scene's textures: their size is the scene's
+    per_texel = MAP_BYTES_PER_TEXEL_FIXED + MAP_BYTES_PER_TEXEL_FITTED * len(fit)
+    memory_check(per_texel * args.map_size ** 2, f"the {args.map_size}x{args.map_size} maps "
+                 f"({per_texel} B per texel)", "lower --map-size")
+
+
+def _run_inputs(args) -> list:
+    """Every file this run reads -- each --scene and the files it names, --reference, --mask --
+    which no output may overwrite (``invert --maps -o .`` beside a scene's alpha.exr)."""
+    inputs = []
+    for scene in args.scene or []:
+        inputs += scene_inputs(scene)
+    return inputs + list(args.reference or []) + list(args.mask or [])
+
+
 def _check_out(path):
     """An output file checked writable before any long work (a UsageError naming -o otherwise)."""
     try:
@@ -257,6 +283,11 @@ def _cli(argv):
         raise UsageError(f"--fit must list parameters from {', '.join(PARAMETERS)}, got {args.fit!r}")
     out = Path(args.output)
     paths = [_check_out(out / name) for name in ("invert_history.csv", "invert.png")]
+    with output_gate(paths, inputs=_run_inputs(args), what="-o/--output file"):
+        return _scalar_run(args, truth, start, fit, paths)
+
+
+def _scalar_run(args, truth, start, fit, paths):
     try:
         prepare()
     except RuntimeError as exc:
@@ -330,6 +361,12 @@ def _cli_maps(args):
             outputs[n + "_stderr.npy"] = f"{n}_stderr.npy"
             outputs[n + "_stderr.exr"] = f"{n}_stderr.exr"
     paths = {k: _check_out(out / v) for k, v in outputs.items()}
+    _check_map_memory(args, fit)
+    with output_gate(list(paths.values()), inputs=_run_inputs(args), what="-o/--output file"):
+        return _maps_run(args, fit, start, paths)
+
+
+def _maps_run(args, fit, start, paths):
     try:
         prepare(MAP_VARIANT)
     except RuntimeError as exc:

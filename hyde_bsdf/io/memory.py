@@ -72,6 +72,6 @@ def check_memory(need, what: str, option: str, available: int | None = None, fra
     if avail is not None and need > fraction * avail:
         share = "" if fraction == 1.0 else f" ({fraction:.0%} of the {format_bytes(avail)} available)"
         room = format_bytes(fraction * avail) if fraction != 1.0 else format_bytes(avail)
-        raise UsageError(f"{what} needs about {format_bytes(need)} of memory, but only {room} is available"
+        raise UsageError(f"{what}: about {format_bytes(need)} of memory needed, but only {room} is available"
                          f"{share}; {option}")
     return need

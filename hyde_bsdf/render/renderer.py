@@ -45,7 +45,7 @@ from hyde_bsdf.io.memory import available_bytes, check_memory
 from hyde_bsdf.io.stokes_exr import STOKES_NAMES
 from hyde_bsdf.progress import as_callback
 
-__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "render_stokes", "estimate_memory",
+__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "scene_inputs", "render_stokes", "estimate_memory",
            "plan_passes", "sensor_to_paper_rotation", "rotate_stokes"]
 
 DEFAULT_VARIANT = "llvm_ad_spectral_polarized"
@@ -222,6 +222,14 @@ class _SceneXML:
                 root.insert(i, inner if inner is not None else ET.Element("integrator", type="path"))
                 return ET.tostring(root, encoding="unicode")
         return None
+
+
+def scene_inputs(path, params: dict | None = None) -> list[Path]:
+    """The scene file and every file it names (``$name`` filled from ``params``): the inputs of a
+    run that reads the scene, which the output gate keeps any output from overwriting."""
+    path = Path(path)
+    info = _SceneXML(path, {str(k): str(v) for k, v in (params or {}).items()})
+    return [path] + info.files()
 
 
 def load_scene(path, params: dict | None = None, polarized: bool | None = None):
