@@ -239,6 +239,26 @@ def _scatter_on_a_dead_cluster(p):
         gather.NO_WORKER_GRACE_S, gather.POLL_S = saved
 
 
+def _scatter_on(executor):
+    from hyde_bsdf import mom
+    mom.scatter(20.0, 2, 0.0, 1.0, 0.0, 0.0, pts_per_wl=6, executor=executor, progress=False)
+
+
+def _scatter_on_a_raw_client(p):
+    """A dask Client where an executor is expected: refused before any work (no cluster needed:
+    the check looks at the type, a stand-in with dask's module and class name)."""
+    client = type("Client", (), {"__module__": "distributed.client"})()
+    _scatter_on(client)
+
+
+def _export_while_locked(p):
+    from hyde_bsdf.fit.pbsdf_export import export_pbsdf
+    from hyde_bsdf.io.output_gate import OutputLock
+
+    with OutputLock([p["tmp"] / "locked.pbsdf"]):
+        export_pbsdf(p["tmp"] / "locked.pbsdf", rms_slope=0.3, n=1.5, resolution=(4, 4, 4), progress=False)
+
+
 def _api_rows():
     from hyde_bsdf.mom import ExecutorError
     from hyde_bsdf.render.renderer import load_scene, plan_passes, prepare_variant, render_stokes
@@ -265,6 +285,12 @@ def _api_rows():
          r"must end in \.exr"),
         ("plan_passes beyond 2^16 passes", lambda p: plan_passes(1000, 1000, 10**7), UsageError,
          "at most 65536 passes"),
+        ("mom.scatter given a raw dask Client, not its executor (was a traceback)", _scatter_on_a_raw_client,
+         UsageError, r"^executor is a dask Client; pass client.get_executor\(\)"),
+        ("mom.scatter given something that is not an executor (new)", lambda p: _scatter_on("a pool"),
+         UsageError, r"^executor must be a concurrent.futures.Executor \(or None\), got str$"),
+        ("export_pbsdf while another run writes the same file (new)", _export_while_locked, UsageError,
+         r"locked.pbsdf' is being written by another run \(pid \d+\)"),
         ("mom.scatter on a dask cluster whose only worker died (was a hang)", _scatter_on_a_dead_cluster,
          ExecutorError, r"^mom\.scatter: the dask cluster at inproc://\S+ is dead: it has no worker .*; 0 of 2 "
                         r"partitions had finished$"),

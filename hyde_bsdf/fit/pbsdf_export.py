@@ -58,7 +58,7 @@ from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.io.memory import check_memory, format_bytes
-from hyde_bsdf.io.output_gate import check_free_space
+from hyde_bsdf.io.output_gate import OutputLock, check_free_space
 from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, read_pbsdf,
                                      rusinkiewicz_to_directions, table_frame_x, table_nbytes)
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
@@ -442,7 +442,7 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
             report(lambda: f"tabulating phi_d {p + 1}/{res[0]} ({100 * (p + 1) / res[0]:.0f} %), "
                            f"{time.perf_counter() - t0:.0f} s")
 
-    with atomic_path(path) as tmp:
+    with OutputLock([path], "pBSDF file"), atomic_path(path) as tmp:     # one writer at a time
         meta = {"producer": "hyde-bsdf export", "model": "Hyde, Schmidt, Havrilla, Opt. Express 17(24) 2009, Eq. 17",
                 **params, "resolution": list(res), "wavelengths_nm": list(wavelengths),
                 "theta_h_grid": "(pi/2) u^2", "edge_deg": edge_deg(res[1])}

@@ -179,7 +179,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.io.memory import available_bytes, format_bytes
+from hyde_bsdf.io.memory import available_bytes, check_memory, format_bytes
 from hyde_bsdf.model.parameters import NATURAL_INDEX, paper_eta
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast, spectral_rule
@@ -757,6 +757,9 @@ ARC_PTS_MIN = 5.0
 TURN_MAX = 0.3
 #: most unknowns per partition: a dense 10,000 x 10,000 LU is ~10 CPU minutes per partition and 1.6 GB
 MAX_UNKNOWNS = 10000
+#: peak bytes per surface point while the surface is drawn: gaussian_surface measured 45 B/point
+#: (tracemalloc, 2^18 and 2^20 points, second derivative on); 64 leaves room for the resampling
+SURFACE_BYTES_PER_POINT = 64
 #: most quadrature panels per cell for the interior Green's function (one per decay length)
 MAX_PANELS = 64
 
@@ -985,6 +988,10 @@ def _realise_surface(cfg, workers):
         reasons += check_sampling(n_part / part_len, corr_length_wl, rough)
 
     def surface(npart):
+        # the surface itself, before it is drawn (a long surface alone can exceed the memory)
+        check_memory(SURFACE_BYTES_PER_POINT * npart * partitions, f"the MoM surface ({npart * partitions} "
+                     f"points, {SURFACE_BYTES_PER_POINT} B each)", "use a shorter length_wl or a lower pts_per_wl",
+                     fraction=0.8)
         try:
             return gaussian_surface(length_wl, npart * partitions, cfg["rms_height_wl"], corr_length_wl, cfg["seed"],
                                     second_derivative=True)
