@@ -26,6 +26,7 @@ from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, invert, 
                                       prepare, render_reference, write_history)
 from hyde_bsdf.io.atomic import atomic_group, atomic_open, atomic_path, check_output_path
 from hyde_bsdf.io.memory import check_memory as memory_check
+from hyde_bsdf.io.input_gate import check_input
 from hyde_bsdf.io.output_gate import output_gate
 from hyde_bsdf.render.renderer import scene_inputs
 from hyde_bsdf.progress import stderr_lines
@@ -155,9 +156,8 @@ def _check_args(args):
         raise UsageError("scalar mode takes one --scene; several scenes need --maps")
     if masks and len(masks) != len(refs):
         raise UsageError(f"give one --mask per --reference: {len(refs)} --reference, {len(masks)} --mask")
-    for path in scenes + refs + masks:
-        if not Path(path).is_file():
-            raise UsageError(f"{path!r} is not an existing file")
+    for path in scenes + refs + masks:       # the input gate: regular files (no FIFO, no device)
+        check_input(path, "input file", stdin=False)
     if args.truth is not None and refs:
         pass                                   # errors are reported against it
     if (args.preset or args.no_uncertainty) and not maps:

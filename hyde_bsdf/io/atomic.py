@@ -58,7 +58,7 @@ import time
 from pathlib import Path
 
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.io.output_gate import check_folder, check_target
+from hyde_bsdf.io.output_gate import OutputLock, check_folder, check_target
 
 __all__ = ["atomic_path", "atomic_open", "atomic_group", "atomic_dir", "check_output_path", "check_output_dir",
            "check_name_fits", "OutputWriteError", "Terminated", "install_signal_cleanup",
@@ -596,10 +596,16 @@ def atomic_dir(path, manifest: str = MANIFEST_NAME, force: bool = False, on_kept
         path = path.resolve()
     if path.exists() and not path.is_dir():
         raise UsageError(f"output folder {str(path)!r} is a regular file, not a folder")
-    check_dir_owned(path, manifest, force)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(path.parent)
-    tmp = _make_temp_dir(path, "partial")
+    check_folder(path, "output folder")         # the output gate: a mount point, a sticky folder
+    lock = OutputLock([path], "output folder").__enter__()    # one writer of the folder at a time
+    try:
+        check_dir_owned(path, manifest, force)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(path.parent)
+        tmp = _make_temp_dir(path, "partial")
+    except BaseException:
+        lock.__exit__(None, None, None)
+        raise
     try:
         os.chmod(tmp, 0o777 & ~_umask())
         yield tmp
@@ -610,6 +616,7 @@ def atomic_dir(path, manifest: str = MANIFEST_NAME, force: bool = False, on_kept
             on_kept(kept)
     finally:
         _remove(tmp)
+        lock.__exit__(None, None, None)
 
 
 def _move_in(tmp: Path, path: Path, new_files, manifest: str) -> list[Path]:

@@ -162,14 +162,16 @@ class _SceneXML:
         return f" (the scene's ${m.group(1)}; set it with -D {m.group(1)}=N)" if m else ""
 
     def files(self) -> list[Path]:
-        """The files the scene names (``<string name="filename">``, ``$name`` resolved, relative to
-        the scene's folder): inputs of the run, which no output may overwrite."""
+        """The files the scene names (``<string name="filename" value=...>``, and the ``filename``
+        attribute of ``<include>`` and ``<spectrum>``; ``$name`` resolved, relative to the scene's
+        folder): inputs of the run, which no output may overwrite."""
         if self.tree is None:
             return []
         out = []
-        for el in self.tree.getroot().iter("string"):
-            if el.get("name") == "filename" and el.get("value"):
-                p = Path(self.resolve(el.get("value"))).expanduser()
+        for el in self.tree.getroot().iter():
+            name = el.get("value") if el.tag == "string" and el.get("name") == "filename" else el.get("filename")
+            if name:
+                p = Path(self.resolve(name)).expanduser()
                 out.append(p if p.is_absolute() else self.path.parent / p)
         return out
 
