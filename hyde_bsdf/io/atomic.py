@@ -763,7 +763,6 @@ def check_output_dir(path, what: str = "output folder", create: bool = True) -> 
     check_name_fits(path, what)
     if path.exists() and not path.is_dir():
         raise UsageError(f"{what} {str(path)!r} is a regular file, not a folder")
-    check_folder(path, what)                  # the output gate: a mount point, a sticky folder
     if not path.exists():
         if not create:
             raise UsageError(f"{what} {str(path)!r} does not exist")
