@@ -216,6 +216,15 @@ CLI_ROWS = [
     # --- issue 24: options checked before the work, one line ---
     ("fit --seed -3 on a table (was a traceback)", ["fit", "{tmp}/small.pbsdf", "--seed", "-3"], 2,
      "--seed must be an integer in [0, 2^63), got -3", "in"),
+    # --- issue 24: validate -o deletes only unchanged files it wrote, never a folder it did not create ---
+    ("validate: an earlier report plus a user's empty folder tree (was deleted)", ["validate", "-o",
+     "{tmp}/treereport"], 2, "holds 2 file(s) that no earlier run wrote ('mine/', 'mine/empty/'", "in"),
+    ("validate: an earlier report whose figure the user replaced (new: hash differs)", ["validate", "-o",
+     "{tmp}/editedreport"], 2, "holds 1 file(s) that no earlier run wrote ('fig.png'", "in"),
+    ("validate: -o is a mount point (refused before the work)", ["validate", "-o", "/dev/shm", "--quick"], 2,
+     "'/dev/shm' is a mount point", "mount"),
+    ("validate: another run is writing the same report folder (new)", ["validate", "-o", "{tmp}/lockedreport",
+     "--quick"], 2, "is being written by another run (pid", "locked"),
     ("fit --seed 2^64 on a table (new)", ["fit", "{tmp}/small.pbsdf", "--seed", str(2**64)], 2,
      "--seed must be an integer in [0, 2^63)", "in"),
 ]
@@ -427,6 +436,8 @@ def _gate_files(tmp):
     """Special files, huge cells and hostile names for the issue 24 rows."""
     import socket
 
+    from hyde_bsdf.io.atomic import write_manifest
+
     for name in ("out_fifo.exr", "pipe.csv", "plot_fifo.png", "b_dolp.png", "tex_fifo.png", "scene_fifo.xml"):
         os.mkfifo(tmp / name)
     for name in ("sock.exr", "sock.csv"):
@@ -453,6 +464,13 @@ def _gate_files(tmp):
     _stokes_exr(inv / "ref.exr", 16, 1.0)
     (inv / "scene.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', '<bsdf type="hyde"><texture '
                                    'type="bitmap" name="alpha"><string name="filename" value="alpha.exr"/></texture></bsdf>'))
+    for name in ("treereport", "editedreport"):      # earlier reports (manifest with hashes), then the user's
+        (tmp / name).mkdir()
+        (tmp / name / "index.html").write_text("report")
+        (tmp / name / "fig.png").write_text("figure")
+        write_manifest(tmp / name, ["index.html", "fig.png"], ".hyde-report-manifest.json")
+    (tmp / "treereport" / "mine" / "empty").mkdir(parents=True)
+    (tmp / "editedreport" / "fig.png").write_text("the user's own figure")
     (tmp / "inref").mkdir()
     _stokes_exr(tmp / "inref" / "invert.png", 16, 1.0)
     return {"fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
@@ -476,7 +494,9 @@ def _snapshot(folder):
             out[str(rel)] = (p.read_bytes(), stat.S_IMODE(st.st_mode))
         elif stat.S_ISLNK(st.st_mode):
             out[str(rel)] = ("link", os.readlink(p))
-        elif not stat.S_ISDIR(st.st_mode):
+        elif stat.S_ISDIR(st.st_mode):
+            out[str(rel)] = ("dir",)              # an empty folder tree counts too
+        else:
             out[str(rel)] = (stat.S_IFMT(st.st_mode), st.st_ino)
     return out
 
@@ -542,7 +562,9 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     lock = contextlib.nullcontext()
     if how == "locked":                           # another run holds the outputs (same pid here)
         from hyde_bsdf.io.output_gate import OutputLock
-        lock = OutputLock([paths["tmp"] / "locked.exr", paths["tmp"] / "locked.png"])
+        lock = OutputLock([paths["tmp"] / "locked.exr", paths["tmp"] / "locked.png", paths["tmp"] / "lockedreport"])
+    if how == "mount" and not os.path.ismount("/dev/shm"):
+        pytest.skip("/dev/shm is not a mount point on this machine")
     if how in ("sub", "sigint", "sigterm", "pipe"):
         got, out, err = _subprocess(argv, how)
     else:
