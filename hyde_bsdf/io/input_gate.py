@@ -34,8 +34,8 @@ from pathlib import Path
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.memory import check_memory, format_bytes
 
-__all__ = ["STDIN", "DEFAULT_LIMIT", "CSV_FIELD_LIMIT", "short", "is_stdin", "check_input", "read_input",
-           "read_text", "csv_rows", "check_dimensions"]
+__all__ = ["STDIN", "DEFAULT_LIMIT", "CSV_FIELD_LIMIT", "short", "is_stdin", "file_kind", "check_input",
+           "read_input", "read_text", "csv_rows", "check_dimensions"]
 
 #: the spelling of standard input
 STDIN = "-"
@@ -45,7 +45,8 @@ DEFAULT_LIMIT = 1 << 30
 CSV_FIELD_LIMIT = 4096
 _STDIN_NAMES = {"-", "/dev/stdin", "/dev/fd/0", "/proc/self/fd/0"}
 _KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
-          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a directory"))
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISLNK, "a symbolic link"),
+          (stat.S_ISDIR, "a directory"))
 
 
 def short(value, limit: int = 80) -> str:
@@ -60,7 +61,8 @@ def is_stdin(path) -> bool:
     return str(path) in _STDIN_NAMES
 
 
-def _kind(mode: int) -> str:
+def file_kind(mode: int) -> str:
+    """What a file of ``st_mode`` ``mode`` is, for messages: 'a FIFO (named pipe)', 'a directory', ..."""
     return next((name for test, name in _KINDS if test(mode)), "not a regular file")
 
 
@@ -78,7 +80,7 @@ def check_input(path, what: str = "input file", limit: int = DEFAULT_LIMIT, stdi
     except OSError as exc:
         raise UsageError(f"{what} {short(path)}: cannot be read ({exc.strerror or exc})") from None
     if not stat.S_ISREG(st.st_mode):
-        raise UsageError(f"{what} {short(path)} is {_kind(st.st_mode)}, not a regular file; give a file"
+        raise UsageError(f"{what} {short(path)} is {file_kind(st.st_mode)}, not a regular file; give a file"
                          + (", or '-' to read standard input" if stdin else ""))
     if st.st_size > limit:
         raise UsageError(f"{what} {short(path)} is {format_bytes(st.st_size)}, more than the "
@@ -111,7 +113,7 @@ def read_input(path, what: str = "input file", limit: int = DEFAULT_LIMIT) -> by
     with os.fdopen(fd, "rb") as fh:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise UsageError(f"{what} {short(checked)} is {_kind(st.st_mode)}, not a regular file")
+            raise UsageError(f"{what} {short(checked)} is {file_kind(st.st_mode)}, not a regular file")
         os.set_blocking(fd, True)
         data = fh.read(limit + 1)
     if len(data) > limit:

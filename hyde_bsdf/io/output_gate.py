@@ -35,18 +35,13 @@ import tempfile
 from pathlib import Path
 
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.io.input_gate import is_stdin, short
+from hyde_bsdf.io.input_gate import file_kind, is_stdin, short
 from hyde_bsdf.io.memory import format_bytes
 from hyde_bsdf.io.trust import UntrustedFileError, make_private_dir
 
 __all__ = ["check_target", "check_not_input", "check_free_space", "check_folder", "OutputLock", "output_gate"]
 
-_KINDS = ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
-          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a directory"))
 
-
-def _kind(mode: int) -> str:
-    return next((name for test, name in _KINDS if test(mode)), "not a regular file")
 
 
 def _mount_points() -> set:
@@ -102,7 +97,7 @@ def check_target(path, what: str = "output file") -> Path:
         real = _follow_link(path, folder, what)
         return check_target(real, what) if real != path else path
     if not stat.S_ISREG(st.st_mode):
-        raise UsageError(f"{what} {short(path)} exists and is {_kind(st.st_mode)}, not a regular file: "
+        raise UsageError(f"{what} {short(path)} exists and is {file_kind(st.st_mode)}, not a regular file: "
                          f"not replaced; give a file name")
     parent = os.stat(folder)
     if _is_mount_point(path, st, parent):

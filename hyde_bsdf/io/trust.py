@@ -14,7 +14,7 @@ The rules are ssh's (``StrictModes``) for files that change what the program com
 A refusal is an :class:`UntrustedFileError` (an ``OSError``) whose one-line message names the
 path, the reason and the fix.
 
-May import: the standard library only.
+May import: the standard library and :mod:`hyde_bsdf.io.input_gate` (message wording).
 """
 from __future__ import annotations
 
@@ -24,21 +24,18 @@ import secrets
 import stat
 from pathlib import Path
 
+from hyde_bsdf.io.input_gate import file_kind
+
 __all__ = ["UntrustedFileError", "check_trusted_dir", "open_trusted", "user_secret", "make_private_dir",
            "SECRET_BYTES"]
 
 #: length of the per-user secret
 SECRET_BYTES = 32
-_KINDS = ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
-          (stat.S_ISSOCK, "a socket"), (stat.S_ISLNK, "a symbolic link"), (stat.S_ISDIR, "a directory"))
 
 
 class UntrustedFileError(OSError):
     """A cache file or folder that this user did not (only) write; the message says why."""
 
-
-def _kind(mode: int) -> str:
-    return next((name for test, name in _KINDS if test(mode)), "not a regular file")
 
 
 def _owner_ok(st, allow_root: bool) -> bool:
@@ -47,7 +44,7 @@ def _owner_ok(st, allow_root: bool) -> bool:
 
 def _check_dir_entry(path: Path, st, leaf: bool) -> None:
     if not stat.S_ISDIR(st.st_mode):
-        raise UntrustedFileError(f"{str(path)!r} is {_kind(st.st_mode)}, not a folder")
+        raise UntrustedFileError(f"{str(path)!r} is {file_kind(st.st_mode)}, not a folder")
     if not _owner_ok(st, allow_root=True):
         raise UntrustedFileError(f"folder {str(path)!r} is owned by uid {st.st_uid}, not by you (uid "
                                  f"{os.geteuid()}) or root: its files are not trusted")
@@ -77,7 +74,7 @@ def make_private_dir(folder) -> Path:
 
 def _check_file(path: Path, st, private: bool) -> None:
     if not stat.S_ISREG(st.st_mode):
-        raise UntrustedFileError(f"{str(path)!r} is {_kind(st.st_mode)}, not a regular file: not opened")
+        raise UntrustedFileError(f"{str(path)!r} is {file_kind(st.st_mode)}, not a regular file: not opened")
     if not _owner_ok(st, allow_root=False):
         raise UntrustedFileError(f"{str(path)!r} is owned by uid {st.st_uid}, not by you (uid {os.geteuid()}): "
                                  f"not trusted; remove it")
