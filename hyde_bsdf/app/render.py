@@ -24,6 +24,7 @@ from hyde_bsdf.app.args import positive_int
 from hyde_bsdf.app.pictures import polarization_png_paths, save_polarization_pngs, save_rgb_png
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.atomic import atomic_group, check_output_path
+from hyde_bsdf.io.input_gate import check_input
 from hyde_bsdf.io.output_gate import output_gate
 from hyde_bsdf.io.stokes_exr import write_stokes_exr
 from hyde_bsdf.progress import stderr_lines
@@ -81,8 +82,7 @@ def _run(args) -> int:
     out = Path(args.output)
     polarized = str(args.variant).endswith("_polarized")
     paths = check_outputs(out, polarized, png=not args.no_png)
-    if not Path(args.scene).is_file():
-        raise UsageError(f"scene file {args.scene!r} does not exist")
+    check_input(args.scene, "scene file", stdin=False)      # the input gate, before any work
     inputs = scene_inputs(args.scene, dict(args.define))
     # the output gate: no output is an input of this run; one writer per output set at a time
     with output_gate(paths, inputs=inputs, what="render output"):
