@@ -199,6 +199,8 @@ CLI_ROWS = [
      "alpha.exr' is the input", "in"),
     ("render -o the scene's own texture (new)", ["render", "{tmp}/invscene/scene.xml", "-o",
      "{tmp}/invscene/alpha.exr"], 2, "alpha.exr' is the input", "in"),
+    ("fit: -o is the data file itself (new)", ["fit", "{tmp}/data_as.png", "-o", "{tmp}/data_as.png"], 2,
+     "data_as.png' is the input", "in"),
     ("invert: the reference named like an output (new)", ["invert", "--reference", "{tmp}/inref/invert.png",
      "-o", "{tmp}/inref"], 2, "invert.png' is the input", "in"),
     # --- issue 24: one writer per output set ---
@@ -471,6 +473,7 @@ def _gate_files(tmp):
         write_manifest(tmp / name, ["index.html", "fig.png"], ".hyde-report-manifest.json")
     (tmp / "treereport" / "mine" / "empty").mkdir(parents=True)
     (tmp / "editedreport" / "fig.png").write_text("the user's own figure")
+    (tmp / "data_as.png").write_bytes((tmp / "meas.csv").read_bytes())   # a CSV under a plot's name
     (tmp / "inref").mkdir()
     _stokes_exr(tmp / "inref" / "invert.png", 16, 1.0)
     return {"fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
