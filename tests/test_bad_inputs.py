@@ -262,6 +262,15 @@ def _scatter_on_a_raw_client(p):
     _scatter_on(client)
 
 
+def _scatter_too_long(p):
+    """2e6 wavelengths at 40 points each: the surface alone needs 4.77 GiB; refused before it is drawn."""
+    from unittest import mock
+
+    from hyde_bsdf import mom
+    with mock.patch("hyde_bsdf.io.memory.available_bytes", lambda: 2**30):
+        mom.scatter(2e6, 2000, 0.0, 1.0, 0.0, 0.0, pts_per_wl=40, progress=False)
+
+
 def _export_while_locked(p):
     from hyde_bsdf.fit.pbsdf_export import export_pbsdf
     from hyde_bsdf.io.output_gate import OutputLock
@@ -300,6 +309,9 @@ def _api_rows():
          UsageError, r"^executor is a dask Client; pass client.get_executor\(\)"),
         ("mom.scatter given something that is not an executor (new)", lambda p: _scatter_on("a pool"),
          UsageError, r"^executor must be a concurrent.futures.Executor \(or None\), got str$"),
+        ("mom.scatter whose surface alone exceeds the memory (was allocated; 1 GiB available here)",
+         _scatter_too_long, UsageError, r"^the MoM surface \(80000000 points, 64 B each\): about 4\.77 GiB of "
+         r"memory needed, but only 819 MiB is available \(80% of the 1 GiB available\); use a shorter length_wl"),
         ("export_pbsdf while another run writes the same file (new)", _export_while_locked, UsageError,
          r"locked.pbsdf' is being written by another run \(pid \d+\)"),
         ("mom.scatter on a dask cluster whose only worker died (was a hang)", _scatter_on_a_dead_cluster,

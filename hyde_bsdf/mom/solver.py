@@ -976,6 +976,12 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
     return "fast", dense_ok
 
 
+def _check_surface_memory(points: int) -> None:
+    """The surface itself, before it is drawn: a long surface alone can exceed the memory."""
+    check_memory(SURFACE_BYTES_PER_POINT * points, f"the MoM surface ({points} points, {SURFACE_BYTES_PER_POINT} "
+                 f"B each)", "use a shorter length_wl or a lower pts_per_wl", fraction=0.8)
+
+
 def _realise_surface(cfg, workers):
     """Stage 2: the surface realisation, resampled along its arc length where steep; the method; the
     set-up's failure reasons (sampling, taper, partition, interior wavelength)."""
@@ -988,10 +994,7 @@ def _realise_surface(cfg, workers):
         reasons += check_sampling(n_part / part_len, corr_length_wl, rough)
 
     def surface(npart):
-        # the surface itself, before it is drawn (a long surface alone can exceed the memory)
-        check_memory(SURFACE_BYTES_PER_POINT * npart * partitions, f"the MoM surface ({npart * partitions} "
-                     f"points, {SURFACE_BYTES_PER_POINT} B each)", "use a shorter length_wl or a lower pts_per_wl",
-                     fraction=0.8)
+        _check_surface_memory(npart * partitions)
         try:
             return gaussian_surface(length_wl, npart * partitions, cfg["rms_height_wl"], corr_length_wl, cfg["seed"],
                                     second_derivative=True)
