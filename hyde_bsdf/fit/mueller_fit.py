@@ -69,8 +69,8 @@ from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.io.measurements import ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index
 
-__all__ = ["PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning", "IllPosedFitError",
-           "FitDataWarning", "merge_repeated_geometries", "impossible_values",
+__all__ = ["PARAMETERS", "FIT_PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning",
+           "IllPosedFitError", "FitDataWarning", "merge_repeated_geometries", "impossible_values",
            "mueller_elements", "fit_mueller", "fit_measurements", "synthetic_measurements",
            ]
 

@@ -34,9 +34,9 @@ from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.loss import StokesLoss, channel_names, stokes_images
 from hyde_bsdf.model.parameters import INVERSE_ETA, INVERSE_K, INVERSE_PARAMETERS, RMS_SLOPE
 
-__all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
-           "parameter_keys", "render_reference", "InversionResult", "invert", "check_gradients", "loss_and_gradient",
-           "finite_difference_gradient", "write_history"]
+__all__ = ["VARIANT", "PARAMETERS", "INVERSE_PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict",
+           "load_scene", "parameter_keys", "render_reference", "InversionResult", "invert", "check_gradients",
+           "loss_and_gradient", "finite_difference_gradient", "write_history"]
 
 VARIANT = "llvm_ad_spectral_polarized"
 #: optimizable BSDF parameters (``parameters.INVERSE_PARAMETERS``: the plugin's names, Mitsuba's n + ik)
