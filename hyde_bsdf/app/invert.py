@@ -373,6 +373,21 @@ def _maps_run(args, fit, start, paths):
         raise UsageError(_one_line(exc)) from None
     import mitsuba as mi
 
+    observations, truth = _map_observations(args, fit, start, mi)
+    try:
+        res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
+                          seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
+                          truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
+    except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
+        raise UsageError(_one_line(exc)) from None
+    with atomic_group():      # history, maps and plot replace the old set together, or not at all
+        _write_map_outputs(res, paths, args)
+    return _print_map_result(args, fit, start, truth, res, paths, len(observations))
+
+
+def _map_observations(args, fit, start, mi):
+    """The observations of a --maps run (the preset, the user's scenes or the built-in one) and the
+    truth maps where they are known."""
     truth = None
     observations = []
     if args.preset:
@@ -419,15 +434,12 @@ def _maps_run(args, fit, start, paths):
             ref = render_stokes_np(scene, args.sensor, args.spp_ref, seed=args.seed)
         mask = _read_mask(args.mask[i], (H, W)) if args.mask else None
         observations.append(Observation(scene, ref, sensor=args.sensor, mask=mask))
-    try:
-        res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
-                          seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
-                          truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
-    except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
-        raise UsageError(_one_line(exc)) from None
-    with atomic_group():      # history, maps and plot replace the old set together, or not at all
-        _write_map_outputs(res, paths, args)
-    print(f"loss: {args.loss}; {args.iterations} iterations over {len(observations)} image(s), "
+    return observations, truth
+
+
+def _print_map_result(args, fit, start, truth, res, paths, n_images):
+    """The summary of a --maps run on stdout."""
+    print(f"loss: {args.loss}; {args.iterations} iterations over {n_images} image(s), "
           f"{res.seconds_per_iteration:.3f} s/iteration (first {res.first_iteration_seconds:.1f} s incl. JIT)")
     for n in fit:
         v = np.asarray(res.final[n])
