@@ -8,25 +8,19 @@ else in ``hyde_bsdf/``.  A :class:`Range` unpacks and indexes as the pair ``(lo,
 
 Ranges
 ------
-=========================  ====================  ===========================================
-entry                      [lo, hi]              meaning
-=========================  ====================  ===========================================
-:data:`RMS_SLOPE`          [1e-4, 50]            accepted rms_slope: evaluator, plugin, MoM
-                                                 model, both fits, the inverse's box
-:data:`ALPHA`              sqrt(2) x RMS_SLOPE   the same range as Beckmann alpha
-:data:`DHR_TABLE_RMS_SLOPE` [1e-4, 100]          the DHR table's grid: wider than the accepted
-                                                 range, so that its top end, 50, is interior
-:data:`N`, :data:`K`       [0, 1e6]              accepted real / imaginary index part
-                                                 (beyond ~1e9 float32 Fresnel overflows)
-:data:`INDEX_MIN`          1e-6                  smallest accepted |eta| (eta^2 underflows)
-:data:`NATURAL_INDEX`      [0, 1e3]              the fits' search box for n and k and the
-                                                 MoM's accepted index (every natural material)
-:data:`INVERSE_ETA`        [0.02, 50]            the inverse's optimisation box for eta
-:data:`INVERSE_K`          [0, 50]               ... for k (log-space map updates floor it
-                                                 at :data:`INVERSE_K_LOG_FLOOR`)
-:data:`INVERSE_SCALE`      [1e-3, 1e3]           ... for specular_reflectance maps
-:data:`ALPHA_SAMPLE`       [1e-4, 10]            the .pbsdf file's sampling alpha
-=========================  ====================  ===========================================
+* :data:`RMS_SLOPE` [1e-4, 50]: the accepted rms_slope -- evaluator, plugin, MoM model, both
+  fits, the inverse's box;
+* :data:`ALPHA`: the same range as Beckmann alpha (sqrt(2) x RMS_SLOPE);
+* :data:`DHR_TABLE_RMS_SLOPE` [1e-4, 100]: the DHR table's grid, wider than the accepted range so
+  that its top end, 50, is interior;
+* :data:`N`, :data:`K` (:data:`ETA`, the plugin's name for n) [0, 1e6]: the accepted index parts
+  (beyond ~1e9 the float32 Fresnel terms overflow); :data:`INDEX_MIN` 1e-6: the smallest |eta|
+  (eta^2 underflows below it);
+* :data:`NATURAL_INDEX` [0, 1e3]: the fits' search box for n and k and the MoM's accepted index
+  (every natural material);
+* :data:`INVERSE_ETA` [0.02, 50], :data:`INVERSE_K` [0, 50], :data:`INVERSE_SCALE` [1e-3, 1e3]:
+  the inverse's optimisation boxes (log-space map updates floor k at :data:`INVERSE_K_LOG_FLOOR`);
+* :data:`ALPHA_SAMPLE` [1e-4, 10]: the .pbsdf file's importance-sampling alpha.
 
 Conventions and spellings (one per interface, converted at the boundary)
 ------------------------------------------------------------------------
@@ -35,17 +29,12 @@ the same material as n + i k (e^{-iwt}).  The two real numbers are the same: n =
 kappa = k.  Roughness: rms_slope = sqrt(2) sigma_h / ell (the paper's), Beckmann
 alpha = 2 sigma_h / ell = sqrt(2) rms_slope (Mitsuba's roughconductor).
 
-==================  ==============================  ===================================
-interface           names                           index convention
-==================  ==============================  ===================================
-evaluator (model)   ``rms_slope``, ``n``, ``k``     paper: eta = n - j k
-plugin (mitsuba)    ``rms_slope`` or ``alpha``,      Mitsuba: eta + i k (same numbers)
-                    ``eta``, ``k``
-fit                 :data:`FIT_PARAMETERS`          evaluator names
-inverse             :data:`INVERSE_PARAMETERS`      plugin names
-MoM solver          ``n``, ``k`` in; complex        paper: :func:`paper_eta` = n - j k
-                    ``eta`` inside
-==================  ==============================  ===================================
+* evaluator (:mod:`hyde_bsdf.model`): ``rms_slope``, ``n``, ``k``; the paper's eta = n - j k;
+* plugin (:mod:`hyde_bsdf.mitsuba`): ``rms_slope`` or ``alpha``, ``eta``, ``k``; Mitsuba's
+  eta + i k (the same numbers);
+* fit: :data:`FIT_PARAMETERS` = (``n``, ``k``, ``rms_slope``), the evaluator's names;
+* inverse: :data:`INVERSE_PARAMETERS` = (``rms_slope``, ``eta``, ``k``), the plugin's names;
+* MoM solver: ``n``, ``k`` in; inside, the complex :func:`paper_eta` = n - j k.
 
 May import: :mod:`hyde_bsdf.model.checks` only.
 """
