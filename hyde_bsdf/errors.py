@@ -59,8 +59,10 @@ def shorten(value, limit: int = SHORTEN_LIMIT) -> str:
     """``repr``-like text of a user value, cut to about ``limit`` characters: the start, an
     ellipsis with the number of characters left out, and the end (a 100 KB material name stays
     one readable line)."""
-    text = value if isinstance(value, str) else repr(value)
-    text = repr(text) if isinstance(value, str) else text
+    import os
+    if isinstance(value, os.PathLike):
+        value = os.fspath(value)          # a path reads as the path, not PosixPath(...)
+    text = repr(value)
     if len(text) <= limit:
         return text
     head, tail = (limit * 2) // 3, limit // 3 - 1
@@ -75,7 +77,7 @@ def shorten_values(text: str, limit: int = MESSAGE_VALUE_LIMIT) -> str:
 
     def cut(match):
         value = match.group(0)
-        if len(value) <= limit:
+        if len(value) <= limit or " characters]..." in value:    # short, or already cut by shorten()
             return value
         head, tail = (limit * 2) // 3, limit // 3 - 1
         return f"{value[:head]}...[{len(value) - head - tail} characters]...{value[-tail:]}"

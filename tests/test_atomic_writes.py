@@ -23,6 +23,7 @@ Behaviour checked:
   ``/proc`` and an unwritable folder with a message naming the path.
 """
 import errno
+import hashlib
 import os
 import random
 import re
@@ -392,3 +393,63 @@ def test_check_output_paths_refuse_before_work(tmp_path):
         assert str(path) in str(info.value) and "\n" not in str(info.value)
     assert check_output_path(tmp_path / "new" / "x.exr") == tmp_path / "new" / "x.exr"
     assert (tmp_path / "new").is_dir()
+
+
+# ---- issue 24: the folder manifest vouches only for unchanged files; symlinks are never followed
+
+def _report(folder, files):
+    with atomic_dir(folder) as new:
+        for name, text in files.items():
+            (new / name).parent.mkdir(parents=True, exist_ok=True)
+            (new / name).write_text(text)
+
+
+def test_a_listed_file_changed_since_is_not_deleted(tmp_path):
+    """The manifest lists fig.png, but the user replaced it with their own image (same name): its
+    SHA-256 no longer matches, so it is the user's -- refused without force, kept with it."""
+    report = tmp_path / "report"
+    _report(report, {"index.html": "r1", "fig.png": "figure 1"})
+    (report / "fig.png").write_text("the user's own image")
+    with pytest.raises(UsageError, match=r"holds 1 file\(s\) that no earlier run wrote \('fig.png'"):
+        with atomic_dir(report) as new:
+            raise AssertionError("the work started")
+    with atomic_dir(report, force=True) as new:
+        (new / "index.html").write_text("r2")
+    assert (report / "fig.png").read_text() == "the user's own image" and (report / "index.html").read_text() == "r2"
+
+
+def test_a_users_empty_folder_tree_is_never_removed(tmp_path):
+    report = tmp_path / "report"
+    _report(report, {"index.html": "r1", "figs/a.png": "a"})
+    (report / "mine" / "empty" / "tree").mkdir(parents=True)
+    with pytest.raises(UsageError, match=r"'mine/'"):
+        with atomic_dir(report) as new:
+            raise AssertionError("the work started")
+    with atomic_dir(report, force=True) as new:
+        (new / "index.html").write_text("r2")
+    assert (report / "mine" / "empty" / "tree").is_dir()
+    assert not (report / "figs").exists()            # the folder the earlier run created, now empty: removed
+
+
+def test_a_hand_edited_manifest_cannot_reach_outside_through_a_symlink(tmp_path):
+    """A manifest edited to list 'link/victim.txt' (with the right hash) where 'link' points
+    outside the folder: nothing outside is deleted, even with force."""
+    import json
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "victim.txt").write_text("precious")
+    report = tmp_path / "report"
+    _report(report, {"index.html": "r1"})
+    os.symlink(outside, report / "link")
+    m = report / ".hyde-manifest.json"
+    data = json.loads(m.read_text())
+    data["files"].append("link/victim.txt")
+    data["sha256"]["link/victim.txt"] = hashlib.sha256(b"precious").hexdigest()
+    data["files"].append("../outside/victim.txt")
+    m.write_text(json.dumps(data))
+    with atomic_dir(report, force=True) as new:
+        (new / "index.html").write_text("r2")
+        (new / "link").mkdir()
+        (new / "link" / "victim.txt").write_text("new")   # a new file under the link's name
+    assert (outside / "victim.txt").read_text() == "precious"
+    assert (report / "link.orig").is_symlink() and (report / "link" / "victim.txt").read_text() == "new"

@@ -19,9 +19,11 @@ before the output paths and the scene have been checked.
 Append a row for each new mistake; ``API_ROWS`` does the same for Python calls
 ``(id, call(paths), exception type, needle)``.
 """
+import contextlib
 import errno
 import os
 import signal
+import stat
 import subprocess
 import sys
 import threading
@@ -73,7 +75,7 @@ CLI_ROWS = [
      2, "film is too large", "in"),
     ("render: memory estimate above MemAvailable",
      ["render", "{inverse}", "-o", "{tmp}/a.exr", "-D", "res=5000", "--spp", "1"], 2,
-     "GiB is available (MemAvailable); lower the film's width and height (the scene's $res; set it with -D res=N)",
+     "2 GiB is available; lower the film's width and height (the scene's $res; set it with -D res=N)",
      "lowmem"),
     ("render: spp beyond 2^16 passes", ["render", "{tiny}", "-o", "{tmp}/a.exr", "--spp", "100000000000"], 2,
      "lower --spp to <=", "in"),
@@ -140,7 +142,7 @@ CLI_ROWS = [
      "ref1e30.exr' has peak |S0| = 1e+30, outside the accepted range [1e-10, 1e+10]", "in"),
     # --- issue 15: plugin values checked as Mitsuba evaluates them (the scene is checked before the render) ---
     ("render: eta bitmap with a negative texel (was accepted: furnace 1.99)", ["render", "{negeta}", "-o",
-     "{tmp}/negeta.exr"], 2, "hyde: parameter 'eta' must be finite and in [0, 1e+06] (index n + i k with k >= 0), "
+     "{tmp}/negeta_out.exr"], 2, "hyde: parameter 'eta' must be finite and in [0, 1e+06] (index n + i k with k >= 0), "
      "got eta.data texel value -1.5", "in"),
     ("render: eta = 1e10 (was an all-NaN image)", ["render", "{hugeeta}", "-o", "{tmp}/hugeeta.exr"], 2,
      "hyde: parameter 'eta' must be finite and in [0, 1e+06]", "in"),
@@ -150,6 +152,84 @@ CLI_ROWS = [
      "{tmp}/alpha0.exr"], 0, "alpha0.exr", "in"),
     # --- dispatcher ---
     ("unknown command", ["nosuch"], 2, "unknown command 'nosuch'", "in"),
+    # --- issue 24: the output gate (an existing target that is not a regular file is never replaced) ---
+    ("render: -o is a FIFO (was replaced by a file, exit 0)", ["render", "{tiny}", "-o", "{tmp}/out_fifo.exr"], 2,
+     "out_fifo.exr' exists and is a FIFO (named pipe), not a regular file: not replaced", "in"),
+    ("render: -o is a symlink into /proc/self/fd (was replaced)", ["render", "{tiny}", "-o", "{tmp}/link_fd.exr"],
+     2, "link_fd.exr' is a symbolic link to", "in"),
+    ("render: -o is a symlink up out of its folder (new)", ["render", "{tiny}", "-o", "{tmp}/sub/link_up.exr"], 2,
+     "outside its folder: not replaced", "in"),
+    ("render: -o is a socket (new)", ["render", "{tiny}", "-o", "{tmp}/sock.exr"], 2,
+     "sock.exr' exists and is a socket, not a regular file", "in"),
+    ("render: a PNG of the set is a FIFO (new)", ["render", "{tiny}", "-o", "{tmp}/b.exr"], 2,
+     "b_dolp.png' exists and is a FIFO (named pipe)", "in"),
+    ("fit: -o plot is a FIFO (new)", ["fit", "{csv}", "-o", "{tmp}/plot_fifo.png"], 2,
+     "plot_fifo.png' exists and is a FIFO", "in"),
+    ("export: the .pbsdf output is /dev/null (new: a device)", ["export", "/dev/null", "--rms-slope", "0.3",
+     "--n", "1.5"], 2, "'/dev/null' exists and is a character device, not a regular file: not replaced", "in"),
+    # --- issue 24: the input gate (regular files or '-', never a FIFO or a device; size and field limits) ---
+    ("fit: the CSV is a FIFO (was a hang)", ["fit", "{tmp}/pipe.csv"], 2,
+     "pipe.csv' is a FIFO (named pipe), not a regular file; give a file, or '-' to read standard input", "in"),
+    ("fit: /dev/zero (was unbounded memory)", ["fit", "/dev/zero"], 2,
+     "'/dev/zero' is a character device, not a regular file", "in"),
+    ("fit: /dev/urandom (new)", ["fit", "/dev/urandom"], 2, "'/dev/urandom' is a character device", "in"),
+    ("fit: the CSV is a socket (new)", ["fit", "{tmp}/sock.csv"], 2, "sock.csv' is a socket, not a regular file", "in"),
+    ("fit: the CSV is a folder (new)", ["fit", "{tmp}/kept"], 2, "kept' is a directory, not a regular file", "in"),
+    ("fit: a 200 KB cell (was a traceback)", ["fit", "{tmp}/bigcell.csv"], 2,
+     "bigcell.csv, line 3: a field is longer than the 4096 characters accepted", "in"),
+    ("fit: a 200 KB header name (new)", ["fit", "{tmp}/bighead.csv"], 2,
+     "bighead.csv, line 1: a field is longer than the 4096 characters accepted", "in"),
+    ("render: a bitmap texture that is a FIFO (was a hang)", ["render", "{fifotex}", "-o", "{tmp}/ft.exr"], 2,
+     "tex_fifo.png' is a FIFO (named pipe), not a regular file; give a file", "in"),
+    ("render: a bitmap texture that is /dev/zero (new)", ["render", "{devtex}", "-o", "{tmp}/dt.exr"], 2,
+     "file '/dev/zero' is a character device", "in"),
+    ("render: the scene is a FIFO (new)", ["render", "{tmp}/scene_fifo.xml", "-o", "{tmp}/sf.exr"], 2,
+     "scene file", "in"),
+    # --- issue 24: material names are Mitsuba's data/ior names only, in the plugin as in export ---
+    ("export: material escaping data/ior with ../", ["export", "{tmp}/m.pbsdf", "--rms-slope", "0.3",
+     "--material", "../../../../etc/passwd"], 2, "material '../../../../etc/passwd' is not one of Mitsuba's data/ior", "in"),
+    ("export: a 100 KB material name is cut in the message", ["export", "{tmp}/m.pbsdf", "--rms-slope", "0.3",
+     "--material", "A" * 100_000], 2, "characters]...AAAAAAAAAAAAAAAAAAAAAAAA' is not one of Mitsuba's data/ior tables", "in"),
+    ("render: the plugin's material with ../ (was followed out of data/ior)", ["render", "{dotdotmat}", "-o",
+     "{tmp}/dm.exr"], 2, "hyde: material '../ior/Au' is not one of Mitsuba's data/ior tables", "in"),
+    ("render: the plugin's 100 KB material name is cut (new)", ["render", "{longmat}", "-o", "{tmp}/lm.exr"], 2,
+     "characters]...AAAAAAAAAAAAAAAAAAAAAAAA' is not one of", "in"),
+    # --- issue 24: no output is an input of the same run ---
+    ("invert --maps -o DIR beside the scene's alpha.exr (was overwritten)", ["invert", "--maps", "--scene",
+     "{tmp}/invscene/scene.xml", "--reference", "{tmp}/invscene/ref.exr", "-o", "{tmp}/invscene"], 2,
+     "alpha.exr' is the input", "in"),
+    ("render -o the scene's own texture (new)", ["render", "{tmp}/invscene/scene.xml", "-o",
+     "{tmp}/invscene/alpha.exr"], 2, "alpha.exr' is the input", "in"),
+    ("fit: -o is the data file itself (new)", ["fit", "{tmp}/data_as.png", "-o", "{tmp}/data_as.png"], 2,
+     "data_as.png' is the input", "in"),
+    ("invert: the reference named like an output (new)", ["invert", "--reference", "{tmp}/inref/invert.png",
+     "-o", "{tmp}/inref"], 2, "invert.png' is the input", "in"),
+    # --- issue 24: one writer per output set ---
+    ("render: another run is writing the same outputs (was a mixed set)", ["render", "{tiny}", "-o",
+     "{tmp}/locked.exr"], 2, "is being written by another run (pid", "locked"),
+    ("fit: another run is writing the same plot (new)", ["fit", "{csv}", "-o", "{tmp}/locked.png"], 2,
+     "is being written by another run (pid", "locked"),
+    # --- issue 24: memory and table dimensions checked before allocation, sensible units ---
+    ("invert --maps --map-size 100000 (was 74.5 GiB allocated)", ["invert", "--maps", "--map-size", "100000",
+     "-o", "{tmp}/mapsize"], 2, "of memory needed, but only", "in"),
+    ("fit: a .pbsdf whose dimensions overflow (new)", ["fit", "{tmp}/overflow.pbsdf"], 2,
+     "field 'M': dimensions", "in"),
+    ("fit: a valid but huge .pbsdf (sparse 1.25 TiB)", ["fit", "{huge}"], 2,
+     "TiB of memory needed, but only", "in"),
+    # --- issue 24: options checked before the work, one line ---
+    ("fit --seed -3 on a table (was a traceback)", ["fit", "{tmp}/small.pbsdf", "--seed", "-3"], 2,
+     "--seed must be an integer in [0, 2^32), got -3", "in"),
+    # --- issue 24: validate -o deletes only unchanged files it wrote, never a folder it did not create ---
+    ("validate: an earlier report plus a user's empty folder tree (was deleted)", ["validate", "-o",
+     "{tmp}/treereport"], 2, "holds 2 file(s) that no earlier run wrote ('mine/', 'mine/empty/'", "in"),
+    ("validate: an earlier report whose figure the user replaced (new: hash differs)", ["validate", "-o",
+     "{tmp}/editedreport"], 2, "holds 1 file(s) that no earlier run wrote ('fig.png'", "in"),
+    ("validate: -o is a mount point (refused before the work)", ["validate", "-o", "/dev/shm", "--quick"], 2,
+     "'/dev/shm' is a mount point", "mount"),
+    ("validate: another run is writing the same report folder (new)", ["validate", "-o", "{tmp}/lockedreport",
+     "--quick"], 2, "is being written by another run (pid", "locked"),
+    ("fit --seed 2^64 on a table (new)", ["fit", "{tmp}/small.pbsdf", "--seed", str(2**64)], 2,
+     "--seed must be an integer in [0, 2^32)", "in"),
 ]
 
 
@@ -169,6 +249,35 @@ def _scatter_on_a_dead_cluster(p):
             mom.scatter(20.0, 2, 0.0, 1.0, 0.0, 0.0, pts_per_wl=6, executor=client.get_executor(), progress=False)
     finally:
         gather.NO_WORKER_GRACE_S, gather.POLL_S = saved
+
+
+def _scatter_on(executor):
+    from hyde_bsdf import mom
+    mom.scatter(20.0, 2, 0.0, 1.0, 0.0, 0.0, pts_per_wl=6, executor=executor, progress=False)
+
+
+def _scatter_on_a_raw_client(p):
+    """A dask Client where an executor is expected: refused before any work (no cluster needed:
+    the check looks at the type, a stand-in with dask's module and class name)."""
+    client = type("Client", (), {"__module__": "distributed.client"})()
+    _scatter_on(client)
+
+
+def _scatter_too_long(p):
+    """2e6 wavelengths at 40 points each: the surface alone needs 4.77 GiB; refused before it is drawn."""
+    from unittest import mock
+
+    from hyde_bsdf import mom
+    with mock.patch("hyde_bsdf.io.memory.available_bytes", lambda: 2**30):
+        mom.scatter(2e6, 2000, 0.0, 1.0, 0.0, 0.0, pts_per_wl=40, progress=False)
+
+
+def _export_while_locked(p):
+    from hyde_bsdf.fit.pbsdf_export import export_pbsdf
+    from hyde_bsdf.io.output_gate import OutputLock
+
+    with OutputLock([p["tmp"] / "locked.pbsdf"]):
+        export_pbsdf(p["tmp"] / "locked.pbsdf", rms_slope=0.3, n=1.5, resolution=(4, 4, 4), progress=False)
 
 
 def _api_rows():
@@ -197,6 +306,15 @@ def _api_rows():
          r"must end in \.exr"),
         ("plan_passes beyond 2^16 passes", lambda p: plan_passes(1000, 1000, 10**7), UsageError,
          "at most 65536 passes"),
+        ("mom.scatter given a raw dask Client, not its executor (was a traceback)", _scatter_on_a_raw_client,
+         UsageError, r"^executor is a dask Client; pass client.get_executor\(\)"),
+        ("mom.scatter given something that is not an executor (new)", lambda p: _scatter_on("a pool"),
+         UsageError, r"^executor must be a concurrent.futures.Executor \(or None\), got str$"),
+        ("mom.scatter whose surface alone exceeds the memory (was allocated; 1 GiB available here)",
+         _scatter_too_long, UsageError, r"^the MoM surface \(80000000 points, 64 B each\): about 4\.77 GiB of "
+         r"memory needed, but only 819 MiB is available \(80% of the 1 GiB available\); use a shorter length_wl"),
+        ("export_pbsdf while another run writes the same file (new)", _export_while_locked, UsageError,
+         r"locked.pbsdf' is being written by another run \(pid \d+\)"),
         ("mom.scatter on a dask cluster whose only worker died (was a hang)", _scatter_on_a_dead_cluster,
          ExecutorError, r"^mom\.scatter: the dask cluster at inproc://\S+ is dead: it has no worker .*; 0 of 2 "
                         r"partitions had finished$"),
@@ -294,13 +412,109 @@ def paths(tmp_path_factory):
             "tmp": tmp, "file": tmp / "file.txt", "tiny": tmp / "tiny.xml", "nosensor": tmp / "nosensor.xml",
             "ptracer": tmp / "ptracer.xml", "inverse": ROOT / "scenes" / "inverse.xml", "csv": tmp / "meas.csv",
             "notreport": tmp / "notreport", "badhyde": tmp / "badhyde.xml", "ref1e30": tmp / "ref1e30.exr",
-            **_plugin_scenes(tmp)}
+            **_plugin_scenes(tmp), **_gate_files(tmp)}
+
+
+def _table_layout(m_shape):
+    import numpy as np
+
+    layout = {n: (np.dtype(np.float32), (1, 3)) for n in ("theta_h", "theta_d", "phi_d")}
+    layout["wvls"] = (np.dtype(np.uint16), (5,))
+    layout["M"] = (np.dtype(np.float32), m_shape)
+    return layout
+
+
+def _tables(tmp):
+    """small.pbsdf (a real 4x4x4 export); overflow.pbsdf: M's dimensions multiply past 2^64."""
+    from hyde_bsdf.fit.pbsdf_export import export_pbsdf
+    from hyde_bsdf.io.pbsdf_file import _header
+
+    export_pbsdf(tmp / "small.pbsdf", rms_slope=0.3, n=1.5, resolution=(4, 4, 4), progress=False)
+    head, offsets, _ = _header(_table_layout((2**40, 2**40, 2**40, 5, 4, 4)))
+    (tmp / "overflow.pbsdf").write_bytes(head.ljust(offsets["M"], b"\0"))
+
+
+def _huge_table(folder):
+    """A valid 4096x1024x1024 table, 1.25 TiB, as a sparse file (no disk used), outside the
+    snapshot folder (the snapshot reads every file)."""
+    from hyde_bsdf.io.pbsdf_file import _header
+
+    folder.mkdir(exist_ok=True)
+    head, _, total = _header(_table_layout((4096, 1024, 1024, 5, 4, 4)))
+    with open(folder / "huge.pbsdf", "wb") as fh:
+        fh.write(head)
+        fh.truncate(total)
+    return folder / "huge.pbsdf"
+
+
+def _gate_files(tmp):
+    """Special files, huge cells and hostile names for the issue 24 rows."""
+    import socket
+
+    from hyde_bsdf.io.atomic import write_manifest
+
+    for name in ("out_fifo.exr", "pipe.csv", "plot_fifo.png", "b_dolp.png", "tex_fifo.png", "scene_fifo.xml"):
+        os.mkfifo(tmp / name)
+    for name in ("sock.exr", "sock.csv"):
+        s = socket.socket(socket.AF_UNIX)
+        s.bind(str(tmp / name))
+        s.close()                              # the socket file stays
+    os.symlink("/proc/self/fd/1", tmp / "link_fd.exr")
+    (tmp / "sub").mkdir()
+    os.symlink("../file.txt", tmp / "sub" / "link_up.exr")
+    head = "theta_i_deg,theta_r_deg,phi_deg,M01"
+    (tmp / "bigcell.csv").write_text(f"{head}\n20,20,180,0.1\n30,30,180,{'x' * 200_000}\n")
+    (tmp / "bighead.csv").write_text(f"{head},{'M' * 200_000}\n20,20,180,0.1,0\n")
+
+    def scene(name, bsdf):
+        (tmp / f"{name}.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', bsdf))
+        return tmp / f"{name}.xml"
+
+    bitmap = '<bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="{}"/>' \
+             '</texture></bsdf>'
+    _tables(tmp)
+    inv = tmp / "invscene"                        # a user's scene folder: scene.xml, its alpha.exr, a reference
+    inv.mkdir()
+    _stokes_exr(inv / "alpha.exr", 4, 0.3)
+    _stokes_exr(inv / "ref.exr", 16, 1.0)
+    (inv / "scene.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', '<bsdf type="hyde"><texture '
+                                   'type="bitmap" name="alpha"><string name="filename" value="alpha.exr"/></texture></bsdf>'))
+    for name in ("treereport", "editedreport"):      # earlier reports (manifest with hashes), then the user's
+        (tmp / name).mkdir()
+        (tmp / name / "index.html").write_text("report")
+        (tmp / name / "fig.png").write_text("figure")
+        write_manifest(tmp / name, ["index.html", "fig.png"], ".hyde-report-manifest.json")
+    (tmp / "treereport" / "mine" / "empty").mkdir(parents=True)
+    (tmp / "editedreport" / "fig.png").write_text("the user's own figure")
+    (tmp / "data_as.png").write_bytes((tmp / "meas.csv").read_bytes())   # a CSV under a plot's name
+    (tmp / "inref").mkdir()
+    _stokes_exr(tmp / "inref" / "invert.png", 16, 1.0)
+    return {"fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
+            "huge": _huge_table(tmp.parent / f"{tmp.name}_sparse"),
+            "devtex": scene("devtex", bitmap.format("/dev/zero")),
+            "dotdotmat": scene("dotdotmat", '<bsdf type="hyde"><string name="material" value="../ior/Au"/></bsdf>'),
+            "longmat": scene("longmat", f'<bsdf type="hyde"><string name="material" value="{"A" * 100_000}"/></bsdf>')}
 
 
 def _snapshot(folder):
-    """{relative path: bytes} of every file under ``folder`` except our own temporaries."""
-    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*"))
-            if p.is_file() and not any(TEMP_NAME_RE.match(part) for part in p.relative_to(folder).parts)}
+    """{relative path: (bytes, mode)} of every regular file under ``folder`` except our own
+    temporaries, (kind, inode) of every FIFO, socket or device, and ("link", target) of every
+    symlink: "nothing changed or lost" covers contents, modes and special files alike."""
+    out = {}
+    for p in sorted(folder.rglob("*")):
+        rel = p.relative_to(folder)
+        if any(TEMP_NAME_RE.match(part) for part in rel.parts):
+            continue
+        st = os.lstat(p)
+        if stat.S_ISREG(st.st_mode):
+            out[str(rel)] = (p.read_bytes(), stat.S_IMODE(st.st_mode))
+        elif stat.S_ISLNK(st.st_mode):
+            out[str(rel)] = ("link", os.readlink(p))
+        elif stat.S_ISDIR(st.st_mode):
+            out[str(rel)] = ("dir",)              # an empty folder tree counts too
+        else:
+            out[str(rel)] = (stat.S_IFMT(st.st_mode), st.st_ino)
+    return out
 
 
 def _fill(argv, paths):
@@ -362,6 +576,12 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
             return real_fsync(fd)
 
         monkeypatch.setattr(os, "fsync", fsync)
+    lock = contextlib.nullcontext()
+    if how == "locked":                           # another run holds the outputs (same pid here)
+        from hyde_bsdf.io.output_gate import OutputLock
+        lock = OutputLock([paths["tmp"] / "locked.exr", paths["tmp"] / "locked.png", paths["tmp"] / "lockedreport"])
+    if how == "mount" and not os.path.ismount("/dev/shm"):
+        pytest.skip("/dev/shm is not a mount point on this machine")
     if how in ("sub", "sigint", "sigterm", "pipe"):
         got, out, err = _subprocess(argv, how)
     else:
@@ -371,7 +591,8 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
             monkeypatch.setattr("hyde_bsdf.app.report.build.VALIDATION_DIR", paths["tmp"] / "no_validation")
         monkeypatch.chdir(paths["tmp"])
         try:
-            got = cli.main(argv)
+            with lock:
+                got = cli.main(argv)
         except SystemExit as exc:                 # argparse errors of commands that do not catch them
             got = exc.code
         out, err = capsys.readouterr()

@@ -164,7 +164,7 @@ def test_exceptions_become_messages_in_one_place():
                 bad.append(f"{path.relative_to(root)}:{node.lineno}: writes to stderr")
             if isinstance(node, ast.ExceptHandler) and node.type is not None and "UsageError" in ast.unparse(node.type):
                 body = ast.Module(body=node.body, type_ignores=[])
-                if any(isinstance(n, ast.Return) and isinstance(n.value, ast.Constant) and isinstance(n.value.value, int)
+                if any(isinstance(n, ast.Return) and isinstance(n.value, ast.Constant) and type(n.value.value) is int
                        or isinstance(n, ast.Call) and ast.unparse(n.func) == "print" for n in ast.walk(body)):
                     bad.append(f"{path.relative_to(root)}:{node.lineno}: turns a UsageError into an exit code")
     assert not bad, bad

@@ -44,6 +44,11 @@ def cache(tmp_path, monkeypatch, good_table):
     return folder, builds
 
 
+def listing(folder):
+    """The folder's files but the per-user key that seals them."""
+    return sorted(p.name for p in folder.iterdir() if p.name != dhr.CACHE_KEY_NAME)
+
+
 def write_npz(path, arrays):
     with open(path, "wb") as fh:          # np.savez(path) would append ".npz" to odd names
         np.savez(fh, **arrays)
@@ -76,7 +81,7 @@ def assert_refused_and_rebuilt(folder, builds, reason):
         again = dhr.load_table("vgroove")
     assert builds == ["vgroove"]
     np.testing.assert_array_equal(again.rho, table.rho)
-    assert sorted(p.name for p in folder.iterdir()) == [path.name]    # no temporary files
+    assert listing(folder) == [path.name]    # no temporary files
     return table
 
 
@@ -164,13 +169,10 @@ def test_directory_in_place_of_the_cache_file_leaves_no_temporary_files(cache, c
     path.mkdir()
     for _ in range(2):                       # two runs: each warns, rebuilds, leaks nothing
         dhr._TABLES.clear()
-        with pytest.warns(dhr.DHRCacheWarning) as record:
+        with pytest.warns(dhr.DHRCacheWarning, match=f"{path.name}.*not a regular file.*kept in memory"):
             dhr.load_table("vgroove")
-        texts = [str(w.message) for w in record]
-        assert any(path.name in text for text in texts), texts
-        assert any("could not cache the DHR table" in text for text in texts), texts
     assert builds == ["vgroove", "vgroove"]
-    assert [p.name for p in folder.iterdir()] == [path.name] and not any(path.iterdir())
+    assert listing(folder) == [path.name] and not any(path.iterdir())
 
 
 def test_empty_cache_variable_means_the_default_folder(monkeypatch, tmp_path):
@@ -203,4 +205,127 @@ def test_halved_rho_with_valid_checksum_does_not_reach_the_model(tmp_path, monke
     diffuse = F[0, 0] - hyde_bsdf.pbrdf(*geometry, **kw, diffuse=False)[0, 0]
     assert diffuse == pytest.approx(ref, rel=1e-9)
     np.testing.assert_allclose(dhr.load_table("vgroove").rho, good_table.rho, rtol=0, atol=1e-12)
-    assert [p.name for p in tmp_path.iterdir()] == [dhr.cache_path("vgroove").name]
+    assert listing(tmp_path) == [dhr.cache_path("vgroove").name]
+
+
+# ---- a cache you did not write is not trusted (issue 24, item 5)
+
+def plain_sha256_reseal(arrays):
+    """The seal an editor without the per-user key can compute: SHA-256 of the same bytes."""
+    import hashlib
+    meta = str(arrays["meta"][()])
+    h = hashlib.sha256(meta.encode())
+    for name in dhr._ARRAYS:
+        a = np.ascontiguousarray(arrays[name], dtype="<f8")
+        h.update(f"{name}{a.shape}".encode())
+        h.update(a.tobytes())
+    arrays["checksum"] = np.array(h.hexdigest())
+    return arrays
+
+
+def test_an_edit_resealed_without_the_key_is_refused(cache, good_table):
+    """One node of rho changed by 1e-3 (no spot check would land on it) and resealed with a plain
+    SHA-256, as the issue's editor did: the keyed seal does not match."""
+    folder, builds = cache
+    a = stored_arrays(good_table)
+    a["rho"] = a["rho"].copy()
+    a["rho"][50, 50] += 1e-3
+    a["rho_avg"] = dhr._rho_average(a["x"], a["rho"])
+    write_npz(dhr.cache_path("vgroove"), plain_sha256_reseal(a))
+    assert_refused_and_rebuilt(folder, builds, "checksum")
+
+
+def test_a_one_percent_edit_resealed_with_the_key_is_caught_by_the_spot_checks(cache, good_table, monkeypatch):
+    """1 % of the nodes (185 of 18513) scaled by 1.01 and resealed with the key itself: of the
+    690 random nodes re-integrated at load, some land on an edited one (seed fixed here; the
+    miss probability over all draws is checked below)."""
+    folder, builds = cache
+    monkeypatch.setattr(dhr, "_spot_rng", lambda: np.random.default_rng(20241202))
+    a = stored_arrays(good_table)
+    rho = a["rho"].copy()
+    edited = np.random.default_rng(7).choice(rho.size, rho.size // 100, replace=False)
+    rho.flat[edited] *= 1.01
+    a["rho"], a["rho_avg"] = rho, dhr._rho_average(a["x"], rho)
+    write_npz(dhr.cache_path("vgroove"), reseal(a))
+    assert_refused_and_rebuilt(folder, builds, "re-integrated")
+
+
+def test_spot_checks_miss_a_one_percent_edit_with_probability_below_one_in_a_thousand():
+    """Hypergeometric: P(690 distinct draws of 18513 nodes miss all 185 edited) = C(N-m, d)/C(N, d)."""
+    n = dhr.TABLE_THETA_POINTS * dhr.TABLE_SLOPE_POINTS
+    m, d = n // 100, dhr._SPOT_RANDOM
+    log_miss = (math.lgamma(n - m + 1) - math.lgamma(n - m - d + 1)) - (math.lgamma(n + 1) - math.lgamma(n - d + 1))
+    assert n == 18513 and m == 185
+    assert math.exp(log_miss) == pytest.approx(8.56e-4, rel=1e-3) and math.exp(log_miss) < 1e-3
+
+
+def test_a_fifo_at_the_cache_path_is_refused_not_waited_on(cache, good_table):
+    import os
+    import stat
+    folder, builds = cache
+    path = dhr.cache_path("vgroove")
+    os.mkfifo(path)
+    with pytest.warns(dhr.DHRCacheWarning, match="not a regular file"):
+        table = dhr.load_table("vgroove")       # would block forever if the FIFO were opened
+    assert builds == ["vgroove"] and stat.S_ISFIFO(os.lstat(path).st_mode)   # left as it was
+    np.testing.assert_array_equal(table.rho, good_table.rho)
+
+
+def test_a_symlink_at_the_cache_path_is_not_followed(cache, good_table, tmp_path):
+    import os
+    folder, builds = cache
+    elsewhere = tmp_path / "planted.npz"
+    dhr._save_table(elsewhere, good_table)     # a valid, sealed table, reached through a link
+    path = dhr.cache_path("vgroove")
+    os.symlink(elsewhere, path)
+    with pytest.warns(dhr.DHRCacheWarning, match="not a regular file"):
+        dhr.load_table("vgroove")
+    assert builds == ["vgroove"] and path.is_symlink() and elsewhere.read_bytes()[:2] == b"PK"
+
+
+@pytest.mark.parametrize("mode", [0o775, 0o777, 0o757], ids=["group-writable", "world-writable", "other-writable"])
+def test_a_folder_others_may_write_to_is_not_used(cache, good_table, mode):
+    """A valid sealed table in a folder others may write to is neither read nor replaced."""
+    import os
+    folder, builds = cache
+    path = dhr.cache_path("vgroove")
+    dhr._save_table(path, good_table)
+    before = path.read_bytes()
+    os.chmod(folder, mode)
+    with pytest.warns(dhr.DHRCacheWarning, match="writable by others.*chmod go-w"):
+        dhr.load_table("vgroove")
+    assert builds == ["vgroove"] and path.read_bytes() == before
+
+
+def test_a_cache_file_others_may_write_to_is_refused_and_replaced_privately(cache, good_table):
+    import os
+    import stat
+    folder, builds = cache
+    path = dhr.cache_path("vgroove")
+    dhr._save_table(path, good_table)
+    os.chmod(path, 0o666)
+    assert_refused_and_rebuilt(folder, builds, "writable by others")
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
+
+
+def test_a_cache_owned_by_someone_else_is_not_trusted(cache, good_table, monkeypatch):
+    """Seen as another user (uid 4242): the folder or the file is someone else's, so nothing is used."""
+    import os
+    folder, builds = cache
+    dhr._save_table(dhr.cache_path("vgroove"), good_table)
+    monkeypatch.setattr(os, "geteuid", lambda: 4242)
+    with pytest.warns(dhr.DHRCacheWarning, match="not by you"):
+        dhr.load_table("vgroove")
+    assert builds == ["vgroove"]
+
+
+def test_a_key_others_may_read_makes_the_cache_unused(cache, good_table):
+    import os
+    folder, builds = cache
+    path = dhr.cache_path("vgroove")
+    dhr._save_table(path, good_table)
+    before = path.read_bytes()
+    os.chmod(folder / dhr.CACHE_KEY_NAME, 0o644)
+    with pytest.warns(dhr.DHRCacheWarning, match="readable or writable by others.*chmod 600"):
+        dhr.load_table("vgroove")
+    assert builds == ["vgroove"] and path.read_bytes() == before

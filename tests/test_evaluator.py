@@ -234,8 +234,11 @@ def test_diffuse_vanishes_for_smooth_and_dominates_for_very_rough_surfaces():
     t = np.radians([0, 30, 60, 80])
     smooth = hyde_bsdf.pbrdf(t, 0.5, 0.0, rms_slope=1e-3, pec=True)[..., 0, 0]
     assert np.all(smooth < 1e-12)          # far from the lobe: only a diffuse term could show
-    rough = hyde_bsdf.pbrdf(t, 0.5, 0.0, rms_slope=100.0, pec=True)[..., 0, 0]
-    np.testing.assert_allclose(rough, 1 / math.pi, rtol=2e-3)
+    # at the top of the accepted range (50, parameters.RMS_SLOPE): 1/pi within 0.05 % up to
+    # 60 deg, 0.6 % at 80 deg (measured 0.31643 against 0.31831)
+    rough = hyde_bsdf.pbrdf(t, 0.5, 0.0, rms_slope=50.0, pec=True)[..., 0, 0]
+    np.testing.assert_allclose(rough[:3], 1 / math.pi, rtol=5e-4)
+    np.testing.assert_allclose(rough[3], 1 / math.pi, rtol=7e-3)
 
 
 def test_numpy_broadcasting_and_shapes():
@@ -277,7 +280,7 @@ def test_bad_angles_raise_naming_the_angle(arg):
 angles = st.floats(0.0, math.pi)
 @settings(max_examples=examples(300), deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(ti=angles, tr=angles, ph=st.floats(-20.0, 20.0),
-       s=st.floats(1e-4, 100.0), n=st.floats(0.0, 1e6), k=st.floats(0.0, 1e6),
+       s=st.floats(1e-4, 50.0), n=st.floats(0.0, 1e6), k=st.floats(0.0, 1e6),
        pec=st.booleans(), shadowing=st.sampled_from(["vgroove", "smith", "none"]),
        diffuse=st.sampled_from(["paper", "reciprocal", "none"]))
 def test_no_nan_anywhere_in_the_input_domain(ti, tr, ph, s, n, k, pec, shadowing, diffuse):

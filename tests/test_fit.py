@@ -235,7 +235,7 @@ def test_cli_reports_bad_file_with_exit_code_2(tmp_path, capsys):
     (dict(n0="1.0"), TypeError, r"n0 must be a real number"),
     (dict(k0=7 + 1j), TypeError, r"k0 must be a real number"),
     (dict(rms_slope=True), TypeError, r"rms_slope must be a real number"),
-    (dict(rms_slope=1e-9), ValueError, r"rms_slope must be in \[0.0001, 100\]"),
+    (dict(rms_slope=1e-9), ValueError, r"rms_slope must be in \[0.0001, 50\]"),
     (dict(shadowing=["vgroove"]), ValueError, r"shadowing must be"),
     (dict(progress="yes"), TypeError, r"progress must be True, False, None or a callable"),
     (dict(theta_i=TH + 0j), TypeError, r"theta_i must be real"),

@@ -55,13 +55,13 @@ def _one_error_line(err):
     (["--iterations", "0"], ["--iterations", ">= 1"]),
     (["--lr", "nan"], ["--lr", "> 0"]),
     (["--start", "rms_slope=abc"], ["--start", "not a number"]),
-    (["--start", "rms_slope=9"], ["--start", "outside the accepted range"]),
+    (["--start", "rms_slope=60"], ["--start", "outside the accepted range"]),
     (["--fit", "sigma"], ["--fit", "rms_slope, eta, k"]),
     (["--regularizer", "tv"], ["--regularizer", "--maps"]),
     (["--maps", "--regularizer", "tikhonov"], ["--regularizer", "invalid choice"]),
     (["--maps", "--weight", "-1"], ["--weight", ">= 0"]),
     (["--maps", "--fit", "alpha,rms_slope"], ["--fit", "same roughness"]),
-    (["--reference", "/nonexistent/ref.exr"], ["/nonexistent/ref.exr", "not an existing file"]),
+    (["--reference", "/nonexistent/ref.exr"], ["/nonexistent/ref.exr", "does not exist"]),
     (["--maps", "--scene", "scenes/inverse.xml"], ["--reference per scene"]),
 ])
 def test_usage_errors_are_one_line_exit_2(capsys, argv, words):
@@ -102,7 +102,7 @@ def test_memory_estimate_refused_with_the_flag(capsys, monkeypatch, tmp_path):
     rc, _, err = _run(capsys, TINY + ["-o", str(tmp_path)])
     assert rc == 2
     line = _one_error_line(err)
-    assert "needs about" in line and "0.1 GiB is available" in line and "--spp" in line and "--res" in line
+    assert "of memory needed" in line and "64 MiB is available" in line and "--spp" in line and "--res" in line
     rc, _, err = _run(capsys, ["--maps"] + TINY + ["-o", str(tmp_path)])
     assert rc == 2 and "--spp" in _one_error_line(err)
     assert inv.estimate_memory(64, 64, 16) == inv.AD_BYTES_FIXED + inv.AD_BYTES_PER_SAMPLE * 64 * 64 * 16

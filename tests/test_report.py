@@ -111,7 +111,7 @@ def test_report_never_deletes_a_users_files(tmp_path, monkeypatch, capsys):
     """Issue 15: ``validate -o DIR`` where DIR is a web site (index.html, no manifest) or an earlier
     report with a user's file added is refused before any work (exit 2, one line naming the
     folder); ``--force`` writes the report beside the user's files and keeps them all (the
-    site's index.html as index.html.orig); a report from before manifests is still recognised."""
+    site's index.html as index.html.orig); a report without a manifest is not adopted."""
     _fake_validation(tmp_path, monkeypatch)
     site = tmp_path / "site"
     site.mkdir()
@@ -134,8 +134,11 @@ def test_report_never_deletes_a_users_files(tmp_path, monkeypatch, capsys):
     assert cli_main(["-o", str(report), "--quick"]) == 2
     assert "holds 1 file(s) that no earlier run wrote ('my_figure.png'; its manifest does not list" \
         in capsys.readouterr().err
-    # a report written before manifests: index.html title + checks.csv header make it ours
-    (report / "my_figure.png").unlink()
+    # a report without its manifest is not adopted (its HTML naming a file does not make it ours):
+    # refused without --force, and with --force its files are kept aside, not deleted
     (report / ".hyde-report-manifest.json").unlink()
-    assert cli_main(["-o", str(report), "--quick"]) == 0
+    assert cli_main(["-o", str(report), "--quick"]) == 2
+    assert "is not a validation report" in capsys.readouterr().err
+    assert cli_main(["-o", str(report), "--quick", "--force"]) == 0
+    assert (report / "my_figure.png").read_bytes() == b"mine" and (report / "index.html.orig").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report", "site", "validation"]

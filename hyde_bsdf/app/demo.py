@@ -36,6 +36,8 @@ from hyde_bsdf.app.args import Parser, positive_int, quiet_option
 from hyde_bsdf.app.pictures import polarization_png_paths, save_polarization_pngs, save_rgb_png
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.atomic import atomic_group, atomic_path, check_output_dir, check_output_path
+from hyde_bsdf.io.input_gate import check_input
+from hyde_bsdf.io.output_gate import OutputLock
 from hyde_bsdf.io.stokes_exr import write_stokes_exr
 from hyde_bsdf.progress import stderr_lines
 from hyde_bsdf.render.polarization import polarization_quantities, tonemap
@@ -60,14 +62,21 @@ def render_demo(outdir, width=None, height=None, spp=None, variant=DEFAULT_VARIA
     """Render the demo scene and write its EXR and PNGs into ``outdir``; returns {name: path}.
 
     ``width``, ``height``, ``spp`` left as None take :data:`DEFAULTS_LLVM`, or the smaller
-    :data:`DEFAULTS_SCALAR` when the variant falls back to scalar.
+    :data:`DEFAULTS_SCALAR` when the variant falls back to scalar.  One run at a time writes the
+    set (the output gate's lock): a second fails at once with one line.
     """
+    with OutputLock(demo_outputs(Path(outdir), str(variant).endswith("_polarized")), "demo output"):
+        return _render_demo(outdir, width, height, spp, variant, seed, bsdf, scene)
+
+
+def _render_demo(outdir, width, height, spp, variant, seed, bsdf, scene) -> dict:
     if bsdf not in ("hyde", "roughconductor"):
         raise UsageError(f"bsdf must be 'hyde' or 'roughconductor', got {bsdf!r}")
     scene = Path(scene)
-    if not scene.is_file():
+    if not scene.exists():
         raise UsageError(f"demo scene {str(scene)!r} not found (run from a checkout of the repository, "
                          f"or pass --scene)")
+    check_input(scene, "demo scene", stdin=False)          # a FIFO or a device: one line, never opened
     outdir = check_output_dir(outdir, "--outdir")
     for path in demo_outputs(outdir, str(variant).endswith("_polarized")):
         check_output_path(path, "output file")

@@ -19,6 +19,7 @@ every few seconds (``-q``: none).
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import warnings
 from pathlib import Path
@@ -26,6 +27,8 @@ from pathlib import Path
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.app.plots import PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.input_gate import STDIN, check_input
+from hyde_bsdf.io.output_gate import output_gate
 from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitWarning, check_options, fit_measurements
 from hyde_bsdf.fit.pbsdf_fit import _check, fit_pbsdf
 from hyde_bsdf.fit.pbsdf_samples import pbsdf_samples
@@ -52,6 +55,11 @@ def is_pbsdf(path) -> bool:
     p = Path(path)
     if p.suffix.lower() == ".pbsdf":
         return True
+    try:       # sniff regular files only: a FIFO would block, stdin would lose its first bytes
+        if check_input(p, "data file") == STDIN:
+            return False
+    except UsageError:
+        return False        # the CSV reader's input gate refuses it with one line
     try:
         if not p.is_file():
             return False
@@ -114,6 +122,19 @@ def csv_main(argv=None) -> int:
     converged (an ill-posed fit with ``--strict`` raises, 1 too); user errors raise UsageError.
     """
     args = csv_parser().parse_args(argv)
+    with _output_gate(args):       # the output gate's refusal comes before the file is read
+        return _csv_run(args)
+
+
+def _output_gate(args):
+    """The output gate on ``-o`` for the whole run: not the data file, one writer at a time."""
+    if not args.output:
+        return contextlib.nullcontext()
+    check_plot_path(args.output)
+    return output_gate([args.output], inputs=[args.data], what="-o plot")
+
+
+def _csv_run(args) -> int:
     opts = dict(fit=args.fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
                 shadowing=args.shadowing, diffuse=args.diffuse)
     with user_input():
@@ -169,6 +190,11 @@ def pbsdf_parser() -> Parser:
 def pbsdf_main(argv=None) -> int:
     """``hyde-bsdf fit FILE.pbsdf``: read, mask, subsample, fit, print, plot."""
     args = pbsdf_parser().parse_args(argv)
+    with _output_gate(args):
+        return _pbsdf_run(args)
+
+
+def _pbsdf_run(args) -> int:
     with user_input():
         fit = _check(args.fit, args.rms_slope, args.n0, args.k0, args.shadowing, args.diffuse)
     if not 0 <= args.seed < 2**32:

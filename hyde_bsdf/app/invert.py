@@ -24,6 +24,10 @@ from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT,
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, invert, load_scene, parameter_keys,
                                       prepare, render_reference, write_history)
 from hyde_bsdf.io.atomic import atomic_group, atomic_open, atomic_path, check_output_path
+from hyde_bsdf.io.memory import check_memory as memory_check
+from hyde_bsdf.io.input_gate import check_input
+from hyde_bsdf.io.output_gate import output_gate
+from hyde_bsdf.render.renderer import scene_inputs
 from hyde_bsdf.progress import stderr_lines
 
 __all__ = ["cli_main", "build_parser"]
@@ -138,9 +142,8 @@ def _check_args(args):
         raise UsageError("scalar mode takes one --scene; several scenes need --maps")
     if masks and len(masks) != len(refs):
         raise UsageError(f"give one --mask per --reference: {len(refs)} --reference, {len(masks)} --mask")
-    for path in scenes + refs + masks:
-        if not Path(path).is_file():
-            raise UsageError(f"{path!r} is not an existing file")
+    for path in scenes + refs + masks:       # the input gate: regular files (no FIFO, no device)
+        check_input(path, "input file", stdin=False)
     if args.truth is not None and refs:
         pass                                   # errors are reported against it
     if (args.preset or args.no_uncertainty) and not maps:
@@ -150,6 +153,29 @@ def _check_args(args):
     if maps and args.truth is not None:
         raise UsageError("--truth is for scalar mode; --maps renders its references from the built-in "
                          "truth map or reads --reference")
+
+
+#: bytes per texel of a built-in sample's maps (float64): the truth map, and per fitted parameter
+#: its value, gradient, Adam's two moments and the running average
+MAP_BYTES_PER_TEXEL_FIXED, MAP_BYTES_PER_TEXEL_FITTED = 8, 5 * 8
+
+
+def _check_map_memory(args, fit):
+    """--map-size checked against the available memory before any map is allocated."""
+    if args.scene:
+        return                          # a user scene's textures: their size is the scene's
+    per_texel = MAP_BYTES_PER_TEXEL_FIXED + MAP_BYTES_PER_TEXEL_FITTED * len(fit)
+    memory_check(per_texel * args.map_size ** 2, f"the {args.map_size}x{args.map_size} maps "
+                 f"({per_texel} B per texel)", "lower --map-size")
+
+
+def _run_inputs(args) -> list:
+    """Every file this run reads -- each --scene and the files it names, --reference, --mask --
+    which no output may overwrite (``invert --maps -o .`` beside a scene's alpha.exr)."""
+    inputs = []
+    for scene in args.scene or []:
+        inputs += scene_inputs(scene)
+    return inputs + list(args.reference or []) + list(args.mask or [])
 
 
 def _check_out(path):
@@ -226,6 +252,11 @@ def _cli(argv):
         raise UsageError(f"--fit must list parameters from {', '.join(PARAMETERS)}, got {args.fit!r}")
     out = Path(args.output)
     paths = [_check_out(out / name) for name in ("invert_history.csv", "invert.png")]
+    with output_gate(paths, inputs=_run_inputs(args), what="-o/--output file"):
+        return _scalar_run(args, truth, start, fit, paths)
+
+
+def _scalar_run(args, truth, start, fit, paths):
     try:
         prepare()
     except RuntimeError as exc:
@@ -387,6 +418,13 @@ def _cli_maps(args):
     """``hyde-bsdf invert --maps``: check, gather the observations, invert, write, report."""
     fit, start = _maps_fit_and_start(args)
     paths = _maps_outputs(args, fit)
+    _check_map_memory(args, fit)
+    with output_gate(list(paths.values()), inputs=_run_inputs(args), what="-o/--output file"):
+        return _maps_run(args, fit, start, paths)
+
+
+def _maps_run(args, fit, start, paths):
+    """The --maps run inside the output gate: observations, inversion, outputs, summary."""
     try:
         prepare(MAP_VARIANT)
     except RuntimeError as exc:

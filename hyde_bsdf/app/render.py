@@ -23,9 +23,11 @@ from hyde_bsdf.app.args import Parser, positive_int, quiet_option
 from hyde_bsdf.app.pictures import polarization_png_paths, save_polarization_pngs, save_rgb_png
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_group, check_output_path
+from hyde_bsdf.io.input_gate import check_input
+from hyde_bsdf.io.output_gate import output_gate
 from hyde_bsdf.io.stokes_exr import write_stokes_exr
 from hyde_bsdf.progress import stderr_lines
-from hyde_bsdf.render.renderer import DEFAULT_VARIANT, MAX_SEED, render_stokes
+from hyde_bsdf.render.renderer import DEFAULT_VARIANT, MAX_SEED, render_stokes, scene_inputs
 
 __all__ = ["build_parser", "check_outputs", "cli_main"]
 
@@ -79,9 +81,15 @@ def check_outputs(out, polarized: bool, png: bool = True) -> list[Path]:
 def _run(args) -> int:
     out = Path(args.output)
     polarized = str(args.variant).endswith("_polarized")
-    check_outputs(out, polarized, png=not args.no_png)
-    if not Path(args.scene).is_file():
-        raise UsageError(f"scene file {shorten(args.scene)} does not exist")
+    paths = check_outputs(out, polarized, png=not args.no_png)
+    check_input(args.scene, "scene file", stdin=False)      # the input gate, before any work
+    inputs = scene_inputs(args.scene, dict(args.define))
+    # the output gate: no output is an input of this run; one writer per output set at a time
+    with output_gate(paths, inputs=inputs, what="render output"):
+        return _render_and_write(args, out)
+
+
+def _render_and_write(args, out: Path) -> int:
     result = render_stokes(args.scene, variant=args.variant, spp=args.spp, seed=args.seed,
                            chunks=args.chunks, params=dict(args.define), progress=_log)
     meta = result["meta"]

@@ -66,22 +66,22 @@ import numpy as np
 from hyde_bsdf.errors import RejectedResult
 from hyde_bsdf.model.checks import real_array
 from hyde_bsdf.progress import Throttle, as_callback, check_progress
-from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.model.evaluator import pbrdf
+from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.io.measurements import ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index
 
-__all__ = ["PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning", "IllPosedFitError",
-           "FitDataWarning", "merge_repeated_geometries", "impossible_values",
+__all__ = ["PARAMETERS", "FIT_PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning",
+           "IllPosedFitError", "FitDataWarning", "merge_repeated_geometries", "impossible_values",
            "mueller_elements", "fit_mueller", "fit_measurements", "synthetic_measurements",
            ]
 
-#: fittable parameters, in this order everywhere (vectors, covariance, correlation)
-PARAMETERS = ("n", "k", "rms_slope")
-#: search bounds; n, k <= 1e3 covers every natural material (the evaluator accepts 1e6)
-BOUNDS = {"n": (0.0, 1e3), "k": (0.0, 1e3), "rms_slope": RMS_SLOPE_RANGE}
+#: fittable parameters (``parameters.FIT_PARAMETERS``: the evaluator's names, paper index n - jk),
+#: in this order everywhere (vectors, covariance, correlation)
+PARAMETERS = FIT_PARAMETERS
+#: search bounds (``hyde_bsdf.model.parameters``): n, k in NATURAL_INDEX, rms_slope the accepted range
+BOUNDS = {"n": NATURAL_INDEX.bounds, "k": NATURAL_INDEX.bounds, "rms_slope": RMS_SLOPE.bounds}
 #: start points tried when n0 / k0 are not given (metals and dielectrics alike)
 DEFAULT_STARTS = {"n": (0.3, 1.5), "k": (0.5, 3.0, 9.0)}
-#: the plugin's DHR texture covers this rms_slope range when diffuse is on
-PLUGIN_RMS_RANGE = (0.01, 3.0)
 #: above this many geometries the multi-start search runs on a random subset of this size
 #: (fixed seed) and only its best point is refined on all the data (see fit_mueller)
 SEARCH_ROWS = 4000
@@ -305,10 +305,7 @@ class FitResult:
         The plugin's ``eta``, ``k`` are Mitsuba's n + ik; the paper's eta = n - jk is
         the same material with the same numbers: eta = n, k = k.
         """
-        s = self.params["rms_slope"]
-        if self.diffuse != "none" and not PLUGIN_RMS_RANGE[0] <= s <= PLUGIN_RMS_RANGE[1]:
-            warnings.warn(f"rms_slope={s:.4g} is outside the plugin's DHR range {PLUGIN_RMS_RANGE} "
-                          f"with diffuse={self.diffuse!r}: the plugin will refuse it", stacklevel=2)
+        s = self.params["rms_slope"]    # inside parameters.RMS_SLOPE (BOUNDS), which the plugin accepts
         return {"type": "hyde", "rms_slope": float(s), "eta": float(self.params["n"]),
                 "k": float(self.params["k"]), "shadowing": self.shadowing, "diffuse": self.diffuse}
 

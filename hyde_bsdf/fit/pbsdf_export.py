@@ -44,11 +44,9 @@ May import: ``hyde_bsdf.io``, ``hyde_bsdf.model``, ``hyde_bsdf.fit``, ``hyde_bsd
 """
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import os
-import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,11 +54,15 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
-from hyde_bsdf.errors import UsageError, shorten
+from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
+from hyde_bsdf.io.ior import material_files
+from hyde_bsdf.io.memory import check_memory, format_bytes
+from hyde_bsdf.io.output_gate import OutputLock, check_free_space
 from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, read_pbsdf,
                                      rusinkiewicz_to_directions, table_frame_x, table_nbytes)
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N
 from hyde_bsdf.model.shadowing import SHADOWING
 from hyde_bsdf.progress import Throttle, as_callback
 
@@ -113,24 +115,6 @@ def _check_resolution(resolution):
 # ---------------------------------------------------------------------------------------------
 # the index per band
 
-def _ior_folder() -> Path | None:
-    """Mitsuba's ``data/ior`` folder, found without importing Mitsuba (once imported, ``mitsuba``
-    is its alias extension module, whose spec has no package folder but an origin inside it)."""
-    try:
-        spec = importlib.util.find_spec("mitsuba")
-    except (ImportError, ValueError):
-        return None
-    if spec is None:
-        return None
-    if spec.submodule_search_locations:
-        folder = Path(list(spec.submodule_search_locations)[0])
-    elif spec.origin:
-        folder = Path(spec.origin).parent
-    else:
-        return None
-    return folder / "data" / "ior"
-
-
 def _read_spd(path: Path):
     data = np.loadtxt(path, comments="#")
     return data[:, 0], data[:, 1]
@@ -144,15 +128,9 @@ def band_index(wavelengths=KAIST_WAVELENGTHS, n=None, k=None, material=None):
     if material is not None:
         if n is not None or k is not None:
             raise UsageError("give either material or n and k, not both")
-        folder = _ior_folder()
-        eta_file = None if folder is None else folder / f"{material}.eta.spd"
-        if eta_file is None or not eta_file.is_file() or "/" in str(material):
-            known = sorted(p.name[:-8] for p in folder.glob("*.eta.spd")) if folder and folder.is_dir() else []
-            raise UsageError(f"material {shorten(material)} is not one of Mitsuba's data/ior tables"
-                             + (f" ({', '.join(known)})" if known else " (Mitsuba is not installed)"))
         out = []
-        for suffix in (".eta.spd", ".k.spd"):
-            x, y = _read_spd(folder / f"{material}{suffix}")
+        for spd in material_files(material):          # data/ior names only (no ../)
+            x, y = _read_spd(spd)
             out.append(np.interp(wl, x, y))
         return out[0], out[1]
     if n is None:
@@ -162,27 +140,16 @@ def band_index(wavelengths=KAIST_WAVELENGTHS, n=None, k=None, material=None):
         a = np.atleast_1d(np.asarray(v, dtype=float))
         if a.ndim != 1 or a.size not in (1, wl.size):
             raise UsageError(f"{name} must be one value or {wl.size} (one per band {wl.tolist()} nm), got {v!r}")
-        if not np.all(np.isfinite(a)) or np.any(a < 0) or np.any(a > 1e6):
-            raise UsageError(f"{name} must be finite and in [0, 1e6], got {v!r}")
+        if not np.all(np.isfinite(a)) or np.any(a < N.lo) or np.any(a > N.hi):
+            raise UsageError(f"{name} must be finite and in {N.text()}, got {v!r}")
         vals.append(np.broadcast_to(a, wl.shape).astype(float))
-    if np.any(np.hypot(*vals) < 1e-6):
-        raise UsageError("n and k cannot both be 0 (|eta| >= 1e-6) in any band")
+    if np.any(np.hypot(*vals) < INDEX_MIN):
+        raise UsageError(f"n and k cannot both be 0 (|eta| >= {INDEX_MIN:g}) in any band")
     return vals[0], vals[1]
 
 
 # ---------------------------------------------------------------------------------------------
 # size checks
-
-def _mem_available() -> int | None:
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError):
-        pass
-    return None
-
 
 def check_table_size(path, resolution, bands: int = len(KAIST_WAVELENGTHS), free_disk=None,
                      free_memory=None) -> int:
@@ -194,21 +161,14 @@ def check_table_size(path, resolution, bands: int = len(KAIST_WAVELENGTHS), free
     elements = n_pd * n_td * n_th * bands * 16
     nbytes = table_nbytes(n_pd, n_td, n_th, bands) + _JSON_BYTES
     res = f"{n_pd}x{n_td}x{n_th}"
-    gib = lambda b: f"{b / 2**30:.2f} GiB"
     if elements > MAX_ELEMENTS:
         raise UsageError(f"resolution {res}: {elements} table values exceed Mitsuba's 32-bit index "
                          f"limit ({MAX_ELEMENTS}); choose a smaller resolution")
     folder = Path(path).parent if str(Path(path).parent) else Path(".")
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent
-    disk = shutil.disk_usage(folder).free if free_disk is None else int(free_disk)
-    if nbytes > disk:
-        raise UsageError(f"resolution {res}: the file needs {gib(nbytes)} and {str(folder)!r} has "
-                         f"{gib(disk)} free; choose a smaller resolution or another folder")
-    mem = _mem_available() if free_memory is None else int(free_memory)
-    if mem is not None and LOADER_COPIES * nbytes > mem:
-        raise UsageError(f"resolution {res}: a {gib(nbytes)} table needs about {gib(LOADER_COPIES * nbytes)} "
-                         f"of memory to load in Mitsuba and {gib(mem)} is available; choose a smaller resolution")
+    check_free_space(folder, nbytes, f"resolution {res}: the file", "choose a smaller resolution or another folder",
+                     free=free_disk)
+    check_memory(LOADER_COPIES * nbytes, f"loading the {res} table ({format_bytes(nbytes)}) in Mitsuba",
+                 "choose a smaller resolution", available=free_memory)
     return nbytes
 
 
@@ -467,8 +427,8 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     res = _check_resolution(resolution)
     if not (isinstance(error_samples, (int, np.integer)) and 0 <= error_samples <= 10**7):
         raise UsageError(f"error_samples must be an integer in [0, 1e7], got {error_samples!r}")
-    if alpha_sample is not None and not (isinstance(alpha_sample, (int, float)) and 1e-4 <= alpha_sample <= 10):
-        raise UsageError(f"alpha_sample must be in [1e-4, 10], got {alpha_sample!r}")
+    if alpha_sample is not None and not (isinstance(alpha_sample, (int, float)) and ALPHA_SAMPLE.contains(alpha_sample)):
+        raise UsageError(f"alpha_sample must be in {ALPHA_SAMPLE.text()}, got {alpha_sample!r}")
     path = check_output_path(path, "pBSDF file")
     nbytes = check_table_size(path, res, len(wavelengths))
     pd, td, th = grids(res)
@@ -482,7 +442,7 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
             report(lambda: f"tabulating phi_d {p + 1}/{res[0]} ({100 * (p + 1) / res[0]:.0f} %), "
                            f"{time.perf_counter() - t0:.0f} s")
 
-    with atomic_path(path) as tmp:
+    with OutputLock([path], "pBSDF file"), atomic_path(path) as tmp:     # one writer at a time
         meta = {"producer": "hyde-bsdf export", "model": "Hyde, Schmidt, Havrilla, Opt. Express 17(24) 2009, Eq. 17",
                 **params, "resolution": list(res), "wavelengths_nm": list(wavelengths),
                 "theta_h_grid": "(pi/2) u^2", "edge_deg": edge_deg(res[1])}

@@ -37,6 +37,7 @@ import numpy as np
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.model.parameters import NATURAL_INDEX
 from hyde_bsdf.model.shadowing import SHADOWING
 from hyde_bsdf.progress import Throttle, as_callback, check_progress
 
@@ -44,7 +45,7 @@ __all__ = ["PbsdfFitResult", "fit_pbsdf"]
 
 #: elements fitted besides M00 (normalized by M00): all 15
 ELEMENTS = tuple((j, k) for j in range(4) for k in range(4) if (j, k) != (0, 0))
-BOUNDS = {"n": (0.0, 1e3), "k": (0.0, 1e3), "rms_slope": RMS_SLOPE_RANGE}
+BOUNDS = {"n": NATURAL_INDEX.bounds, "k": NATURAL_INDEX.bounds, "rms_slope": RMS_SLOPE_RANGE}
 STARTS = {"n": (0.3, 1.5), "k": (0.5, 3.0, 9.0)}
 #: geometries used by the multi-start stage (the joint fit uses all)
 SEARCH_ROWS = 1000

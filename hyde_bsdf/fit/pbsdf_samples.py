@@ -195,6 +195,8 @@ def pbsdf_samples(table, max_points: int = 3000, theta_max: float = math.radians
         raise UsageError(f"theta_max must be in (0, pi/2] radians, got {theta_max!r}")
     if not (isinstance(tolerance, (int, float)) and 0 <= tolerance <= 1):
         raise UsageError(f"tolerance must be in [0, 1], got {tolerance!r}")
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**63:
+        raise UsageError(f"seed must be an integer in [0, 2^63), got {seed!r}")
     om_i, om_r, x = table.grid_directions()
     up = (om_i[..., 2] > 1e-12) & (om_r[..., 2] > 1e-12)
     cand = up & (om_i[..., 2] >= math.cos(theta_max) - 1e-12) & (om_r[..., 2] >= math.cos(theta_max) - 1e-12)

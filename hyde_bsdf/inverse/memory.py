@@ -1,10 +1,10 @@
 """Memory of a differentiable render: the estimate, and the check before an inversion starts.
 
-May import: the standard library, :mod:`hyde_bsdf.errors`.
+May import: the standard library, :mod:`hyde_bsdf.io.memory`.
 """
 from __future__ import annotations
 
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.memory import available_bytes, check_memory as memory_check
 
 __all__ = ["AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "estimate_memory", "check_memory"]
 
@@ -23,22 +23,14 @@ def estimate_memory(width: int, height: int, spp: int) -> int:
 
 
 def _mem_available():
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
+    return available_bytes()
 
 
 def check_memory(width: int, height: int, spp: int, hint: str) -> int:
     """UsageError when :func:`estimate_memory` exceeds the available memory; returns the estimate."""
     need, avail = estimate_memory(width, height, spp), _mem_available()
-    if avail is not None and need > avail:
-        raise UsageError(f"one optimisation step on the {width}x{height} film at {spp} spp needs about "
-                         f"{need / 2**30:.1f} GiB ({AD_BYTES_PER_SAMPLE} B per sample + "
-                         f"{AD_BYTES_FIXED // 2**20} MiB), but only {avail / 2**30:.1f} GiB is available; "
-                         f"lower {hint}")
+    if avail is not None:
+        memory_check(need, f"one optimisation step on the {width}x{height} film at {spp} spp "
+                     f"({AD_BYTES_PER_SAMPLE} B per sample + {AD_BYTES_FIXED // 2**20} MiB)", f"lower {hint}",
+                     available=avail)
     return need

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hyde_bsdf.inverse._common import SQRT2
 from hyde_bsdf.inverse.loss import interior_mask, stokes_images
 from hyde_bsdf.inverse.scalar import RANGES, _unique_key
+from hyde_bsdf.model.parameters import ALPHA, INVERSE_K_LOG_FLOOR, INVERSE_SCALE
 
 __all__ = ["MAP_PARAMETERS", "MAP_VARIANT", "map_keys", "film_channels", "render_stokes", "render_stokes_np",
            "Observation", "texel_coverage", "pixel_texels", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS"]
@@ -23,12 +23,12 @@ __all__ = ["MAP_PARAMETERS", "MAP_VARIANT", "map_keys", "film_channels", "render
 #: own roughness texture (alpha = sqrt(2) rms_slope), ``eta``, ``k`` the index (Mitsuba's n + ik),
 #: ``specular_reflectance`` the plugin's multiplier of the whole BSDF (an unknown per-texel scale).
 MAP_PARAMETERS = {
-    "alpha": ((".alpha.data", ".alpha.value"), (SQRT2 * 0.011, SQRT2 * 2.9)),
+    "alpha": ((".alpha.data", ".alpha.value"), ALPHA.bounds),
     "rms_slope": ((".rms_slope.data", ".rms_slope.value", ".rms_slope"), RANGES["rms_slope"]),
     "eta": ((".eta.data", ".eta.value"), RANGES["eta"]),
-    "k": ((".k.data", ".k.value"), (1e-4, RANGES["k"][1])),
+    "k": ((".k.data", ".k.value"), (INVERSE_K_LOG_FLOOR, RANGES["k"][1])),
     # a multiplier of the whole BSDF: an unknown albedo or an uncalibrated light, per texel
-    "specular_reflectance": ((".specular_reflectance.data", ".specular_reflectance.value"), (1e-3, 1e3)),
+    "specular_reflectance": ((".specular_reflectance.data", ".specular_reflectance.value"), INVERSE_SCALE.bounds),
 }
 #: the variant of the SVBRDF validation, tests and benchmark: monochromatic polarized.  The
 #: scenes there have white lights and a wavelength-independent index, so one wavelength holds

@@ -32,19 +32,20 @@ from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf.inverse._common import SQRT2
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.loss import StokesLoss, channel_names, stokes_images
+from hyde_bsdf.model.parameters import INVERSE_ETA, INVERSE_K, INVERSE_PARAMETERS, RMS_SLOPE
 
-__all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
-           "parameter_keys", "render_reference", "InversionResult", "invert", "check_gradients", "loss_and_gradient",
-           "finite_difference_gradient", "write_history"]
+__all__ = ["VARIANT", "PARAMETERS", "INVERSE_PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict",
+           "load_scene", "parameter_keys", "render_reference", "InversionResult", "invert", "check_gradients",
+           "loss_and_gradient", "finite_difference_gradient", "write_history"]
 
 VARIANT = "llvm_ad_spectral_polarized"
-#: optimizable BSDF parameters (the plugin's names)
-PARAMETERS = ("rms_slope", "eta", "k")
+#: optimizable BSDF parameters (``parameters.INVERSE_PARAMETERS``: the plugin's names, Mitsuba's n + ik)
+PARAMETERS = INVERSE_PARAMETERS
 #: ground truth and a start far from it used by the scripts and the CLI by default
 TRUTH = {"rms_slope": 0.3, "eta": 1.5, "k": 3.0}
 START = {"rms_slope": 0.6, "eta": 3.0, "k": 6.0}
-#: the plugin's DHR texture range for rms_slope (diffuse on); eta, k kept in a sane box
-RANGES = {"rms_slope": (0.011, 2.9), "eta": (0.02, 50.0), "k": (0.0, 50.0)}
+#: the optimisation box (``hyde_bsdf.model.parameters``): rms_slope the accepted range, eta and k a sane box
+RANGES = {"rms_slope": RMS_SLOPE.bounds, "eta": INVERSE_ETA.bounds, "k": INVERSE_K.bounds}
 
 
 def prepare(variant: str = VARIANT) -> str:
@@ -239,7 +240,7 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
         values = {}
         for p in fit:
             lo, hi = RANGES[p]
-            # keep the latent inside the accepted range (the plugin refuses rms_slope outside its DHR table)
+            # keep the latent inside the box (the plugin refuses rms_slope outside parameters.RMS_SLOPE)
             opt[p] = dr.clip(opt[p], math.log(max(lo, 1e-6)), math.log(hi))
             values[p] = dr.exp(opt[p])
             if p == "rms_slope" and bsdf == "roughconductor":

@@ -52,11 +52,13 @@ import secrets
 import shutil
 import signal
 import socket
+import stat
 import threading
 import time
 from pathlib import Path
 
 from hyde_bsdf.errors import OutputError, UsageError
+from hyde_bsdf.io.output_gate import OutputLock, check_folder, check_target
 
 __all__ = ["atomic_path", "atomic_open", "atomic_group", "atomic_dir", "check_output_path", "check_output_dir",
            "check_name_fits", "OutputWriteError", "Terminated", "install_signal_cleanup",
@@ -371,13 +373,32 @@ def atomic_group():
     group.commit()
 
 
+def _keep_owner_and_mode(tmp: Path, path: Path, mode) -> None:
+    """Give ``tmp`` the permission bits ``mode``; by default those of the regular file it replaces
+    (a 0600 file stays 0600) and, where allowed, its owner and group, else what open() gives."""
+    try:
+        old = os.lstat(path)
+    except OSError:
+        old = None
+    if old is not None and not (old.st_mode & 0o170000 == 0o100000):
+        old = None                                   # only a regular file passes on its mode
+    if mode is None:
+        mode = (old.st_mode & 0o7777) if old is not None else 0o666 & ~_umask()
+    if old is not None and (old.st_uid, old.st_gid) != (os.geteuid(), os.getegid()):
+        with contextlib.suppress(OSError):           # root: owner and group; others: a group of theirs
+            os.chown(tmp, old.st_uid if os.geteuid() == 0 else -1, old.st_gid)
+    os.chmod(tmp, mode)
+
+
 @contextlib.contextmanager
-def atomic_path(path):
+def atomic_path(path, mode: int | None = None):
     """Yield a temporary path beside ``path`` (ending in the same suffix, so writers that choose
     the format from the extension still work); on normal exit it replaces ``path`` (inside
     :func:`atomic_group`: when the group ends), on an exception (KeyboardInterrupt included) it
     is removed and ``path`` is left as it was.  An OSError of the write, or a writer's
-    RuntimeError (OpenEXR), becomes :class:`OutputWriteError` naming ``path``."""
+    RuntimeError (OpenEXR), becomes :class:`OutputWriteError` naming ``path``.  The new file
+    keeps the mode (and, where the user may, the owner and group) of the regular file it
+    replaces, or gets ``mode`` when given, or what ``open`` gives (0666 & ~umask)."""
     path = Path(path)
     _sweep_once(path.parent)
     try:
@@ -388,7 +409,7 @@ def atomic_path(path):
     try:
         try:
             yield tmp
-            os.chmod(tmp, 0o666 & ~_umask())       # 0600 at creation; give what open() would give
+            _keep_owner_and_mode(tmp, path, mode)   # 0600 at creation
             with open(tmp, "rb+") as f:
                 os.fsync(f.fileno())                # the data is on disk before the name points at it
             if group is None:
@@ -414,11 +435,12 @@ def _looks_like_io(exc: BaseException) -> bool:
 
 
 @contextlib.contextmanager
-def atomic_open(path, mode: str = "w", **kwargs):
-    """``open(path, mode)`` that becomes visible under ``path`` only once the block completes."""
+def atomic_open(path, mode: str = "w", *, permissions: int | None = None, **kwargs):
+    """``open(path, mode)`` that becomes visible under ``path`` only once the block completes
+    (``permissions``: the new file's mode bits, see :func:`atomic_path`)."""
     if not mode.startswith("w"):
         raise ValueError(f"atomic_open: mode must be a write mode ('w', 'wb'), got {mode!r}")
-    with atomic_path(path) as tmp:
+    with atomic_path(path, permissions) as tmp:
         with open(tmp, mode, **kwargs) as f:
             yield f
 
@@ -426,19 +448,63 @@ def atomic_open(path, mode: str = "w", **kwargs):
 # ---------------------------------------------------------------------------
 # folders with a manifest
 
-def read_manifest(folder, manifest: str = MANIFEST_NAME):
-    """The set of relative file paths the manifest of ``folder`` lists, or None without one."""
-    p = Path(folder) / manifest
+def _sha256(path: Path):
+    """SHA-256 of the regular file ``path`` (a symlink, FIFO or device is not followed), or None."""
     try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-        files = data["files"]
-        if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0))
+    except OSError:
+        return None
+    with os.fdopen(fd, "rb") as fh:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        h = hashlib.sha256()
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _no_link_on_the_way(folder: Path, rel: str) -> bool:
+    """True if ``folder/rel`` exists and none of its parts below ``folder`` is a symlink."""
+    p = Path(folder)
+    for part in Path(rel).parts:
+        p = p / part
+        try:
+            if stat.S_ISLNK(os.lstat(p).st_mode):
+                return False
+        except OSError:
+            return False
+    return True
+
+
+def _safe_rel(f) -> bool:
+    return isinstance(f, str) and bool(f) and not Path(f).is_absolute() and ".." not in Path(f).parts
+
+
+def _manifest(folder, manifest: str):
+    """{"files": {rel: sha256 or None}, "dirs": set} of ``folder``'s manifest; None without one;
+    empty when unreadable (it vouches for nothing)."""
+    try:
+        data = json.loads((Path(folder) / manifest).read_text(encoding="utf-8"))
+        files, hashes, dirs = data["files"], data.get("sha256", {}), data.get("dirs", [])
+        if not isinstance(files, list) or not isinstance(hashes, dict) or not isinstance(dirs, list):
             raise ValueError
     except FileNotFoundError:
         return None
-    except (OSError, ValueError, KeyError, TypeError):
-        return set()                    # unreadable: it vouches for nothing
-    return {f for f in files if f and not Path(f).is_absolute() and ".." not in Path(f).parts}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {"files": {}, "dirs": set()}
+    return {"files": {f: hashes.get(f) for f in files if _safe_rel(f)}, "dirs": {d for d in dirs if _safe_rel(d)}}
+
+
+def read_manifest(folder, manifest: str = MANIFEST_NAME):
+    """The files the manifest of ``folder`` lists that are still as this program wrote them --
+    regular files, reached without a symlink, with the SHA-256 the manifest recorded -- or None
+    without a manifest.  Only these may ever be deleted (a file changed since, listed without a
+    hash, or behind a symlink is not ours any more)."""
+    data = _manifest(folder, manifest)
+    if data is None:
+        return None
+    return {f for f, h in data["files"].items()
+            if h and _no_link_on_the_way(Path(folder), f) and _sha256(Path(folder) / f) == h}
 
 
 def _files_under(folder: Path) -> list[str]:
@@ -450,18 +516,29 @@ def _files_under(folder: Path) -> list[str]:
     return sorted(out)
 
 
-def foreign_files(folder, manifest: str = MANIFEST_NAME) -> list[str]:
-    """Files in ``folder`` (relative paths) that its manifest does not list: not ours to delete.
+def _dirs_under(folder: Path) -> list[str]:
+    """Real sub-folders of ``folder`` (relative paths; symlinks to folders are files here)."""
+    out = []
+    for root, dirs, _ in os.walk(folder):
+        rel = Path(root).relative_to(folder)
+        out += [(rel / d).as_posix() for d in dirs if not os.path.islink(os.path.join(root, d))]
+    return sorted(out)
 
-    Our own stale temporaries are removed first and never count.
-    """
+
+def foreign_files(folder, manifest: str = MANIFEST_NAME) -> list[str]:
+    """What in ``folder`` (relative paths; folders end in '/') this program did not write, or
+    changed since: files its manifest does not vouch for (:func:`read_manifest`) and folders it
+    does not list -- not ours to delete.  Our own stale temporaries are removed first."""
     folder = Path(folder)
     if not folder.is_dir():
         return []
     remove_stale_temporaries(folder)
     listed = read_manifest(folder, manifest) or set()
-    return [f for f in _files_under(folder) if f != manifest and f not in listed
-            and not TEMP_NAME_RE.match(Path(f).name)]
+    data = _manifest(folder, manifest) or {"dirs": set()}
+    files = [f for f in _files_under(folder) if f != manifest and f not in listed
+             and not TEMP_NAME_RE.match(Path(f).name)]
+    return files + [d + "/" for d in _dirs_under(folder) if d not in data["dirs"]
+                    and not TEMP_NAME_RE.match(Path(d).name)]
 
 
 def check_dir_owned(path, manifest: str = MANIFEST_NAME, force: bool = False, what: str = "output folder") -> list[str]:
@@ -488,12 +565,16 @@ def _unique_backup(dest: Path) -> Path:
     return cand
 
 
-def write_manifest(folder, files, manifest: str = MANIFEST_NAME) -> None:
-    """Write ``folder/manifest`` (atomically) listing ``files`` (relative paths) as this program's."""
+def write_manifest(folder, files, manifest: str = MANIFEST_NAME, dirs=(), hashes=None) -> None:
+    """Write ``folder/manifest`` (atomically) listing ``files`` (relative paths) with their SHA-256
+    (``hashes``, else read from ``folder``) and the sub-folders ``dirs`` this program created."""
     folder = Path(folder)
+    hashes = dict(hashes) if hashes is not None else {f: _sha256(folder / f) for f in files}
     with atomic_open(folder / manifest, "w", encoding="utf-8") as fh:
-        json.dump({"written_by": "hyde-bsdf", "note": "files this program wrote here; a rerun removes only these",
-                   "files": sorted(files)}, fh, indent=1)
+        json.dump({"written_by": "hyde-bsdf", "note": "files this program wrote here (with their SHA-256) and the "
+                   "folders it created; a rerun removes only these, and only while unchanged",
+                   "files": sorted(files), "sha256": {f: hashes.get(f) for f in sorted(files)},
+                   "dirs": sorted(dirs)}, fh, indent=1)
         fh.write("\n")
 
 
@@ -515,20 +596,27 @@ def atomic_dir(path, manifest: str = MANIFEST_NAME, force: bool = False, on_kept
         path = path.resolve()
     if path.exists() and not path.is_dir():
         raise UsageError(f"output folder {str(path)!r} is a regular file, not a folder")
-    check_dir_owned(path, manifest, force)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(path.parent)
-    tmp = _make_temp_dir(path, "partial")
+    check_folder(path, "output folder")         # the output gate: a mount point, a sticky folder
+    lock = OutputLock([path], "output folder").__enter__()    # one writer of the folder at a time
+    try:
+        check_dir_owned(path, manifest, force)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(path.parent)
+        tmp = _make_temp_dir(path, "partial")
+    except BaseException:
+        lock.__exit__(None, None, None)
+        raise
     try:
         os.chmod(tmp, 0o777 & ~_umask())
         yield tmp
         new_files = [f for f in _files_under(tmp) if f != manifest]
-        write_manifest(tmp, new_files, manifest)
+        write_manifest(tmp, new_files, manifest, dirs=_dirs_under(tmp))
         kept = _move_in(tmp, path, new_files, manifest)
         if kept and on_kept is not None:
             on_kept(kept)
     finally:
         _remove(tmp)
+        lock.__exit__(None, None, None)
 
 
 def _move_in(tmp: Path, path: Path, new_files, manifest: str) -> list[Path]:
@@ -549,22 +637,48 @@ def _move_in(tmp: Path, path: Path, new_files, manifest: str) -> list[Path]:
         _remove(old)
         return []
     # other files live here (force): list everything first, so a crash midway leaves no orphan
-    old_listed = read_manifest(path, manifest) or set()
-    write_manifest(path, set(old_listed) | set(new_files), manifest)
+    old = _manifest(path, manifest) or {"dirs": set()}
+    old_listed = read_manifest(path, manifest) or set()       # ours and unchanged: the only deletable
+    hashes = {**{f: _sha256(path / f) for f in old_listed}, **{f: _sha256(tmp / f) for f in new_files}}
+    new_dirs = _dirs_under(tmp)
+    write_manifest(path, set(old_listed) | set(new_files), manifest, set(old["dirs"]) | set(new_dirs), hashes)
     for rel in sorted(set(old_listed) - set(new_files)):
-        with contextlib.suppress(FileNotFoundError, IsADirectoryError):
+        with contextlib.suppress(OSError):
             (path / rel).unlink()
     kept = []
-    foreign_set = set(foreign)
     for rel in new_files:
-        dest = path / rel
-        dest.parent.mkdir(parents=True, exist_ok=True)
-        if rel in foreign_set and (dest.exists() or dest.is_symlink()):
-            backup = _unique_backup(dest)
-            os.replace(dest, backup)
+        kept += _clear_the_way(path, rel, rel in old_listed)
+        os.replace(tmp / rel, path / rel)
+    for rel in sorted(set(old["dirs"]) - set(new_dirs), key=len, reverse=True):   # ours, now empty
+        if _no_link_on_the_way(path, rel):
+            with contextlib.suppress(OSError):
+                os.rmdir(path / rel)
+    write_manifest(path, new_files, manifest, [d for d in set(old["dirs"]) | set(new_dirs)
+                                               if os.path.isdir(path / d)])
+    return kept
+
+
+def _clear_the_way(path: Path, rel: str, ours: bool) -> list[Path]:
+    """Make ``path/rel`` writable without following anything: a symlink or a file where a folder
+    of ``rel`` goes, or whatever holds ``rel``'s own name (unless ``ours``: an earlier run's
+    unchanged file), is kept aside as ``NAME.orig``."""
+    kept, p = [], path
+    parts = Path(rel).parts
+    for i, part in enumerate(parts):
+        p = p / part
+        last = i == len(parts) - 1
+        try:
+            st = os.lstat(p)
+        except FileNotFoundError:
+            if not last:
+                os.mkdir(p)
+            continue
+        if (last and not ours) or (not last and not stat.S_ISDIR(st.st_mode)):   # a symlink is no folder
+            backup = _unique_backup(p)
+            os.replace(p, backup)
             kept.append(backup)
-        os.replace(tmp / rel, dest)
-    write_manifest(path, new_files, manifest)
+            if not last:
+                os.mkdir(p)
     return kept
 
 
@@ -626,6 +740,8 @@ def check_output_path(path, what: str = "output file", create_parent: bool = Tru
     check_name_fits(path, what)
     if path.is_dir():
         raise UsageError(f"{what} {str(path)!r} is a directory; give a file name")
+    if os.path.lexists(path):
+        path = check_target(path, what)       # the output gate: special files, links, mounts, sticky
     parent = path.parent
     if not parent.exists():
         if not create_parent:

@@ -50,8 +50,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.errors import InputFileError
+from hyde_bsdf.errors import InputFileError, UsageError
 from hyde_bsdf.io.atomic import atomic_open, check_output_path
+from hyde_bsdf.io.input_gate import STDIN, check_input, csv_rows, read_input
 from hyde_bsdf.progress import as_callback
 
 __all__ = ["ELEMENT_NAMES", "ANGLE_COLUMNS", "SIGMA_RANGE", "ELEMENT_LIMIT", "MeasurementFileError", "Measurements",
@@ -72,6 +73,15 @@ SIGMA_RANGE = (1e-12, 1e3)
 
 class MeasurementFileError(InputFileError):
     """A measurement file that cannot be read: the message names file, line and column."""
+
+
+def _cells(name, lineno, line: str) -> list:
+    """The CSV cells of one line, through the input gate's field limit (a huge cell: one line)."""
+    try:
+        rows = csv_rows(line, f"{name}, line {lineno}")
+    except UsageError as exc:
+        raise MeasurementFileError(str(exc).replace(": row 1:", ":")) from None
+    return rows[0] if rows else [""]
 
 
 def element_index(name: str) -> tuple[int, int]:
@@ -194,7 +204,7 @@ def _split_header(name, raw: bytes):
         if stripped[0] == "#":
             comments.append(stripped[1:].strip())
             continue
-        return (lineno, [c.strip() for c in next(csv.reader([line]))]), raw[pos:], comments
+        return (lineno, [c.strip() for c in _cells(name, lineno, line)]), raw[pos:], comments
     raise MeasurementFileError(f"{name}: no header line (expected columns "
                                f"{', '.join(ANGLE_COLUMNS)}, M01, M01_sigma, ...)")
 
@@ -232,7 +242,7 @@ def _parse_careful(name, columns, linenos, lines):
     """Cell by cell, with the csv module (quotes allowed): the first bad cell is reported."""
     data = np.empty((len(lines), len(columns)))
     for r, (lineno, raw) in enumerate(zip(linenos, lines)):
-        cells = next(csv.reader([raw]))
+        cells = _cells(name, lineno, raw)
         if len(cells) != len(columns):
             raise _error(name, lineno, None, f"{len(cells)} cells, the header has {len(columns)} columns")
         for i, col in enumerate(columns):
@@ -308,17 +318,14 @@ def read_measurements(path, progress=None) -> Measurements:
     report = as_callback(progress)
     path = Path(path)
     name = str(path)
-    if path.is_dir():
-        raise MeasurementFileError(f"{name}: is a directory, not a measurement file")
-    try:
-        size = path.stat().st_size
+    try:       # the input gate: a regular file or stdin, size-limited, read once (no FIFO, no device)
+        checked = check_input(path, "measurement file")
+        size = 0 if checked == STDIN else checked.stat().st_size
         if report and size > 10e6:
             report(f"reading {name} ({size / 1e6:.0f} MB)")
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise MeasurementFileError(f"{name}: measurement file does not exist") from None
-    except OSError as exc:
-        raise MeasurementFileError(f"{name}: cannot be read ({exc.strerror or exc})") from None
+        raw = read_input(path, "measurement file")
+    except UsageError as exc:
+        raise MeasurementFileError(str(exc)) from None
 
     raw = _normalise(name, raw)
     header, body, comments = _split_header(name, raw)

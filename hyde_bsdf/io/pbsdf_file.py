@@ -57,7 +57,8 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
-from hyde_bsdf.errors import InputFileError
+from hyde_bsdf.errors import InputFileError, UsageError
+from hyde_bsdf.io.input_gate import check_dimensions, check_input
 
 __all__ = ["PbsdfFileError", "PbsdfTable", "KAIST_WAVELENGTHS", "MITSUBA_BANDS", "read_pbsdf", "write_pbsdf",
            "read_tensor_file", "table_nbytes", "rusinkiewicz_to_directions", "directions_to_rusinkiewicz",
@@ -87,9 +88,10 @@ def read_tensor_file(path) -> dict:
     type, or a field that runs past the end of the file (a truncated download).
     """
     path = Path(path)
-    if not path.is_file():
-        raise PbsdfFileError(f"pBSDF file {str(path)!r} does not exist or is not a file")
-    size = path.stat().st_size
+    try:       # the input gate: a regular file (no FIFO, no device), never stdin (it is memory-mapped)
+        size = check_input(path, "pBSDF file", limit=1 << 50, stdin=False).stat().st_size
+    except UsageError as exc:
+        raise PbsdfFileError(str(exc)) from None
     try:
         with open(path, "rb") as f:
             head = f.read(min(size, 1 << 20))
@@ -113,10 +115,11 @@ def read_tensor_file(path) -> dict:
             if code not in _DTYPES:
                 raise PbsdfFileError(f"pBSDF file {str(path)!r}: field {name!r} has an unknown type code {code}")
             dtype = np.dtype(_DTYPES[code])
-            nbytes = int(np.prod(shape, dtype=np.uint64)) * dtype.itemsize
-            if offset + nbytes > size:
-                raise PbsdfFileError(f"pBSDF file {str(path)!r}: field {name!r} ({nbytes} bytes at {offset}) runs "
-                                     f"past the end of the file ({size} bytes): truncated?")
+            try:       # Python integers (no uint64 wrap-around), the file's size, the memory
+                check_dimensions(shape, dtype.itemsize, f"pBSDF file {str(path)!r}: field {name!r}",
+                                 available_in_file=max(size - offset, 0), option="give a smaller table")
+            except UsageError as exc:
+                raise PbsdfFileError(str(exc)) from None
             fields[name] = (dtype, tuple(int(s) for s in shape), int(offset))
     except (struct.error, UnicodeDecodeError):
         raise PbsdfFileError(f"pBSDF file {str(path)!r}: the tensor file header is truncated or corrupt") from None

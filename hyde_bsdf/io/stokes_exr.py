@@ -34,6 +34,7 @@ import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.input_gate import check_input
 
 __all__ = [
     "STOKES_NAMES",
@@ -167,9 +168,7 @@ def read_stokes_exr(path) -> dict:
     """
     import OpenEXR
 
-    path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"path {str(path)!r} is not an existing file")
+    path = check_input(path, "Stokes EXR", stdin=False)    # the input gate: a regular file, no FIFO
     f = OpenEXR.File(str(path), separate_channels=True)
     chans = {name: ch.pixels for name, ch in f.channels().items()}
     need = [f"{s}.{c}" for s in STOKES_NAMES for c in COLOURS]

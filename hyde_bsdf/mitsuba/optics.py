@@ -4,7 +4,8 @@ These functions are written with Dr.Jit operations only, so they run unchanged
 in every Mitsuba variant (scalar, LLVM, CUDA; RGB, spectral, mono) and carry
 gradients in the ``*_ad_*`` variants.  They are a derivation independent of the
 NumPy evaluator (:mod:`hyde_bsdf.model.evaluator`), which uses the paper's angle
-formulas; the two only share the DHR table (:mod:`hyde_bsdf.model.dhr`).
+formulas; the two only share data: the DHR table (:mod:`hyde_bsdf.model.dhr`) and the
+parameter ranges (:mod:`hyde_bsdf.model.parameters`).
 
 Conventions used here
 ---------------------
@@ -23,6 +24,8 @@ import math
 
 import drjit as dr
 import mitsuba as mi
+
+from hyde_bsdf.model.parameters import RMS_SLOPE
 
 __all__ = [
     "accurate_cross",
@@ -199,11 +202,11 @@ def vgroove_g(wi, wo, h):
     return dr.select(valid, g, 0.0)
 
 
-#: accepted rms_slope: the NumPy evaluator's range (``hyde_bsdf.model.roughness.check_rms_slope``)
-RMS_RANGE = (1e-4, 50.0)
+#: accepted rms_slope: the registry's (``hyde_bsdf.model.parameters.RMS_SLOPE``), read once at import
+RMS_RANGE = RMS_SLOPE.bounds
 #: texture nodes along x = 1 - sqrt(cos theta) on [0, 1] (error and size: plugin.DOC, "DHR lookup")
 DHR_X_POINTS = 1025
-#: texture nodes per decade of rms_slope (over the DHR table's whole range, 1e-4..100)
+#: texture nodes per decade of rms_slope (over the DHR table's whole range, parameters.DHR_TABLE_RMS_SLOPE)
 DHR_SLOPE_PER_DECADE = 192
 
 
@@ -239,7 +242,7 @@ class DHRLookup:
     own ``__call__`` (a bicubic spline), onto a fine grid: ``DHR_X_POINTS`` nodes
     uniform in x = 1 - sqrt(cos theta) (dense near grazing, where rho varies most)
     times ``DHR_SLOPE_PER_DECADE`` nodes per decade of rms_slope over the
-    table's whole range (:func:`dhr_rms_range`, 1e-4..100).  It is stored as 1 - rho (so that the small diffuse
+    table's whole range (:func:`dhr_rms_range`, ``parameters.DHR_TABLE_RMS_SLOPE``).  It is stored as 1 - rho (so that the small diffuse
     weights of smooth surfaces keep their float32 relative precision) in an
     ``mi.Texture2f`` with linear filtering and clamped borders.  Linear filtering
     keeps the lookup differentiable w.r.t. rms_slope.  1 - rho_avg(rms_slope)

@@ -28,18 +28,19 @@ import mitsuba as mi
 import numpy as np
 
 from hyde_bsdf.mitsuba import optics as po
+from hyde_bsdf.model.parameters import ALPHA, ETA
 
 __all__ = ["RMS_RANGE", "ALPHA_RANGE", "INDEX_MAX", "probe", "texel_values", "readable",
            "values_of", "check_roughness", "check_index", "check_reflectance", "Snapshot"]
 
 SQRT2 = math.sqrt(2.0)
-#: accepted rms_slope, the NumPy evaluator's range (:func:`hyde_bsdf.model.roughness.check_rms_slope`)
+#: accepted rms_slope (``hyde_bsdf.model.parameters.RMS_SLOPE``, the evaluator's too)
 RMS_RANGE = po.RMS_RANGE
-#: the same range as Beckmann alpha = sqrt(2) rms_slope
-ALPHA_RANGE = (SQRT2 * RMS_RANGE[0], SQRT2 * RMS_RANGE[1])
-#: largest accepted eta and k (the NumPy evaluator's ``INDEX_MAX``): beyond ~1e9 the float32
+#: the same range as Beckmann alpha = sqrt(2) rms_slope (``parameters.ALPHA``)
+ALPHA_RANGE = ALPHA.bounds
+#: largest accepted eta and k (``parameters.ETA``/``K``): beyond ~1e9 the float32
 #: Fresnel terms overflow (|eta|^4), and no material comes near 1e6
-INDEX_MAX = 1e6
+INDEX_MAX = ETA.hi
 #: relative slack on the printed bounds: a bound printed with 7 digits is itself accepted
 _SLACK = 1e-6
 #: wavelengths (nm) at which spectral textures are checked

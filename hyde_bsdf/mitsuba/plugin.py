@@ -10,20 +10,21 @@ class docstring).
 from __future__ import annotations
 
 import math
-import os
 
 import drjit as dr
 import mitsuba as mi
 
+from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.mitsuba import optics as po
 from hyde_bsdf.mitsuba import param_checks as pc
+from hyde_bsdf.model.parameters import ALPHA, DHR_TABLE_RMS_SLOPE, ETA, INDEX_MIN, RMS_SLOPE
 
 __all__ = ["register", "plugin_class", "DOC", "SHADOWING", "DIFFUSE", "RMS_RANGE", "ALPHA_RANGE", "INDEX_MAX"]
 
 SHADOWING = ("vgroove", "smith", "none")
 DIFFUSE = ("paper", "reciprocal", "none")
 SQRT2 = math.sqrt(2.0)
-#: accepted rms_slope, the NumPy evaluator's range (:func:`hyde_bsdf.model.roughness.check_rms_slope`)
+#: accepted rms_slope (``hyde_bsdf.model.parameters.RMS_SLOPE``, the evaluator's too)
 RMS_RANGE = pc.RMS_RANGE
 #: the same range as Beckmann alpha = sqrt(2) rms_slope
 ALPHA_RANGE = pc.ALPHA_RANGE
@@ -45,16 +46,16 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
    - 0.3 (if no roughness is given)
    - the paper's roughness sqrt(2) sigma_h / ell (rms facet slope along one axis),
      per shading point (texture ``eval_1(si)``, like roughconductor's alpha);
-     useful range 0.02-1.5; accepted [1e-4, 50], with every diffuse term
-     (values in [0, 1e-4) are floored to 1e-4 with a warning)
+     useful range 0.02-1.5; accepted @RMS_SLOPE@, with every diffuse term
+     (values in [0, @RMS_LO@) are floored to @RMS_LO@ with a warning)
    - ``rms_slope.value`` (float), ``rms_slope.data`` (bitmap), ``rms_slope.color0.value``
      (checkerboard), ...; differentiable, discontinuous
  * - alpha
    - float or texture
    - (none)
    - Beckmann alpha = sqrt(2) rms_slope = 2 sigma_h / ell (roughconductor's alpha);
-     alternative to rms_slope; accepted [0.0001414214, 70.71068]; values in
-     [0, 0.0001414214) (roughconductor's mirror, alpha = 0) are floored with a warning
+     alternative to rms_slope; accepted @ALPHA@; values in
+     [0, @ALPHA_LO@) (roughconductor's mirror, alpha = 0) are floored with a warning
    - ``alpha.value`` / ``alpha.data`` / ...: Beckmann alpha, as roughconductor;
      differentiable, discontinuous
  * - sigma_h, ell
@@ -68,7 +69,7 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
    - 0, 1 (a 100 % reflective mirror, as roughconductor)
    - real and imaginary part of the complex index n + i k (Mitsuba's sign;
      the paper writes the same material as eta = n - j kappa); eta and k in
-     [0, 1e6] (INDEX_MAX), not both 0.  ``k = 0`` with any eta is a dielectric (dispersive if eta is a
+     @INDEX@ (INDEX_MAX), not both 0.  ``k = 0`` with any eta is a dielectric (dispersive if eta is a
      spectrum).
    - ``eta.value``, ``k.value`` (float; ``eta.values`` for a spectrum, ``eta.data``
      for a bitmap); differentiable, discontinuous
@@ -117,11 +118,11 @@ Validation (:mod:`hyde_bsdf.mitsuba.param_checks`).  The constructor and every
 ``params.update()`` (``parameters_changed``) apply the same checks, on the values the textures'
 own ``eval`` returns (an 8-bit PNG is read as 0-1, not as its stored 0-255): the roughness
 finite and in range (values in [0, lower bound) floored with a warning), eta and k finite and
-in [0, 1e6] and not both 0 for a constant, specular_reflectance finite and >= 0; constants at
+in @INDEX@ and not both 0 for a constant, specular_reflectance finite and >= 0; constants at
 48 wavelengths 360-830 nm (spectral), every texel of a bitmap and both colours of a
 checkerboard.  A refused update restores the last accepted values (the update is atomic).
 Values that cannot be read at load (a ``mesh_attribute`` or procedural texture) get one
-warning and are clamped at eval (roughness to its range, eta and k to [0, 1e6],
+warning and are clamped at eval (roughness to its range, eta and k to @INDEX@,
 specular_reflectance to [0, 1], NaN: no reflection).  Where a spectrum is 0 (outside the
 wavelength range it is defined on, Mitsuba's rule) and k is 0 as well, the index is taken as 1
 (no reflection) rather than producing 0/0, with a warning at load (spectral variants: give eta
@@ -179,9 +180,9 @@ the diffuse term is done at that per-point roughness.
 
 DHR lookup.  1 - rho^{s,PEC} is resampled from the table's bicubic ``__call__``
 onto 1025 nodes in x = 1 - sqrt(cos theta) times 192 per decade of rms_slope over
-the table's whole range [1e-4, 100] (4.7 MB, float32) and read with a linear
+the table's whole range @DHR_TABLE@ (4.7 MB, float32) and read with a linear
 ``mi.Texture2f`` (differentiable in rms_slope), at each shading point's own roughness.
-Its deviation from the table, 1 - rho clipped at 0, for rms_slope in [1e-4, 50] and
+Its deviation from the table, 1 - rho clipped at 0, for rms_slope in @RMS_SLOPE@ and
 theta <= 89 deg is <= 1.9e-5 (vgroove), 2.6e-5 (smith), 1.3e-4 (none), target 2e-4
 (``validation/plugin_checks.py``, "DHR texture interpolation error"); denser grids
 cost render time once the roughness varies per point (cache misses).  1 - rho is
@@ -196,6 +197,12 @@ roughconductor's).  ``pdf`` and ``eval_pdf`` return the mixture density.
 
 Components: 0 = glossy reflection (specular lobe), 1 = diffuse reflection.
 """
+# the ranges in the table above, from the registry (hyde_bsdf.model.parameters)
+for _token, _text in (("@RMS_SLOPE@", RMS_SLOPE.text()), ("@RMS_LO@", f"{RMS_SLOPE.lo:.7g}"),
+                      ("@ALPHA@", ALPHA.text()), ("@ALPHA_LO@", f"{ALPHA.lo:.7g}"),
+                      ("@INDEX@", f"[0, {ETA.hi:.0e}]".replace("e+0", "e")),
+                      ("@DHR_TABLE@", DHR_TABLE_RMS_SLOPE.text())):
+    DOC = DOC.replace(_token, _text)
 
 
 def _read_float(props, name, hint=""):
@@ -235,15 +242,6 @@ def _ior_texture(path):
         return mi.load_dict({"type": "uniform",
                              "value": float(np.asarray(mi.luminance(color), dtype=float).ravel()[0])})
     return mi.load_dict({"type": "srgb", "color": color, "unbounded": True})
-
-
-def _known_materials():
-    folder = os.path.join(os.path.dirname(mi.__file__), "data", "ior")
-    try:
-        names = sorted({f[:-len(".eta.spd")] for f in os.listdir(folder) if f.endswith(".eta.spd")})
-    except OSError:
-        names = []
-    return names
 
 
 # ---------------------------------------------------------------- texture checks
@@ -364,12 +362,12 @@ def _make_class():
                 if given:
                     raise ValueError(f"hyde: give either material or eta/k, not both "
                                      f"(got material and {', '.join(given)})")
-                path = mi.file_resolver().resolve(f"data/ior/{material}.eta.spd")
-                if not os.path.exists(str(path)):
-                    raise ValueError(f"hyde: unknown material={material!r}; Mitsuba's data/ior has "
-                                     f"{', '.join(_known_materials())}")
-                self.m_eta = _ior_texture(str(path))
-                self.m_k = _ior_texture(str(path).replace(".eta.spd", ".k.spd"))
+                try:
+                    eta_file, k_file = material_files(material)     # data/ior names only (no ../)
+                except ValueError as exc:
+                    raise ValueError(f"hyde: {exc}") from None
+                self.m_eta = _ior_texture(str(eta_file))
+                self.m_k = _ior_texture(str(k_file))
                 self.m_material = material
             else:
                 for name in ("eta", "k"):
@@ -500,8 +498,8 @@ def _make_class():
             # a spectrum is 0 outside its wavelength range: index 0 would give 0/0 at normal
             # incidence; take it as 1 there (no interface, no reflection).  A tiny nonzero index
             # (|eta| < 1e-6, eta^2 underflows) is floored at n = 1e-6: the mirror limit of eta -> 0
-            tiny = (n < 1e-6) & (k < 1e-6)
-            n = dr.select(tiny, dr.select((n == 0) & (k == 0), 1.0, 1e-6), n)
+            tiny = (n < INDEX_MIN) & (k < INDEX_MIN)
+            n = dr.select(tiny, dr.select((n == 0) & (k == 0), 1.0, INDEX_MIN), n)
             if self.m_guard_index:
                 # values not readable at load: clamped to [0, INDEX_MAX]; NaN -> index 1 (no reflection)
                 bad = dr.isnan(n) | dr.isnan(k)

@@ -43,12 +43,19 @@ to 7.5e-3 (measured); with the refined end the interpolation error is below
 The disk cache
 --------------
 The table is cached as ``dhr_<shadowing>_<key>.npz`` in ``$HYDE_BSDF_CACHE``
-(unset or empty: ``~/.cache/hyde-bsdf``).  The file stores, besides the arrays, its
-build parameters (grid, quadrature order, shadowing), a code version (a hash of
-the quadrature's source) and a SHA-256 checksum of the arrays.  A file is used only
-if all of these match, its arrays have the grid's shapes and are finite, rho_avg is
-the average of rho, and a few nodes re-integrated on the spot with
-:func:`dhr_quadrature` agree with the stored rho to 1e-9; otherwise a
+(unset or empty: ``~/.cache/hyde-bsdf``).  A cache you did not write is not trusted
+(:mod:`hyde_bsdf.io.trust`, ssh's rules): a folder that others may write to or that someone
+else owns is not used at all (the table is built and kept in memory, with one warning); a
+file that is not a regular file (a FIFO is refused before it is opened, never waited on),
+is owned by someone else or is writable by others is refused.  The file stores, besides the
+arrays, its build parameters (grid, quadrature order, shadowing), a code version (a hash of
+the quadrature's source) and a seal: HMAC-SHA256 of all of it under a per-user secret kept
+in the cache folder (``.dhr-cache-key``, mode 0600), so an edit resealed without the key
+(say with a plain SHA-256) is refused.  A file is used only if all of these match, its arrays
+have the grid's shapes and are finite, rho_avg is the average of rho, and 9 fixed and 690
+random nodes re-integrated on the spot with :func:`dhr_quadrature` agree with the stored rho
+to 1e-9 (an edit of 1 % of the nodes, even resealed with the key, is caught with probability
+>= 0.999); otherwise a
 :class:`DHRCacheWarning` names the file and the reason, and the table is rebuilt
 and written back atomically (:mod:`hyde_bsdf.io.atomic`: no partial or temporary file
 is left behind).  A cache that cannot be written (read-only, a directory in the
@@ -57,10 +64,12 @@ way) only costs the rebuild, with a one-line note on stderr.
 from __future__ import annotations
 
 import hashlib
+import hmac
 import inspect
 import json
 import math
 import os
+import stat
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -70,7 +79,9 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_open
+from hyde_bsdf.io.trust import UntrustedFileError, make_private_dir, open_trusted, user_secret
 from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
+from hyde_bsdf.model.parameters import DHR_TABLE_RMS_SLOPE
 from hyde_bsdf.model import shadowing as _shadowing_module
 from hyde_bsdf.model.shadowing import SHADOWING, g1_smith_beckmann
 from hyde_bsdf.progress import Throttle, as_callback
@@ -90,14 +101,18 @@ TABLE_X_REFINE = 4
 TABLE_THETA_POINTS = (round(TABLE_X_REFINE_FROM * TABLE_X_STEPS)          # 120 coarse nodes
                       + round((1 - TABLE_X_REFINE_FROM) * TABLE_X_STEPS * TABLE_X_REFINE) + 1)  # + 33 fine
 TABLE_SLOPE_POINTS = 121       # 20 per decade over 6 decades
-TABLE_SLOPE_RANGE = (1e-4, 100.0)
+TABLE_SLOPE_RANGE = DHR_TABLE_RMS_SLOPE   # wider than the accepted RMS_SLOPE (parameters.py)
 _TABLE_VERSION = 7             # bump when the quadrature or the grid changes
 #: stored rho and rho re-integrated at load must agree to this (same rule, same nodes)
 _SPOT_TOL = 1e-9
 #: (x index, slope index) of the nodes re-integrated at every load: the corners, the
-#: grazing end, the middle; plus _SPOT_RANDOM nodes drawn afresh at each load
+#: grazing end, the middle; plus _SPOT_RANDOM distinct nodes drawn afresh at each load, so that
+#: an edit of 1 % of the nodes is caught with probability 1 - 0.99^690 >= 0.999 even when the
+#: file is resealed with the key (0.16 s per load with the V-groove, 0.5 s with Smith)
 _SPOT_NODES = ((0, 0), (0, -1), (-1, 0), (-1, -1), (-3, 2), (-9, 30), (76, 60), (40, 100), (140, 10))
-_SPOT_RANDOM = 4
+_SPOT_RANDOM = 690
+#: the per-user secret (mode 0600) in the cache folder that seals the cache files (HMAC-SHA256)
+CACHE_KEY_NAME = ".dhr-cache-key"
 #: Gauss-Legendre nodes per piece (outer, inner) used for the table: the V-groove
 #: integrand is split at all its kinks and converges fastest; Smith's G1(theta_r)
 #: has a steep layer near the horizon that wants more nodes.
@@ -374,7 +389,7 @@ def _code_version() -> str:
 
 def _build_params(shadowing) -> dict:
     """Everything the table's values depend on; stored in the cache file and compared at load."""
-    return {"format": 1, "table_version": _TABLE_VERSION, "code_version": _code_version(),
+    return {"format": 2, "table_version": _TABLE_VERSION, "code_version": _code_version(),
             "shadowing": shadowing, "x_steps": TABLE_X_STEPS, "x_refine_from": TABLE_X_REFINE_FROM,
             "x_refine": TABLE_X_REFINE, "theta_points": TABLE_THETA_POINTS,
             "slope_points": TABLE_SLOPE_POINTS, "slope_range": list(TABLE_SLOPE_RANGE),
@@ -384,8 +399,15 @@ def _build_params(shadowing) -> dict:
 _ARRAYS = ("x", "theta", "log_slope", "rho", "rho_avg")
 
 
-def _checksum(meta_json: str, arrays: dict) -> str:
-    h = hashlib.sha256(meta_json.encode())
+def _cache_key() -> bytes:
+    """The per-user secret that seals the cache files (:func:`hyde_bsdf.io.trust.user_secret`)."""
+    return user_secret(cache_dir(), CACHE_KEY_NAME)
+
+
+def _checksum(meta_json: str, arrays: dict, key: bytes | None = None) -> str:
+    """HMAC-SHA256 of the build parameters and arrays under the per-user ``key``: a file edited
+    and resealed without the key (e.g. with a plain SHA-256) does not match."""
+    h = hmac.new(_cache_key() if key is None else key, meta_json.encode(), hashlib.sha256)
     for name in _ARRAYS:
         a = np.ascontiguousarray(arrays[name], dtype="<f8")
         h.update(f"{name}{a.shape}".encode())
@@ -405,17 +427,20 @@ _cache_path = cache_path   # old private name
 def _save_table(path: Path, table: DHRTable) -> None:
     arrays = {name: getattr(table, name) for name in _ARRAYS}
     meta = json.dumps(_build_params(table.shadowing), sort_keys=True)
-    with atomic_open(path, "wb") as fh:
-        np.savez(fh, meta=np.array(meta), checksum=np.array(_checksum(meta, arrays)),
+    key = _cache_key()
+    with atomic_open(path, "wb", permissions=0o600) as fh:   # writable by no one else
+        np.savez(fh, meta=np.array(meta), checksum=np.array(_checksum(meta, arrays, key)),
                  build_seconds=np.array(table.build_seconds), **arrays)
 
 
 def _read_table(path: Path, shadowing) -> DHRTable:
     """Load and verify a cache file; ValueError (the reason) if it must not be used."""
     try:
-        with np.load(path, allow_pickle=False) as z:
+        with open_trusted(path) as fh, np.load(fh, allow_pickle=False) as z:
             stored = {name: np.array(z[name]) for name in z.files}
-    except Exception as exc:         # not an .npz, truncated, a directory, unreadable
+    except UntrustedFileError as exc:   # a FIFO, device, symlink, directory; another owner; mode
+        raise ValueError(f"is refused: {exc}") from None
+    except Exception as exc:         # not an .npz, truncated, unreadable
         raise ValueError(f"cannot be read as a table ({type(exc).__name__}: {exc})") from None
     missing = [n for n in ("meta", "checksum", "build_seconds", *_ARRAYS) if n not in stored]
     if missing:
@@ -440,7 +465,8 @@ def _read_table(path: Path, shadowing) -> DHRTable:
         if not np.all(np.isfinite(a)):
             raise ValueError(f"{name} has non-finite values")
     if str(stored["checksum"][()]) != _checksum(meta_json, arrays):
-        raise ValueError("its checksum does not match its contents (modified or corrupt)")
+        raise ValueError("its checksum (sealed with your key) does not match its contents "
+                         "(modified, corrupt, or written by someone else)")
     if not (np.array_equal(arrays["x"], x) and np.array_equal(arrays["log_slope"], log_slope)
             and np.array_equal(arrays["theta"], theta_of_x(x))):
         raise ValueError("its grid is not the table's grid")
@@ -448,11 +474,9 @@ def _read_table(path: Path, shadowing) -> DHRTable:
     if not np.allclose(arrays["rho_avg"], _rho_average(x, rho), rtol=0.0, atol=1e-12):
         raise ValueError("rho_avg is not the average of rho")
     # a few nodes re-integrated now, the fixed ones and some drawn at random
-    rng = np.random.default_rng()
-    nodes = list(_SPOT_NODES) + [(int(rng.integers(x.size)), int(rng.integers(log_slope.size)))
-                                 for _ in range(_SPOT_RANDOM)]
-    ix = np.array([i for i, _ in nodes])
-    js = np.array([j for _, j in nodes])
+    drawn = _spot_rng().choice(rho.size, _SPOT_RANDOM, replace=False)
+    ix = np.concatenate([[i % x.size for i, _ in _SPOT_NODES], drawn // log_slope.size])
+    js = np.concatenate([[j % log_slope.size for _, j in _SPOT_NODES], drawn % log_slope.size])
     fresh = dhr_quadrature(theta_of_x(x[ix]), np.exp(log_slope[js]), shadowing, *_TABLE_ORDER[shadowing])
     bad = np.abs(fresh - rho[ix, js]) > _SPOT_TOL
     if bad.any():
@@ -465,6 +489,8 @@ def _read_table(path: Path, shadowing) -> DHRTable:
 
 
 _TABLES: dict[str, DHRTable] = {}
+#: the generator of the random spot checks (fresh entropy at each load; tests fix its seed)
+_spot_rng = np.random.default_rng
 
 
 def load_table(shadowing="vgroove") -> DHRTable:
@@ -478,23 +504,45 @@ def load_table(shadowing="vgroove") -> DHRTable:
     if shadowing in _TABLES:
         return _TABLES[shadowing]
     path = cache_path(shadowing)
-    table = None
-    if path.exists() or path.is_symlink():
-        try:
-            table = _read_table(path, shadowing)
-        except ValueError as exc:
-            warnings.warn(f"DHR table cache {str(path)!r} {exc}; rebuilding it", DHRCacheWarning,
-                          stacklevel=2)
+    table, writable = _cached_table(path, shadowing)
     if table is None:
         table = build_table(shadowing)
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            _save_table(path, table)
+            if writable:
+                _save_table(path, table)
         except OSError as exc:       # read-only cache, a directory in the way: memory only
             warnings.warn(f"could not cache the DHR table at {str(path)!r}: {exc.strerror or exc}; "
                           "it is kept in memory for this run", DHRCacheWarning, stacklevel=2)
     _TABLES[shadowing] = table
     return table
+
+
+def _cached_table(path: Path, shadowing):
+    """(the verified table or None, whether the cache folder may be written).
+
+    A folder that others may write to or that someone else owns, or a key that others may read,
+    makes the whole cache untrusted: nothing is read or written there (one warning)."""
+    try:
+        make_private_dir(path.parent)
+        _cache_key()
+    except UntrustedFileError as exc:
+        warnings.warn(f"DHR table cache not used: {exc}; the table is built and kept in memory",
+                      DHRCacheWarning, stacklevel=3)
+        return None, False
+    except OSError:                  # the folder cannot be created: the save reports it
+        return None, True
+    if not os.path.lexists(path):
+        return None, True
+    if not stat.S_ISREG(os.lstat(path).st_mode):   # a FIFO, device, socket, symlink, folder: left alone
+        warnings.warn(f"DHR table cache {str(path)!r} is not a regular file: not opened, not replaced; "
+                      f"the table is built and kept in memory (remove it to cache again)",
+                      DHRCacheWarning, stacklevel=3)
+        return None, False
+    try:
+        return _read_table(path, shadowing), True
+    except ValueError as exc:
+        warnings.warn(f"DHR table cache {str(path)!r} {exc}; rebuilding it", DHRCacheWarning, stacklevel=3)
+        return None, True
 
 
 def dhr_specular_pec(theta_i, rms_slope, shadowing="vgroove", error_estimate=False):

@@ -42,11 +42,12 @@ import math
 
 import numpy as np
 
-from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array, real_scalar
+from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
 from hyde_bsdf.model.dhr import load_table, x_of_theta
 from hyde_bsdf.model.facet_geometry import angle_trig, cos_alpha_beta, rotation_terms
 from hyde_bsdf.model.fresnel import fresnel_mueller_terms
 from hyde_bsdf.model.jones_mueller import rotated_fresnel_mueller
+from hyde_bsdf.model.parameters import INDEX_MIN, K, N, RMS_SLOPE
 from hyde_bsdf.model.roughness import check_rms_slope
 from hyde_bsdf.model.shadowing import SHADOWING, visibility
 from hyde_bsdf.model.slope_distribution import beckmann_P
@@ -54,9 +55,8 @@ from hyde_bsdf.model.slope_distribution import beckmann_P
 __all__ = ["pbrdf", "specular_pbrdf", "diffuse_pbrdf", "DIFFUSE"]
 
 DIFFUSE = ("paper", "reciprocal", "none")
-RMS_SLOPE_RANGE = (1e-4, 100.0)
-INDEX_MAX = 1e6
-INDEX_MIN = 1e-6
+RMS_SLOPE_RANGE = RMS_SLOPE.bounds      # hyde_bsdf.model.parameters, the one definition
+INDEX_MAX = N.hi
 
 
 def _check_angles(name, value, hi):
@@ -73,7 +73,7 @@ def _check_index(n, k, pec):
         return None, None
     if n is None:
         raise ValueError("n is required (eta = n - jk) unless pec=True")
-    out = [real_scalar(name, v, 0.0, INDEX_MAX) for name, v in (("n", n), ("k", k))]
+    out = [rng.check(v) for rng, v in ((N, n), (K, k))]
     if math.hypot(*out) < INDEX_MIN:       # eta^2 would underflow in the Fresnel terms
         raise ValueError(f"n and k: |eta| = sqrt(n^2 + k^2) must be >= {INDEX_MIN:g}, got n={out[0]!r}, k={out[1]!r}")
     return out
@@ -110,7 +110,7 @@ def specular_pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False
 
     Same conventions and validation as :func:`pbrdf` (which adds the diffuse term).
     """
-    s = check_rms_slope(rms_slope, *RMS_SLOPE_RANGE)
+    s = check_rms_slope(rms_slope)
     nk = _check_index(n, k, pec)
     _check_shadowing(shadowing)
     theta_i, theta_r, phi = _check_all_angles(theta_i, theta_r, phi)
@@ -187,7 +187,7 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
         directions at or below the horizon (cos <= 0) give an all-zero matrix.
     phi : array_like, radians
         phi_r - phi_i; pi = specular plane (see module docstring for bases).
-    rms_slope : float in [1e-4, 100]
+    rms_slope : float in ``parameters.RMS_SLOPE`` ([1e-4, 50])
         the paper's roughness sqrt(2) sigma_h / l (Beckmann alpha / sqrt(2)).
     n, k : float >= 0
         the complex index eta = n - jk; or ``pec=True`` for a perfect conductor.
@@ -209,7 +209,7 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
     value out of range, non-finite, or angles that do not broadcast together.  Each
     message names the parameter and what it accepts.
     """
-    s = check_rms_slope(rms_slope, *RMS_SLOPE_RANGE)
+    s = check_rms_slope(rms_slope)
     nk = _check_index(n, k, pec)
     mode = _check_diffuse(diffuse)
     _check_shadowing(shadowing)

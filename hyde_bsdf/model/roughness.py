@@ -8,15 +8,11 @@ Mitsuba's ``roughconductor``, is ``alpha = 2*sigma_h/ell = sqrt(2)*rms_slope``.
 """
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from hyde_bsdf.model.checks import real_scalar
+from hyde_bsdf.model.parameters import RMS_SLOPE, SQRT2, alpha_from_rms_slope, rms_slope_from_alpha
 
 __all__ = ["rms_slope_from", "alpha_from_rms_slope", "rms_slope_from_alpha", "check_rms_slope"]
-
-SQRT2 = math.sqrt(2.0)
 
 
 def rms_slope_from(sigma_h, ell):
@@ -31,19 +27,10 @@ def rms_slope_from(sigma_h, ell):
     return float(out) if out.ndim == 0 else out
 
 
-def alpha_from_rms_slope(rms_slope):
-    """Beckmann alpha (Mitsuba's ``alpha``) = sqrt(2) * rms_slope."""
-    return SQRT2 * rms_slope
-
-
-def rms_slope_from_alpha(alpha):
-    """The paper's rms slope = Beckmann alpha / sqrt(2)."""
-    return alpha / SQRT2
-
-
-def check_rms_slope(rms_slope, lo: float = 1e-4, hi: float = 50.0) -> float:
-    """Validate a scalar rms slope, naming the parameter and the accepted range.
+def check_rms_slope(rms_slope) -> float:
+    """Validate a scalar rms slope, naming the parameter and the accepted range
+    (:data:`hyde_bsdf.model.parameters.RMS_SLOPE`).
 
     TypeError for a complex, string, boolean or array value; ValueError for NaN, infinity
-    or a value outside [lo, hi]."""
-    return real_scalar("rms_slope", rms_slope, lo, hi)
+    or a value outside the range."""
+    return RMS_SLOPE.check(rms_slope)

@@ -24,7 +24,9 @@ import concurrent.futures as cf
 import sys
 import time
 
-__all__ = ["gather", "ExecutorError", "describe_executor", "executor_problem",
+from hyde_bsdf.errors import UsageError
+
+__all__ = ["gather", "ExecutorError", "check_executor", "describe_executor", "executor_problem",
            "POLL_S", "HEARTBEAT_S", "NO_WORKER_GRACE_S"]
 
 #: longest single wait on the executor before the liveness checks run again (seconds)
@@ -45,6 +47,18 @@ def _dask_client(executor):
     if type(executor).__module__.split(".")[0] != "distributed":
         return None
     return getattr(executor, "_client", None)
+
+
+def check_executor(executor):
+    """``executor`` if it is None or a ``concurrent.futures.Executor`` (a dask one included);
+    a one-line UsageError otherwise -- a raw dask ``Client`` names ``client.get_executor()``."""
+    if executor is None or isinstance(executor, cf.Executor):
+        return executor
+    kind = type(executor)
+    if kind.__module__.split(".")[0] == "distributed" and kind.__name__ == "Client":
+        raise UsageError("executor is a dask Client; pass client.get_executor() (a concurrent.futures "
+                         "executor) instead")
+    raise UsageError(f"executor must be a concurrent.futures.Executor (or None), got {kind.__name__}")
 
 
 def describe_executor(executor) -> str:

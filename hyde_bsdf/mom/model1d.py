@@ -77,6 +77,8 @@ import math
 
 import numpy as np
 
+from hyde_bsdf.model.parameters import RMS_SLOPE
+
 __all__ = [
     "facet_angles",
     "facet_pdf",
@@ -101,9 +103,7 @@ def _check(theta_i, theta_r, rms_slope):
         raise ValueError("theta_i must be finite and in [0, pi/2) radians")
     if not np.all(np.isfinite(theta_r)) or np.any(np.abs(theta_r) > _HALF_PI):
         raise ValueError("theta_r must be finite signed angles in [-pi/2, pi/2] radians")
-    rms_slope = float(rms_slope)
-    if not (math.isfinite(rms_slope) and 1e-4 <= rms_slope <= 50.0):
-        raise ValueError(f"rms_slope must be a finite number in [1e-4, 50], got {rms_slope!r}")
+    rms_slope = RMS_SLOPE.check(rms_slope)
     return theta_i, theta_r, rms_slope
 
 

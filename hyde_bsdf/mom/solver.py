@@ -179,9 +179,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyde_bsdf.io.memory import available_bytes, check_memory, format_bytes
+from hyde_bsdf.model.parameters import NATURAL_INDEX, paper_eta
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast, spectral_rule
-from hyde_bsdf.mom.gather import ExecutorError, gather
+from hyde_bsdf.mom.gather import ExecutorError, check_executor, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
 
 __all__ = [
@@ -726,21 +728,17 @@ def _check_index(n, k):
         return None
     n = _check_positive("n", n)
     k = 0.0 if k is None else _check_positive("k", k, allow_zero=True)
-    if n > 1e3 or k > 1e3:
-        raise ValueError(f"n and k must be <= 1000 (use the PEC, n=None, for a better conductor), got n={n:g}, k={k:g}")
-    return complex(n, -k)
+    if not (NATURAL_INDEX.contains(n) and NATURAL_INDEX.contains(k)):
+        raise ValueError(f"n and k must be <= {NATURAL_INDEX.hi:g} (use the PEC, n=None, for a better conductor), "
+                         f"got n={n:g}, k={k:g}")
+    return paper_eta(n, k)
 
 
 def _memory_available():
-    """Bytes of memory available to new allocations (Linux /proc/meminfo), or 8 GiB if unknown."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return 8 * 2**30
+    """Bytes of memory available to new allocations (:func:`hyde_bsdf.io.memory.available_bytes`),
+    or 8 GiB if unknown."""
+    value = available_bytes()
+    return 8 * 2**30 if value is None else value
 
 
 def _matrices_per_partition(pols, eta):
@@ -759,6 +757,9 @@ ARC_PTS_MIN = 5.0
 TURN_MAX = 0.3
 #: most unknowns per partition: a dense 10,000 x 10,000 LU is ~10 CPU minutes per partition and 1.6 GB
 MAX_UNKNOWNS = 10000
+#: peak bytes per surface point while the surface is drawn: gaussian_surface measured 45 B/point
+#: (tracemalloc, 2^18 and 2^20 points, second derivative on); 64 leaves room for the resampling
+SURFACE_BYTES_PER_POINT = 64
 #: most quadrature panels per cell for the interior Green's function (one per decay length)
 MAX_PANELS = 64
 
@@ -838,7 +839,7 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     t_wall = time.perf_counter()
     cfg = _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
                         pts_per_wl, seed, taper_width_wl, polarization, n, k, timeout, solver, tol)
-    own = executor is None
+    own = check_executor(executor) is None
     workers = min(os.cpu_count() or 1, cfg["partitions"]) if own else 1
     surf = _realise_surface(cfg, workers)
     for r in surf["reasons"]:
@@ -956,8 +957,8 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
                              + ": use shorter partitions (more `partitions`)" + hint)
         if need_dense > budget:
             raise ValueError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
-                             f"{part_len:g} wavelengths, {need_dense / 2**30:.1f} GiB for {workers} worker(s), more "
-                             f"than the {budget / 2**30:.1f} GiB available: use shorter partitions (more "
+                             f"{part_len:g} wavelengths, {format_bytes(need_dense)} for {workers} worker(s), more "
+                             f"than the {format_bytes(budget)} available: use shorter partitions (more "
                              "`partitions`)" + hint)
         return "dense", dense_ok
     if cfg["solver"] == "fast" and not fast_ok:
@@ -967,12 +968,18 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
                          f"{why}: " + (f"the height range {height:.3g} wavelengths needs blocks of {block:.3g}, more "
                                        "than a third of the partition" if not fast_fit else
                                        f"more than {MAX_FAST_UNKNOWNS} unknowns" if npart > MAX_FAST_UNKNOWNS else
-                                       f"{need_fast / 2**30:.1f} GiB for {workers} worker(s), more than the "
-                                       f"{budget / 2**30:.1f} GiB available")
+                                       f"{format_bytes(need_fast)} for {workers} worker(s), more than the "
+                                       f"{format_bytes(budget)} available")
                          + "; use shorter partitions (more `partitions`)" + hint)
     if cfg["solver"] == "auto" and npart < AUTO_FAST_UNKNOWNS and dense_ok:
         return "dense", dense_ok
     return "fast", dense_ok
+
+
+def _check_surface_memory(points: int) -> None:
+    """The surface itself, before it is drawn: a long surface alone can exceed the memory."""
+    check_memory(SURFACE_BYTES_PER_POINT * points, f"the MoM surface ({points} points, {SURFACE_BYTES_PER_POINT} "
+                 f"B each)", "use a shorter length_wl or a lower pts_per_wl", fraction=0.8)
 
 
 def _realise_surface(cfg, workers):
@@ -987,6 +994,7 @@ def _realise_surface(cfg, workers):
         reasons += check_sampling(n_part / part_len, corr_length_wl, rough)
 
     def surface(npart):
+        _check_surface_memory(npart * partitions)
         try:
             return gaussian_surface(length_wl, npart * partitions, cfg["rms_height_wl"], corr_length_wl, cfg["seed"],
                                     second_derivative=True)

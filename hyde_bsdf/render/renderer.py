@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import re
 import signal
 import threading
@@ -39,10 +40,12 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, one_line
+from hyde_bsdf.io.input_gate import check_input
+from hyde_bsdf.io.memory import available_bytes, check_memory
 from hyde_bsdf.io.stokes_exr import STOKES_NAMES
 from hyde_bsdf.progress import as_callback
 
-__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "render_stokes", "estimate_memory",
+__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "scene_inputs", "render_stokes", "estimate_memory",
            "plan_passes", "sensor_to_paper_rotation", "rotate_stokes"]
 
 DEFAULT_VARIANT = "llvm_ad_spectral_polarized"
@@ -158,9 +161,31 @@ class _SceneXML:
         m = _PARAM.fullmatch(self.raw.get(key, "") or "")
         return f" (the scene's ${m.group(1)}; set it with -D {m.group(1)}=N)" if m else ""
 
+    def files(self) -> list[Path]:
+        """The files the scene names (``<string name="filename" value=...>``, and the ``filename``
+        attribute of ``<include>`` and ``<spectrum>``; ``$name`` resolved, relative to the scene's
+        folder): inputs of the run, which no output may overwrite."""
+        if self.tree is None:
+            return []
+        out = []
+        for el in self.tree.getroot().iter():
+            name = el.get("value") if el.tag == "string" and el.get("name") == "filename" else el.get("filename")
+            if name:
+                p = Path(self.resolve(name)).expanduser()
+                out.append(p if p.is_absolute() else self.path.parent / p)
+        return out
+
+    def check_files(self) -> None:
+        """Each existing file the scene names through the input gate: a FIFO or a device as a
+        texture or mesh is refused here, before Mitsuba would wait on it forever."""
+        for p in self.files():
+            if os.path.lexists(p):
+                check_input(p, f"scene {str(self.path)!r}: file", stdin=False)
+
     def check(self) -> None:
         if self.tree is None:
             return
+        self.check_files()
         where = f"scene {str(self.path)!r}"
         if not self.sensors and not self.has_include:
             raise UsageError(f"{where} has no <sensor>: add a camera, e.g. <sensor type=\"perspective\"> "
@@ -201,6 +226,14 @@ class _SceneXML:
         return None
 
 
+def scene_inputs(path, params: dict | None = None) -> list[Path]:
+    """The scene file and every file it names (``$name`` filled from ``params``): the inputs of a
+    run that reads the scene, which the output gate keeps any output from overwriting."""
+    path = Path(path)
+    info = _SceneXML(path, {str(k): str(v) for k, v in (params or {}).items()})
+    return [path] + info.files()
+
+
 def load_scene(path, params: dict | None = None, polarized: bool | None = None):
     """``mi.load_file`` with the checks above and one-line errors; ``params`` fill the XML's
     ``$name`` defaults.  ``polarized`` (default: the current variant's) False drops a
@@ -213,8 +246,7 @@ def _load_scene(path, params=None, polarized=None):
     import mitsuba as mi
 
     path = Path(path)
-    if not path.is_file():
-        raise UsageError(f"scene file {str(path)!r} does not exist")
+    check_input(path, "scene file", stdin=False)   # the input gate: a regular file, size-limited
     if path.suffix.lower() != ".xml":
         raise UsageError(f"scene must be a Mitsuba .xml file, got {str(path)!r}")
     kwargs = {str(k): str(v) for k, v in (params or {}).items()}
@@ -252,15 +284,8 @@ def _stokes_integrator(scene):
 
 
 def mem_available() -> int | None:
-    """``MemAvailable`` of /proc/meminfo in bytes (None where there is no /proc/meminfo)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
+    """Memory available to new allocations, bytes (:func:`hyde_bsdf.io.memory.available_bytes`)."""
+    return available_bytes()
 
 
 def estimate_memory(width: int, height: int, polarized: bool = True) -> int:
@@ -301,12 +326,12 @@ def _check_film(scene, polarized: bool, info=None) -> tuple[int, int]:
         raise UsageError(f"the {width}x{height} film is too large: {width * height * channels:.3g} values, "
                          f"Dr.Jit arrays hold at most 2^32 = {MAX_FILM_VALUES + 1:.3g}; at most "
                          f"{MAX_FILM_VALUES // channels:.3g} pixels{hint}")
-    need, avail = estimate_memory(width, height, polarized), mem_available()
-    if avail is not None and need > avail:
-        per_px = BYTES_PER_PIXEL_STOKES if polarized else BYTES_PER_PIXEL_COLOUR
-        raise UsageError(f"rendering the {width}x{height} film needs about {need / 2**30:.1f} GiB of memory "
-                         f"(~{per_px} B/pixel), but only {avail / 2**30:.1f} GiB is available (MemAvailable); "
-                         f"lower the film's width and height{hint or ' (its <film> width/height, or -D)'}")
+    per_px = BYTES_PER_PIXEL_STOKES if polarized else BYTES_PER_PIXEL_COLOUR
+    avail = mem_available()
+    if avail is not None:
+        check_memory(estimate_memory(width, height, polarized), f"rendering the {width}x{height} film "
+                     f"(~{per_px} B/pixel)", f"lower the film's width and height"
+                     f"{hint or ' (its <film> width/height, or -D)'}", available=avail)
     return width, height
 
 

@@ -12,14 +12,17 @@ not a source checkout).
 
 Nothing but an earlier report's own files is ever deleted.  The report is built in a fresh hidden
 folder beside ``DIR`` and moved in at the end (:func:`hyde_bsdf.io.atomic.atomic_dir`), with a
-manifest ``DIR/.hyde-report-manifest.json`` listing every file it wrote: an interrupted run
+manifest ``DIR/.hyde-report-manifest.json`` listing every file it wrote, with its SHA-256, and
+every folder it created: an interrupted run
 (Ctrl-C, SIGTERM, a kill) leaves the previous report as it was, never an old ``index.html``
 beside new figures.  ``DIR`` must be new, empty, or hold only an earlier report's files (those its
-manifest lists); a folder with any other file -- a web site's ``index.html``, a thesis -- is
-refused before any work, unless ``--force``: then the files of the earlier report are replaced
-and every other file is kept (one whose name the report takes, such as ``index.html``, is renamed
-``index.html.orig``).  A report written before manifests existed is recognised by its
-``index.html`` title and ``checks.csv`` header.
+manifest lists, unchanged since: same SHA-256, reached without a symlink); a folder with any other
+file or folder -- a web site's ``index.html``, a thesis, an empty folder tree, a file edited since
+-- is refused before any work, unless ``--force``: then the unchanged files of the earlier report
+are replaced and everything else is kept (one whose name the report takes, such as
+``index.html``, is renamed ``index.html.orig``).  Symlinks are never followed and no folder the
+report did not create is removed.  A report without a manifest (or from before manifests had
+hashes) is not adopted: that its HTML names a file does not prove the report wrote it.
 """
 from __future__ import annotations
 
@@ -37,9 +40,10 @@ import warnings
 from pathlib import Path
 
 from hyde_bsdf.io.atomic import (TEMP_NAME_RE, atomic_dir, atomic_open, check_dir_owned, check_name_fits,
-                                 check_output_dir, read_manifest, write_manifest)
+                                 check_output_dir, read_manifest)
 from hyde_bsdf.app.args import Parser, quiet_option
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.memory import format_bytes, total_bytes
 from hyde_bsdf.progress import as_callback
 
 __all__ = ["SECTIONS", "MANIFEST", "build_report", "check_report_dir", "cli_main"]
@@ -73,27 +77,6 @@ def validation_dir() -> Path:
 
 #: the manifest of a report folder: every file the report wrote (a rerun removes only these)
 MANIFEST = ".hyde-report-manifest.json"
-_TITLE = "<title>hyde-bsdf validation report</title>"
-_CSV_HEADER = "script,name,value,tolerance,passed"
-
-
-def _legacy_report_files(out: Path):
-    """The files of a report written before manifests (index.html with our title, checks.csv with
-    our header, and the PNG/CSV files of the validation scripts it shows), or None if not one."""
-    try:
-        page = (out / "index.html").read_text(encoding="utf-8", errors="replace")
-        with open(out / "checks.csv", encoding="utf-8", errors="replace") as fh:
-            header = fh.readline().strip()
-    except OSError:
-        return None
-    if _TITLE not in page or header != _CSV_HEADER:
-        return None
-    import re
-
-    figures = set(re.findall(r"<img src='([^'/]+)'", page))
-    listed = {"index.html", "checks.csv"} | figures
-    listed |= {Path(f).stem + ".csv" for f in figures if (out / (Path(f).stem + ".csv")).exists()}
-    return listed
 
 
 def check_report_dir(outdir, force: bool = False) -> Path:
@@ -112,10 +95,8 @@ def check_report_dir(outdir, force: bool = False) -> Path:
     if out.resolve() == here or out.resolve() in here.parents:
         raise UsageError(f"--outdir {str(outdir)!r} is the current folder or one above it: give the report "
                          "a folder of its own (default out/report)")
-    if out.is_dir() and read_manifest(out, MANIFEST) is None:
-        legacy = _legacy_report_files(out)
-        if legacy is not None:          # adopt a report written before manifests: these files are ours
-            write_manifest(out, [f for f in legacy if (out / f).is_file()], MANIFEST)
+    # a report written before manifests (or one whose manifest has no hashes) is not adopted: that
+    # its HTML names a file does not prove this program wrote it (it may be the user's image)
     if out.is_dir():
         others = [f for f in (p.name for p in out.iterdir()) if f != MANIFEST and not TEMP_NAME_RE.match(f)]
         if others and read_manifest(out, MANIFEST) is None and not force:
@@ -137,11 +118,8 @@ def machine_info() -> dict:
         info["CPU"] = cpu
     except (OSError, StopIteration):
         info["CPU"] = platform.processor() or platform.machine()
-    try:
-        mem = next(int(line.split()[1]) for line in open("/proc/meminfo") if line.startswith("MemTotal"))
-        info["memory"] = f"{mem / 2**20:.1f} GiB"
-    except (OSError, StopIteration):
-        pass
+    if total_bytes() is not None:
+        info["memory"] = format_bytes(total_bytes())
     info["load average at start"] = f"{os.getloadavg()[0]:.2f}"
     for mod in ("numpy", "scipy", "matplotlib", "mitsuba", "drjit"):
         try:
