@@ -179,8 +179,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError
 from hyde_bsdf.mom.dense import solve_dense
-from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast, spectral_rule
+from hyde_bsdf.mom.fast import FAST_TOL, FastSolverUnsuitable, block_length_wl, solve_fast, spectral_rule
 from hyde_bsdf.mom.gather import ExecutorError, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
 
@@ -253,7 +254,7 @@ def gaussian_surface(length_wl, n_points, rms_height_wl, corr_length_wl, seed=0,
     dk = 2.0 * math.pi / length_wl
     j_max = int(math.ceil(12.0 / corr_length_wl / dk))
     if 2 * j_max >= n_points:
-        raise ValueError(
+        raise UsageError(
             f"n_points={n_points} cannot resolve a surface with corr_length_wl={corr_length_wl}: "
             f"need more than {2 * j_max} samples over {length_wl} wavelengths")
     rng = np.random.default_rng(seed)
@@ -331,7 +332,7 @@ def power_grid(w, k=K0):
 def check_sampling(pts_per_wl, corr_length_wl=None, rough=True):
     """Warn (MoMAccuracyWarning) or raise when the pulse sampling cannot resolve field or surface."""
     if not (math.isfinite(pts_per_wl) and pts_per_wl >= 2.0):
-        raise ValueError(f"pts_per_wl must be >= 2 (the pulses cannot represent a wave below that), got {pts_per_wl}")
+        raise UsageError(f"pts_per_wl must be >= 2 (the pulses cannot represent a wave below that), got {pts_per_wl}")
     reasons = []
     if pts_per_wl < 5.0:
         reasons.append(f"pts_per_wl={pts_per_wl:g} is below ~5 points per wavelength: the pulse-basis current "
@@ -449,49 +450,80 @@ def _worker_init():
     _keep_freed_memory()
 
 
+#: a dense fallback may cost at most this many times the fast solver's own estimate (or its time spent)
+DENSE_FALLBACK_RATIO = 10.0
+
+
+def _dense_cost(n, pols, eta):
+    """(bytes, CPU seconds) of a dense solve of n unknowns (:mod:`hyde_bsdf.mom.dense`), measured on one core:
+    fill 2.2e-7 s per matrix entry and region, LU 3.9e-11 s n^3 per polarisation, and a lossless interior's
+    full (1/2 + D1)^-1 S1 5.5e-10 s n^3 (3000 unknowns: PEC s 3.0 s, glass s and p 16.9 s)."""
+    regions = 1 if eta is None else 2
+    seconds = 2.2e-7 * regions * n * n + 3.9e-11 * len(pols) * n ** 3
+    if eta is not None and eta.imag == 0:
+        seconds += 5.5e-10 * n ** 3
+    return _matrices_per_partition(pols, eta) * 16.0 * n * n, seconds
+
+
+def _dense_refusal(n, pols, eta, fast_seconds):
+    """Why a dense fallback of n unknowns is refused (memory, or more than DENSE_FALLBACK_RATIO x the fast
+    solver's cost), or None where it may run."""
+    need, seconds = _dense_cost(n, pols, eta)
+    free = _memory_available()
+    if need > 0.8 * free:
+        return f"a dense LU of {n} unknowns needs {need / 2**30:.1f} GiB, more than the {free / 2**30:.1f} GiB available"
+    if seconds > DENSE_FALLBACK_RATIO * fast_seconds:
+        return (f"a dense LU of {n} unknowns would take ~{seconds:.0f} CPU s, more than {DENSE_FALLBACK_RATIO:g}x "
+                f"the fast solver's ~{fast_seconds:.1f} s")
+    return None
+
+
 def _solve_fields(task, psi, clock):
     """Stage 3 of a partition: the surface fields u, v by the chosen method, with the fast solver's fallbacks.
 
+    The fast solver falls back on its own to GMRES (the fast operator, preconditioned by its strong part);
+    a dense LU follows only where that too misses the tolerance and the LU is affordable
+    (:func:`_dense_refusal`); otherwise the result keeps the residual reached, with a reason naming ``tol``.
     Returns (fields dict with ``u_P``, ``v_P``; times (fill, factor, solve); method used;
     reasons: every fallback with why).
     """
     x, y, fp, fpp, dx = task["x"], task["y"], task["dfdx"], task["d2fdx2"], task["dx"]
     pols, eta = task["pols"], task["eta"]
-    method = task.get("solver", "dense")
+    if task.get("solver", "dense") != "fast":
+        return solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock), "dense", []
     reasons = []
-    if method == "fast":
-        t0 = clock()
-        try:
-            sol = solve_fast(x, y, fp, fpp, dx, psi, pols, eta, tol=task.get("tol") or FAST_TOL,
-                             method=task.get("fast_method", "fb"))
-        except FastSolverUnsuitable as exc:
-            if not task.get("dense_ok", True):
-                raise ValueError(f"the fast solver cannot take this surface ({exc}) and a dense solve of "
-                                 f"{x.size} unknowns is refused: use shorter partitions or a smoother surface") \
-                    from None
-            reasons.append(f"fast solver unsuitable ({exc}): dense LU instead")
-        else:
-            info = sol["info"]
-            reasons += info["reasons"]
-            worst = max(float(np.max(info[p]["residual"])) for p in pols)
-            tol = task.get("tol") or FAST_TOL
-            if info["converged"] or not task.get("dense_ok", True):
-                if not info["converged"]:
-                    reasons.append(f"fast solver stopped at residual {worst:.2g} > tolerance {tol:g} and a dense "
-                                   f"solve of {x.size} unknowns is refused: the result carries that residual")
-                t = info["times"]
-                sol["times"] = (t["setup"], 0.0, t["solve"])
-                sol["residual"] = worst
-                return sol, "fast", reasons
-            reasons.append(f"fast solver did not converge (residual {worst:.2g} > tolerance {tol:g}): dense LU "
-                           "instead")
-        # the fallback's time is counted from the fast attempt on
-        t_lost = clock() - t0
-        sol = solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock)
-        f, fa, so = sol["times"]
-        sol["times"] = (f + t_lost, fa, so)
-        return sol, "dense", reasons
+    tol = task.get("tol") or FAST_TOL
+    t0 = clock()
+    try:
+        sol = solve_fast(x, y, fp, fpp, dx, psi, pols, eta, tol=tol, method=task.get("fast_method", "fb"))
+    except FastSolverUnsuitable as exc:
+        why = None if task.get("dense_ok", True) else "the memory available"
+        why = why or _dense_refusal(x.size, pols, eta, FAST_SECONDS_PER_UNKNOWN * x.size)
+        if why:
+            raise UsageError(f"the fast solver cannot take this surface ({exc}) and {why}: use shorter partitions "
+                             "(more `partitions`) or a smoother surface") from None
+        reasons.append(f"fast solver unsuitable ({exc}): dense LU instead")
+    else:
+        info = sol["info"]
+        reasons += info["reasons"]
+        worst = max(float(np.max(info[p]["residual"])) for p in pols)
+        spent = clock() - t0
+        why = None if info["converged"] else (
+            "the memory available" if not task.get("dense_ok", True) else
+            _dense_refusal(x.size, pols, eta, max(spent, FAST_SECONDS_PER_UNKNOWN * x.size)))
+        if info["converged"] or why:
+            if not info["converged"]:
+                reasons.append(f"fast solver stopped at residual {worst:.2g} > tolerance {tol:g} and {why}: the "
+                               "result carries that residual (raise `tol`, or use shorter partitions)")
+            t = info["times"]
+            sol["times"] = (t["setup"], 0.0, t["solve"])
+            sol["residual"] = worst
+            return sol, "fast", reasons
+        reasons.append(f"fast solver did not converge (residual {worst:.2g} > tolerance {tol:g}): dense LU instead")
+    t_lost = clock() - t0          # the fallback's time is counted from the fast attempt on
     sol = solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock)
+    f, fa, so = sol["times"]
+    sol["times"] = (f + t_lost, fa, so)
     return sol, "dense", reasons
 
 
@@ -661,10 +693,10 @@ def _check_positive(name, value, allow_zero=False):
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a real number, got {value!r}") from None
+        raise UsageError(f"{name} must be a real number, got {value!r}") from None
     ok = math.isfinite(v) and (v >= 0.0 if allow_zero else v > 0.0)
     if not ok:
-        raise ValueError(f"{name} must be finite and {'>= 0' if allow_zero else '> 0'}, got {value!r}")
+        raise UsageError(f"{name} must be finite and {'>= 0' if allow_zero else '> 0'}, got {value!r}")
     return v
 
 
@@ -707,14 +739,14 @@ class _Progress:
 
 def _check_seed(seed):
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
     return int(seed)
 
 
 def _check_polarization(polarization):
     pols = (polarization,) if isinstance(polarization, str) else tuple(polarization)
     if not pols or any(p not in ("s", "p") for p in pols) or len(set(pols)) != len(pols):
-        raise ValueError(f"polarization must be 's', 'p' or a sequence of both, e.g. ('s', 'p'), got {polarization!r}")
+        raise UsageError(f"polarization must be 's', 'p' or a sequence of both, e.g. ('s', 'p'), got {polarization!r}")
     return pols
 
 
@@ -722,12 +754,12 @@ def _check_index(n, k):
     """None, None: a PEC; else the paper's eta = n - j k (n > 0, k >= 0)."""
     if n is None:
         if k is not None:
-            raise ValueError(f"k={k!r} needs n (the real part of the index n - jk); give n, or neither for a PEC")
+            raise UsageError(f"k={k!r} needs n (the real part of the index n - jk); give n, or neither for a PEC")
         return None
     n = _check_positive("n", n)
     k = 0.0 if k is None else _check_positive("k", k, allow_zero=True)
     if n > 1e3 or k > 1e3:
-        raise ValueError(f"n and k must be <= 1000 (use the PEC, n=None, for a better conductor), got n={n:g}, k={k:g}")
+        raise UsageError(f"n and k must be <= 1000 (use the PEC, n=None, for a better conductor), got n={n:g}, k={k:g}")
     return complex(n, -k)
 
 
@@ -861,6 +893,9 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
 # The stages of scatter: checks, surface, per-partition solve, statistics, energy
 # ---------------------------------------------------------------------------
 
+#: the fast solver's CPU seconds per unknown, for the dense fallback's cost limit where it has not run (glass,
+#: sigma_h = 2 lambda, 7728 unknowns: ~15 s; a Fig. 6 partition, 1500 unknowns: ~0.5 s)
+FAST_SECONDS_PER_UNKNOWN = 2e-3
 #: "auto" takes the fast solver from this many unknowns per partition on (the Fig. 6 partitions have 1500)
 AUTO_FAST_UNKNOWNS = 1000
 #: most unknowns per partition for the fast solver
@@ -873,7 +908,7 @@ def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_
     length_wl = _check_positive("length_wl", length_wl)
     if isinstance(partitions, bool) or not isinstance(partitions, (int, np.integer, float)) \
             or int(partitions) != partitions or partitions < 1:
-        raise ValueError(f"partitions must be an integer >= 1, got {partitions!r}")
+        raise UsageError(f"partitions must be an integer >= 1, got {partitions!r}")
     partitions = int(partitions)
     rms_height_wl = _check_positive("rms_height_wl", rms_height_wl, allow_zero=True)
     corr_length_wl = _check_positive("corr_length_wl", corr_length_wl)
@@ -884,27 +919,27 @@ def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_
     if timeout is not None:
         timeout = _check_positive("timeout", timeout)
     if solver not in ("auto", "dense", "fast"):
-        raise ValueError(f"solver must be 'auto', 'dense' or 'fast', got {solver!r}")
+        raise UsageError(f"solver must be 'auto', 'dense' or 'fast', got {solver!r}")
     if tol is not None:
         tol = _check_positive("tol", tol)
         if not 1e-12 <= tol <= 0.1:
-            raise ValueError(f"tol must be in [1e-12, 0.1] (the fast solver's relative residual), got {tol!r}")
+            raise UsageError(f"tol must be in [1e-12, 0.1] (the fast solver's relative residual), got {tol!r}")
     ti_deg = np.atleast_1d(np.asarray(theta_i_deg, dtype=float))
     tr_deg = np.atleast_1d(np.asarray(theta_r_deg, dtype=float))
     if ti_deg.ndim != 1 or not np.all(np.isfinite(ti_deg)) or np.any(ti_deg < 0) or np.any(ti_deg >= 90):
-        raise ValueError(f"theta_i_deg must be finite angles in [0, 90) degrees, got {theta_i_deg!r}")
+        raise UsageError(f"theta_i_deg must be finite angles in [0, 90) degrees, got {theta_i_deg!r}")
     if tr_deg.ndim != 1 or not np.all(np.isfinite(tr_deg)) or np.any(np.abs(tr_deg) > 90):
-        raise ValueError(f"theta_r_deg must be finite signed angles in [-90, 90] degrees, got {theta_r_deg!r}")
+        raise UsageError(f"theta_r_deg must be finite signed angles in [-90, 90] degrees, got {theta_r_deg!r}")
     part_len = length_wl / partitions
     n_part = int(round(part_len * pts_per_wl))
     if n_part < 4:
-        raise ValueError(f"partitions of {part_len:g} wavelengths at pts_per_wl={pts_per_wl:g} hold fewer than 4 pulses")
+        raise UsageError(f"partitions of {part_len:g} wavelengths at pts_per_wl={pts_per_wl:g} hold fewer than 4 pulses")
     if taper_width_wl is None:
         w = part_len / 4.0
     else:
         w = _check_positive("taper_width_wl", taper_width_wl)
         if w > part_len:
-            raise ValueError(f"taper_width_wl={w:g} must be in (0, {part_len:g}] (the partition length "
+            raise UsageError(f"taper_width_wl={w:g} must be in (0, {part_len:g}] (the partition length "
                              f"length_wl/partitions; Eq. 22's window must fit in its partition)")
     return dict(length_wl=length_wl, partitions=partitions, rms_height_wl=rms_height_wl,
                 corr_length_wl=corr_length_wl, pts_per_wl=pts_per_wl, seed=seed, pols=pols, eta=eta,
@@ -913,9 +948,8 @@ def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_
 
 
 def _fast_block_wl(height_wl, eta):
-    """The fast solver's block length for a partition of this height range (fast.solve_fast's rule)."""
-    kmax = K0 if eta is None or eta.imag != 0 else K0 * abs(eta)
-    return max(NEAR_WL, kmax * height_wl ** 2 / (4.0 * 0.8 * GROWTH_MAX))
+    """The fast solver's block length for a partition of this height range (glass's interior k sets it)."""
+    return block_length_wl(height_wl, [K0] if eta is None or eta.imag != 0 else [K0, K0 * eta])
 
 
 def _fast_bytes(n, block_wl, dx, height, part_len, eta):
@@ -947,7 +981,7 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
     hint = (" or a smoother surface (smaller rms_height_wl / corr_length_wl)" if why else " or a lower pts_per_wl")
     if cfg["solver"] == "dense" or (cfg["solver"] == "auto" and not fast_ok):
         if npart > MAX_UNKNOWNS:
-            raise ValueError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
+            raise UsageError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
                              f"{part_len:g} wavelengths, more than {MAX_UNKNOWNS} (a dense solve of that size takes "
                              "many CPU minutes per partition)"
                              + ("" if cfg["solver"] == "dense" else
@@ -955,7 +989,7 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
                                 f"blocks of {block:.3g}; at most a third of the partition)")
                              + ": use shorter partitions (more `partitions`)" + hint)
         if need_dense > budget:
-            raise ValueError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
+            raise UsageError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
                              f"{part_len:g} wavelengths, {need_dense / 2**30:.1f} GiB for {workers} worker(s), more "
                              f"than the {budget / 2**30:.1f} GiB available: use shorter partitions (more "
                              "`partitions`)" + hint)
@@ -963,7 +997,7 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
     if cfg["solver"] == "fast" and not fast_ok:
         if not fast_fit and dense_ok:
             return "fast", dense_ok      # solve_partition falls back to dense, with a warning naming why
-        raise ValueError(f"solver='fast' cannot take partitions of {part_len:g} wavelengths with {npart} unknowns"
+        raise UsageError(f"solver='fast' cannot take partitions of {part_len:g} wavelengths with {npart} unknowns"
                          f"{why}: " + (f"the height range {height:.3g} wavelengths needs blocks of {block:.3g}, more "
                                        "than a third of the partition" if not fast_fit else
                                        f"more than {MAX_FAST_UNKNOWNS} unknowns" if npart > MAX_FAST_UNKNOWNS else
@@ -991,7 +1025,7 @@ def _realise_surface(cfg, workers):
             return gaussian_surface(length_wl, npart * partitions, cfg["rms_height_wl"], corr_length_wl, cfg["seed"],
                                     second_derivative=True)
         except ValueError as exc:
-            raise ValueError(f"pts_per_wl={pts_per_wl:g} is too coarse for corr_length_wl={corr_length_wl:g} "
+            raise UsageError(f"pts_per_wl={pts_per_wl:g} is too coarse for corr_length_wl={corr_length_wl:g} "
                              f"(the surface spectrum needs > {3.9 / corr_length_wl:.3g} points per wavelength): "
                              f"{exc}") from None
 
@@ -1024,14 +1058,14 @@ def _realise_surface(cfg, workers):
         n_in = max(1.0, eta.real)
         ppw_in = 1.0 / (dx * n_in)
         if ppw_in < 2.0:
-            raise ValueError(f"pts_per_wl={pts_per_wl:g} gives {ppw_in:.2g} points per interior wavelength "
+            raise UsageError(f"pts_per_wl={pts_per_wl:g} gives {ppw_in:.2g} points per interior wavelength "
                              f"(lambda / n, n={eta.real:g}): must be >= 2; raise pts_per_wl")
         if ppw_in < 5.0:
             reasons.append(f"only {ppw_in:.2g} points per interior wavelength (lambda / n, n={eta.real:g}): "
                            "the field inside the material is not resolved")
         panels = math.ceil(-eta.imag * K0 * dx * float(np.max(np.hypot(1.0, s_all))))
         if panels > MAX_PANELS:
-            raise ValueError(f"k={-eta.imag:g} gives a skin depth of {1 / (-eta.imag * K0):.2g} wavelengths, "
+            raise UsageError(f"k={-eta.imag:g} gives a skin depth of {1 / (-eta.imag * K0):.2g} wavelengths, "
                              f"{panels} quadrature panels per cell (> {MAX_PANELS}): use k <= "
                              f"{MAX_PANELS / (K0 * dx):.3g} at this sampling, or the PEC (n=None)")
     with warnings.catch_warnings():
