@@ -25,13 +25,14 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--pts-per-wl", type=float, default=8.0)
     ap.add_argument("--tol", type=float, default=None)
+    ap.add_argument("--incidence", default="auto")
     args = ap.parse_args(argv)
     t0 = time.process_time()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", mom.MoMAccuracyWarning)
         res = mom.scatter(1932.0, 2, 2.0, 14.1, [85.0], np.arange(-89.0, 90.0, 1.0), pts_per_wl=args.pts_per_wl, seed=args.seed, tol=args.tol,
                           executor=mom.SerialExecutor(), taper_width_wl=241.0, polarization=("s", "p"), n=1.5, k=0.0,
-                          solver="fast", progress=False)
+                          solver="fast", progress=False, incidence=args.incidence)
     cpu = time.process_time() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20
     print(f"unknowns per partition {res.params['unknowns_per_partition']}, solver {res.params['solver']}, "

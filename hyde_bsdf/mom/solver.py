@@ -180,6 +180,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.mom.beam import gaussian_beam, window_bias
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, FastSolverUnsuitable, block_length_wl, solve_fast, spectral_rule
 from hyde_bsdf.mom.gather import ExecutorError, gather
@@ -527,19 +528,28 @@ def _solve_fields(task, psi, clock):
     return sol, "dense", reasons
 
 
-def _radiate(task, fields, out):
-    """Stage 4 of a partition: taper (Eq. 22), absorbed power, far field (Eq. 21) of every polarisation."""
+def _radiate(task, fields, out, lit=None):
+    """Stage 4 of a partition: taper (Eq. 22), absorbed power, far field (Eq. 21) of every polarisation.
+
+    ``lit``: (flux, effective length) of the beam-lit incidence angles (``task["beam"]``, :mod:`beam`), whose
+    currents are not windowed; ``out["length"]`` [n_ti] is the effective illuminated length that normalises sigma.
+    """
     x, y, fp, dx = task["x"], task["y"], task["dfdx"], task["dx"]
     pols, eta = task["pols"], task["eta"]
-    win = taper(x, 0.0, task["w"])
-    out["flux"] = incident_flux(x, fp, dx, win, task["theta_i"])
     n_ti = np.atleast_1d(task["theta_i"]).size
+    win = np.repeat(taper(x, 0.0, task["w"])[:, None], n_ti, axis=1)
+    out["flux"] = incident_flux(x, fp, dx, win[:, 0], task["theta_i"])
+    out["length"] = np.full(n_ti, task["w"] * math.sqrt(math.pi / 2.0))
+    if lit is not None:
+        beam = task["beam"]
+        win[:, beam] = 1.0
+        out["flux"][beam], out["length"][beam] = lit
     Us, Vs = [], []
     for pol in pols:
         u, v = fields["u_" + pol], fields["v_" + pol]
         out["absorbed_" + pol] = np.zeros(n_ti) if eta is None else absorbed_flux(u, v, win, dx)
-        Us.append(np.zeros((x.size, n_ti), complex) if u is None else u * win[:, None])
-        Vs.append(np.zeros((x.size, n_ti), complex) if v is None else v * win[:, None])
+        Us.append(np.zeros((x.size, n_ti), complex) if u is None else u * win)
+        Vs.append(np.zeros((x.size, n_ti), complex) if v is None else v * win)
     # one far-field pass for all polarisations and both angle grids (the kernel e^{jk(x sin + y cos)} and
     # the segments' Fourier coefficients are shared; a PEC's zero u or v columns are skipped)
     U, V = np.hstack(Us), np.hstack(Vs)
@@ -568,10 +578,17 @@ def solve_partition(task):
     """
     clock = time.process_time  # CPU seconds of this process (its BLAS is single-threaded in the pool)
     psi = incident_field(task["x"], task["y"], task["theta_i"])
+    beam = task.get("beam")
+    lit = None
+    if beam is not None and np.any(beam):
+        pb, fb, lb = gaussian_beam(task["x"], task["y"], task["dfdx"], task["dx"],
+                                   np.atleast_1d(task["theta_i"])[beam], task["w"])
+        psi[:, beam] = pb
+        lit = (fb, lb)
     fields, method, reasons = _solve_fields(task, psi, clock)
     tc = clock()
     out = {"solver": method, "reasons": reasons, "residual": fields.get("residual")}
-    _radiate(task, fields, out)
+    _radiate(task, fields, out, lit)
     fill, factor, solve = fields["times"]
     out["times"] = np.array([fill, factor, solve, clock() - tc])
     return out
@@ -797,7 +814,7 @@ MAX_PANELS = 64
 
 def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
             pts_per_wl=10, seed=0, executor=None, *, taper_width_wl=None, progress=None,
-            polarization="s", n=None, k=None, timeout=None, solver="auto", tol=None):
+            polarization="s", n=None, k=None, timeout=None, solver="auto", tol=None, incidence="window"):
     """Incoherent far-field scattering of a 1-D Gaussian rough surface -- paper Eqs. 18-23, both polarisations.
 
     Parameters
@@ -870,6 +887,7 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     t_wall = time.perf_counter()
     cfg = _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
                         pts_per_wl, seed, taper_width_wl, polarization, n, k, timeout, solver, tol)
+    cfg["beam"] = _check_incidence(incidence, cfg["ti_deg"])
     own = executor is None
     workers = min(os.cpu_count() or 1, cfg["partitions"]) if own else 1
     surf = _realise_surface(cfg, workers)
@@ -900,6 +918,19 @@ FAST_SECONDS_PER_UNKNOWN = 2e-3
 AUTO_FAST_UNKNOWNS = 1000
 #: most unknowns per partition for the fast solver
 MAX_FAST_UNKNOWNS = 200000
+
+
+#: incidence="auto" lights theta_i at and above this (degrees) with the Gaussian beam (:mod:`hyde_bsdf.mom.beam`)
+BEAM_FROM_DEG = 75.0
+
+
+def _check_incidence(incidence, ti_deg):
+    """Per theta_i, whether the beam (True) or the windowed plane-wave current (False) lights it."""
+    if incidence not in ("window", "beam", "auto"):
+        raise UsageError(f"incidence must be 'window', 'beam' or 'auto', got {incidence!r}")
+    if incidence == "auto":
+        return ti_deg >= BEAM_FROM_DEG
+    return np.full(ti_deg.size, incidence == "beam")
 
 
 def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, pts_per_wl,
@@ -1087,7 +1118,7 @@ def _partition_tasks(cfg, surf):
                       "dfdx": surf["s"][sl].copy(), "d2fdx2": surf["c"][sl].copy(), "dx": surf["dx"],
                       "theta_i": cfg["theta_i"], "theta_r": cfg["theta_r"], "theta_fine": surf["fine"],
                       "w": cfg["w"], "pols": cfg["pols"], "eta": cfg["eta"], "solver": surf["method"],
-                      "tol": cfg["tol"], "dense_ok": surf["dense_ok"]})
+                      "tol": cfg["tol"], "dense_ok": surf["dense_ok"], "beam": cfg.get("beam")})
     return tasks
 
 
@@ -1120,10 +1151,12 @@ def _statistics(results, cfg, surf):
     """Stage 4: Eq. 23's partition average, standard errors, coherent part, power balance, Mueller elements."""
     M, w, pols, theta_i, fine = cfg["partitions"], cfg["w"], cfg["pols"], cfg["theta_i"], surf["fine"]
     # Eq. 23 with F = -j k0 (Eq. 21's sum): sigma = |F|^2 / (8 pi w sqrt(pi/2)), partition mean
-    norm = 1.0 / (8.0 * math.pi * w * math.sqrt(math.pi / 2.0))
+    # (w sqrt(pi/2) for a windowed current; a beam's power over cos ti: beam.gaussian_beam)
+    length = results[0].get("length", np.full(np.size(theta_i), w * math.sqrt(math.pi / 2.0)))
+    norm = 1.0 / (8.0 * math.pi * length)[:, None]
     sum_flux = sum(r["flux"] for r in results)
     cos_i = np.cos(theta_i)
-    nominal_flux = M * w * math.sqrt(math.pi / 2.0) * cos_i
+    nominal_flux = M * length * cos_i
 
     def mean_se(stack):
         """Partition mean and its standard error (spread between partitions)."""
@@ -1218,6 +1251,7 @@ def _result(cfg, surf, results, stats, reasons, wall):
                 "k": None if eta is None else -eta.imag,
                 "solver": used[0] if len(used) == 1 else "+".join(used), "solver_requested": cfg["solver"],
                 "tol": cfg["tol"] or FAST_TOL,
+                "incidence": ["beam" if b else "window" for b in cfg["beam"]],
                 "max_residual": max(residuals) if residuals else None},
         warnings=reasons, polarization=pols,
         sigma_s=get("s", "sigma"), sigma_p=get("p", "sigma"), sigma_sp=stats["sigma_sp"],
