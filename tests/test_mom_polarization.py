@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from hyde_bsdf import mom
-from hyde_bsdf.mom import model1d
+from hyde_bsdf.mom import model1d, runtime
 from hyde_bsdf.model.fresnel import fresnel_rs_rp
 
 SERIAL = mom.SerialExecutor()
@@ -165,7 +165,7 @@ def test_blas_thread_probe_leaves_no_file_open():
     """The OpenBLAS probe reads /proc/self/maps with a context manager: no ResourceWarning."""
     with warnings.catch_warnings():
         warnings.simplefilter("error", ResourceWarning)
-        mom.solver._openblas_libs()
+        runtime.openblas_libs()
         gc.collect()
 
 

@@ -168,7 +168,6 @@ all incidence angles at once.
 from __future__ import annotations
 
 import concurrent.futures as cf
-import ctypes
 import math
 import multiprocessing
 import os
@@ -185,6 +184,7 @@ from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, FastSolverUnsuitable, block_length_wl, solve_fast, spectral_rule
 from hyde_bsdf.mom.gather import ExecutorError, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
+from hyde_bsdf.mom.runtime import limit_blas_threads, memory_available, restore_blas_threads, worker_init
 
 __all__ = [
     "scatter",
@@ -393,69 +393,6 @@ def check_partition(partition_length, corr_length_wl, rough=True):
 # One partition (the unit of parallel work)
 # ---------------------------------------------------------------------------
 
-def _openblas_libs():
-    """(set_num_threads, get_num_threads) ctypes functions of every OpenBLAS loaded in this process.
-
-    NumPy's and SciPy's wheels each bundle OpenBLAS; we reach their thread
-    controls through ctypes (what threadpoolctl does) and skip any we cannot find.
-    """
-    try:
-        with open("/proc/self/maps") as fh:  # closed at once (no ResourceWarning)
-            maps = fh.read().split("\n")
-    except OSError:  # not Linux: leave the BLAS alone
-        return []
-    paths = {line.split()[-1] for line in maps if "openblas" in line.lower() and line.split()[-1].startswith("/")}
-    found = []
-    for path in sorted(paths):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for suffix in ("64_", "", "_64_"):
-            set_fn = getattr(lib, "scipy_openblas_set_num_threads" + suffix, None)
-            get_fn = getattr(lib, "scipy_openblas_get_num_threads" + suffix, None)
-            if set_fn is not None and get_fn is not None:
-                found.append((set_fn, get_fn))
-                break
-        else:
-            set_fn = getattr(lib, "openblas_set_num_threads", None)
-            get_fn = getattr(lib, "openblas_get_num_threads", None)
-            if set_fn is not None and get_fn is not None:
-                found.append((set_fn, get_fn))
-    return found
-
-
-def _limit_blas_threads(n=1):
-    """Limit OpenBLAS to n threads in this process; returns the previous counts (for restoring)."""
-    previous = []
-    for set_fn, get_fn in _openblas_libs():
-        previous.append((set_fn, int(get_fn())))
-        set_fn(int(n))
-    return previous
-
-
-def _restore_blas_threads(previous):
-    for set_fn, count in previous:
-        set_fn(count)
-
-
-def _keep_freed_memory():
-    """glibc only: keep freed blocks up to 256 MiB in the heap instead of returning them to the system (each
-    partition allocates and frees the same temporaries; handing them back costs a page fault per 4 KiB on the
-    next use: a tenth of a Fig. 6 partition's CPU time was system time).  For pool workers only (process-wide)."""
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        libc.mallopt(-3, 256 * 2**20)      # M_MMAP_THRESHOLD
-        libc.mallopt(-1, 512 * 2**20)      # M_TRIM_THRESHOLD
-    except (OSError, AttributeError):      # not glibc
-        pass
-
-
-def _worker_init():
-    _limit_blas_threads(1)
-    _keep_freed_memory()
-
-
 #: a dense fallback may cost at most this many times the fast solver's own estimate (or its time spent)
 DENSE_FALLBACK_RATIO = 10.0
 
@@ -475,7 +412,7 @@ def _dense_refusal(n, pols, eta, fast_seconds):
     """Why a dense fallback of n unknowns is refused (memory, or more than DENSE_FALLBACK_RATIO x the fast
     solver's cost), or None where it may run."""
     need, seconds = _dense_cost(n, pols, eta)
-    free = _memory_available()
+    free = memory_available()
     if need > 0.8 * free:
         return f"a dense LU of {n} unknowns needs {need / 2**30:.1f} GiB, more than the {free / 2**30:.1f} GiB available"
     if seconds > DENSE_FALLBACK_RATIO * fast_seconds:
@@ -609,13 +546,13 @@ class SerialExecutor(cf.Executor):
         fut = cf.Future()
         # one BLAS thread while the task runs: threaded BLAS only slows down these matrix sizes
         # (the 2-thread LU of a 500-unknown partition is 10x slower here) -- restored afterwards
-        previous = _limit_blas_threads(1)
+        previous = limit_blas_threads(1)
         try:
             fut.set_result(fn(*args, **kwargs))
         except BaseException as exc:  # hand the error to the caller through the future
             fut.set_exception(exc)
         finally:
-            _restore_blas_threads(previous)
+            restore_blas_threads(previous)
         return fut
 
 
@@ -730,7 +667,7 @@ def process_pool(max_workers=None):
     """
     workers = max(1, int(max_workers or os.cpu_count() or 1))
     ctx = multiprocessing.get_context("fork" if sys.platform.startswith("linux") else "spawn")
-    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init)
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=worker_init)
 
 
 class _Progress:
@@ -783,18 +720,6 @@ def _check_index(n, k):
     if n > 1e3 or k > 1e3:
         raise UsageError(f"n and k must be <= 1000 (use the PEC, n=None, for a better conductor), got n={n:g}, k={k:g}")
     return complex(n, -k)
-
-
-def _memory_available():
-    """Bytes of memory available to new allocations (Linux /proc/meminfo), or 8 GiB if unknown."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return 8 * 2**30
 
 
 def _matrices_per_partition(pols, eta):
@@ -1069,7 +994,7 @@ def _realise_surface(cfg, workers):
     def height_range(f, npart):
         return float(np.max(np.ptp(f.reshape(partitions, npart), axis=1)))
 
-    budget = 0.8 * _memory_available()
+    budget = 0.8 * memory_available()
     # a first bound before any allocation: the dense path's size (or the fast path's for long partitions)
     if n_part > MAX_FAST_UNKNOWNS or (cfg["solver"] == "dense" and n_part > MAX_UNKNOWNS):
         _choose_solver(cfg, n_part, part_len / n_part, 0.0, workers, budget, "")
