@@ -11,10 +11,16 @@ an exact Gaussian beam and radiates the unwindowed currents.
    sigma_ref(theta) = 2 pi cos(ti) cos^2(theta) |A(k sin theta)|^2 / int cos^2 |A|^2 d theta (energy conservation
    fixes the scale; A the beam's spectrum), which is ~e^-700 at 87 deg: the MoM's value there is its floor.
 2. Rough PEC surface, the Fig. 6 statistics (rms slope 0.3, ell = 5 lambda), theta_i = 80 deg, w = 150 lambda, on
-   the same realisation: window (partitions 4 w) against beam (4 w, and 6 w: the partition ends' share), 1-deg bins
-   at theta_r = 80-89 deg.  The beam is the reference of the comparison (exact incident field, energy 1 to 0.3 %);
-   its 4 w and 6 w runs must agree within 3 dB at 86-89 deg (speckle from few partitions).
+   the same partitions: window (partitions 4 w) against beam (4 w), 1-deg bins at theta_r = 86-89 deg (reported);
+   the beam on 6 w partitions (another realisation) against 4 w within 3 dB plus twice the speckle.
    Quick mode: 2 partitions (full: 8).
+
+Measured (docs/validation.md): the flat plate's analytic sigma at 86/87/88/89 deg is -82/-99/-113/-126 dB below the
+specular peak; the windowed current sits at -44.5 dB (4 w) and -50 dB (6 w) in s -- the artificial floor: the
+plane-wave-lit partition ends launch surface waves (s: decaying only as x^-3/2) that reach the window and radiate
+at forward grazing -- and follows the reference in p at 6 w; the beam follows it to -98 dB at 6 w (its floor at
+4 w, -54 to -59 dB, is the beam's e^-4 at the partition ends).  On the rough surface the incoherent field is
+20-50 dB above these floors and window and beam agree within 0.3-2.6 dB.
 
 Writes mom_forward_grazing.csv (sigma per case and theta_r), mom_forward_grazing.png, and the checks.
 """
@@ -92,30 +98,42 @@ def validate(outdir="out/validation", quick=False):
     return checks(flat, rough, ref)
 
 
+def band_error_db(res, pol):
+    """Speckle of the 1-deg band means in dB: the partitions' standard error, averaged over the bin (conservative:
+    the samples of a bin are correlated)."""
+    sig, se = getattr(res, "sigma_" + pol)[0], getattr(res, f"sigma_{pol}_std_error")[0]
+    return (10.0 / math.log(10.0)) * band_means(se) / band_means(sig)
+
+
 def checks(flat, rough, ref):
     ref_b = band_means(ref)
     peak = float(ref.max())
     out = []
     for name, res in flat.items():
         for pol in ("s", "p"):
-            got = band_means(getattr(res, "sigma_" + pol)[0])
-            lvl = db(got / peak)
-            good = name.startswith("beam")
+            lvl = db(band_means(getattr(res, "sigma_" + pol)[0]) / peak)
+            ok = (np.abs(lvl - db(ref_b / peak)) <= 3.0) | (lvl < -80.0)
+            graded = name == "beam 6w"
             out.append(dict(name=f"MoM forward grazing: flat PEC 80 deg, w = 75, {name}, {pol}: sigma at 86/87/88/89 deg "
-                                 f"relative to the specular peak (reference {', '.join(f'{v:.0f}' for v in db(ref_b / peak))} "
-                                 "dB); beam: below -40 dB (floor), window: reported",
-                            value=", ".join(f"{v:.1f}" for v in lvl), tolerance="< -40 dB" if good else "reported",
-                            passed=bool(np.all(lvl < -40.0)) if good else True))
-    for name in ("window 4w", "beam 6w"):
+                                 f"relative to the specular peak (analytic {', '.join(f'{v:.0f}' for v in db(ref_b / peak))}"
+                                 " dB); within 3 dB of it or below -80 dB (the solver's floor at tol 1e-4)"
+                                 + ("" if graded else ", reported"),
+                            value=", ".join(f"{v:.1f}" for v in lvl), tolerance=3.0 if graded else "reported",
+                            passed=bool(np.all(ok)) if graded else True))
+    for name, against in (("window 4w", "beam 4w"), ("beam 6w", "beam 4w")):
         for pol in ("s", "p"):
-            a = band_means(getattr(rough[name], "sigma_" + pol)[0])
-            b = band_means(getattr(rough["beam 4w"], "sigma_" + pol)[0])
-            d = db(a / b)
-            good = name.startswith("beam")
-            out.append(dict(name=f"MoM forward grazing: rough PEC 80 deg, w = 150, {name} against beam 4w, {pol}: dB at "
-                                 "86/87/88/89 deg" + (" (within 3 dB)" if good else " (the windowed current's excess)"),
-                            value=", ".join(f"{v:+.1f}" for v in d), tolerance=3.0 if good else "reported",
-                            passed=bool(np.all(np.abs(d) <= 3.0)) if good else True))
+            a, b = rough[name], rough[against]
+            d = db(band_means(getattr(a, "sigma_" + pol)[0]) / band_means(getattr(b, "sigma_" + pol)[0]))
+            tol = 3.0 + 2.0 * np.hypot(band_error_db(a, pol), band_error_db(b, pol))
+            same = name.startswith("window")
+            out.append(dict(name=f"MoM forward grazing: rough PEC 80 deg, w = 150, {name} against {against}, {pol}: dB at "
+                                 "86/87/88/89 deg" + (" on the same partitions (the windowed current's excess), reported"
+                                                      if same else " (other partitions: within 3 dB + 2 speckle errors)"),
+                            value=", ".join(f"{v:+.1f}" for v in d) + ("" if same else
+                                                                         " (limits " + ", ".join(f"{t:.1f}" for t in tol)
+                                                                         + ")"),
+                            tolerance="reported" if same else "3 dB + 2 se", passed=True if same else
+                            bool(np.all(np.abs(d) <= tol))))
     for tag, case in (("flat", flat), ("rough", rough)):
         for name, res in case.items():
             out.append(dict(name=f"MoM forward grazing: {tag} {name}, reflected power s / p (energy)",
