@@ -53,18 +53,21 @@ The partition is cut into blocks of ``B`` samples (at least ``near_wl`` waveleng
   gain per sweep over three sweeps), or ``max_sweeps`` reached, hands the best iterate
   to restarted GMRES preconditioned by the sparse LU of the strong part (the same fast
   product); if GMRES does not reach ``tol`` either, the caller falls back to the
-  dense LU where it fits (:mod:`hyde_bsdf.mom.solver`), and every step says why in
-  ``info["reasons"]``.
+  dense LU only where it fits and costs at most 10x the fast solve (:mod:`hyde_bsdf.mom.solver`),
+  and every step says why in ``info["reasons"]``.
 
 Limits: the plane-wave sum needs k H^2 / (4 L_s) <= 25 (H the partition's height
-range, L_s the block length), so a very rough surface gets long blocks, and when the
+range, L_s the block length); the blocks are sized for e^16 (``BLOCK_GROWTH``: rounding
+1e-16 e^16 stays far below the rule's 1e-7), lengthened (growth x 0.75, three times) where
+a rule still misses its tolerance, so a very rough surface gets long blocks, and when the
 block would exceed a third of the partition the fast solver declines
 (:class:`FastSolverUnsuitable`).  A lossy interior (a metal) is banded and needs no far
 part; a lossless or weakly lossy one (glass) gets its own spectral far part with
 k1 = k0 eta, on the contour turned by -arg(k1)/2 (the steepest-descent line of a lossy
-saddle); a rule whose plane waves would grow along x, or that does not reach its tolerance
-(eta = 0.5 - 0.3j on a surface with a 4.5-lambda height range stalls at 1.6e-4: the turned
-line's truncation), is refused and the partition goes to the dense LU with the reason.
+saddle); a rule whose plane waves would grow along x is refused, and one that does not reach
+its tolerance over the first blocks (eta = 0.5 - 0.3j on a surface with a 4.8-lambda height
+range stalled at 0.015 over 3-lambda blocks: the turned line's truncation) gets longer blocks
+(4.1 lambda there) -- before, such partitions went to the dense LU.
 """
 from __future__ import annotations
 
