@@ -197,7 +197,7 @@ def test_plane_wave_rule_that_misses_its_tolerance_says_by_how_much():
     k1 = 1.5 * kernels.K0
     with pytest.raises(fast.FastSolverUnsuitable, match=r"tolerance 1e-07 \(the best, [0-9.e-]+, is above it\)"):
         fast.spectral_rule(k1, 16.5, 200.0, 11.84)
-    b, rules = fast._plan_blocks(1600, 0.125, 11.84, 200.0, [kernels.K0, k1], fast.NEAR_WL)
+    b, rules = fast.plan_blocks(1600, 0.125, 11.84, 200.0, [kernels.K0, k1], fast.NEAR_WL)
     assert b * 0.125 > 16.5 and all(phi.size < 400 for phi, _ in rules)
 
 
@@ -315,3 +315,25 @@ def test_lossy_dielectric_interior_with_its_own_plane_waves(length, sigma_h, see
         a, b = getattr(f, "sigma_" + pol), getattr(d, "sigma_" + pol)
         assert np.max(np.abs(a - b)) < 1e-3 * b.max()
         np.testing.assert_allclose(getattr(f, "energy_" + pol), getattr(d, "energy_" + pol), atol=1e-3)
+
+
+@pytest.mark.parametrize("solver", ["fast", "dense"])
+def test_run_beyond_available_memory_is_refused_before_allocating(monkeypatch, solver):
+    """With 16 MiB available (runtime.memory_available patched), a 1000-unknown partition is refused by the set-up
+    with one UsageError line naming the need, what is available and the option (`partitions`); nothing is solved."""
+    from hyde_bsdf.errors import UsageError
+
+    monkeypatch.setattr(mom.solver, "memory_available", lambda: 16 * 2**20)
+    monkeypatch.setattr(mom.solver, "solve_partition", lambda task: pytest.fail("a partition was solved"))
+    with pytest.raises(UsageError, match=r"GiB for 1 worker\(s\), more than the 0\.0 GiB available.*`partitions`") as exc:
+        mom.scatter(100.0, 1, 0.0, 1.0, [30.0], [30.0], executor=SERIAL, solver=solver)
+    assert "\n" not in str(exc.value)
+
+
+def test_fast_memory_estimate_counts_the_interior_plane_waves():
+    """The set-up's memory estimate of a glass partition uses the blocks and both rules solve_fast will use: the
+    issue's 7,728-unknown glass partition (height range 11 lambda) is estimated at 1.50 GiB (measured peak RSS of
+    the whole run 1.52 GiB, benchmarks/bench_mom_glass.py), within 2 GB."""
+    x, f, s = mom.gaussian_surface(1932.0, 2 * 7728, 2.0, 14.1, seed=0)
+    need = mom.solver._fast_bytes(7728, 0.125, float(np.ptp(f[:7728])), 966.0, 1.5 + 0j)
+    assert 1.2 * 2**30 < need < 2e9

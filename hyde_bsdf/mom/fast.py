@@ -83,7 +83,8 @@ from hyde_bsdf.mom.kernels import (
     DECAY_CUTOFF, K0, _cell_moments, _complex_weights, _interp_weights, _near, _self, _sinc_derivatives, hankel2,
 )
 
-__all__ = ["solve_fast", "spectral_rule", "block_length_wl", "FastSolverUnsuitable", "FAST_TOL", "NEAR_WL"]
+__all__ = ["solve_fast", "spectral_rule", "block_length_wl", "plan_blocks", "FastSolverUnsuitable", "FAST_TOL",
+           "NEAR_WL"]
 
 #: default relative residual ||b - A x|| / ||b|| at which the iteration stops
 FAST_TOL = 1e-4
@@ -842,7 +843,7 @@ def block_length_wl(height_wl, ks, near_wl=NEAR_WL, growth=BLOCK_GROWTH):
     return max(near_wl, max(abs(complex(k)) for k in ks) * height_wl ** 2 / (4.0 * growth))
 
 
-def _plan_blocks(n, dx, height, length, ks, near_wl):
+def plan_blocks(n, dx, height, length, ks, near_wl):
     """Block samples b and the plane-wave rule of every k in ``ks``; where a rule misses its tolerance (rounding
     in the sum's growth), the blocks are lengthened (growth x 0.75, up to three times) rather than given up."""
     growth = BLOCK_GROWTH
@@ -897,7 +898,7 @@ def solve_fast(x, y, fp, fpp, dx, psi, pols, eta, *, tol=FAST_TOL, method="fb", 
     band1 = n if k1 is None or k1.imag == 0 else int(math.ceil(DECAY_CUTOFF / (abs(k1.imag) * dx)))
     interior_far = k1 is not None and band1 >= max(8, int(math.ceil(block_length_wl(height, [k0], near_wl) / dx))) - 1
     ks = [k0, k1] if interior_far else [k0]
-    b, rules = _plan_blocks(n, dx, height, length, ks, near_wl)
+    b, rules = plan_blocks(n, dx, height, length, ks, near_wl)
     blocks = _Blocks(n, b)
     bounds = blocks.bounds
     half = 2 * blocks.width + 1

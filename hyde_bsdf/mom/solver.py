@@ -197,7 +197,7 @@ import numpy as np
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.mom.beam import gaussian_beam, window_bias
 from hyde_bsdf.mom.dense import solve_dense
-from hyde_bsdf.mom.fast import FAST_TOL, FastSolverUnsuitable, block_length_wl, solve_fast, spectral_rule
+from hyde_bsdf.mom.fast import FAST_TOL, NEAR_WL, FastSolverUnsuitable, block_length_wl, plan_blocks, solve_fast
 from hyde_bsdf.mom.gather import ExecutorError, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
 from hyde_bsdf.mom.runtime import limit_blas_threads, memory_available, restore_blas_threads, worker_init
@@ -934,14 +934,15 @@ def _fast_block_wl(height_wl, eta):
     return block_length_wl(height_wl, [K0] if eta is None or eta.imag != 0 else [K0, K0 * eta])
 
 
-def _fast_bytes(n, block_wl, dx, height, part_len, eta):
-    """Peak bytes of one fast solve: plane-wave factors (Q per sample and direction), the strong part's
-    band, the block matrices.  O(N Q); Q from the plane-wave rule itself.  Raises FastSolverUnsuitable."""
-    b = int(math.ceil(block_wl / dx))
-    q = spectral_rule(K0, (b - 1) * dx, part_len, height)[0].size
-    interior_far = eta is not None and eta.imag == 0
+def _fast_bytes(n, dx, height, part_len, eta):
+    """Peak bytes of one fast solve: plane-wave factors (Q per sample and direction, every region with a far part),
+    the strong part's band, the block matrices.  O(N Q); the blocks and Q from fast.plan_blocks itself (what
+    solve_fast will use: glass' interior k has its own rule).  Raises FastSolverUnsuitable."""
+    ks = [K0] if eta is None or eta.imag != 0 else [K0, K0 * eta]
+    b, rules = plan_blocks(n, dx, height, part_len, ks, NEAR_WL)
+    q = sum(phi.size for phi, _ in rules)
     nk = 1 if eta is None else 2
-    planes = q * (7 + 8) * (2 if interior_far else 1)     # 7 kept per region, ~8 temporaries while set up
+    planes = q * (7 + 8)                                   # 7 kept per region, ~8 temporaries while set up
     bands = (4 * b + 3) * (2 if eta is None else 4)
     return 16.0 * n * (planes + 1.5 * bands + 6 * nk * nk * b + 40)
 
@@ -956,7 +957,7 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
     need_fast = math.inf
     if fast_fit and npart <= MAX_FAST_UNKNOWNS:
         try:
-            need_fast = _fast_bytes(npart, block, dx, height, part_len, eta) * workers
+            need_fast = _fast_bytes(npart, dx, height, part_len, eta) * workers
         except FastSolverUnsuitable:
             fast_fit = False
     fast_ok = fast_fit and need_fast <= budget
