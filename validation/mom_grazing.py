@@ -1,30 +1,32 @@
-"""The grazing verdict: exact EM (the fast MoM) against the model's 1-D reduction at 70-88 deg (issue 17).
+"""The grazing verdict: exact EM (the fast MoM) against the model's 1-D reduction at 60-88 deg (issues 17, 25).
 
 The paper's claim is that V-groove shadowing and the diffuse term keep the pBRDF bounded and
 realistic as incidence or observation approaches grazing.  The dense MoM could not go there (the
 taper Thorsos' criterion asks for at 88 deg needs partitions of 50,000 unknowns); the fast solver
-(:mod:`hyde_bsdf.mom.fast`, forward-backward sweeps with spectral acceleration) can.
+(:mod:`hyde_bsdf.mom.fast`, forward-backward sweeps with spectral acceleration) can.  From 80 deg on
+the partitions are lit by the Gaussian beam (``incidence="auto"``, :mod:`hyde_bsdf.mom.beam`).
 
-1. Energy on long flat plates (PEC and Infragold eta = 0.285 - 7.3523 j, s and p, 10 pts/lambda):
-   the taper is as wide as Thorsos' parameter (1 + 2 tan^2 ti) / (k w cos ti)^2 <= 0.006 asks
-   (w = 96, 381, 2383 lambda at 80, 85, 88 deg), the partition 4 w (PEC) or 6 w (Infragold: the
-   truncated ends launch p waves along the metal whose absorption under the window decays with
-   their distance: +1.3 % of the incident power at 4 w, +0.34 % at 8 w), 88 deg: 95,000 and
-   143,000 unknowns; reflected + absorbed must be 1 within 1 %.  Quick mode: 80 deg only.
-2. Rough surface, the Fig. 6 statistics (rms slope 0.3, ell = 5 lambda), PEC and Infragold on
-   the same realisation, theta_i = 70, 80, 85, 88 deg, both polarisations, observation angles to
-   +-89.75 deg; the taper for Thorsos' parameter 0.015 (partitions of 150, 220, 840, 5300 lambda;
-   full mode 12, 8, 3, 1 of them, 1800-5300 lambda per angle; quick mode 80 deg, one partition).  The MoM's M00 (1-deg
-   bins, sigma units) and M01/M00, M22/M00, M23/M00 against the 1-D model
+1. Energy on long flat plates (PEC, Infragold eta = 0.285 - 7.3523 j; full mode also flame-sprayed
+   Al 1.226 - 10.413 j and glass 1.5; s and p, 10 pts/lambda): the taper is as wide as Thorsos'
+   parameter (1 + 2 tan^2 ti) / (k w cos ti)^2 <= 0.006 asks (w = 96, 381, 2383 lambda at 80, 85,
+   88 deg), the partition 4 w (PEC, glass) or 6 w (metals), 88 deg: 95,000 and 143,000 unknowns;
+   reflected + absorbed must be 1 within 1 %.  Quick mode: 80 deg only.
+2. Rough surface, the Fig. 6 statistics (rms slope 0.3, ell = 5 lambda), the four materials on
+   the same realisation, theta_i = 60, 70, 80, 85, 88 deg (``ROUGH_PLAN``: 16, 12, 8, 3, 1 partitions
+   of 150-6040 lambda; quick mode 80 deg, one partition), both polarisations, observation angles to
+   +-89.75 deg.  The MoM's M00 (1-deg bins, sigma units) and M01/M00, M22/M00, M23/M00, M33/M00 (= M22/M00
+   for a 1-D surface in the plane of incidence) against the 1-D model
    (:func:`hyde_bsdf.mom.model1d.mueller_sigma`, specular + diffuse) with V-groove (Eq. 12),
    Smith and no shadowing: rms dB over the MoM's lobe (bins >= 10 % of its peak, the coherent
    specular spike |theta_r - theta_i| <= 2 deg left out: no facet model has it), the mean dB at
    near-grazing observation (theta_r >= 80 deg, forward), and the model's specular DHR rho_s
    (above 1 the diffuse term of Eq. 16 turns negative: the energy bookkeeping fails).
+3. The verdict per element (:func:`element_verdict`, V-groove model): the lobe-mean difference against
+   twice its speckle (+0.5 dB for M00, +0.05 for the ratios): holds, or fails by how much and where.
 
-Writes mom_grazing.png (M00 and the ratios per theta_i, PEC and Infragold), mom_grazing_energy.png
-(flat-plate energy), mom_grazing.csv (binned curves), mom_grazing_table.csv (the verdict numbers)
-and mom_grazing_energy.csv.
+Writes mom_grazing.png (M00 and the ratios per theta_i, all materials), mom_grazing_energy.png
+(flat-plate energy), mom_grazing.csv (binned curves), mom_grazing_table.csv (the shadowing verdict),
+mom_grazing_elements.csv (the per-element verdict) and mom_grazing_energy.csv.
 """
 import math
 import sys
@@ -257,7 +259,7 @@ def energy_figure(rows, path):
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6, 3.6))
-    for title, marker in (("PEC", "o"), ("Infragold", "s")):
+    for (_, title, _, _), marker in zip(MATERIALS, "osD^"):
         sel = [r for r in rows if r[0] == title]
         ax.plot([r[1] for r in sel], [r[6] - 1 for r in sel], marker + "-", label=f"{title} s")
         ax.plot([r[1] for r in sel], [r[7] - 1 for r in sel], marker + "--", label=f"{title} p")
