@@ -76,7 +76,7 @@ def validate(outdir="out/validation", quick=False):
     out.mkdir(parents=True, exist_ok=True)
     ti, w = FLAT["theta_i"], FLAT["w"]
     flat = {name: run(f * w, 1, 0.0, w, ti, inc) for name, inc, f in
-            (("window 4w", "window", 4), ("beam 4w", "beam", 4), ("beam 6w", "beam", 6))}
+            (("window 4w", "window", 4), ("beam 4w", "beam", 4), ("window 6w", "window", 6), ("beam 6w", "beam", 6))}
     ref = beam_reference(ti, w, THETA_R)
     M = 2 if quick else 8
     rw = ROUGH["w"]
@@ -150,7 +150,7 @@ def figure(flat, rough, ref, path):
     peak = float(ref.max())
     ax = axes[0]
     ax.plot(THETA_R, db(ref / peak), "k-", lw=2, label="analytic beam reflection")
-    for (name, res), col in zip(flat.items(), ("C3", "C0", "C2")):
+    for (name, res), col in zip(flat.items(), ("C3", "C0", "C1", "C2")):
         ax.plot(THETA_R, db(res.sigma_s[0] / peak), color=col, label=f"{name} s")
         ax.plot(THETA_R, db(res.sigma_p[0] / peak), "--", color=col, label=f"{name} p")
     ax.set(ylim=(-90, 5), xlabel="theta_r (deg)", ylabel="sigma / specular peak (dB)",
@@ -162,7 +162,7 @@ def figure(flat, rough, ref, path):
         ax.plot(THETA_R, db(res.sigma_s[0]), color=col, label=f"{name} s")
         ax.plot(THETA_R, db(res.sigma_p[0]), "--", color=col, label=f"{name} p")
     ax.set(ylim=(-45, 15), xlabel="theta_r (deg)", ylabel="sigma (dB)",
-           title="Rough PEC (rms slope 0.3, ell = 5), theta_i = 80 deg, w = 150 lambda")
+           title="Rough PEC (slope 0.3, ell 5), theta_i 80 deg, w 150 lambda")
     ax.axvspan(85.5, 89.5, color="0.92", zorder=0)
     ax.legend(fontsize=6)
     fig.tight_layout()
