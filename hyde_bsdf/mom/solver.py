@@ -195,6 +195,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.progress import Throttle, as_callback
 from hyde_bsdf.mom.beam import gaussian_beam, window_bias
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, NEAR_WL, FastSolverUnsuitable, block_length_wl, plan_blocks, solve_fast
@@ -690,30 +691,19 @@ def process_pool(max_workers=None):
     return cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=worker_init)
 
 
-class _Progress:
-    """A stderr progress report: a rewritten line on a terminal, a line every 10 s otherwise."""
+def _progress_reporter(total, progress):
+    """``update(done)`` reporting partitions done through :mod:`hyde_bsdf.progress` (a callback, True: stderr lines,
+    None: stderr lines for runs of 10 or more partitions, False: nothing), at most every PROGRESS_SECONDS."""
+    callback = as_callback(total >= 10 if progress is None else progress, prefix="mom:")
+    throttle = Throttle(callback)
 
-    def __init__(self, total, enabled):
-        self.total, self.enabled = total, enabled
-        self.t0 = time.perf_counter()
-        self.last = 0.0
-        self.tty = hasattr(sys.stderr, "isatty") and sys.stderr.isatty()
+    def update(done):
+        def line():
+            t = throttle.elapsed
+            return f"partition {done}/{total}, {t:.1f} s elapsed, ~{t / done * (total - done):.0f} s left"
+        throttle(line, force=done == total and throttle.elapsed >= 1.0)
 
-    def update(self, done):
-        if not self.enabled:
-            return
-        now = time.perf_counter() - self.t0
-        step = 0.5 if self.tty else 10.0
-        if done < self.total and now - self.last < step:
-            return
-        if done == self.total and now < 1.0:
-            return  # a short run needs no report
-        self.last = now
-        eta = now / done * (self.total - done)
-        start = "\r" if self.tty else ""
-        end = "" if (self.tty and done < self.total) else "\n"
-        sys.stderr.write(start + f"mom: partition {done}/{self.total}, {now:.1f} s elapsed, ~{eta:.0f} s left " + end)
-        sys.stderr.flush()
+    return update
 
 
 def _check_seed(seed):
@@ -794,9 +784,11 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         a dask cluster that loses its last worker (for ``gather.NO_WORKER_GRACE_S`` =
         60 s), a closed client or a broken process pool ends in :class:`ExecutorError`
         naming it, and a stderr line reports every 30 s in which no partition finished.
-    taper_width_wl : float in (0, L_p], keyword-only, Eq. 22's w (default L_p / 4).
-    progress : bool or None, keyword-only; None shows a stderr line for runs of
-        10 or more partitions.
+    taper_width_wl : float in (0, L_p], keyword-only, Eq. 22's w (default L_p / 4); with the beam, its
+        footprint (the incident field's e^-(x/w)^2 on the mean plane).
+    progress : callable progress(message), bool or None, keyword-only (:mod:`hyde_bsdf.progress`): a
+        line "partition done/total, elapsed, left" at most every 3 s; True: on stderr; None: on stderr
+        for runs of 10 or more partitions; False: none.
     polarization : "s", "p" or ("s", "p"), keyword-only (default "s").  s: E along z
         (TM_z, the paper's Fig. 6); p: H along z.  Both on the same surface give
         the cross term and the in-plane Mueller matrix.
@@ -815,6 +807,10 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         range against the partition length), else dense.  ``params["solver"]`` says which ran.
     tol : float or None, keyword-only: the fast solver's relative residual
         ||b - A x|| / ||b|| (default ``fast.FAST_TOL`` = 1e-4; 1e-3 is within 0.01 dB).
+    incidence : "auto", "window" or "beam", keyword-only.  "window": the paper's plane wave with the
+        current windowed by Eq. 22; "beam": an exact Gaussian beam of footprint w, unwindowed currents
+        (:mod:`hyde_bsdf.mom.beam`: no power bias, no forward-grazing floor in s); "auto" (default): the
+        beam for theta_i >= BEAM_FROM_DEG = 80 deg, the window below.  ``params["incidence"]`` per theta_i.
 
     Returns
     -------
@@ -1078,11 +1074,10 @@ def _solve_partitions(tasks, executor, workers, cfg, progress):
     """Stage 3: every partition solved and radiated (solve_partition) on the executor."""
     own = executor is None
     ex = process_pool(workers) if own else executor
-    show = (cfg["partitions"] >= 10) if progress is None else bool(progress)
-    bar = _Progress(cfg["partitions"], show)
+    update = _progress_reporter(cfg["partitions"], progress)
     try:
         # never a blind wait: liveness checks, the caller's timeout and a heartbeat (gather.py)
-        return gather(ex, solve_partition, tasks, timeout=cfg["timeout"], on_done=bar.update,
+        return gather(ex, solve_partition, tasks, timeout=cfg["timeout"], on_done=update,
                       heartbeat=progress is not False, what="partition", label="mom.scatter")
     finally:
         if own:
