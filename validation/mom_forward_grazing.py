@@ -94,6 +94,9 @@ def validate(outdir="out/validation", quick=False):
         for name in case:
             head += [f"{tag}_{name.replace(' ', '_')}_sigma_s", f"{tag}_{name.replace(' ', '_')}_sigma_p"]
     write_csv(out / "mom_forward_grazing.csv", head, rows)
+    write_csv(out / "mom_forward_grazing_cost.csv",
+              ["case", "cpu_s", "unknowns", "energy_error_s", "energy_error_p", "sigma_s_88_dB_below_peak"],
+              cost_rows(flat, ref))
     figure(flat, rough, ref, out / "mom_forward_grazing.png")
     return checks(flat, rough, ref)
 
@@ -141,12 +144,22 @@ def checks(flat, rough, ref):
     return out
 
 
+def cost_rows(flat, ref):
+    """Error against cost of each choice on the flat plate: worker CPU seconds, |energy - 1| per polarisation and
+    the s level at 88 deg relative to the specular peak (analytic: -113 dB)."""
+    peak = float(ref.max())
+    at88 = (THETA_R >= 87.5) & (THETA_R < 88.5)
+    return [[name, sum(v for k, v in res.times.items() if k != "wall"), res.params["unknowns_per_partition"],
+             abs(res.energy_s[0] - 1.0), abs(res.energy_p[0] - 1.0), float(db(res.sigma_s[0, at88].mean() / peak))]
+            for name, res in flat.items()]
+
+
 def figure(flat, rough, ref, path):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4))
     peak = float(ref.max())
     ax = axes[0]
     ax.plot(THETA_R, db(ref / peak), "k-", lw=2, label="analytic beam reflection")
@@ -164,6 +177,12 @@ def figure(flat, rough, ref, path):
     ax.set(ylim=(-45, 15), xlabel="theta_r (deg)", ylabel="sigma (dB)",
            title="Rough PEC (slope 0.3, ell 5), theta_i 80 deg, w 150 lambda")
     ax.axvspan(85.5, 89.5, color="0.92", zorder=0)
+    ax.legend(fontsize=6)
+    ax = axes[2]
+    for (name, cpu, _, es, ep, floor), col in zip(cost_rows(flat, ref), ("C3", "C0", "C1", "C2")):
+        ax.semilogy(cpu, max(es, 1e-5), "o", color=col, label=f"{name}: |E_s - 1|")
+        ax.semilogy(cpu, 10 ** (floor / 10), "s", color=col, mfc="none", label=f"{name}: sigma_s(88) / peak")
+    ax.set(xlabel="CPU s (one flat partition, s + p)", ylabel="error", title="Error against cost (flat plate)")
     ax.legend(fontsize=6)
     fig.tight_layout()
     save_figure(fig, path)
