@@ -325,7 +325,8 @@ def test_run_beyond_available_memory_is_refused_before_allocating(monkeypatch, s
 
     monkeypatch.setattr(mom.solver, "memory_available", lambda: 16 * 2**20)
     monkeypatch.setattr(mom.solver, "solve_partition", lambda task: pytest.fail("a partition was solved"))
-    with pytest.raises(UsageError, match=r"GiB for 1 worker\(s\), more than the 0\.0 GiB available.*`partitions`") as exc:
+    need = r"GiB for 1 worker\(s\), more than the 0\.0 GiB available.*`partitions`"
+    with pytest.raises(UsageError, match=need) as exc:
         mom.scatter(100.0, 1, 0.0, 1.0, [30.0], [30.0], executor=SERIAL, solver=solver)
     assert "\n" not in str(exc.value)
 

@@ -98,7 +98,8 @@ def window_bias(theta_i, w, pol, k=K0):
     (u = sin theta, visible |u| < 1) with obliquity cos(ti) / cos(theta) (s: EFIE current) or cos(theta) / cos(ti)
     (p: MFIE current) relative to a plane wave's, over the full spectrum's power:
 
-        s: int_{-1}^{1} G cos(ti) / sqrt(1 - u^2) du / int G du,   p: int_{-1}^{1} G sqrt(1 - u^2) / cos(ti) du / int G du.
+        s: int_{-1}^{1} G cos(ti) / sqrt(1 - u^2) du / int G du,
+        p: int_{-1}^{1} G sqrt(1 - u^2) / cos(ti) du / int G du.
 
     To first order s: 1 + (1 + 3 tan^2 ti) / (2 (k w cos ti)^2), p: 1 - 1 / (2 (k w cos ti)^2 cos^2 ti); near grazing
     about 1 + 0.75 tau and 1 - 0.25 tau (tau Thorsos' parameter); the exact integral is what :mod:`solver` warns

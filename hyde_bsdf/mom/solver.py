@@ -437,7 +437,8 @@ def _dense_refusal(n, pols, eta, fast_seconds):
     need, seconds = _dense_cost(n, pols, eta)
     free = memory_available()
     if need > 0.8 * free:
-        return f"a dense LU of {n} unknowns needs {need / 2**30:.1f} GiB, more than the {free / 2**30:.1f} GiB available"
+        return (f"a dense LU of {n} unknowns needs {need / 2**30:.1f} GiB, more than the {free / 2**30:.1f} GiB "
+                "available")
     if seconds > DENSE_FALLBACK_RATIO * fast_seconds:
         return (f"a dense LU of {n} unknowns would take ~{seconds:.0f} CPU s, more than {DENSE_FALLBACK_RATIO:g}x "
                 f"the fast solver's ~{fast_seconds:.1f} s")
