@@ -122,7 +122,7 @@ def main(argv=None):
     import warnings
 
     from hyde_bsdf import mom
-    from hyde_bsdf.mom.solver import _keep_freed_memory, _limit_blas_threads
+    from hyde_bsdf.mom.runtime import keep_freed_memory, limit_blas_threads
 
     warnings.simplefilter("ignore", mom.MoMAccuracyWarning)
     print(f"load average before: {' '.join(load())} (cores: {os.cpu_count()})")
@@ -155,8 +155,8 @@ def main(argv=None):
                 ratios.append(f"fast / dense = {med['fast'] / med['dense']:.2f}")
             print("  " + "; ".join(ratios))
     if not args.skip_sizes:
-        previous = _limit_blas_threads(1)
-        _keep_freed_memory()          # as in a pool worker (scatter's default executor)
+        previous = limit_blas_threads(1)
+        keep_freed_memory()          # as in a pool worker (scatter's default executor)
         print("one partition (s and p, theta_i = 45 deg, Fig. 6 statistics), CPU seconds, one BLAS thread, in this "
               "process (freed memory kept, as in a pool worker):")
         print(f"  {'N':>7s} {'fast':>8s} {'dense':>8s} {'fast/dense':>10s}  fast info")
@@ -171,8 +171,8 @@ def main(argv=None):
             t = rf.times
             print(f"  {n:7d} {tf:8.2f} {'-':>8s} {'-':>10s}  set-up {t['fill']:.1f} s, iterations {t['solve']:.1f} s, "
                   f"far field {t['far_field']:.1f} s; E_s {rf.energy_s[0]:.4f}, E_p {rf.energy_p[0]:.4f}")
-        from hyde_bsdf.mom.solver import _restore_blas_threads
-        _restore_blas_threads(previous)
+        from hyde_bsdf.mom.runtime import restore_blas_threads
+        restore_blas_threads(previous)
     print(f"load average after: {' '.join(load())}")
     self_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     child_rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0

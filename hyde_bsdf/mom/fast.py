@@ -53,18 +53,21 @@ The partition is cut into blocks of ``B`` samples (at least ``near_wl`` waveleng
   gain per sweep over three sweeps), or ``max_sweeps`` reached, hands the best iterate
   to restarted GMRES preconditioned by the sparse LU of the strong part (the same fast
   product); if GMRES does not reach ``tol`` either, the caller falls back to the
-  dense LU where it fits (:mod:`hyde_bsdf.mom.solver`), and every step says why in
-  ``info["reasons"]``.
+  dense LU only where it fits and costs at most 10x the fast solve (:mod:`hyde_bsdf.mom.solver`),
+  and every step says why in ``info["reasons"]``.
 
 Limits: the plane-wave sum needs k H^2 / (4 L_s) <= 25 (H the partition's height
-range, L_s the block length), so a very rough surface gets long blocks, and when the
+range, L_s the block length); the blocks are sized for e^16 (``BLOCK_GROWTH``: rounding
+1e-16 e^16 stays far below the rule's 1e-7), lengthened (growth x 0.75, three times) where
+a rule still misses its tolerance, so a very rough surface gets long blocks, and when the
 block would exceed a third of the partition the fast solver declines
 (:class:`FastSolverUnsuitable`).  A lossy interior (a metal) is banded and needs no far
 part; a lossless or weakly lossy one (glass) gets its own spectral far part with
 k1 = k0 eta, on the contour turned by -arg(k1)/2 (the steepest-descent line of a lossy
-saddle); a rule whose plane waves would grow along x, or that does not reach its tolerance
-(eta = 0.5 - 0.3j on a surface with a 4.5-lambda height range stalls at 1.6e-4: the turned
-line's truncation), is refused and the partition goes to the dense LU with the reason.
+saddle); a rule whose plane waves would grow along x is refused, and one that does not reach
+its tolerance over the first blocks (eta = 0.5 - 0.3j on a surface with a 4.8-lambda height
+range stalled at 0.015 over 3-lambda blocks: the turned line's truncation) gets longer blocks
+(4.1 lambda there) -- before, such partitions went to the dense LU.
 """
 from __future__ import annotations
 
@@ -80,7 +83,8 @@ from hyde_bsdf.mom.kernels import (
     DECAY_CUTOFF, K0, _cell_moments, _complex_weights, _interp_weights, _near, _self, _sinc_derivatives, hankel2,
 )
 
-__all__ = ["solve_fast", "spectral_rule", "FastSolverUnsuitable", "FAST_TOL", "NEAR_WL"]
+__all__ = ["solve_fast", "spectral_rule", "block_length_wl", "plan_blocks", "FastSolverUnsuitable", "FAST_TOL",
+           "NEAR_WL"]
 
 #: default relative residual ||b - A x|| / ||b|| at which the iteration stops
 FAST_TOL = 1e-4
@@ -88,6 +92,10 @@ FAST_TOL = 1e-4
 NEAR_WL = 3.0
 #: largest exp(k H^2 / (4 L_s)) growth of the plane-wave sum allowed (digits lost: GROWTH / ln 10)
 GROWTH_MAX = 25.0
+#: growth k H^2 / (4 L_s) the blocks are sized for: e^16 leaves the rule 1e-16 e^16 ~ 1e-9 of rounding, well
+#: below its 1e-7 tolerance (at 0.8 GROWTH_MAX = 20 the rounding, ~5e-8, met the tolerance: glass with an 11-lambda
+#: height range needed 2665 plane waves or found no rule at all, and the partition went to a dense LU)
+BLOCK_GROWTH = 16.0
 #: sweeps of the forward-backward iteration before GMRES takes over
 MAX_SWEEPS = 30
 _NEAR = 4  # near-cell offsets integrated by Gauss-Legendre (as kernels.layer_matrices)
@@ -95,6 +103,10 @@ _NEAR = 4  # near-cell offsets integrated by Gauss-Legendre (as kernels.layer_ma
 
 class FastSolverUnsuitable(ValueError):
     """The surface is too rough (height range against partition length) for the spectral far part."""
+
+
+class _RuleShort(FastSolverUnsuitable):
+    """No plane-wave rule reached its tolerance (rounding in the growing sum): longer blocks may do."""
 
 
 # ---------------------------------------------------------------------------
@@ -164,8 +176,8 @@ def spectral_rule(k, near_wl, length_wl, height_wl, tol=1e-7):
             return phi, w
         h0 *= 0.7
         h_far *= 0.7
-    raise FastSolverUnsuitable(f"no plane-wave rule reached {tol:g} (best {err:.2g}) for k={k}, blocks of "
-                               f"{near_wl:.3g}, length {length_wl:.3g}, height range {height_wl:.3g}")
+    raise _RuleShort(f"no plane-wave rule reached the tolerance {tol:.3g} (the best, {err:.3g}, is above it) for "
+                     f"k={k:.4g}, blocks of {near_wl:.3g}, length {length_wl:.3g}, height range {height_wl:.3g}")
 
 
 # ---------------------------------------------------------------------------
@@ -825,6 +837,30 @@ def _iterate(sys, bf, tol, max_sweeps, method, reasons, label):
     return xf, _rel_residual(sys, xf, bf), info
 
 
+def block_length_wl(height_wl, ks, near_wl=NEAR_WL, growth=BLOCK_GROWTH):
+    """Shortest block (wavelengths) over which the plane-wave sums of every k in ``ks`` grow by at most e^growth
+    across a height range ``height_wl``: k H^2 / (4 L_s) <= growth, and at least ``near_wl``."""
+    return max(near_wl, max(abs(complex(k)) for k in ks) * height_wl ** 2 / (4.0 * growth))
+
+
+def plan_blocks(n, dx, height, length, ks, near_wl):
+    """Block samples b and the plane-wave rule of every k in ``ks``; where a rule misses its tolerance (rounding
+    in the sum's growth), the blocks are lengthened (growth x 0.75, up to three times) rather than given up."""
+    growth = BLOCK_GROWTH
+    for attempt in range(4):
+        b = max(8, int(math.ceil(block_length_wl(height, ks, near_wl, growth) / dx)))
+        if 3 * b > n:
+            raise FastSolverUnsuitable(
+                f"blocks of {b * dx:.3g} wavelengths (height range {height:.3g}) leave fewer than 3 blocks in a "
+                f"partition of {length:.3g} wavelengths")
+        try:
+            return b, [spectral_rule(k, (b - 1) * dx, length, height) for k in ks]
+        except _RuleShort:
+            if attempt == 3:
+                raise
+            growth *= 0.75
+
+
 def solve_fast(x, y, fp, fpp, dx, psi, pols, eta, *, tol=FAST_TOL, method="fb", near_wl=NEAR_WL,
                max_sweeps=MAX_SWEEPS):
     """Surface fields of one partition by the fast solver (module docstring), all incidence angles at once.
@@ -860,29 +896,17 @@ def solve_fast(x, y, fp, fpp, dx, psi, pols, eta, *, tol=FAST_TOL, method="fb", 
     k1 = None if eta is None else k0 * eta
     # a metal's interior operators end within a few skin depths (banded); glass's reach the whole partition
     band1 = n if k1 is None or k1.imag == 0 else int(math.ceil(DECAY_CUTOFF / (abs(k1.imag) * dx)))
-    ks = [k0]
-    lblock = near_wl
-    # blocks: >= near_wl and long enough that the plane-wave sums grow by at most e^(0.8 GROWTH_MAX)
-    lblock = max(lblock, k0 * height ** 2 / (4.0 * 0.8 * GROWTH_MAX))
-    b = max(8, int(math.ceil(lblock / dx)))
-    interior_far = k1 is not None and band1 >= b - 1
-    if interior_far:
-        ks.append(k1)
-        lblock = max(lblock, abs(k1) * height ** 2 / (4.0 * 0.8 * GROWTH_MAX))
-        b = max(b, int(math.ceil(lblock / dx)))
-    if 3 * b > n:
-        raise FastSolverUnsuitable(
-            f"blocks of {b * dx:.3g} wavelengths (height range {height:.3g}) leave fewer than 3 blocks in a "
-            f"partition of {length:.3g} wavelengths")
+    interior_far = k1 is not None and band1 >= max(8, int(math.ceil(block_length_wl(height, [k0], near_wl) / dx))) - 1
+    ks = [k0, k1] if interior_far else [k0]
+    b, rules = plan_blocks(n, dx, height, length, ks, near_wl)
     blocks = _Blocks(n, b)
     bounds = blocks.bounds
-    near_len = (b - 1) * dx          # shortest far separation: sources two blocks away
     half = 2 * blocks.width + 1
     reasons = []
-    info = {"block_samples": b, "blocks": blocks.nb, "reasons": reasons}
+    info = {"block_samples": b, "blocks": blocks.nb, "reasons": reasons}   # far sources: >= (b - 1) dx away
     need0S = eta is not None or "s" in pols
     need0D = eta is not None or "p" in pols
-    phi, w = spectral_rule(k0, near_len, length, height)
+    phi, w = rules[0]
     info["plane_waves"] = phi.size
     S0, D0, _ = _band_fill(x, yc, fp, fpp, dx, k0, bounds, half, need0S, need0D)
     far0 = _Far(x, yc, fp, dx, k0, bounds, phi, w, need0S, need0D)
@@ -890,11 +914,12 @@ def solve_fast(x, y, fp, fpp, dx, psi, pols, eta, *, tol=FAST_TOL, method="fb", 
     if eta is not None:
         S1, D1, _ = _band_fill(x, yc, fp, fpp, dx, k1, bounds, half, True, True)
         if interior_far:
-            phi1, w1 = spectral_rule(k1, near_len, length, height)
+            phi1, w1 = rules[1]
             far1 = _Far(x, yc, fp, dx, k1, bounds, phi1, w1, True, True)
             info["plane_waves_interior"] = phi1.size
     out = {"info": info}
     for pol in pols:
+        sys = None                      # the previous polarisation's system goes before the next is built
         if eta is None:
             if pol == "s":
                 kinds, eqs = ["v"], [[("v", S0, 1.0, 0.0)]]

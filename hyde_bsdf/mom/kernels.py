@@ -644,5 +644,6 @@ def absorbed_flux(u, v, window, dx, k=K0):
     In units of |psi_inc|^2 / (2 Z) times wavelengths, like the incident flux of
     :func:`hyde_bsdf.mom.solver.incident_flux`, so their ratio is the absorbed fraction.
     """
-    w2 = (window * window * dx)[:, None]
+    w2 = window * window * dx
+    w2 = w2[:, None] if w2.ndim == 1 else w2          # one window, or one per theta_i [N, n_ti]
     return -(np.imag(u * np.conj(v)) * w2).sum(axis=0) / k

@@ -106,11 +106,11 @@ Where MoM fails (warnings and errors)
 * fewer than 5 points per wavelength (or fewer than 5 per correlation length)
   sample the surface: the pulse currents no longer resolve the field; below 2
   points per wavelength a ``ValueError`` is raised instead;
-* the taper is too narrow for the incidence angle (grazing): Thorsos'
-  parameter ``(1 + 2 tan^2 ti)/(k w cos ti)^2`` above 0.02 or the taper's
-  angular spectrum (3 standard deviations, ``3/(k w)`` in sin(theta)) crossing
-  grazing.  The windowed current then no longer represents a plane-wave
-  illumination and the power balance drifts off 1;
+* a windowed current (``incidence="window"``, the paper's Eq. 22) whose estimated power error
+  exceeds ``TAPER_TOLERANCE`` = 1 % in either polarisation, or whose taper's angular spectrum
+  (3 standard deviations, ``3/(k w)`` in sin(theta)) crosses grazing: the estimate is the exact
+  flat-PEC law :func:`hyde_bsdf.mom.beam.window_bias` (measured: s 1 + 0.82 tau, p 1 - 0.26 tau at
+  Thorsos' tau = (1 + 2 tan^2 ti)/(k w cos ti)^2 = 0.02), given in the message;
 * partitions are too short for the correlation length (partition shorter than
   10 correlation lengths): a partition then holds too few independent facets
   and the surface is no longer a stationary random sample at the partition
@@ -120,9 +120,20 @@ Where MoM fails (warnings and errors)
 * fewer than 5 points per interior wavelength lambda / max(1, n) (below 2 a
   ValueError naming pts_per_wl);
 * after the solve, reflected + absorbed power off 1 by more than
-  ``ENERGY_TOLERANCE`` = 0.03 in either polarisation at any theta_i (the value
+  ``ENERGY_TOLERANCE`` = 0.01 in either polarisation at any theta_i (the value
   is in the message): a result that fails the energy check never comes back
   unwarned.
+
+Incidence near grazing
+----------------------
+``incidence="auto"`` (default) lights theta_i >= ``BEAM_FROM_DEG`` = 80 deg with an exact Gaussian
+beam of footprint w (:mod:`hyde_bsdf.mom.beam`: unwindowed currents, sigma normalised by the beam's
+power, the power balance by its flux through the surface) and the windowed plane-wave current of
+Eq. 22 below (the paper's Fig. 6 is unchanged).  The windowed current's power is biased (above) and,
+in s, its forward-grazing sigma has an artificial floor (-44.5 dB below the specular peak of an 80-deg
+flat plate at L = 4 w: the lit partition ends launch surface waves that reach the window); the beam
+reflects 1.0000 (p) and 1.0026 (s, the sampling) off a flat PEC at any tau and follows the analytic
+reflected beam to -98 dB (validation/mom_forward_grazing.py).
 
 and it refuses (ValueError naming the parameter) before allocating when
 * the realised surface is so steep that ``pts_per_wl`` along x gives fewer than
@@ -131,7 +142,11 @@ and it refuses (ValueError naming the parameter) before allocating when
   resampled finer (``params["pts_per_wl"]``), and refused if that needs more than
   ``MAX_UNKNOWNS`` = 10000 unknowns per partition for the dense solver (``MAX_FAST_UNKNOWNS``
   = 200000 for the fast one, which also needs the surface's height range to fit its
-  blocks) or more memory than is available;
+  blocks) or more memory than is available (:func:`hyde_bsdf.mom.runtime.memory_available`);
+* the fast solver misses its tolerance (after GMRES) and the dense fallback would not fit in
+  memory or would cost more than ``DENSE_FALLBACK_RATIO`` = 10 x the fast solve: the result keeps
+  the residual reached, with a warning naming ``tol`` (or, where the fast solver cannot take the
+  surface at all, a UsageError naming ``partitions``);
 * the skin depth would need more than ``MAX_PANELS`` = 64 quadrature panels per cell;
 * ``taper_width_wl`` exceeds the partition length, ``seed`` is not an integer
   >= 0, ``polarization`` is not "s"/"p"/both, or n, k are out of range.
@@ -152,8 +167,9 @@ Stages and solvers
 surface fields by the chosen method, then taper, absorbed power and far field),
 ``_statistics`` (Eq. 23, standard errors, Mueller elements) and ``_energy_check``.  One
 module per solution method: :mod:`hyde_bsdf.mom.dense` (LU of the full matrix) and
-:mod:`hyde_bsdf.mom.fast` (forward-backward sweeps with spectral acceleration, GMRES and
-dense fallbacks).
+:mod:`hyde_bsdf.mom.fast` (forward-backward sweeps with spectral acceleration, a GMRES fallback on the
+fast operator, the dense LU only where affordable); :mod:`hyde_bsdf.mom.beam` the grazing beam;
+:mod:`hyde_bsdf.mom.runtime` the workers' BLAS and heap tuning.
 
 Parallelism
 -----------
@@ -168,7 +184,6 @@ all incidence angles at once.
 from __future__ import annotations
 
 import concurrent.futures as cf
-import ctypes
 import math
 import multiprocessing
 import os
@@ -179,12 +194,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.io.memory import available_bytes, check_memory, format_bytes
+from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io.memory import check_memory, format_bytes
 from hyde_bsdf.model.parameters import NATURAL_INDEX, paper_eta
+from hyde_bsdf.progress import Throttle, as_callback
+from hyde_bsdf.mom.beam import gaussian_beam, window_bias
 from hyde_bsdf.mom.dense import solve_dense
-from hyde_bsdf.mom.fast import FAST_TOL, GROWTH_MAX, NEAR_WL, FastSolverUnsuitable, solve_fast, spectral_rule
+from hyde_bsdf.mom.fast import FAST_TOL, NEAR_WL, FastSolverUnsuitable, block_length_wl, plan_blocks, solve_fast
 from hyde_bsdf.mom.gather import ExecutorError, check_executor, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
+from hyde_bsdf.mom.runtime import limit_blas_threads, memory_available, restore_blas_threads, worker_init
 
 __all__ = [
     "scatter",
@@ -206,8 +225,8 @@ __all__ = [
 ]
 
 K0 = 2.0 * math.pi  # wavenumber in units of 1/lambda
-#: Thorsos' taper parameter above which the taper is "too narrow" for theta_i
-THORSOS_LIMIT = 0.02
+#: estimated power error of a windowed current (beam.window_bias) above which check_taper warns
+TAPER_TOLERANCE = 0.01
 
 
 class MoMAccuracyWarning(UserWarning):
@@ -255,7 +274,7 @@ def gaussian_surface(length_wl, n_points, rms_height_wl, corr_length_wl, seed=0,
     dk = 2.0 * math.pi / length_wl
     j_max = int(math.ceil(12.0 / corr_length_wl / dk))
     if 2 * j_max >= n_points:
-        raise ValueError(
+        raise UsageError(
             f"n_points={n_points} cannot resolve a surface with corr_length_wl={corr_length_wl}: "
             f"need more than {2 * j_max} samples over {length_wl} wavelengths")
     rng = np.random.default_rng(seed)
@@ -333,7 +352,7 @@ def power_grid(w, k=K0):
 def check_sampling(pts_per_wl, corr_length_wl=None, rough=True):
     """Warn (MoMAccuracyWarning) or raise when the pulse sampling cannot resolve field or surface."""
     if not (math.isfinite(pts_per_wl) and pts_per_wl >= 2.0):
-        raise ValueError(f"pts_per_wl must be >= 2 (the pulses cannot represent a wave below that), got {pts_per_wl}")
+        raise UsageError(f"pts_per_wl must be >= 2 (the pulses cannot represent a wave below that), got {pts_per_wl}")
     reasons = []
     if pts_per_wl < 5.0:
         reasons.append(f"pts_per_wl={pts_per_wl:g} is below ~5 points per wavelength: the pulse-basis current "
@@ -346,25 +365,36 @@ def check_sampling(pts_per_wl, corr_length_wl=None, rough=True):
     return reasons
 
 
-def check_taper(theta_i, w, partition_length):
-    """Warn when the Gaussian taper (Eq. 22) is too narrow for theta_i or too wide for the partition.
+def check_taper(theta_i, w, partition_length, pols=("s",), beam=None, eta=None):
+    """Warn when the Gaussian taper (Eq. 22) would bias the power by more than TAPER_TOLERANCE, or is too wide.
 
-    Thorsos (JASA 83, 78 (1988)) shows that a Gaussian-windowed plane wave of
-    width w stands for a plane wave only while (1 + 2 tan^2 ti)/(k w cos ti)^2 << 1;
-    and the window's angular spectrum, of standard deviation 1/(k w) in sin(theta),
-    must stay inside the visible range: sin ti + 3/(k w) < 1.  The first is
-    also the size of the power error it causes: integrating the windowed
-    specular spike over theta_r picks up 1/cos(theta_r), whose average over the
-    spike (std 1/(k w cos ti) in theta) exceeds 1/cos(ti) by about half of
-    Thorsos' parameter; the limit 0.02 thus flags power errors above ~1 %.
+    A windowed current (plane-wave incidence, ``beam`` False) reflects, off a flat PEC, the power ratio
+    :func:`hyde_bsdf.mom.beam.window_bias` -- measured and exact: s 1 + 0.82 tau, p 1 - 0.26 tau at Thorsos'
+    tau = (1 + 2 tan^2 ti)/(k w cos ti)^2 = 0.02 (1 + 0.76 tau and 1 - 0.25 tau as tau -> 0); the warning gives
+    that estimate per polarisation wherever it exceeds the tolerance, or where the window's spectrum (3/(k w) in
+    sin theta) crosses grazing.  A finite index (``eta``) takes the s law for p too: measured on flat plates at
+    tau = 0.0195, 80 and 85 deg, glass p +1.1 / +1.5 % and Infragold p +2.2 / +1.4 % (s +1.5 to +1.9 %) where the
+    s law says +1.6 % (the PEC's p law, -0.5 %, would understate them).  A Gaussian beam (``beam`` True,
+    :mod:`hyde_bsdf.mom.beam`) has no such bias (flat PEC plate: 1.0000 in p, 1.0026 in s at 10 pts/lambda, the
+    sampling; glass and Infragold within 0.26 %).  On a rough surface the law is a lower bound (Fig. 6 statistics
+    at 70 deg, w = 37.5: +2.2 % in s where it says +0.2 %; the beam +0.2 %): the energy check after the solve
+    (ENERGY_TOLERANCE) catches what it misses.  ``beam``: bool per theta_i.
     """
     reasons = []
-    for ti in np.atleast_1d(theta_i):
-        thorsos = (1.0 + 2.0 * math.tan(ti) ** 2) / (K0 * w * math.cos(ti)) ** 2
-        if thorsos > THORSOS_LIMIT or math.sin(ti) + 3.0 / (K0 * w) >= 1.0:
-            reasons.append(f"taper too narrow for theta_i={math.degrees(ti):.1f} deg (grazing): "
-                           f"w={w:.3g} wavelengths gives Thorsos' (1+2tan^2 ti)/(k w cos ti)^2={thorsos:.3g} "
-                           f"> {THORSOS_LIMIT} or spectrum beyond grazing; lengthen the partitions")
+    lit = np.zeros(np.size(theta_i), bool) if beam is None else np.asarray(beam, bool)
+    for ti, by_beam in zip(np.atleast_1d(theta_i), lit):
+        if by_beam:
+            continue
+        est = {pol: float(window_bias(ti, w, pol if eta is None else "s")[0]) - 1.0 for pol in pols}
+        beyond = math.sin(ti) + 3.0 / (K0 * w) >= 1.0
+        if max(abs(e) for e in est.values()) > TAPER_TOLERANCE or beyond:
+            reasons.append(f"taper too narrow for theta_i={math.degrees(ti):.1f} deg: the windowed current of "
+                           f"w={w:.3g} wavelengths has an estimated power error of "
+                           + ", ".join(f"{pol} {100 * e:+.2g} %" for pol, e in est.items())
+                           + f" ({'flat-PEC law' if eta is None else 'flat-plate s law'}; tolerance "
+                           f"{100 * TAPER_TOLERANCE:g} %"
+                           + ("; its spectrum crosses grazing, where the law understates the error" if beyond else "")
+                           + "): use incidence='beam' or a wider taper (taper_width_wl, longer partitions)")
     if w > partition_length / 3.0:
         reasons.append(f"taper width w={w:.3g} exceeds a third of the partition length {partition_length:.3g}: "
                        "the partition ends are not windowed away (edge diffraction)")
@@ -388,128 +418,106 @@ def check_partition(partition_length, corr_length_wl, rough=True):
 # One partition (the unit of parallel work)
 # ---------------------------------------------------------------------------
 
-def _openblas_libs():
-    """(set_num_threads, get_num_threads) ctypes functions of every OpenBLAS loaded in this process.
-
-    NumPy's and SciPy's wheels each bundle OpenBLAS; we reach their thread
-    controls through ctypes (what threadpoolctl does) and skip any we cannot find.
-    """
-    try:
-        with open("/proc/self/maps") as fh:  # closed at once (no ResourceWarning)
-            maps = fh.read().split("\n")
-    except OSError:  # not Linux: leave the BLAS alone
-        return []
-    paths = {line.split()[-1] for line in maps if "openblas" in line.lower() and line.split()[-1].startswith("/")}
-    found = []
-    for path in sorted(paths):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for suffix in ("64_", "", "_64_"):
-            set_fn = getattr(lib, "scipy_openblas_set_num_threads" + suffix, None)
-            get_fn = getattr(lib, "scipy_openblas_get_num_threads" + suffix, None)
-            if set_fn is not None and get_fn is not None:
-                found.append((set_fn, get_fn))
-                break
-        else:
-            set_fn = getattr(lib, "openblas_set_num_threads", None)
-            get_fn = getattr(lib, "openblas_get_num_threads", None)
-            if set_fn is not None and get_fn is not None:
-                found.append((set_fn, get_fn))
-    return found
+#: a dense fallback may cost at most this many times the fast solver's own estimate (or its time spent)
+DENSE_FALLBACK_RATIO = 10.0
 
 
-def _limit_blas_threads(n=1):
-    """Limit OpenBLAS to n threads in this process; returns the previous counts (for restoring)."""
-    previous = []
-    for set_fn, get_fn in _openblas_libs():
-        previous.append((set_fn, int(get_fn())))
-        set_fn(int(n))
-    return previous
+def _dense_cost(n, pols, eta):
+    """(bytes, CPU seconds) of a dense solve of n unknowns (:mod:`hyde_bsdf.mom.dense`), measured on one core:
+    fill 2.2e-7 s per matrix entry and region, LU 3.9e-11 s n^3 per polarisation, and a lossless interior's
+    full (1/2 + D1)^-1 S1 5.5e-10 s n^3 (3000 unknowns: PEC s 3.0 s, glass s and p 16.9 s)."""
+    regions = 1 if eta is None else 2
+    seconds = 2.2e-7 * regions * n * n + 3.9e-11 * len(pols) * n ** 3
+    if eta is not None and eta.imag == 0:
+        seconds += 5.5e-10 * n ** 3
+    return _matrices_per_partition(pols, eta) * 16.0 * n * n, seconds
 
 
-def _restore_blas_threads(previous):
-    for set_fn, count in previous:
-        set_fn(count)
-
-
-def _keep_freed_memory():
-    """glibc only: keep freed blocks up to 256 MiB in the heap instead of returning them to the system (each
-    partition allocates and frees the same temporaries; handing them back costs a page fault per 4 KiB on the
-    next use: a tenth of a Fig. 6 partition's CPU time was system time).  For pool workers only (process-wide)."""
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        libc.mallopt(-3, 256 * 2**20)      # M_MMAP_THRESHOLD
-        libc.mallopt(-1, 512 * 2**20)      # M_TRIM_THRESHOLD
-    except (OSError, AttributeError):      # not glibc
-        pass
-
-
-def _worker_init():
-    _limit_blas_threads(1)
-    _keep_freed_memory()
+def _dense_refusal(n, pols, eta, fast_seconds):
+    """Why a dense fallback of n unknowns is refused (memory, or more than DENSE_FALLBACK_RATIO x the fast
+    solver's cost), or None where it may run."""
+    need, seconds = _dense_cost(n, pols, eta)
+    free = memory_available()
+    if need > 0.8 * free:
+        return (f"a dense LU of {n} unknowns needs {format_bytes(need)}, more than the {format_bytes(free)} "
+                "available")
+    if seconds > DENSE_FALLBACK_RATIO * fast_seconds:
+        return (f"a dense LU of {n} unknowns would take ~{seconds:.0f} CPU s, more than {DENSE_FALLBACK_RATIO:g}x "
+                f"the fast solver's ~{fast_seconds:.1f} s")
+    return None
 
 
 def _solve_fields(task, psi, clock):
     """Stage 3 of a partition: the surface fields u, v by the chosen method, with the fast solver's fallbacks.
 
+    The fast solver falls back on its own to GMRES (the fast operator, preconditioned by its strong part);
+    a dense LU follows only where that too misses the tolerance and the LU is affordable
+    (:func:`_dense_refusal`); otherwise the result keeps the residual reached, with a reason naming ``tol``.
     Returns (fields dict with ``u_P``, ``v_P``; times (fill, factor, solve); method used;
     reasons: every fallback with why).
     """
     x, y, fp, fpp, dx = task["x"], task["y"], task["dfdx"], task["d2fdx2"], task["dx"]
     pols, eta = task["pols"], task["eta"]
-    method = task.get("solver", "dense")
+    if task.get("solver", "dense") != "fast":
+        return solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock), "dense", []
     reasons = []
-    if method == "fast":
-        t0 = clock()
-        try:
-            sol = solve_fast(x, y, fp, fpp, dx, psi, pols, eta, tol=task.get("tol") or FAST_TOL,
-                             method=task.get("fast_method", "fb"))
-        except FastSolverUnsuitable as exc:
-            if not task.get("dense_ok", True):
-                raise ValueError(f"the fast solver cannot take this surface ({exc}) and a dense solve of "
-                                 f"{x.size} unknowns is refused: use shorter partitions or a smoother surface") \
-                    from None
-            reasons.append(f"fast solver unsuitable ({exc}): dense LU instead")
-        else:
-            info = sol["info"]
-            reasons += info["reasons"]
-            worst = max(float(np.max(info[p]["residual"])) for p in pols)
-            tol = task.get("tol") or FAST_TOL
-            if info["converged"] or not task.get("dense_ok", True):
-                if not info["converged"]:
-                    reasons.append(f"fast solver stopped at residual {worst:.2g} > tolerance {tol:g} and a dense "
-                                   f"solve of {x.size} unknowns is refused: the result carries that residual")
-                t = info["times"]
-                sol["times"] = (t["setup"], 0.0, t["solve"])
-                sol["residual"] = worst
-                return sol, "fast", reasons
-            reasons.append(f"fast solver did not converge (residual {worst:.2g} > tolerance {tol:g}): dense LU "
-                           "instead")
-        # the fallback's time is counted from the fast attempt on
-        t_lost = clock() - t0
-        sol = solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock)
-        f, fa, so = sol["times"]
-        sol["times"] = (f + t_lost, fa, so)
-        return sol, "dense", reasons
+    tol = task.get("tol") or FAST_TOL
+    t0 = clock()
+    try:
+        sol = solve_fast(x, y, fp, fpp, dx, psi, pols, eta, tol=tol, method=task.get("fast_method", "fb"))
+    except FastSolverUnsuitable as exc:
+        why = None if task.get("dense_ok", True) else "the memory available"
+        why = why or _dense_refusal(x.size, pols, eta, FAST_SECONDS_PER_UNKNOWN * x.size)
+        if why:
+            raise UsageError(f"the fast solver cannot take this surface ({exc}) and {why}: use shorter partitions "
+                             "(more `partitions`) or a smoother surface") from None
+        reasons.append(f"fast solver unsuitable ({exc}): dense LU instead")
+    else:
+        info = sol["info"]
+        reasons += info["reasons"]
+        worst = max(float(np.max(info[p]["residual"])) for p in pols)
+        spent = clock() - t0
+        why = None if info["converged"] else (
+            "the memory available" if not task.get("dense_ok", True) else
+            _dense_refusal(x.size, pols, eta, max(spent, FAST_SECONDS_PER_UNKNOWN * x.size)))
+        if info["converged"] or why:
+            if not info["converged"]:
+                reasons.append(f"fast solver stopped at residual {worst:.2g} > tolerance {tol:g} and {why}: the "
+                               "result carries that residual (raise `tol`, or use shorter partitions)")
+            t = info["times"]
+            sol["times"] = (t["setup"], 0.0, t["solve"])
+            sol["residual"] = worst
+            return sol, "fast", reasons
+        reasons.append(f"fast solver did not converge (residual {worst:.2g} > tolerance {tol:g}): dense LU instead")
+    t_lost = clock() - t0          # the fallback's time is counted from the fast attempt on
     sol = solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock)
+    f, fa, so = sol["times"]
+    sol["times"] = (f + t_lost, fa, so)
     return sol, "dense", reasons
 
 
-def _radiate(task, fields, out):
-    """Stage 4 of a partition: taper (Eq. 22), absorbed power, far field (Eq. 21) of every polarisation."""
+def _radiate(task, fields, out, lit=None):
+    """Stage 4 of a partition: taper (Eq. 22), absorbed power, far field (Eq. 21) of every polarisation.
+
+    ``lit``: (flux, effective length) of the beam-lit incidence angles (``task["beam"]``, :mod:`beam`), whose
+    currents are not windowed; ``out["length"]`` [n_ti] is the effective illuminated length that normalises sigma.
+    """
     x, y, fp, dx = task["x"], task["y"], task["dfdx"], task["dx"]
     pols, eta = task["pols"], task["eta"]
-    win = taper(x, 0.0, task["w"])
-    out["flux"] = incident_flux(x, fp, dx, win, task["theta_i"])
     n_ti = np.atleast_1d(task["theta_i"]).size
+    win = np.repeat(taper(x, 0.0, task["w"])[:, None], n_ti, axis=1)
+    out["flux"] = incident_flux(x, fp, dx, win[:, 0], task["theta_i"])
+    out["length"] = np.full(n_ti, task["w"] * math.sqrt(math.pi / 2.0))
+    if lit is not None:
+        beam = task["beam"]
+        win[:, beam] = 1.0
+        out["flux"][beam], out["length"][beam] = lit
     Us, Vs = [], []
     for pol in pols:
         u, v = fields["u_" + pol], fields["v_" + pol]
         out["absorbed_" + pol] = np.zeros(n_ti) if eta is None else absorbed_flux(u, v, win, dx)
-        Us.append(np.zeros((x.size, n_ti), complex) if u is None else u * win[:, None])
-        Vs.append(np.zeros((x.size, n_ti), complex) if v is None else v * win[:, None])
+        Us.append(np.zeros((x.size, n_ti), complex) if u is None else u * win)
+        Vs.append(np.zeros((x.size, n_ti), complex) if v is None else v * win)
     # one far-field pass for all polarisations and both angle grids (the kernel e^{jk(x sin + y cos)} and
     # the segments' Fourier coefficients are shared; a PEC's zero u or v columns are skipped)
     U, V = np.hstack(Us), np.hstack(Vs)
@@ -538,10 +546,17 @@ def solve_partition(task):
     """
     clock = time.process_time  # CPU seconds of this process (its BLAS is single-threaded in the pool)
     psi = incident_field(task["x"], task["y"], task["theta_i"])
+    beam = task.get("beam")
+    lit = None
+    if beam is not None and np.any(beam):
+        pb, fb, lb = gaussian_beam(task["x"], task["y"], task["dfdx"], task["dx"],
+                                   np.atleast_1d(task["theta_i"])[beam], task["w"])
+        psi[:, beam] = pb
+        lit = (fb, lb)
     fields, method, reasons = _solve_fields(task, psi, clock)
     tc = clock()
     out = {"solver": method, "reasons": reasons, "residual": fields.get("residual")}
-    _radiate(task, fields, out)
+    _radiate(task, fields, out, lit)
     fill, factor, solve = fields["times"]
     out["times"] = np.array([fill, factor, solve, clock() - tc])
     return out
@@ -557,13 +572,13 @@ class SerialExecutor(cf.Executor):
         fut = cf.Future()
         # one BLAS thread while the task runs: threaded BLAS only slows down these matrix sizes
         # (the 2-thread LU of a 500-unknown partition is 10x slower here) -- restored afterwards
-        previous = _limit_blas_threads(1)
+        previous = limit_blas_threads(1)
         try:
             fut.set_result(fn(*args, **kwargs))
         except BaseException as exc:  # hand the error to the caller through the future
             fut.set_exception(exc)
         finally:
-            _restore_blas_threads(previous)
+            restore_blas_threads(previous)
         return fut
 
 
@@ -663,10 +678,10 @@ def _check_positive(name, value, allow_zero=False):
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a real number, got {value!r}") from None
+        raise UsageError(f"{name} must be a real number, got {value!r}") from None
     ok = math.isfinite(v) and (v >= 0.0 if allow_zero else v > 0.0)
     if not ok:
-        raise ValueError(f"{name} must be finite and {'>= 0' if allow_zero else '> 0'}, got {value!r}")
+        raise UsageError(f"{name} must be finite and {'>= 0' if allow_zero else '> 0'}, got {value!r}")
     return v
 
 
@@ -678,45 +693,34 @@ def process_pool(max_workers=None):
     """
     workers = max(1, int(max_workers or os.cpu_count() or 1))
     ctx = multiprocessing.get_context("fork" if sys.platform.startswith("linux") else "spawn")
-    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init)
+    return cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=worker_init)
 
 
-class _Progress:
-    """A stderr progress report: a rewritten line on a terminal, a line every 10 s otherwise."""
+def _progress_reporter(total, progress):
+    """``update(done)`` reporting partitions done through :mod:`hyde_bsdf.progress` (a callback, True: stderr lines,
+    None: stderr lines for runs of 10 or more partitions, False: nothing), at most every PROGRESS_SECONDS."""
+    callback = as_callback(total >= 10 if progress is None else progress, prefix="mom:")
+    throttle = Throttle(callback)
 
-    def __init__(self, total, enabled):
-        self.total, self.enabled = total, enabled
-        self.t0 = time.perf_counter()
-        self.last = 0.0
-        self.tty = hasattr(sys.stderr, "isatty") and sys.stderr.isatty()
+    def update(done):
+        def line():
+            t = throttle.elapsed
+            return f"partition {done}/{total}, {t:.1f} s elapsed, ~{t / done * (total - done):.0f} s left"
+        throttle(line, force=done == total and throttle.elapsed >= 1.0)
 
-    def update(self, done):
-        if not self.enabled:
-            return
-        now = time.perf_counter() - self.t0
-        step = 0.5 if self.tty else 10.0
-        if done < self.total and now - self.last < step:
-            return
-        if done == self.total and now < 1.0:
-            return  # a short run needs no report
-        self.last = now
-        eta = now / done * (self.total - done)
-        start = "\r" if self.tty else ""
-        end = "" if (self.tty and done < self.total) else "\n"
-        sys.stderr.write(start + f"mom: partition {done}/{self.total}, {now:.1f} s elapsed, ~{eta:.0f} s left " + end)
-        sys.stderr.flush()
+    return update
 
 
 def _check_seed(seed):
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+        raise UsageError(f"seed must be an integer >= 0, got {seed!r}")
     return int(seed)
 
 
 def _check_polarization(polarization):
     pols = (polarization,) if isinstance(polarization, str) else tuple(polarization)
     if not pols or any(p not in ("s", "p") for p in pols) or len(set(pols)) != len(pols):
-        raise ValueError(f"polarization must be 's', 'p' or a sequence of both, e.g. ('s', 'p'), got {polarization!r}")
+        raise UsageError(f"polarization must be 's', 'p' or a sequence of both, e.g. ('s', 'p'), got {polarization!r}")
     return pols
 
 
@@ -724,21 +728,14 @@ def _check_index(n, k):
     """None, None: a PEC; else the paper's eta = n - j k (n > 0, k >= 0)."""
     if n is None:
         if k is not None:
-            raise ValueError(f"k={k!r} needs n (the real part of the index n - jk); give n, or neither for a PEC")
+            raise UsageError(f"k={k!r} needs n (the real part of the index n - jk); give n, or neither for a PEC")
         return None
     n = _check_positive("n", n)
     k = 0.0 if k is None else _check_positive("k", k, allow_zero=True)
     if not (NATURAL_INDEX.contains(n) and NATURAL_INDEX.contains(k)):
-        raise ValueError(f"n and k must be <= {NATURAL_INDEX.hi:g} (use the PEC, n=None, for a better conductor), "
+        raise UsageError(f"n and k must be <= {NATURAL_INDEX.hi:g} (use the PEC, n=None, for a better conductor), "
                          f"got n={n:g}, k={k:g}")
     return paper_eta(n, k)
-
-
-def _memory_available():
-    """Bytes of memory available to new allocations (:func:`hyde_bsdf.io.memory.available_bytes`),
-    or 8 GiB if unknown."""
-    value = available_bytes()
-    return 8 * 2**30 if value is None else value
 
 
 def _matrices_per_partition(pols, eta):
@@ -748,9 +745,10 @@ def _matrices_per_partition(pols, eta):
     return 2 + (len(pols) > 1)
 
 
-#: |reflected + absorbed - 1| beyond this after a solve gives a MoMAccuracyWarning with the value
-#: (the Fig. 6 statistics with 100 partitions stay within 1 %; tilt noise of few partitions adds ~1 %)
-ENERGY_TOLERANCE = 0.03
+#: |reflected + absorbed - 1| beyond this after a solve gives a MoMAccuracyWarning with the value: the stated
+#: tolerance of the power balance (the partitions' tilt is divided out by incident_flux; check_taper warns before
+#: the solve where the windowed current's own bias exceeds TAPER_TOLERANCE)
+ENERGY_TOLERANCE = 0.01
 #: fewest points per wavelength of *arc length* at the steepest point of the realised surface
 ARC_PTS_MIN = 5.0
 #: largest turn of the surface direction over one cell (radians), |f''| dx / (1 + f'^2)
@@ -766,7 +764,7 @@ MAX_PANELS = 64
 
 def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
             pts_per_wl=10, seed=0, executor=None, *, taper_width_wl=None, progress=None,
-            polarization="s", n=None, k=None, timeout=None, solver="auto", tol=None):
+            polarization="s", n=None, k=None, timeout=None, solver="auto", tol=None, incidence="auto"):
     """Incoherent far-field scattering of a 1-D Gaussian rough surface -- paper Eqs. 18-23, both polarisations.
 
     Parameters
@@ -795,9 +793,11 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         a dask cluster that loses its last worker (for ``gather.NO_WORKER_GRACE_S`` =
         60 s), a closed client or a broken process pool ends in :class:`ExecutorError`
         naming it, and a stderr line reports every 30 s in which no partition finished.
-    taper_width_wl : float in (0, L_p], keyword-only, Eq. 22's w (default L_p / 4).
-    progress : bool or None, keyword-only; None shows a stderr line for runs of
-        10 or more partitions.
+    taper_width_wl : float in (0, L_p], keyword-only, Eq. 22's w (default L_p / 4); with the beam, its
+        footprint (the incident field's e^-(x/w)^2 on the mean plane).
+    progress : callable progress(message), bool or None, keyword-only (:mod:`hyde_bsdf.progress`): a
+        line "partition done/total, elapsed, left" at most every 3 s; True: on stderr; None: on stderr
+        for runs of 10 or more partitions; False: none.
     polarization : "s", "p" or ("s", "p"), keyword-only (default "s").  s: E along z
         (TM_z, the paper's Fig. 6); p: H along z.  Both on the same surface give
         the cross term and the in-plane Mueller matrix.
@@ -816,6 +816,10 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         range against the partition length), else dense.  ``params["solver"]`` says which ran.
     tol : float or None, keyword-only: the fast solver's relative residual
         ||b - A x|| / ||b|| (default ``fast.FAST_TOL`` = 1e-4; 1e-3 is within 0.01 dB).
+    incidence : "auto", "window" or "beam", keyword-only.  "window": the paper's plane wave with the
+        current windowed by Eq. 22; "beam": an exact Gaussian beam of footprint w, unwindowed currents
+        (:mod:`hyde_bsdf.mom.beam`: no power bias, no forward-grazing floor in s); "auto" (default): the
+        beam for theta_i >= BEAM_FROM_DEG = 80 deg, the window below.  ``params["incidence"]`` per theta_i.
 
     Returns
     -------
@@ -839,6 +843,7 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     t_wall = time.perf_counter()
     cfg = _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
                         pts_per_wl, seed, taper_width_wl, polarization, n, k, timeout, solver, tol)
+    cfg["beam"] = _check_incidence(incidence, cfg["ti_deg"])
     own = check_executor(executor) is None
     workers = min(os.cpu_count() or 1, cfg["partitions"]) if own else 1
     surf = _realise_surface(cfg, workers)
@@ -862,10 +867,26 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
 # The stages of scatter: checks, surface, per-partition solve, statistics, energy
 # ---------------------------------------------------------------------------
 
+#: the fast solver's CPU seconds per unknown, for the dense fallback's cost limit where it has not run (glass,
+#: sigma_h = 2 lambda, 7728 unknowns: ~15 s; a Fig. 6 partition, 1500 unknowns: ~0.5 s)
+FAST_SECONDS_PER_UNKNOWN = 2e-3
 #: "auto" takes the fast solver from this many unknowns per partition on (the Fig. 6 partitions have 1500)
 AUTO_FAST_UNKNOWNS = 1000
 #: most unknowns per partition for the fast solver
 MAX_FAST_UNKNOWNS = 200000
+
+
+#: incidence="auto" lights theta_i at and above this (degrees) with the Gaussian beam (:mod:`hyde_bsdf.mom.beam`)
+BEAM_FROM_DEG = 80.0
+
+
+def _check_incidence(incidence, ti_deg):
+    """Per theta_i, whether the beam (True) or the windowed plane-wave current (False) lights it."""
+    if incidence not in ("window", "beam", "auto"):
+        raise UsageError(f"incidence must be 'window', 'beam' or 'auto', got {incidence!r}")
+    if incidence == "auto":
+        return ti_deg >= BEAM_FROM_DEG
+    return np.full(ti_deg.size, incidence == "beam")
 
 
 def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, pts_per_wl,
@@ -874,7 +895,7 @@ def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_
     length_wl = _check_positive("length_wl", length_wl)
     if isinstance(partitions, bool) or not isinstance(partitions, (int, np.integer, float)) \
             or int(partitions) != partitions or partitions < 1:
-        raise ValueError(f"partitions must be an integer >= 1, got {partitions!r}")
+        raise UsageError(f"partitions must be an integer >= 1, got {partitions!r}")
     partitions = int(partitions)
     rms_height_wl = _check_positive("rms_height_wl", rms_height_wl, allow_zero=True)
     corr_length_wl = _check_positive("corr_length_wl", corr_length_wl)
@@ -885,27 +906,27 @@ def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_
     if timeout is not None:
         timeout = _check_positive("timeout", timeout)
     if solver not in ("auto", "dense", "fast"):
-        raise ValueError(f"solver must be 'auto', 'dense' or 'fast', got {solver!r}")
+        raise UsageError(f"solver must be 'auto', 'dense' or 'fast', got {solver!r}")
     if tol is not None:
         tol = _check_positive("tol", tol)
         if not 1e-12 <= tol <= 0.1:
-            raise ValueError(f"tol must be in [1e-12, 0.1] (the fast solver's relative residual), got {tol!r}")
+            raise UsageError(f"tol must be in [1e-12, 0.1] (the fast solver's relative residual), got {tol!r}")
     ti_deg = np.atleast_1d(np.asarray(theta_i_deg, dtype=float))
     tr_deg = np.atleast_1d(np.asarray(theta_r_deg, dtype=float))
     if ti_deg.ndim != 1 or not np.all(np.isfinite(ti_deg)) or np.any(ti_deg < 0) or np.any(ti_deg >= 90):
-        raise ValueError(f"theta_i_deg must be finite angles in [0, 90) degrees, got {theta_i_deg!r}")
+        raise UsageError(f"theta_i_deg must be finite angles in [0, 90) degrees, got {theta_i_deg!r}")
     if tr_deg.ndim != 1 or not np.all(np.isfinite(tr_deg)) or np.any(np.abs(tr_deg) > 90):
-        raise ValueError(f"theta_r_deg must be finite signed angles in [-90, 90] degrees, got {theta_r_deg!r}")
+        raise UsageError(f"theta_r_deg must be finite signed angles in [-90, 90] degrees, got {theta_r_deg!r}")
     part_len = length_wl / partitions
     n_part = int(round(part_len * pts_per_wl))
     if n_part < 4:
-        raise ValueError(f"partitions of {part_len:g} wavelengths at pts_per_wl={pts_per_wl:g} hold fewer than 4 pulses")
+        raise UsageError(f"partitions of {part_len:g} wavelengths at pts_per_wl={pts_per_wl:g} hold fewer than 4 pulses")
     if taper_width_wl is None:
         w = part_len / 4.0
     else:
         w = _check_positive("taper_width_wl", taper_width_wl)
         if w > part_len:
-            raise ValueError(f"taper_width_wl={w:g} must be in (0, {part_len:g}] (the partition length "
+            raise UsageError(f"taper_width_wl={w:g} must be in (0, {part_len:g}] (the partition length "
                              f"length_wl/partitions; Eq. 22's window must fit in its partition)")
     return dict(length_wl=length_wl, partitions=partitions, rms_height_wl=rms_height_wl,
                 corr_length_wl=corr_length_wl, pts_per_wl=pts_per_wl, seed=seed, pols=pols, eta=eta,
@@ -914,19 +935,19 @@ def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_
 
 
 def _fast_block_wl(height_wl, eta):
-    """The fast solver's block length for a partition of this height range (fast.solve_fast's rule)."""
-    kmax = K0 if eta is None or eta.imag != 0 else K0 * abs(eta)
-    return max(NEAR_WL, kmax * height_wl ** 2 / (4.0 * 0.8 * GROWTH_MAX))
+    """The fast solver's block length for a partition of this height range (glass's interior k sets it)."""
+    return block_length_wl(height_wl, [K0] if eta is None or eta.imag != 0 else [K0, K0 * eta])
 
 
-def _fast_bytes(n, block_wl, dx, height, part_len, eta):
-    """Peak bytes of one fast solve: plane-wave factors (Q per sample and direction), the strong part's
-    band, the block matrices.  O(N Q); Q from the plane-wave rule itself.  Raises FastSolverUnsuitable."""
-    b = int(math.ceil(block_wl / dx))
-    q = spectral_rule(K0, (b - 1) * dx, part_len, height)[0].size
-    interior_far = eta is not None and eta.imag == 0
+def _fast_bytes(n, dx, height, part_len, eta):
+    """Peak bytes of one fast solve: plane-wave factors (Q per sample and direction, every region with a far part),
+    the strong part's band, the block matrices.  O(N Q); the blocks and Q from fast.plan_blocks itself (what
+    solve_fast will use: glass' interior k has its own rule).  Raises FastSolverUnsuitable."""
+    ks = [K0] if eta is None or eta.imag != 0 else [K0, K0 * eta]
+    b, rules = plan_blocks(n, dx, height, part_len, ks, NEAR_WL)
+    q = sum(phi.size for phi, _ in rules)
     nk = 1 if eta is None else 2
-    planes = q * (7 + 8) * (2 if interior_far else 1)     # 7 kept per region, ~8 temporaries while set up
+    planes = q * (7 + 8)                                   # 7 kept per region, ~8 temporaries while set up
     bands = (4 * b + 3) * (2 if eta is None else 4)
     return 16.0 * n * (planes + 1.5 * bands + 6 * nk * nk * b + 40)
 
@@ -941,14 +962,14 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
     need_fast = math.inf
     if fast_fit and npart <= MAX_FAST_UNKNOWNS:
         try:
-            need_fast = _fast_bytes(npart, block, dx, height, part_len, eta) * workers
+            need_fast = _fast_bytes(npart, dx, height, part_len, eta) * workers
         except FastSolverUnsuitable:
             fast_fit = False
     fast_ok = fast_fit and need_fast <= budget
     hint = (" or a smoother surface (smaller rms_height_wl / corr_length_wl)" if why else " or a lower pts_per_wl")
     if cfg["solver"] == "dense" or (cfg["solver"] == "auto" and not fast_ok):
         if npart > MAX_UNKNOWNS:
-            raise ValueError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
+            raise UsageError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
                              f"{part_len:g} wavelengths, more than {MAX_UNKNOWNS} (a dense solve of that size takes "
                              "many CPU minutes per partition)"
                              + ("" if cfg["solver"] == "dense" else
@@ -956,7 +977,7 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
                                 f"blocks of {block:.3g}; at most a third of the partition)")
                              + ": use shorter partitions (more `partitions`)" + hint)
         if need_dense > budget:
-            raise ValueError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
+            raise UsageError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
                              f"{part_len:g} wavelengths, {format_bytes(need_dense)} for {workers} worker(s), more "
                              f"than the {format_bytes(budget)} available: use shorter partitions (more "
                              "`partitions`)" + hint)
@@ -964,7 +985,7 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
     if cfg["solver"] == "fast" and not fast_ok:
         if not fast_fit and dense_ok:
             return "fast", dense_ok      # solve_partition falls back to dense, with a warning naming why
-        raise ValueError(f"solver='fast' cannot take partitions of {part_len:g} wavelengths with {npart} unknowns"
+        raise UsageError(f"solver='fast' cannot take partitions of {part_len:g} wavelengths with {npart} unknowns"
                          f"{why}: " + (f"the height range {height:.3g} wavelengths needs blocks of {block:.3g}, more "
                                        "than a third of the partition" if not fast_fit else
                                        f"more than {MAX_FAST_UNKNOWNS} unknowns" if npart > MAX_FAST_UNKNOWNS else
@@ -999,14 +1020,14 @@ def _realise_surface(cfg, workers):
             return gaussian_surface(length_wl, npart * partitions, cfg["rms_height_wl"], corr_length_wl, cfg["seed"],
                                     second_derivative=True)
         except ValueError as exc:
-            raise ValueError(f"pts_per_wl={pts_per_wl:g} is too coarse for corr_length_wl={corr_length_wl:g} "
+            raise UsageError(f"pts_per_wl={pts_per_wl:g} is too coarse for corr_length_wl={corr_length_wl:g} "
                              f"(the surface spectrum needs > {3.9 / corr_length_wl:.3g} points per wavelength): "
                              f"{exc}") from None
 
     def height_range(f, npart):
         return float(np.max(np.ptp(f.reshape(partitions, npart), axis=1)))
 
-    budget = 0.8 * _memory_available()
+    budget = 0.8 * memory_available()
     # a first bound before any allocation: the dense path's size (or the fast path's for long partitions)
     if n_part > MAX_FAST_UNKNOWNS or (cfg["solver"] == "dense" and n_part > MAX_UNKNOWNS):
         _choose_solver(cfg, n_part, part_len / n_part, 0.0, workers, budget, "")
@@ -1032,19 +1053,19 @@ def _realise_surface(cfg, workers):
         n_in = max(1.0, eta.real)
         ppw_in = 1.0 / (dx * n_in)
         if ppw_in < 2.0:
-            raise ValueError(f"pts_per_wl={pts_per_wl:g} gives {ppw_in:.2g} points per interior wavelength "
+            raise UsageError(f"pts_per_wl={pts_per_wl:g} gives {ppw_in:.2g} points per interior wavelength "
                              f"(lambda / n, n={eta.real:g}): must be >= 2; raise pts_per_wl")
         if ppw_in < 5.0:
             reasons.append(f"only {ppw_in:.2g} points per interior wavelength (lambda / n, n={eta.real:g}): "
                            "the field inside the material is not resolved")
         panels = math.ceil(-eta.imag * K0 * dx * float(np.max(np.hypot(1.0, s_all))))
         if panels > MAX_PANELS:
-            raise ValueError(f"k={-eta.imag:g} gives a skin depth of {1 / (-eta.imag * K0):.2g} wavelengths, "
+            raise UsageError(f"k={-eta.imag:g} gives a skin depth of {1 / (-eta.imag * K0):.2g} wavelengths, "
                              f"{panels} quadrature panels per cell (> {MAX_PANELS}): use k <= "
                              f"{MAX_PANELS / (K0 * dx):.3g} at this sampling, or the PEC (n=None)")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MoMAccuracyWarning)
-        reasons += check_taper(cfg["theta_i"], cfg["w"], part_len)
+        reasons += check_taper(cfg["theta_i"], cfg["w"], part_len, cfg["pols"], cfg.get("beam"), eta)
         reasons += check_partition(part_len, corr_length_wl, rough)
     return dict(x=x_all, f=f_all, s=s_all, c=c_all, n_part=n_part, dx=dx, method=method, dense_ok=dense_ok,
                 reasons=reasons, fine=power_grid(cfg["w"]))
@@ -1061,7 +1082,7 @@ def _partition_tasks(cfg, surf):
                       "dfdx": surf["s"][sl].copy(), "d2fdx2": surf["c"][sl].copy(), "dx": surf["dx"],
                       "theta_i": cfg["theta_i"], "theta_r": cfg["theta_r"], "theta_fine": surf["fine"],
                       "w": cfg["w"], "pols": cfg["pols"], "eta": cfg["eta"], "solver": surf["method"],
-                      "tol": cfg["tol"], "dense_ok": surf["dense_ok"]})
+                      "tol": cfg["tol"], "dense_ok": surf["dense_ok"], "beam": cfg.get("beam")})
     return tasks
 
 
@@ -1069,11 +1090,10 @@ def _solve_partitions(tasks, executor, workers, cfg, progress):
     """Stage 3: every partition solved and radiated (solve_partition) on the executor."""
     own = executor is None
     ex = process_pool(workers) if own else executor
-    show = (cfg["partitions"] >= 10) if progress is None else bool(progress)
-    bar = _Progress(cfg["partitions"], show)
+    update = _progress_reporter(cfg["partitions"], progress)
     try:
         # never a blind wait: liveness checks, the caller's timeout and a heartbeat (gather.py)
-        return gather(ex, solve_partition, tasks, timeout=cfg["timeout"], on_done=bar.update,
+        return gather(ex, solve_partition, tasks, timeout=cfg["timeout"], on_done=update,
                       heartbeat=progress is not False, what="partition", label="mom.scatter")
     finally:
         if own:
@@ -1094,10 +1114,12 @@ def _statistics(results, cfg, surf):
     """Stage 4: Eq. 23's partition average, standard errors, coherent part, power balance, Mueller elements."""
     M, w, pols, theta_i, fine = cfg["partitions"], cfg["w"], cfg["pols"], cfg["theta_i"], surf["fine"]
     # Eq. 23 with F = -j k0 (Eq. 21's sum): sigma = |F|^2 / (8 pi w sqrt(pi/2)), partition mean
-    norm = 1.0 / (8.0 * math.pi * w * math.sqrt(math.pi / 2.0))
+    # (w sqrt(pi/2) for a windowed current; a beam's power over cos ti: beam.gaussian_beam)
+    length = results[0].get("length", np.full(np.size(theta_i), w * math.sqrt(math.pi / 2.0)))
+    norm = 1.0 / (8.0 * math.pi * length)[:, None]
     sum_flux = sum(r["flux"] for r in results)
     cos_i = np.cos(theta_i)
-    nominal_flux = M * w * math.sqrt(math.pi / 2.0) * cos_i
+    nominal_flux = M * length * cos_i
 
     def mean_se(stack):
         """Partition mean and its standard error (spread between partitions)."""
@@ -1192,6 +1214,7 @@ def _result(cfg, surf, results, stats, reasons, wall):
                 "k": None if eta is None else -eta.imag,
                 "solver": used[0] if len(used) == 1 else "+".join(used), "solver_requested": cfg["solver"],
                 "tol": cfg["tol"] or FAST_TOL,
+                "incidence": ["beam" if b else "window" for b in cfg["beam"]],
                 "max_residual": max(residuals) if residuals else None},
         warnings=reasons, polarization=pols,
         sigma_s=get("s", "sigma"), sigma_p=get("p", "sigma"), sigma_sp=stats["sigma_sp"],

@@ -1,0 +1,193 @@
+"""Forward grazing in s: the windowed current's artificial floor, and the Gaussian beam that removes it (issue 25).
+
+The paper's Eq. 22 windows the *current* of a plane-wave-lit partition.  A windowed current radiates the window's
+spectrum without the obliquity of a real reflected wave: in s on a PEC its far field near theta_r -> 90 deg stays at
+cos(ti)^2 |W^|^2 where a beam's reflected wave falls as cos(theta_r)^2 -- (cos 80 / cos 87)^2 = 11, 10.4 dB too
+strong at 87 deg for 80-deg incidence.  ``incidence="beam"`` (:mod:`hyde_bsdf.mom.beam`) lights the partition with
+an exact Gaussian beam and radiates the unwindowed currents.
+
+1. Flat PEC plate, theta_i = 80 deg, w = 75 lambda, partition 4 w (and 6 w), 10 pts/lambda: sigma_s, sigma_p of both
+   incidences against the independent analytic result -- the beam's reflected wave off an infinite PEC plane,
+   sigma_ref(theta) = 2 pi cos(ti) cos^2(theta) |A(k sin theta)|^2 / int cos^2 |A|^2 d theta (energy conservation
+   fixes the scale; A the beam's spectrum), which is ~e^-700 at 87 deg: the MoM's value there is its floor.
+2. Rough PEC surface, the Fig. 6 statistics (rms slope 0.3, ell = 5 lambda), theta_i = 80 deg, w = 150 lambda, on
+   the same partitions: window (partitions 4 w) against beam (4 w), 1-deg bins at theta_r = 86-89 deg (reported);
+   the beam on 6 w partitions (another realisation) against 4 w within 3 dB plus twice the speckle.
+   Quick mode: 2 partitions (full: 8).
+
+Measured (docs/validation.md): the flat plate's analytic sigma at 86/87/88/89 deg is -82/-99/-113/-126 dB below the
+specular peak; the windowed current sits at -44.5 dB (4 w) and -50 dB (6 w) in s -- the artificial floor: the
+plane-wave-lit partition ends launch surface waves (s: decaying only as x^-3/2) that reach the window and radiate
+at forward grazing -- and follows the reference in p at 6 w; the beam follows it to -98 dB at 6 w (its floor at
+4 w, -54 to -59 dB, is the beam's e^-4 at the partition ends).  On the rough surface the incoherent field is
+20-50 dB above these floors and window and beam agree within 0.3-2.6 dB.
+
+Writes mom_forward_grazing.csv (sigma per case and theta_r), mom_forward_grazing.png, and the checks.
+"""
+import math
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import cli, save_figure, write_csv  # noqa: E402
+
+K0 = 2.0 * math.pi
+ELL = 5.0
+SIGMA_H = 0.3 * ELL / math.sqrt(2.0)
+THETA_R = np.arange(60.0, 89.76, 0.25)
+FLAT = dict(theta_i=80.0, w=75.0)
+ROUGH = dict(theta_i=80.0, w=150.0)
+BANDS = (86.0, 87.0, 88.0, 89.0)
+
+
+def beam_reference(theta_i_deg, w, theta_r_deg):
+    """sigma of the beam's reflected wave off an infinite flat PEC (analytic; scale from energy conservation)."""
+    ti = math.radians(theta_i_deg)
+    th = np.linspace(-math.pi / 2, math.pi / 2, 400001)
+    dens = lambda t: np.cos(t) ** 2 * np.exp(-(w * K0 * (np.sin(t) - math.sin(ti))) ** 2 / 2.0)  # noqa: E731
+    total = np.trapezoid(dens(th), th)
+    return 2.0 * math.pi * math.cos(ti) * dens(np.radians(theta_r_deg)) / total
+
+
+def run(length, partitions, sigma_h, w, theta_i, incidence, seed=3):
+    from hyde_bsdf import mom
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", mom.MoMAccuracyWarning)
+        return mom.scatter(length, partitions, sigma_h, ELL, [theta_i], THETA_R, pts_per_wl=10, seed=seed,
+                           executor=mom.SerialExecutor(), taper_width_wl=w, polarization=("s", "p"), solver="fast",
+                           incidence=incidence, progress=False)
+
+
+def db(v):
+    return 10.0 * np.log10(np.maximum(v, 1e-30))
+
+
+def band_means(res_sigma):
+    """Mean sigma over theta_r in [a - 0.5, a + 0.5) for a in BANDS (1-deg bins)."""
+    return np.array([res_sigma[(THETA_R >= a - 0.5) & (THETA_R < a + 0.5)].mean() for a in BANDS])
+
+
+def validate(outdir="out/validation", quick=False):
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    ti, w = FLAT["theta_i"], FLAT["w"]
+    flat = {name: run(f * w, 1, 0.0, w, ti, inc) for name, inc, f in
+            (("window 4w", "window", 4), ("beam 4w", "beam", 4), ("window 6w", "window", 6), ("beam 6w", "beam", 6))}
+    ref = beam_reference(ti, w, THETA_R)
+    M = 2 if quick else 8
+    rw = ROUGH["w"]
+    rough = {name: run(f * rw * M, M, SIGMA_H, rw, ROUGH["theta_i"], inc) for name, inc, f in
+             (("window 4w", "window", 4), ("beam 4w", "beam", 4), ("beam 6w", "beam", 6))}
+    rows = []
+    for j, tr in enumerate(THETA_R):
+        row = [tr, ref[j]]
+        for case in (flat, rough):
+            for res in case.values():
+                row += [res.sigma_s[0, j], res.sigma_p[0, j]]
+        rows.append(row)
+    head = ["theta_r_deg", "flat_reference_s_and_p"]
+    for tag, case in (("flat", flat), ("rough", rough)):
+        for name in case:
+            head += [f"{tag}_{name.replace(' ', '_')}_sigma_s", f"{tag}_{name.replace(' ', '_')}_sigma_p"]
+    write_csv(out / "mom_forward_grazing.csv", head, rows)
+    write_csv(out / "mom_forward_grazing_cost.csv",
+              ["case", "cpu_s", "unknowns", "energy_error_s", "energy_error_p", "sigma_s_88_dB_below_peak"],
+              cost_rows(flat, ref))
+    figure(flat, rough, ref, out / "mom_forward_grazing.png")
+    return checks(flat, rough, ref)
+
+
+def band_error_db(res, pol):
+    """Speckle of the 1-deg band means in dB: the partitions' standard error, averaged over the bin (conservative:
+    the samples of a bin are correlated)."""
+    sig, se = getattr(res, "sigma_" + pol)[0], getattr(res, f"sigma_{pol}_std_error")[0]
+    return (10.0 / math.log(10.0)) * band_means(se) / band_means(sig)
+
+
+def checks(flat, rough, ref):
+    ref_b = band_means(ref)
+    peak = float(ref.max())
+    out = []
+    for name, res in flat.items():
+        for pol in ("s", "p"):
+            lvl = db(band_means(getattr(res, "sigma_" + pol)[0]) / peak)
+            ok = (np.abs(lvl - db(ref_b / peak)) <= 3.0) | (lvl < -80.0)
+            graded = name == "beam 6w"
+            analytic = ", ".join(f"{v:.0f}" for v in db(ref_b / peak))
+            out.append(dict(name=f"MoM forward grazing: flat PEC 80 deg, w = 75, {name}, {pol}: sigma at 86/87/88/89 "
+                                 f"deg relative to the specular peak (analytic {analytic} dB); within 3 dB of it or "
+                                 "below -80 dB (the solver's floor at tol 1e-4)"
+                                 + ("" if graded else ", reported"),
+                            value=", ".join(f"{v:.1f}" for v in lvl), tolerance=3.0 if graded else "reported",
+                            passed=bool(np.all(ok)) if graded else True))
+    for name, against in (("window 4w", "beam 4w"), ("beam 6w", "beam 4w")):
+        for pol in ("s", "p"):
+            a, b = rough[name], rough[against]
+            d = db(band_means(getattr(a, "sigma_" + pol)[0]) / band_means(getattr(b, "sigma_" + pol)[0]))
+            tol = 3.0 + 2.0 * np.hypot(band_error_db(a, pol), band_error_db(b, pol))
+            same = name.startswith("window")
+            what = (" on the same partitions (the windowed current's excess), reported" if same else
+                    " (other partitions: within 3 dB + 2 speckle errors)")
+            limits = "" if same else " (limits " + ", ".join(f"{t:.1f}" for t in tol) + ")"
+            out.append(dict(name=f"MoM forward grazing: rough PEC 80 deg, w = 150, {name} against {against}, {pol}: "
+                                 "dB at 86/87/88/89 deg" + what,
+                            value=", ".join(f"{v:+.1f}" for v in d) + limits,
+                            tolerance="reported" if same else "3 dB + 2 se",
+                            passed=True if same else bool(np.all(np.abs(d) <= tol))))
+    for tag, case in (("flat", flat), ("rough", rough)):
+        for name, res in case.items():
+            out.append(dict(name=f"MoM forward grazing: {tag} {name}, reflected power s / p (energy)",
+                            value=f"{res.energy_s[0]:.4f} / {res.energy_p[0]:.4f}", tolerance="reported", passed=True))
+    return out
+
+
+def cost_rows(flat, ref):
+    """Error against cost of each choice on the flat plate: worker CPU seconds, |energy - 1| per polarisation and
+    the s level at 88 deg relative to the specular peak (analytic: -113 dB)."""
+    peak = float(ref.max())
+    at88 = (THETA_R >= 87.5) & (THETA_R < 88.5)
+    return [[name, sum(v for k, v in res.times.items() if k != "wall"), res.params["unknowns_per_partition"],
+             abs(res.energy_s[0] - 1.0), abs(res.energy_p[0] - 1.0), float(db(res.sigma_s[0, at88].mean() / peak))]
+            for name, res in flat.items()]
+
+
+def figure(flat, rough, ref, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4))
+    peak = float(ref.max())
+    ax = axes[0]
+    ax.plot(THETA_R, db(ref / peak), "k-", lw=2, label="analytic beam reflection")
+    for (name, res), col in zip(flat.items(), ("C3", "C0", "C1", "C2")):
+        ax.plot(THETA_R, db(res.sigma_s[0] / peak), color=col, label=f"{name} s")
+        ax.plot(THETA_R, db(res.sigma_p[0] / peak), "--", color=col, label=f"{name} p")
+    ax.set(ylim=(-90, 5), xlabel="theta_r (deg)", ylabel="sigma / specular peak (dB)",
+           title="Flat PEC plate, theta_i = 80 deg, w = 75 lambda")
+    ax.axvspan(85.5, 89.5, color="0.92", zorder=0)
+    ax.legend(fontsize=6)
+    ax = axes[1]
+    for (name, res), col in zip(rough.items(), ("C3", "C0", "C2")):
+        ax.plot(THETA_R, db(res.sigma_s[0]), color=col, label=f"{name} s")
+        ax.plot(THETA_R, db(res.sigma_p[0]), "--", color=col, label=f"{name} p")
+    ax.set(ylim=(-45, 15), xlabel="theta_r (deg)", ylabel="sigma (dB)",
+           title="Rough PEC (slope 0.3, ell 5), theta_i 80 deg, w 150 lambda")
+    ax.axvspan(85.5, 89.5, color="0.92", zorder=0)
+    ax.legend(fontsize=6)
+    ax = axes[2]
+    for (name, cpu, _, es, ep, floor), col in zip(cost_rows(flat, ref), ("C3", "C0", "C1", "C2")):
+        ax.semilogy(cpu, max(es, 1e-5), "o", color=col, label=f"{name}: |E_s - 1|")
+        ax.semilogy(cpu, 10 ** (floor / 10), "s", color=col, mfc="none", label=f"{name}: sigma_s(88) / peak")
+    ax.set(xlabel="CPU s (one flat partition, s + p)", ylabel="error", title="Error against cost (flat plate)")
+    ax.legend(fontsize=6)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+if __name__ == "__main__":
+    cli(validate, __doc__)
