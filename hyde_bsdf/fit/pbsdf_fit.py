@@ -44,11 +44,13 @@ import numpy as np
 
 from hyde_bsdf.atomic import atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.fit.adequacy import (InadequateModelWarning, Verdict, cluster_covariance, floor_verdict, geometry_clusters,
+                                    half_angles)
 from hyde_bsdf.fit.pbsdf_file import PbsdfSamples, pbsdf_samples, read_pbsdf
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.shadowing import SHADOWING
 
-__all__ = ["PbsdfFitResult", "fit_pbsdf", "plot_pbsdf_fit", "cli_main"]
+__all__ = ["PbsdfFitResult", "InadequateModelWarning", "fit_pbsdf", "plot_pbsdf_fit", "cli_main"]
 
 #: elements fitted besides M00 (normalized by M00): all 15
 ELEMENTS = tuple((j, k) for j in range(4) for k in range(4) if (j, k) != (0, 0))
@@ -84,6 +86,7 @@ class PbsdfFitResult:
     warnings: list = field(default_factory=list)
     rms_m00: np.ndarray = None        # per band rms of the log residual of M00
     rms_elements: np.ndarray = None   # per band rms of the normalized-element residuals
+    verdict: Verdict = None           # does the model describe the table (hyde_bsdf.fit.adequacy)
 
     def params(self, band: int) -> dict:
         return {"rms_slope": self.rms_slope, "n": float(self.n[band]), "k": float(self.k[band])}
@@ -119,9 +122,12 @@ class PbsdfFitResult:
         def pm(v, e):
             return f"{v:.6g} +- {e:.3g}" if math.isfinite(e) else f"{v:.6g} (fixed)"
 
+        v = self.verdict
+        caveat = "" if v is None or v.adequate else " -- but the model does NOT describe the table (WARNING below)"
         out = [f"pBRDF fit to a measured_polarized table (paper Eq. 17; shadowing={self.shadowing!r}, "
                f"diffuse={self.diffuse!r}): {self.n_geometries} geometries x {len(self.wavelengths)} bands",
-               f"  converged: {self.success} ({self.message}; {self.nfev} residual evaluations, Jacobians included)",
+               f"  optimizer converged: {self.success} ({self.message}; {self.nfev} residual evaluations, "
+               f"Jacobians included){caveat}",
                f"  rms_slope = {pm(self.rms_slope, self.stderr['rms_slope'])}"]
         for b, wl in enumerate(self.wavelengths):
             out.append(f"  {wl:5.0f} nm: n = {pm(self.n[b], self.stderr['n'][b])}, "
@@ -129,10 +135,22 @@ class PbsdfFitResult:
                        f"elements {self.rms_elements[b]:.4f})")
         out.append(f"  scatter used as sigma: M00 {100 * self.sigma_m00:.3g} % (relative), normalized elements "
                    f"{self.sigma_elements:.3g}; chi^2 = {self.chi2:.4g}, dof = {self.dof}")
-        out.append("  (a table has no error bars: the standard errors treat the misfit as noise)")
+        if v is not None:
+            out.append(f"  model {v.line()}")
+            out.append("  standard errors: " + ERRORS_NOTE[v.errors])
         for w in self.warnings:
             out.append(f"  WARNING: {w}")
+        if v is not None and not v.adequate:
+            out.append(f"  WARNING: {v.message}")
         return "\n".join(out)
+
+
+#: what the printed standard errors mean, by Verdict.errors
+ERRORS_NOTE = {
+    "classic": "from the residual scatter (a table has no error bars; the misfit is scatter, not a trend)",
+    "robust": "robust (cluster sandwich over neighbouring geometries), as the misfit is systematic",
+    "lower bounds": "LOWER BOUNDS: the model does not describe the table, and no error covers that",
+}
 
 
 def _check(fit, rms_slope, n0, k0, shadowing, diffuse):
@@ -202,7 +220,7 @@ def _bounds(free):
 
 def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=None, k0=None,
               shadowing: str = "vgroove", diffuse: str = "paper", strict: bool = False,
-              progress: bool | None = None, **sample_options) -> PbsdfFitResult:
+              progress: bool | None = None, start: dict | None = None, **sample_options) -> PbsdfFitResult:
     """Fit rms_slope and n, k per band to a table (see the module docstring).
 
     ``data``: :class:`~hyde_bsdf.fit.pbsdf_file.PbsdfSamples`, a
@@ -211,7 +229,11 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     ("n,k,rms_slope" or a tuple); ``rms_slope``, ``n0``, ``k0``: start values, or the values of
     parameters held fixed (n0/k0 apply to every band).  ``strict``: raise instead of warning when
     the fit is ill-posed.  ``progress``: lines on stderr every few seconds (default: when the
-    fit runs longer).
+    fit runs longer).  ``start``: a warm start ``{"rms_slope", "n", "k"}`` (the middle band's
+    values, e.g. another model's fit) replacing the multi-start.
+
+    The result carries a :class:`~hyde_bsdf.fit.adequacy.Verdict` (``result.verdict``); an
+    inadequate model also warns (:class:`~hyde_bsdf.fit.adequacy.InadequateModelWarning`).
     """
     from scipy.optimize import least_squares
 
@@ -259,6 +281,9 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     free_mid = [p for p in (("n", mid), ("k", mid)) if p[0] in fit] + (["rms_slope"] if "rms_slope" in fit else [])
     starts = [(n_, k_) for n_ in ((n0,) if n0 is not None else STARTS["n"])
               for k_ in ((k0,) if k0 is not None else STARTS["k"])]
+    if start is not None:
+        values["rms_slope"] = float(start["rms_slope"]) if "rms_slope" in fit else values["rms_slope"]
+        starts = [(float(start["n"]) if n0 is None else n0, float(start["k"]) if k0 is None else k0)]
     best = None
     for n_, k_ in starts:
         trial = {("n", mid): n_, ("k", mid): k_, "rms_slope": values["rms_slope"]}
@@ -294,24 +319,68 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         print(f"[hyde-bsdf] fit: done, {state['calls']} evaluations in {time.perf_counter() - t0:.0f} s",
               file=sys.stderr, flush=True)
 
+    cov, corr, err, diag, verdict = _uncertainty(res, prob, free, values, data)
+    if not res.success:
+        diag.append(f"the optimizer did not converge: {res.message}")
     r = res.fun
-    chi2 = float(r @ r)
+    nan = float("nan")
+    stderr = {"rms_slope": err.get("rms_slope", nan),
+              "n": np.array([err.get(("n", b), nan) for b in range(K)]),
+              "k": np.array([err.get(("k", b), nan) for b in range(K)])}
+    names = _names(free, data.wavelengths)
+    result = PbsdfFitResult(
+        rms_slope=values["rms_slope"], n=np.array([values[("n", b)] for b in range(K)]),
+        k=np.array([values[("k", b)] for b in range(K)]), wavelengths=data.wavelengths.copy(),
+        stderr=stderr, fitted=tuple(fit), correlation=corr, names=names, sigma_m00=s00, sigma_elements=sel,
+        chi2=float(r @ r), dof=r.size - len(free), success=bool(res.success), message=str(res.message),
+        nfev=state["calls"], n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
+        rms_m00=np.sqrt(np.mean(r00 ** 2, axis=1)), rms_elements=np.sqrt(np.mean(rel ** 2, axis=(1, 2))),
+        verdict=verdict)
+    if not verdict.adequate:
+        warnings.warn(verdict.message, InadequateModelWarning, stacklevel=2)
+    if diag:
+        text = "ill-posed fit: " + "; ".join(diag)
+        if strict:
+            raise IllPosedFitError(text)
+        warnings.warn(text, IllPosedFitWarning, stacklevel=2)
+    return result
+
+
+
+def _names(free, wavelengths):
+    return tuple(q if isinstance(q, str) else f"{q[0]}@{wavelengths[q[1]]:g}nm" for q in free)
+
+
+def _uncertainty(res, prob, free, values, data):
+    """Covariance (classic, or robust where a systematic misfit dominates), correlation, standard
+    errors, ill-posedness diagnostics and the adequacy verdict of the final joint fit."""
+    r = res.fun
     m, p = r.size, len(free)
     J = np.asarray(res.jac, float)
+    names = _names(free, data.wavelengths)
     diag = []
     sv = np.linalg.svd(J, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+    r00, rel = prob.parts(res.x)
+    verdict = floor_verdict(r00, rel, prob.ti, prob.tr, prob.ph)
     if not math.isfinite(cond) or cond > 1e12:
         cov = np.full((p, p), np.inf)
         corr = np.eye(p)
         diag.append(f"the Jacobian is singular (condition number {cond:.3g}): the table does not constrain "
                     f"the fitted parameters separately")
     else:
-        cov = np.linalg.inv(J.T @ J) * (chi2 / max(m - p, 1))
+        cov = np.linalg.inv(J.T @ J) * (float(r @ r) / max(m - p, 1))
+        if verdict.errors != "classic":
+            N, K = prob.ti.size, len(prob.bands)
+            geometry = np.concatenate([np.tile(np.arange(N), K), np.tile(np.arange(N), K * len(ELEMENTS))])
+            th, td = half_angles(prob.ti, prob.tr, prob.ph)
+            robust = cluster_covariance(J, r, geometry_clusters(th, td)[geometry])
+            if robust is not None:      # each error the larger of the two, the robust correlations
+                se = np.sqrt(np.maximum(np.diag(cov), np.diag(robust)))
+                cov = np.outer(se, se) * _corr(robust)
         se = np.sqrt(np.diag(cov))
         corr = cov / np.outer(se, se)
     err = {q: math.sqrt(cov[i, i]) if math.isfinite(cov[i, i]) else math.inf for i, q in enumerate(free)}
-    names = tuple(q if isinstance(q, str) else f"{q[0]}@{data.wavelengths[q[1]]:g}nm" for q in free)
     for i in range(p):
         for j in range(i + 1, p):
             if math.isfinite(corr[i, j]) and abs(corr[i, j]) > 0.999:
@@ -323,25 +392,12 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         lo, hi = BOUNDS[q if isinstance(q, str) else q[0]]
         if v <= lo + 1e-6 * max(1.0, abs(lo)) or v >= hi * (1 - 1e-9):
             diag.append(f"{names[i]} = {v:.4g} sits on its bound [{lo:g}, {hi:g}]")
-    if not res.success:
-        diag.append(f"the optimizer did not converge: {res.message}")
-    nan = float("nan")
-    stderr = {"rms_slope": err.get("rms_slope", nan),
-              "n": np.array([err.get(("n", b), nan) for b in range(K)]),
-              "k": np.array([err.get(("k", b), nan) for b in range(K)])}
-    result = PbsdfFitResult(
-        rms_slope=values["rms_slope"], n=np.array([values[("n", b)] for b in range(K)]),
-        k=np.array([values[("k", b)] for b in range(K)]), wavelengths=data.wavelengths.copy(),
-        stderr=stderr, fitted=tuple(fit), correlation=corr, names=names, sigma_m00=s00, sigma_elements=sel,
-        chi2=chi2, dof=m - p, success=bool(res.success), message=str(res.message), nfev=state["calls"],
-        n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
-        rms_m00=np.sqrt(np.mean(r00 ** 2, axis=1)), rms_elements=np.sqrt(np.mean(rel ** 2, axis=(1, 2))))
-    if diag:
-        text = "ill-posed fit: " + "; ".join(diag)
-        if strict:
-            raise IllPosedFitError(text)
-        warnings.warn(text, IllPosedFitWarning, stacklevel=2)
-    return result
+    return cov, corr, err, diag, verdict
+
+
+def _corr(cov):
+    se = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    return cov / np.outer(se, se)
 
 
 def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str = "", max_points: int = 1500):
