@@ -35,7 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Verdict", "InadequateModelWarning", "P_LIMIT", "M00_TOLERANCE", "ELEMENT_TOLERANCE", "Z_LIMIT", "NEIGHBOURS",
+__all__ = ["Verdict", "InadequateModelWarning", "InadequateModelError", "ERRORS_NOTE", "P_LIMIT",
+           "M00_TOLERANCE", "ELEMENT_TOLERANCE", "Z_LIMIT", "NEIGHBOURS",
            "half_angles", "residual_structure", "angle_trends", "geometry_clusters", "cluster_covariance",
            "chi2_verdict", "floor_verdict"]
 
@@ -55,6 +56,19 @@ BINS = 4
 
 class InadequateModelWarning(UserWarning):
     """The fitted model does not describe the data (the message gives the figure and the cause)."""
+
+
+class InadequateModelError(ValueError):
+    """Raised instead of :class:`InadequateModelWarning` by a fit with ``strict=True``."""
+
+
+#: what the printed standard errors mean, by Verdict.errors
+ERRORS_NOTE = {
+    "classic": "linearized, sqrt(diag((J^T J)^-1)) (scaled by the residual scatter where the data have no "
+               "sigmas); they hold because the misfit is scatter, not a trend",
+    "robust": "robust (cluster sandwich over neighbouring geometries), as the misfit is systematic",
+    "lower bounds": "LOWER BOUNDS: the model does not describe the table, and no error covers that",
+}
 
 
 @dataclass

@@ -77,11 +77,14 @@ import numpy as np
 from hyde_bsdf.atomic import atomic_path, check_output_path
 from hyde_bsdf.model.checks import real_array
 from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
+                                    chi2_verdict, cluster_covariance, floor_verdict, geometry_clusters,
+                                    half_angles)
 from hyde_bsdf.fit.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements,
                                         MeasurementFileError, element_index, read_measurements)
 
 __all__ = ["PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning", "IllPosedFitError",
-           "FitDataWarning", "merge_repeated_geometries", "impossible_values",
+           "FitDataWarning", "InadequateModelWarning", "InadequateModelError", "merge_repeated_geometries", "impossible_values",
            "mueller_elements", "fit_mueller", "fit_measurements", "synthetic_measurements",
            "plot_fit", "cli_main"]
 
@@ -269,6 +272,9 @@ class FitResult:
     success : the optimizer converged (``message`` says how)
     sigma_given : whether chi^2 uses the given sigma (else unit weights)
     warnings : the ill-posedness diagnostics (also issued as IllPosedFitWarning)
+    verdict : :class:`~hyde_bsdf.fit.adequacy.Verdict`, whether the model describes the data
+        (chi^2 p-value with sigmas, the misfit against the data's floor without) and what the
+        standard errors mean (classic, robust, or lower bounds)
     """
 
     params: dict
@@ -294,6 +300,7 @@ class FitResult:
     repeats: dict | None = None
     stderr_scale: float = 1.0
     data_warnings: list = field(default_factory=list)
+    verdict: Verdict | None = None
 
     @property
     def ill_posed(self) -> bool:
@@ -341,8 +348,10 @@ class FitResult:
         """A human-readable report of the fit."""
         out = [f"pBRDF fit (paper Eq. 17; shadowing={self.shadowing!r}, diffuse={self.diffuse!r}): "
                f"{self.n_data} values, {len(self.fitted)} fitted parameters"]
-        caveat = " -- but the data warnings below limit what it means" if self.data_warnings else ""
-        out.append(f"  converged: {self.success} ({self.message}; {self.nfev} model evaluations){caveat}")
+        vd = self.verdict
+        caveat = (" -- but the model does NOT describe the data (WARNING below)" if vd is not None and not vd.adequate
+                  else " -- but the data warnings below limit what it means" if self.data_warnings else "")
+        out.append(f"  optimizer converged: {self.success} ({self.message}; {self.nfev} model evaluations){caveat}")
         if self.repeats:
             rp = self.repeats
             out.append(f"  repeated geometries: {rp['repeated_rows']} of {rp['rows']} rows repeat another row's "
@@ -368,7 +377,10 @@ class FitResult:
             for i, a in enumerate(self.fitted):
                 out.append(f"    {a:10s}" + "".join(f"{self.correlation[i, j]:10.4f}"
                                                     for j in range(len(self.fitted))))
-        for w in self.warnings + self.data_warnings:
+        if vd is not None:
+            out.append(f"  model {vd.line()}")
+            out.append("  standard errors: " + ERRORS_NOTE[vd.errors])
+        for w in self.warnings + self.data_warnings + ([vd.message] if vd is not None and not vd.adequate else []):
             out.append(f"  WARNING: {w}")
         return "\n".join(out)
 
@@ -671,6 +683,9 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
                 f"theta_i={math.degrees(ti[i]):.4g}, theta_r={math.degrees(tr[i]):.4g}, "
                 f"phi={math.degrees(ph[i]):.4g} deg): no Mueller matrix has it -- unnormalized data or a "
                 "calibration error; the fit cannot describe these values")
+    verdict, cov = _adequacy(r, J, cov, ti, tr, ph, len(names), chi2, dof, sigma is not None)
+    if verdict.errors == "robust" or (not verdict.adequate and np.all(np.isfinite(cov))):
+        corr = _correlation(cov)
     stderr = {q: float(math.sqrt(cov[i, i])) if math.isfinite(cov[i, i]) else float("inf")
               for i, q in enumerate(fitted)}
     vals = unpack(res.x)
@@ -708,15 +723,40 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
         residuals=residuals, success=bool(res.success), message=str(res.message), nfev=int(nfev),
         n_data=m, sigma_given=sigma is not None, shadowing=shadowing, diffuse=mode,
         warnings=diag, condition_number=cond, rows=rows_in, repeats=repeats, stderr_scale=scale,
-        data_warnings=data_diag)
+        data_warnings=data_diag, verdict=verdict)
     for text in data_diag:
         warnings.warn(text, FitDataWarning, stacklevel=2)
+    if not verdict.adequate:
+        if strict:
+            raise InadequateModelError(verdict.message)
+        warnings.warn(verdict.message, InadequateModelWarning, stacklevel=2)
     if diag:
         text = "ill-posed fit: " + "; ".join(diag)
         if strict:
             raise IllPosedFitError(text)
         warnings.warn(text, IllPosedFitWarning, stacklevel=2)
     return result
+
+
+def _correlation(cov):
+    se = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    return cov / np.outer(se, se)
+
+
+def _adequacy(r, J, cov, ti, tr, ph, n_elements, chi2, dof, sigma_given):
+    """The verdict (chi^2 with sigmas, the data's floor without) and the covariance: where the
+    misfit is systematic, each error the larger of the classic and the cluster-robust one."""
+    R = r.reshape(n_elements, -1)
+    verdict = (chi2_verdict(chi2, dof, R, ti, tr, ph) if sigma_given
+               else floor_verdict(None, R[None], ti, tr, ph))
+    if verdict.errors == "classic" or not np.all(np.isfinite(cov)):
+        return verdict, cov
+    th, td = half_angles(ti, tr, ph)
+    robust = cluster_covariance(J, r, np.tile(geometry_clusters(th, td), n_elements))
+    if robust is None:
+        return verdict, cov
+    se = np.sqrt(np.maximum(np.diag(cov), np.diag(robust)))
+    return verdict, np.outer(se, se) * _correlation(robust)
 
 
 def fit_measurements(meas: Measurements, **kwargs) -> FitResult:

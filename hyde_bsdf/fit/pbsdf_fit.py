@@ -44,7 +44,7 @@ import numpy as np
 
 from hyde_bsdf.atomic import atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.fit.adequacy import (InadequateModelWarning, Verdict, cluster_covariance, floor_verdict, geometry_clusters,
+from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict, cluster_covariance, floor_verdict, geometry_clusters,
                                     half_angles)
 from hyde_bsdf.fit.pbsdf_file import PbsdfSamples, pbsdf_samples, read_pbsdf
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
@@ -143,14 +143,6 @@ class PbsdfFitResult:
         if v is not None and not v.adequate:
             out.append(f"  WARNING: {v.message}")
         return "\n".join(out)
-
-
-#: what the printed standard errors mean, by Verdict.errors
-ERRORS_NOTE = {
-    "classic": "from the residual scatter (a table has no error bars; the misfit is scatter, not a trend)",
-    "robust": "robust (cluster sandwich over neighbouring geometries), as the misfit is systematic",
-    "lower bounds": "LOWER BOUNDS: the model does not describe the table, and no error covers that",
-}
 
 
 def _check(fit, rms_slope, n0, k0, shadowing, diffuse):
@@ -337,6 +329,8 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         rms_m00=np.sqrt(np.mean(r00 ** 2, axis=1)), rms_elements=np.sqrt(np.mean(rel ** 2, axis=(1, 2))),
         verdict=verdict)
     if not verdict.adequate:
+        if strict:
+            raise InadequateModelError(verdict.message)
         warnings.warn(verdict.message, InadequateModelWarning, stacklevel=2)
     if diag:
         text = "ill-posed fit: " + "; ".join(diag)
