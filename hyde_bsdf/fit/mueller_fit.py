@@ -756,7 +756,7 @@ def _adequacy(r, J, cov, ti, tr, ph, n_elements, chi2, dof, sigma_given):
     if robust is None:
         return verdict, cov
     se = np.sqrt(np.maximum(np.diag(cov), np.diag(robust)))
-    return verdict, np.outer(se, se) * _correlation(robust)
+    return verdict, np.outer(se, se) * _correlation(cov)
 
 
 def fit_measurements(meas: Measurements, **kwargs) -> FitResult:

@@ -369,9 +369,9 @@ def _uncertainty(res, prob, free, values, data):
             geometry = np.concatenate([np.tile(np.arange(N), K), np.tile(np.arange(N), K * len(ELEMENTS))])
             th, td = half_angles(prob.ti, prob.tr, prob.ph)
             robust = cluster_covariance(J, r, geometry_clusters(th, td)[geometry])
-            if robust is not None:      # each error the larger of the two, the robust correlations
+            if robust is not None:      # each error the larger of the two; the correlations stay J's
                 se = np.sqrt(np.maximum(np.diag(cov), np.diag(robust)))
-                cov = np.outer(se, se) * _corr(robust)
+                cov = np.outer(se, se) * _corr(cov)
         se = np.sqrt(np.diag(cov))
         corr = cov / np.outer(se, se)
     err = {q: math.sqrt(cov[i, i]) if math.isfinite(cov[i, i]) else math.inf for i, q in enumerate(free)}
