@@ -113,18 +113,29 @@ def _neighbour_index(theta_i, theta_r, phi, k=NEIGHBOURS):
 
 
 def residual_structure(r, neighbours):
-    """Systematic and scatter rms of residuals ``r`` (..., N) over N geometries, and the z-score of
-    the systematic part; ``neighbours`` (N, k) indices (None: too few geometries, all scatter)."""
+    """Systematic and scatter rms of residuals ``r`` (B, ..., N): B bands, N geometries.
+
+    The systematic part is what a residual shares with the residuals of the same geometry in the
+    other bands (B >= 2) or of its neighbouring geometries (``neighbours`` (N, k) indices; None:
+    too few geometries): systematic^2 = mean(r_i s_i), s_i their mean, whichever is larger; z is
+    that mean in units of its standard error (noise alone gives z ~ N(0, 1))."""
     r = np.asarray(r, float)
     total = float(np.sqrt(np.mean(r * r)))
-    if neighbours is None:
-        return {"rms": total, "systematic": 0.0, "scatter": total, "z": 0.0}
-    prod = (r * r[..., neighbours].mean(axis=-1)).reshape(-1)
-    mean = float(prod.mean())
-    se = float(prod.std()) / math.sqrt(prod.size) if prod.size > 1 else math.inf
-    sys2 = max(mean, 0.0)
-    return {"rms": total, "systematic": math.sqrt(sys2), "scatter": math.sqrt(max(total ** 2 - sys2, 0.0)),
-            "z": mean / se if se > 0 else (math.inf if mean > 0 else 0.0)}
+    best = (0.0, 0.0)
+    partners = []
+    if r.shape[0] >= 2:
+        partners.append((r.sum(axis=0, keepdims=True) - r) / (r.shape[0] - 1))
+    if neighbours is not None:
+        partners.append(r[..., neighbours].mean(axis=-1))
+    for s in partners:
+        prod = (r * s).reshape(-1)
+        mean = float(prod.mean())
+        se = float(prod.std()) / math.sqrt(prod.size)
+        z = mean / se if se > 0 else (math.inf if mean > 0 else 0.0)
+        if mean > best[0]:
+            best = (mean, z)
+    sys2, z = best
+    return {"rms": total, "systematic": math.sqrt(sys2), "scatter": math.sqrt(max(total ** 2 - sys2, 0.0)), "z": z}
 
 
 def angle_trends(r, theta_h, theta_d, bins=BINS):
