@@ -234,7 +234,7 @@ def _screen(data, rows, band, model, dielectric, fit, fixed, starts):
     best = None
     for st in starts:
         vals = {("n", band): st["n"], ("k", band): 0.0 if dielectric else st["k"], "rms_slope": st["rms_slope"]}
-        vals.update({(q, band): v for q, v in fixed.items() if q in ("n", "k") and (q, band) not in free})
+        vals.update({(q, band): v for q, v in fixed.items() if v is not None and (q, band) not in free})
         prob = _Problem(data, [band], rows, free, {p: v for p, v in vals.items() if p not in free},
                         model[0], model[1], 0.05, 0.01, lambda r: None)
         lo, hi = _bounds(free)

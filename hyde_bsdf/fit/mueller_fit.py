@@ -248,12 +248,21 @@ def mueller_elements(theta_i, theta_r, phi, names, *, rms_slope, n, k,
     ndarray of the broadcast shape.  Geometries with F_00 = 0 (at or below the
     horizon) raise ValueError: a normalized element is undefined there.
     """
+    return _elements(theta_i, theta_r, phi, names, rms_slope=rms_slope, n=n, k=k, shadowing=shadowing,
+                     diffuse=diffuse, strict=True)
+
+
+def _elements(theta_i, theta_r, phi, names, *, rms_slope, n, k, shadowing, diffuse, strict):
+    """F_jk / F_00; where F_00 = 0 above the horizon (the lobe underflows far from the specular
+    direction without a diffuse term, as the fit may try) 0 unless ``strict``."""
     F = pbrdf(theta_i, theta_r, phi, rms_slope=rms_slope, n=n, k=k, shadowing=shadowing,
               diffuse=diffuse)
     F00 = F[..., 0, 0]
     if np.any(F00 <= 0.0):
-        raise ValueError("theta_i and theta_r must be below 90 deg (pi/2): F_00 = 0 there and "
-                         "normalized Mueller elements are undefined")
+        if strict:
+            raise ValueError("theta_i and theta_r must be below 90 deg (pi/2): F_00 = 0 there and "
+                             "normalized Mueller elements are undefined")
+        F00 = np.where(F00 > 0.0, F00, np.inf)
     return {name: F[(...,) + element_index(name)] / F00 for name in names}
 
 
@@ -576,7 +585,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
             wd = np.concatenate([w[n][sel] for n in names])
 
         def residual(x):
-            model = mueller_elements(a, b, c, names, **unpack(x), shadowing=shadowing, diffuse=mode)
+            model = _elements(a, b, c, names, **unpack(x), shadowing=shadowing, diffuse=mode, strict=False)
             r = (np.concatenate([model[n] for n in names]) - yd) / wd
             report.tick(r)
             return r
@@ -683,7 +692,9 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
                 f"theta_i={math.degrees(ti[i]):.4g}, theta_r={math.degrees(tr[i]):.4g}, "
                 f"phi={math.degrees(ph[i]):.4g} deg): no Mueller matrix has it -- unnormalized data or a "
                 "calibration error; the fit cannot describe these values")
+    classic = np.sqrt(np.diag(cov))
     verdict, cov = _adequacy(r, J, cov, ti, tr, ph, len(names), chi2, dof, sigma is not None)
+    verdict.figures["stderr_classic"] = dict(zip(fitted, classic.tolist()))
     if verdict.errors == "robust" or (not verdict.adequate and np.all(np.isfinite(cov))):
         corr = _correlation(cov)
     stderr = {q: float(math.sqrt(cov[i, i])) if math.isfinite(cov[i, i]) else float("inf")

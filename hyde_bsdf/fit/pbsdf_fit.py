@@ -364,6 +364,7 @@ def _uncertainty(res, prob, free, values, data):
                     f"the fitted parameters separately")
     else:
         cov = np.linalg.inv(J.T @ J) * (float(r @ r) / max(m - p, 1))
+        classic = np.sqrt(np.diag(cov))
         if verdict.errors != "classic":
             N, K = prob.ti.size, len(prob.bands)
             geometry = np.concatenate([np.tile(np.arange(N), K), np.tile(np.arange(N), K * len(ELEMENTS))])
@@ -375,6 +376,8 @@ def _uncertainty(res, prob, free, values, data):
         se = np.sqrt(np.diag(cov))
         corr = cov / np.outer(se, se)
     err = {q: math.sqrt(cov[i, i]) if math.isfinite(cov[i, i]) else math.inf for i, q in enumerate(free)}
+    verdict.figures["stderr_classic"] = dict(zip(names, (np.sqrt(np.diag(cov)) if cov[0, 0] == math.inf
+                                                         else classic).tolist()))
     for i in range(p):
         for j in range(i + 1, p):
             if math.isfinite(corr[i, j]) and abs(corr[i, j]) > 0.999:
