@@ -48,6 +48,8 @@ M00_TOLERANCE = 0.01
 ELEMENT_TOLERANCE = 0.005
 #: a systematic misfit counts only when it is this many standard errors above 0
 Z_LIMIT = 5.0
+#: a systematic misfit below this (relative) is the float32 rounding of a stored table
+FLOAT32_FLOOR = 1e-6
 #: neighbours whose residuals define the systematic part
 NEIGHBOURS = 8
 #: quantile bins of theta_h and of theta_d for the trends
@@ -181,12 +183,14 @@ def cluster_covariance(J, r, labels):
     if G < 2:
         return None
     H = J.T @ J
-    Hg = np.zeros((G, p, p))
-    np.add.at(Hg, inv, J[:, :, None] * J[:, None, :])
-    S = np.zeros((G, p))
-    np.add.at(S, inv, J * r[:, None])
+    D = np.empty((G, p))
+    order = np.argsort(inv, kind="stable")
+    bounds = np.searchsorted(inv[order], np.arange(G + 1))
     try:
-        D = np.stack([np.linalg.solve(H - Hg[g], S[g]) for g in range(G)])
+        for g in range(G):
+            rows = order[bounds[g]:bounds[g + 1]]
+            Jg = J[rows]
+            D[g] = np.linalg.solve(H - Jg.T @ Jg, Jg.T @ r[rows])
     except np.linalg.LinAlgError:
         return None
     D -= D.mean(axis=0)
@@ -242,7 +246,7 @@ def floor_verdict(m00, elements, theta_i, theta_r, phi):
     for name, r, tol in parts:
         st = residual_structure(r, nb)
         figs.update({f"{name}_{k}": v for k, v in st.items()})
-        if st["systematic"] > st["scatter"] and st["z"] > Z_LIMIT:
+        if st["systematic"] > max(st["scatter"], FLOAT32_FLOOR) and st["z"] > Z_LIMIT:
             systematic_dominates = True
         if st["systematic"] > tol and st["z"] > Z_LIMIT:
             bad.append(name)

@@ -239,8 +239,8 @@ def _screen(data, rows, band, model, dielectric, fit, fixed, starts):
                         model[0], model[1], 0.05, 0.01, lambda r: None)
         lo, hi = _bounds(free)
         x0 = np.clip([vals[p] for p in free], lo + 1e-9, hi - 1e-9)
-        res = least_squares(prob, x0, bounds=(lo, hi), method="trf", x_scale="jac", diff_step=1e-6,
-                            max_nfev=40 * len(free), xtol=1e-10, ftol=1e-10, gtol=1e-10)
+        res = least_squares(prob, x0, jac=lambda x, pr=prob: pr.jac(x, hi), bounds=(lo, hi), method="trf",
+                            x_scale="jac", max_nfev=40 * len(free), xtol=1e-10, ftol=1e-10, gtol=1e-10)
         if best is None or res.cost < best[0].cost:
             best = (res, prob)
     res, prob = best
