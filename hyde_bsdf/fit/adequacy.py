@@ -218,14 +218,14 @@ def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi):
                        "no degrees of freedom: the fit cannot be checked")
     p = float(chi2_dist.sf(chi2, dof))
     red = chi2 / dof
-    st = residual_structure(r, _neighbour_index(theta_i, theta_r, phi))
+    st = residual_structure(np.asarray(r, float)[None], _neighbour_index(theta_i, theta_r, phi))   # one band
     th, td = half_angles(theta_i, theta_r, phi)
     trends = angle_trends(r, th, td)
     figs = {"chi2": chi2, "dof": dof, "reduced_chi2": red, "p_value": p, "systematic_sigmas": st["systematic"],
             "scatter_sigmas": st["scatter"], "z": st["z"], **{f"trend_{k}": v for k, v in trends.items()}}
     if p >= P_LIMIT:
         return Verdict(True, "chi2", "classic", figs, f"chi^2 = {chi2:.4g} for {dof} dof (p = {p:.3g})")
-    structured = st["z"] > Z_LIMIT and st["systematic"] > st["scatter"] / 2
+    structured = st["z"] > 3.0 and st["systematic"] > st["scatter"] / 2     # (only names the likely cause)
     cause = (_cause(trends, True, False) + f"; systematic residual {st['systematic']:.3g} sigma against scatter "
              f"{st['scatter']:.3g} sigma") if structured else \
         (f"the residuals are scatter without a trend ({st['scatter']:.3g} sigma rms): the sigmas underestimate "
