@@ -58,6 +58,8 @@ TABLE_RMS = 0.2
 PULL_RANGE = (0.8, 1.25)
 CONDUCTORS = [("Au", 0.1), ("Au", 0.3), ("Cu", 0.1), ("Cu", 0.3)]
 PPLASTIC_ETA = 1.49
+#: geometries of the noisy refits (pulls)
+PULL_ROWS = 600
 
 
 def csv_geometry():
@@ -132,11 +134,22 @@ def noisy(data, rng, m00=0.01, elements=0.005):
     return type(data)(**{**data.__dict__, "F": F})
 
 
+def subset(data, count, seed=0):
+    """At most ``count`` of the samples' geometries (fixed seed)."""
+    if len(data) <= count:
+        return data
+    keep = np.sort(np.random.default_rng(seed).choice(len(data), count, replace=False))
+    return type(data)(**{**data.__dict__, "theta_i": data.theta_i[keep], "theta_r": data.theta_r[keep],
+                         "phi": data.phi[keep], "F": data.F[:, keep], "cells": data.cells[keep]})
+
+
 def table_pulls(data, sel, truth, reps, seed, m00=0.01, elements=0.005):
-    """Pulls of rms_slope, n, k (every band) refitting the chosen model to noisy copies."""
+    """Pulls of rms_slope, n, k (every band) refitting the chosen model to noisy copies of
+    :data:`PULL_ROWS` of the geometries."""
     c, res = sel.choice, sel.result
     pulls = {"rms_slope": [], "n": [], "k": []}
     rng = np.random.default_rng(seed)
+    data = subset(data, PULL_ROWS)
     for _ in range(reps):
         f, _ = _quiet(fit_pbsdf, noisy(data, rng, m00, elements), fit=("n", "rms_slope") if c.dielectric else
                       ("n", "k", "rms_slope"), k0=0.0 if c.dielectric else None, shadowing=c.shadowing,
@@ -281,7 +294,8 @@ def _silent_row(label, res, warned):
 def validate(outdir="out/validation", quick=False):
     """Run parts 1-4, write the PNG and CSV files, return the checks.  ``quick``: 4 CSV models with
     8 noise realizations, 2 table models (one with 4 noisy refits), Au alpha 0.3 and pplastic with a
-    diffuse base on a coarse grid; the full run: every case, 30 (CSV) or 20 (tables) realizations."""
+    diffuse base on a coarse grid; the full run: every case, 30 (CSV), 12 (tables) or 10 (Mitsuba
+    conductors) noise realizations, refitting 600 geometries."""
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     reps = 8 if quick else 30
@@ -293,10 +307,10 @@ def validate(outdir="out/validation", quick=False):
     table_models = [("vgroove", "paper"), ("smith", "none")] if quick else MODELS
     conductors = [("Au", 0.3)] if quick else CONDUCTORS
     with tempfile.TemporaryDirectory() as folder:
-        cases += [table_case(m, folder, quick, (4 if quick and i == 0 else 0 if quick else 20), 200 + i)
+        cases += [table_case(m, folder, quick, (4 if quick and i == 0 else 0 if quick else 12), 200 + i)
                   for i, m in enumerate(table_models)]
         print(f"[fit_model_selection] + tables {time.perf_counter() - clock:.0f} s", file=sys.stderr)
-        mits = [conductor_case(mat, a, folder, quick, 3 if quick else 20, 300 + i)
+        mits = [conductor_case(mat, a, folder, quick, 3 if quick else 10, 300 + i)
                 for i, (mat, a) in enumerate(conductors)]
         plastics = [pplastic_case(d, folder, quick) for d in ((0.5,) if quick else (0.0, 0.5))]
         mits += [row for row, _ in plastics]

@@ -5,7 +5,10 @@
 writer); ``pbsdf_file`` (Mitsuba ``measured_polarized`` tables: :func:`read_pbsdf`,
 :func:`pbsdf_samples` -- frames, masking, subsampling), ``pbsdf_fit`` (:func:`fit_pbsdf`, n and k
 per band and rms_slope; ``hyde-bsdf fit FILE.pbsdf``) and ``pbsdf_export`` (:func:`export_pbsdf`,
-the model as such a table for the C++ renderer; ``hyde-bsdf export``).
+the model as such a table for the C++ renderer; ``hyde-bsdf export``); ``adequacy`` (the verdict
+every fit carries: does the model describe the data, and what its standard errors mean) and
+``model_selection`` (:func:`select_model`, :func:`select_model_pbsdf`: every shadowing x diffuse
+model, the smallest adequate one chosen; ``--model auto``).
 
 May import: ``hyde_bsdf.model``.  Independent of Mitsuba.
 """
@@ -14,5 +17,7 @@ from hyde_bsdf.fit.mueller_fit import __all__ as _fit_all
 from hyde_bsdf.fit.pbsdf_export import export_pbsdf
 from hyde_bsdf.fit.pbsdf_file import pbsdf_samples, read_pbsdf
 from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
+from hyde_bsdf.fit.model_selection import select_model, select_model_pbsdf
 
-__all__ = list(_fit_all) + ["read_pbsdf", "pbsdf_samples", "fit_pbsdf", "export_pbsdf"]
+__all__ = list(_fit_all) + ["read_pbsdf", "pbsdf_samples", "fit_pbsdf", "export_pbsdf", "select_model",
+                            "select_model_pbsdf"]

@@ -38,6 +38,7 @@ import numpy as np
 __all__ = ["Verdict", "InadequateModelWarning", "InadequateModelError", "ERRORS_NOTE", "P_LIMIT",
            "M00_TOLERANCE", "ELEMENT_TOLERANCE", "Z_LIMIT", "NEIGHBOURS",
            "half_angles", "residual_structure", "angle_trends", "geometry_clusters", "cluster_covariance",
+           "correlation", "larger_errors",
            "chi2_verdict", "floor_verdict"]
 
 #: chi^2 tail probability below which a fit with error bars is inadequate
@@ -195,6 +196,21 @@ def cluster_covariance(J, r, labels):
         return None
     D -= D.mean(axis=0)
     return (G - 1) / G * (D.T @ D)
+
+
+def correlation(cov):
+    """The correlation matrix of a covariance matrix."""
+    se = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    return cov / np.outer(se, se)
+
+
+def larger_errors(cov, robust):
+    """``cov`` with each standard error the larger of its own and ``robust``'s (None: ``cov``);
+    the correlations stay ``cov``'s (the Jacobian's: what the data can separate)."""
+    if robust is None:
+        return cov
+    se = np.sqrt(np.maximum(np.diag(cov), np.diag(robust)))
+    return np.outer(se, se) * correlation(cov)
 
 
 def _cause(trends, elements_bad, m00_bad):

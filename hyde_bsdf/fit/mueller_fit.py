@@ -32,6 +32,13 @@ above ``corr_limit``, relative errors above 50 %, a parameter on its bound) warn
 with :class:`IllPosedFitWarning` or, with ``strict=True``, raise
 :class:`IllPosedFitError`.  Fewer data than fitted parameters always raise.
 
+Every result carries a verdict (``FitResult.verdict``, :mod:`hyde_bsdf.fit.adequacy`): with
+sigmas, chi^2 and its p-value (p < 0.001: the model, or the sigmas, do not describe the data --
+:class:`InadequateModelWarning`, or :class:`InadequateModelError` with ``strict``, and the errors
+are lower bounds); without, the systematic part of the misfit against the data's scatter.  Where
+the misfit is systematic each error is the larger of the classic and the cluster-robust one.
+:func:`hyde_bsdf.fit.model_selection.select_model` chooses the shadowing and diffuse terms.
+
 What the data can and cannot say (:class:`FitDataWarning`, ``FitResult.data_warnings``):
 
 - *Repeated geometries* (rows with the same theta_i, theta_r, phi) are detected and
@@ -78,8 +85,8 @@ from hyde_bsdf.atomic import atomic_path, check_output_path
 from hyde_bsdf.model.checks import real_array
 from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
-                                    chi2_verdict, cluster_covariance, floor_verdict, geometry_clusters,
-                                    half_angles)
+                                    chi2_verdict, cluster_covariance, correlation, floor_verdict,
+                                    geometry_clusters, half_angles, larger_errors)
 from hyde_bsdf.fit.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements,
                                         MeasurementFileError, element_index, read_measurements)
 
@@ -696,7 +703,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     verdict, cov = _adequacy(r, J, cov, ti, tr, ph, len(names), chi2, dof, sigma is not None)
     verdict.figures["stderr_classic"] = dict(zip(fitted, classic.tolist()))
     if verdict.errors == "robust" or (not verdict.adequate and np.all(np.isfinite(cov))):
-        corr = _correlation(cov)
+        corr = correlation(cov)
     stderr = {q: float(math.sqrt(cov[i, i])) if math.isfinite(cov[i, i]) else float("inf")
               for i, q in enumerate(fitted)}
     vals = unpack(res.x)
@@ -737,21 +744,21 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
         data_warnings=data_diag, verdict=verdict)
     for text in data_diag:
         warnings.warn(text, FitDataWarning, stacklevel=2)
+    raise_or_warn(verdict, diag, strict, stacklevel=3)
+    return result
+
+
+def raise_or_warn(verdict, diag, strict, stacklevel=3):
+    """An inadequate model and an ill-posed fit: raise (``strict``) or warn, in that order."""
     if not verdict.adequate:
         if strict:
             raise InadequateModelError(verdict.message)
-        warnings.warn(verdict.message, InadequateModelWarning, stacklevel=2)
+        warnings.warn(verdict.message, InadequateModelWarning, stacklevel=stacklevel)
     if diag:
         text = "ill-posed fit: " + "; ".join(diag)
         if strict:
             raise IllPosedFitError(text)
-        warnings.warn(text, IllPosedFitWarning, stacklevel=2)
-    return result
-
-
-def _correlation(cov):
-    se = np.sqrt(np.maximum(np.diag(cov), 1e-300))
-    return cov / np.outer(se, se)
+        warnings.warn(text, IllPosedFitWarning, stacklevel=stacklevel)
 
 
 def _adequacy(r, J, cov, ti, tr, ph, n_elements, chi2, dof, sigma_given):
@@ -763,11 +770,7 @@ def _adequacy(r, J, cov, ti, tr, ph, n_elements, chi2, dof, sigma_given):
     if verdict.errors == "classic" or not np.all(np.isfinite(cov)):
         return verdict, cov
     th, td = half_angles(ti, tr, ph)
-    robust = cluster_covariance(J, r, np.tile(geometry_clusters(th, td), n_elements))
-    if robust is None:
-        return verdict, cov
-    se = np.sqrt(np.maximum(np.diag(cov), np.diag(robust)))
-    return verdict, np.outer(se, se) * _correlation(cov)
+    return verdict, larger_errors(cov, cluster_covariance(J, r, np.tile(geometry_clusters(th, td), n_elements)))
 
 
 def fit_measurements(meas: Measurements, **kwargs) -> FitResult:

@@ -14,13 +14,20 @@ A table has no uncertainties: ``s00`` (relative, of M00) and ``s_el`` (absolute,
 elements) are estimated from the residual scatter of a first fit, and the fit is repeated with
 them; the standard errors are then sqrt(diag((J^T J)^-1)) of the weighted residuals, i.e. they
 assume the misfit is noise.  A table written by ``hyde-bsdf export`` is fitted to ~1e-6 (only
-float32 rounding), a real material leaves model error that these errors include as if it were
-noise.  Ill-posed fits warn as :func:`hyde_bsdf.fit.fit_mueller` does (correlation > 0.999,
-relative error > 50 %, a parameter on its bound, no convergence).
+float32 rounding).  Every result carries a verdict (:mod:`hyde_bsdf.fit.adequacy`): the misfit
+split into its systematic part (shared between bands and neighbouring geometries) and the table's
+own scatter; a systematic misfit above the tolerance makes the model inadequate
+(:class:`~hyde_bsdf.fit.adequacy.InadequateModelWarning`, or an error with ``strict``; the errors are
+then lower bounds), one within it but above the scatter makes each standard error the larger of
+the classic and the cluster-robust one.  Ill-posed fits warn as :func:`hyde_bsdf.fit.fit_mueller`
+does (correlation > 0.999, relative error > 50 %, a parameter on its bound, no convergence).
+:func:`hyde_bsdf.fit.model_selection.select_model_pbsdf` chooses the shadowing and diffuse terms.
 
 Procedure: multi-start (n, k, rms_slope) on the middle band (starts as :func:`fit_mueller`'s),
 then (n, k) of each other band from its neighbour's solution, then all parameters jointly on all
-bands; then the weights and the final joint fit.  3000 geometries x 5 bands take a few seconds.
+bands; then the weights and the final joint fit.  Jacobians by forward differences with every
+band's n (and k) perturbed at once (n_b moves only band b's residuals): three residual evaluations
+per Jacobian, however many bands.  3000 geometries x 5 bands take a few seconds.
 
 Command line::
 
@@ -44,13 +51,13 @@ import numpy as np
 
 from hyde_bsdf.atomic import atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict, cluster_covariance, floor_verdict, geometry_clusters,
-                                    half_angles)
+from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, Verdict, cluster_covariance, correlation, floor_verdict,
+                                    geometry_clusters, half_angles, larger_errors)
 from hyde_bsdf.fit.pbsdf_file import PbsdfSamples, pbsdf_samples, read_pbsdf
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.shadowing import SHADOWING
 
-__all__ = ["PbsdfFitResult", "InadequateModelWarning", "fit_pbsdf", "plot_pbsdf_fit", "cli_main"]
+__all__ = ["PbsdfFitResult", "fit_pbsdf", "plot_pbsdf_fit", "cli_main"]
 
 #: elements fitted besides M00 (normalized by M00): all 15
 ELEMENTS = tuple((j, k) for j in range(4) for k in range(4) if (j, k) != (0, 0))
@@ -260,7 +267,7 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     """
     from scipy.optimize import least_squares
 
-    from hyde_bsdf.fit.mueller_fit import IllPosedFitError, IllPosedFitWarning
+    from hyde_bsdf.fit.mueller_fit import raise_or_warn
 
     fit = _check(fit, rms_slope, n0, k0, shadowing, diffuse)
     if not isinstance(data, PbsdfSamples):
@@ -359,15 +366,7 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         nfev=state["calls"], n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
         rms_m00=np.sqrt(np.mean(r00 ** 2, axis=1)), rms_elements=np.sqrt(np.mean(rel ** 2, axis=(1, 2))),
         verdict=verdict)
-    if not verdict.adequate:
-        if strict:
-            raise InadequateModelError(verdict.message)
-        warnings.warn(verdict.message, InadequateModelWarning, stacklevel=2)
-    if diag:
-        text = "ill-posed fit: " + "; ".join(diag)
-        if strict:
-            raise IllPosedFitError(text)
-        warnings.warn(text, IllPosedFitWarning, stacklevel=2)
+    raise_or_warn(verdict, diag, strict, stacklevel=3)
     return result
 
 
@@ -400,12 +399,8 @@ def _uncertainty(res, prob, free, values, data):
             N, K = prob.ti.size, len(prob.bands)
             geometry = np.concatenate([np.tile(np.arange(N), K), np.tile(np.arange(N), K * len(ELEMENTS))])
             th, td = half_angles(prob.ti, prob.tr, prob.ph)
-            robust = cluster_covariance(J, r, geometry_clusters(th, td)[geometry])
-            if robust is not None:      # each error the larger of the two; the correlations stay J's
-                se = np.sqrt(np.maximum(np.diag(cov), np.diag(robust)))
-                cov = np.outer(se, se) * _corr(cov)
-        se = np.sqrt(np.diag(cov))
-        corr = cov / np.outer(se, se)
+            cov = larger_errors(cov, cluster_covariance(J, r, geometry_clusters(th, td)[geometry]))
+        corr = correlation(cov)
     err = {q: math.sqrt(cov[i, i]) if math.isfinite(cov[i, i]) else math.inf for i, q in enumerate(free)}
     verdict.figures["stderr_classic"] = dict(zip(names, (np.sqrt(np.diag(cov)) if cov[0, 0] == math.inf
                                                          else classic).tolist()))
@@ -421,11 +416,6 @@ def _uncertainty(res, prob, free, values, data):
         if v <= lo + 1e-6 * max(1.0, abs(lo)) or v >= hi * (1 - 1e-9):
             diag.append(f"{names[i]} = {v:.4g} sits on its bound [{lo:g}, {hi:g}]")
     return cov, corr, err, diag, verdict
-
-
-def _corr(cov):
-    se = np.sqrt(np.maximum(np.diag(cov), 1e-300))
-    return cov / np.outer(se, se)
 
 
 def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str = "", max_points: int = 1500):
