@@ -26,7 +26,7 @@ from pathlib import Path
 
 from hyde_bsdf.fit.model_selection import select_model_pbsdf
 from hyde_bsdf.fit.pbsdf_export import export_pbsdf
-from hyde_bsdf.fit.pbsdf_file import pbsdf_samples
+from hyde_bsdf.fit.pbsdf_samples import pbsdf_samples
 from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
 
 TABLES = {"default model (vgroove, paper diffuse)": dict(shadowing="vgroove", diffuse="paper"),

@@ -17,7 +17,7 @@ from hyde_bsdf.fit import fit_mueller, synthetic_measurements
 from hyde_bsdf.fit.adequacy import InadequateModelError, InadequateModelWarning, cluster_covariance, half_angles
 from hyde_bsdf.fit.model_selection import select_model, select_model_pbsdf
 from hyde_bsdf.fit.pbsdf_export import export_pbsdf
-from hyde_bsdf.fit.pbsdf_file import pbsdf_samples
+from hyde_bsdf.fit.pbsdf_samples import pbsdf_samples
 from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
 
 TRUTH = {"rms_slope": 0.2, "n": 1.5, "k": 3.0}
@@ -137,3 +137,28 @@ def test_auto_picks_smith_without_diffuse_from_its_table(smith_table):
     assert "none/reciprocal" in text and "undefined" in text and "<- chosen" in text
     rejected = [r for r in sel.rows if r.stage != "undefined" and not r.adequate]
     assert {r.label for r in rejected} >= {"vgroove/paper", "smith/paper"}
+
+
+def test_cli_strict_exits_1_on_an_inadequate_fit_after_printing_the_verdict(smith_table, tmp_path, capsys):
+    from hyde_bsdf.app.cli import main
+
+    path = smith_table.source
+    code = main(["fit", str(path), "--max-points", "60", "--shadowing", "vgroove", "--strict", "-q"])
+    out, err = capsys.readouterr()
+    assert code == 1
+    assert "INADEQUATE" in out and "but the model does NOT describe the table" in out
+    assert "--strict: M00 misfit" in err and "try --model auto" in err
+    # the same fit without --strict still says so, but exits 0
+    assert main(["fit", str(path), "--max-points", "60", "--shadowing", "vgroove", "-q"]) == 0
+    assert "WARNING: M00 misfit" in capsys.readouterr().out
+
+
+def test_cli_chooses_the_model_unless_one_is_named(smith_table, tmp_path, capsys):
+    from hyde_bsdf.app.cli import main
+
+    code = main(["fit", str(smith_table.source), "--max-points", "200", "-q", "-o", str(tmp_path / "fit.png")])
+    out = capsys.readouterr().out
+    assert code == 0 and "model selection" in out and "chosen: smith/none" in out
+    assert (tmp_path / "fit.png").is_file() and (tmp_path / "fit_models.png").is_file()
+    assert main(["fit", str(smith_table.source), "--model", "auto", "--diffuse", "none"]) == 2
+    assert "--model auto chooses" in capsys.readouterr().err

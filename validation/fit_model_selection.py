@@ -44,8 +44,8 @@ from hyde_bsdf.fit import fit_mueller, synthetic_measurements
 from hyde_bsdf.fit.adequacy import ELEMENT_TOLERANCE, M00_TOLERANCE, InadequateModelWarning
 from hyde_bsdf.fit.model_selection import CANDIDATES, defined, model_size, select_model, select_model_pbsdf
 from hyde_bsdf.fit.pbsdf_export import _edge_directions, band_index, edge_deg, export_pbsdf, grids
-from hyde_bsdf.fit.pbsdf_file import (KAIST_WAVELENGTHS, paper_angles, paper_to_table, pbsdf_samples,
-                                      rusinkiewicz_to_directions, write_pbsdf)
+from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, pbsdf_samples
+from hyde_bsdf.io.pbsdf_file import KAIST_WAVELENGTHS, rusinkiewicz_to_directions, write_pbsdf
 from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))

@@ -16,9 +16,11 @@ When no model is adequate the lowest BIC is chosen and the verdict says so.
 
 Speed (tables): every model is first fitted on the middle band and :data:`SCREEN_ROWS` geometries
 (the *screen*), each starting from the best already-fitted neighbouring model (one term changed)
-and two fixed starts; the screen's verdict and BIC rank them, and only the chosen model is fitted
-jointly on every band and geometry (:func:`hyde_bsdf.fit.fit_pbsdf` from the screen's values),
-its verdict checked on all the data; if that fails the next candidate is tried.  With error bars
+and two fixed starts.  On the screen a model is adequate when its misfit in excess of the best
+screened model's is within the tolerance (one band and a few hundred geometries are too few for the
+verdict's own tests); the rule above picks one, and only that model is fitted jointly on every band
+and geometry (:func:`hyde_bsdf.fit.fit_pbsdf` from the screen's values) and its verdict made on all
+the data; if it fails the next candidate is tried (at most :data:`MAX_FULL_FITS`).  With error bars
 (CSV) every model is fitted fully, warm-started the same way.
 
 May import: ``hyde_bsdf.model``, ``hyde_bsdf.fit``.
@@ -31,10 +33,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.fit.adequacy import InadequateModelWarning, floor_verdict
+from hyde_bsdf.fit.adequacy import ELEMENT_TOLERANCE, M00_TOLERANCE, InadequateModelWarning
 
-__all__ = ["CANDIDATES", "ModelRow", "ModelSelection", "model_size", "select_model", "select_model_pbsdf",
-           "plot_selection"]
+__all__ = ["CANDIDATES", "ModelRow", "ModelSelection", "model_size", "select_model", "select_model_pbsdf"]
 
 SHADOWINGS = ("none", "smith", "vgroove")
 DIFFUSES = ("none", "paper", "reciprocal")
@@ -246,12 +247,11 @@ def _screen(data, rows, band, model, dielectric, fit, fixed, starts):
     res, prob = best
     v = prob.values(res.x)
     r00, rel = prob.parts(res.x)
-    verdict = floor_verdict(r00, rel, prob.ti, prob.tr, prob.ph)
     m, p = res.fun.size, len(free)
     return ModelRow(model[0], model[1], dielectric, {"rms_slope": v["rms_slope"], "n": v[("n", band)],
                     "k": v[("k", band)]}, p, model_size(*model, p), _bic_weighted(2 * res.cost, m, p),
                     {"M00": float(np.sqrt(np.mean(r00 ** 2))), "elements": float(np.sqrt(np.mean(rel ** 2)))},
-                    bool(verdict.adequate), "screen")
+                    False, "screen")
 
 
 def select_model_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope=0.3, n0=None, k0=None, strict=False,
@@ -264,12 +264,12 @@ def select_model_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope=0.3, n0=N
     :class:`ModelSelection` whose ``result`` is the chosen model's full
     :class:`~hyde_bsdf.fit.pbsdf_fit.PbsdfFitResult`.
     """
-    from hyde_bsdf.fit.pbsdf_file import PbsdfSamples, pbsdf_samples
+    from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
     from hyde_bsdf.fit.pbsdf_fit import STARTS, _check
 
     fit = _check(fit, rms_slope, n0, k0, "vgroove", "paper")
     if not isinstance(data, PbsdfSamples):
-        data = pbsdf_samples(data, progress=bool(progress), **sample_options)
+        data = pbsdf_samples(data, progress=progress or False, **sample_options)
     band = data.wavelengths.size // 2
     rows_all = np.arange(len(data))
     screen = rows_all if rows_all.size <= SCREEN_ROWS else \
@@ -286,7 +286,19 @@ def select_model_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope=0.3, n0=N
     if "k" in fit and k0 is None and min(rows, key=lambda r: r.bic).params["k"] < DIELECTRIC_K:
         for r in sorted(rows, key=lambda r: r.bic)[:3]:
             rows.append(_screen(data, screen, band, (r.shadowing, r.diffuse), True, fit, fixed, [r.params]))
+    _screen_verdicts(rows)
     return _full_fits(data, rows, fit, rms_slope, n0, k0, strict, progress)
+
+
+def _screen_verdicts(rows):
+    """Adequate on the screen: a misfit in excess of the best screened model's (the floor the data
+    allow any model here) within the tolerance.  One band and a few hundred geometries are too few
+    for the verdict's own tests; the chosen model's verdict is then made on all the data."""
+    best = min(rows, key=lambda r: r.bic).misfit
+    for r in rows:
+        excess = {q: math.sqrt(max(r.misfit[q] ** 2 - best[q] ** 2, 0.0)) for q in ("M00", "elements")}
+        r.adequate = excess["M00"] <= M00_TOLERANCE and excess["elements"] <= ELEMENT_TOLERANCE
+        r.note = f"excess misfit over the best: M00 {100 * excess['M00']:.3g} %, elements {excess['elements']:.2g}"
 
 
 def _full_fits(data, rows, fit, rms_slope, n0, k0, strict, progress):
@@ -314,35 +326,3 @@ def _full_fits(data, rows, fit, rms_slope, n0, k0, strict, progress):
     _finish(sel, strict)
     return sel
 
-
-def plot_selection(sel: ModelSelection, path, title: str = ""):
-    """Misfit against model size, one point per candidate (the chosen one ringed), as PNG/PDF/SVG."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from hyde_bsdf.atomic import atomic_path, check_output_path
-
-    live = [r for r in sel.rows if r.stage != "undefined"]
-    key = "reduced_chi2" if "reduced_chi2" in live[0].misfit else ("M00" if "M00" in live[0].misfit else "elements")
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for r in live:
-        y = r.misfit[key] * (100 if key == "M00" else 1)
-        ax.semilogy(r.size + (0.15 if r.dielectric else 0), y, "o", color="C2" if r.adequate else "C3", ms=7)
-        ax.annotate(r.label, (r.size + (0.15 if r.dielectric else 0), y), fontsize=7, xytext=(4, 2),
-                    textcoords="offset points")
-    c = sel.choice
-    ax.semilogy(c.size + (0.15 if c.dielectric else 0), c.misfit[key] * (100 if key == "M00" else 1), "o",
-                mfc="none", mec="k", ms=14, label=f"chosen: {c.label}")
-    ax.set_xlabel("model size (free parameters + terms)")
-    ax.set_ylabel({"reduced_chi2": "reduced chi^2", "M00": "M00 rms misfit (%)",
-                   "elements": "normalized-element rms misfit"}[key])
-    ax.set_title((title + "\n" if title else "") + "green: adequate, red: inadequate", fontsize=9)
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path = check_output_path(path, "plot file")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format=path.suffix.lstrip(".").lower() or "png")
-    plt.close(fig)
-    return path
