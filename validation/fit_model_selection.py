@@ -167,7 +167,7 @@ def table_case(model, folder, quick, reps, seed):
     path = Path(folder) / f"{model[0]}_{model[1]}.pbsdf"
     export_pbsdf(path, rms_slope=TABLE_RMS, material="Cu", shadowing=model[0], diffuse=model[1],
                  resolution=(9, 16, 16) if quick else (13, 24, 24), error_samples=0, alpha_sample=0.3)
-    data = pbsdf_samples(path, max_points=400 if quick else 3000)
+    data = pbsdf_samples(path, max_points=400 if quick else 1500)
     sel, _ = _quiet(select_model_pbsdf, data, progress=False)
     c, res = sel.choice, sel.result
     n, k = band_index(material="Cu")
@@ -212,7 +212,7 @@ def conductor_case(material, alpha, folder, quick, reps, seed):
     path = mitsuba_table(Path(folder) / f"{material}_{alpha}.pbsdf", {"type": "roughconductor",
                          "distribution": "beckmann", "alpha": alpha, "material": material},
                          (9, 16, 16) if quick else (13, 24, 24))
-    data = pbsdf_samples(path, max_points=500 if quick else 3000)
+    data = pbsdf_samples(path, max_points=500 if quick else 1500)
     sel, warned = _quiet(select_model_pbsdf, data, progress=False)
     res = sel.result
     n, k = band_index(material=material)
@@ -245,7 +245,7 @@ def pplastic_case(diffuse_reflectance, folder, quick):
                          {"type": "pplastic", "distribution": "beckmann", "alpha": 0.2,
                           "diffuse_reflectance": float(diffuse_reflectance),
                           "int_ior": PPLASTIC_ETA, "ext_ior": 1.0}, (9, 16, 16) if quick else (13, 24, 24))
-    data = pbsdf_samples(path, max_points=500 if quick else 3000)
+    data = pbsdf_samples(path, max_points=500 if quick else 1500)
     sel, warned = _quiet(select_model_pbsdf, data, progress=False)
     res = sel.result
     return {"case": f"pplastic diffuse {diffuse_reflectance}", "chosen": sel.choice.label,
@@ -294,8 +294,8 @@ def _silent_row(label, res, warned):
 def validate(outdir="out/validation", quick=False):
     """Run parts 1-4, write the PNG and CSV files, return the checks.  ``quick``: 4 CSV models with
     8 noise realizations, 2 table models (one with 4 noisy refits), Au alpha 0.3 and pplastic with a
-    diffuse base on a coarse grid; the full run: every case, 30 (CSV), 12 (tables) or 10 (Mitsuba
-    conductors) noise realizations, refitting 600 geometries."""
+    diffuse base on a coarse grid; the full run: every case (1500 geometries), 30 (CSV), 8 (tables) or
+    6 (Mitsuba conductors) noise realizations, refitting 600 geometries."""
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     reps = 8 if quick else 30
@@ -307,10 +307,10 @@ def validate(outdir="out/validation", quick=False):
     table_models = [("vgroove", "paper"), ("smith", "none")] if quick else MODELS
     conductors = [("Au", 0.3)] if quick else CONDUCTORS
     with tempfile.TemporaryDirectory() as folder:
-        cases += [table_case(m, folder, quick, (4 if quick and i == 0 else 0 if quick else 12), 200 + i)
+        cases += [table_case(m, folder, quick, (4 if quick and i == 0 else 0 if quick else 8), 200 + i)
                   for i, m in enumerate(table_models)]
         print(f"[fit_model_selection] + tables {time.perf_counter() - clock:.0f} s", file=sys.stderr)
-        mits = [conductor_case(mat, a, folder, quick, 3 if quick else 10, 300 + i)
+        mits = [conductor_case(mat, a, folder, quick, 3 if quick else 6, 300 + i)
                 for i, (mat, a) in enumerate(conductors)]
         plastics = [pplastic_case(d, folder, quick) for d in ((0.5,) if quick else (0.0, 0.5))]
         mits += [row for row, _ in plastics]
