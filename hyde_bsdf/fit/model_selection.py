@@ -4,9 +4,9 @@ Candidates: shadowing {none, smith, vgroove} x diffuse {none, paper, reciprocal}
 shadowing, so none x reciprocal is listed as undefined: 8 models), plus k = 0 (a dielectric) for
 the best models where the data allow one (their fitted k below :data:`DIELECTRIC_K`).
 
-Size of a model: its free parameters plus one for each term it adds (a shadowing function, a
-diffuse term); the terms have no free parameters of their own, so the information criterion alone
-cannot tell them apart.  Rule: among the *adequate* models (:mod:`hyde_bsdf.fit.adequacy`) the
+Size of a model: its free parameters (a table's: on the middle band, rms_slope, n, k) plus one for
+each term it adds (a shadowing function, a diffuse term); the terms have no free parameters of
+their own, so the information criterion alone cannot tell them apart.  Rule: among the *adequate* models (:mod:`hyde_bsdf.fit.adequacy`) the
 smallest, ties broken by the Bayesian information criterion
 
     BIC = chi^2 + p ln m            (data with sigmas; m values, p free parameters)
@@ -315,10 +315,11 @@ def _full_fits(data, rows, fit, rms_slope, n0, k0, strict, progress):
                             rms_slope=rms_slope, n0=n0, k0=0.0 if r.dielectric else k0, shadowing=r.shadowing,
                             diffuse=r.diffuse, progress=progress, start=r.params)
         mid = data.wavelengths.size // 2
-        rows[i] = ModelRow(r.shadowing, r.diffuse, r.dielectric, res.params(mid), len(res.names), r.size, r.bic,
+        rows[i] = ModelRow(r.shadowing, r.diffuse, r.dielectric, res.params(mid), r.n_params, r.size, r.bic,
                            {"M00": float(np.sqrt(np.mean(res.rms_m00 ** 2))),
                             "elements": float(np.sqrt(np.mean(res.rms_elements ** 2)))},
-                           bool(res.verdict.adequate), "full")
+                           bool(res.verdict.adequate), "full",
+                           f"all bands: {len(res.names)} free parameters, misfit over {len(data)} geometries")
         if res.verdict.adequate or not any(x.adequate for x in rows):
             break
         notes.append(f"{r.label} was adequate on the screen but not on every band: {res.verdict.message}")
