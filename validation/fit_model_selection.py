@@ -383,7 +383,7 @@ def _plot(path, cases, mits):
     ax.axhline(0.03, color="k", ls="--", lw=0.8)
     ax.axhline(0.05, color="k", ls=":", lw=0.8)
     ax.set_yscale("log")
-    ax.set_xticks(x, [f"{m['case']}\n{m['chosen']}" for m in cond], fontsize=7)
+    ax.set_xticks(x, [f"{m['case'].replace('roughconductor ', '')}\n{m['chosen']}" for m in cond], fontsize=7)
     ax.set_title("Mitsuba roughconductor tables, default command: relative errors (3 %, 5 % lines)", fontsize=9)
     ax.legend(fontsize=7)
     ax = axes[2]
