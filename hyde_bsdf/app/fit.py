@@ -117,11 +117,15 @@ def _quiet_fit(fn, *args, **kwargs):
         return fn(*args, **kwargs)
 
 
+def _warn_verdict(result):
+    """An inadequate model's WARNING again on stderr, where a script's log sees it."""
+    if not result.verdict.adequate:
+        print(f"hyde-bsdf fit: warning: {result.verdict.message}", file=sys.stderr)
+
+
 def _finish(result, strict) -> int:
-    """Exit status after the summary: the verdict on stderr, 1 for --strict failures or no convergence."""
+    """Exit status after the summary: 1 for --strict failures (said on stderr) or no convergence."""
     v = result.verdict
-    if not v.adequate:
-        print(f"hyde-bsdf fit: warning: {v.message}", file=sys.stderr)
     if strict and (not v.adequate or result.warnings):
         why = v.message if not v.adequate else "ill-posed fit: " + "; ".join(result.warnings)
         print(f"hyde-bsdf fit: --strict: {why}", file=sys.stderr)
@@ -185,6 +189,7 @@ def csv_main(argv=None) -> int:
     if sel is not None:
         print(sel.summary())
     print(result.summary())
+    _warn_verdict(result)
     for text in result.data_warnings:          # also on stderr, where a script's log sees them
         print(f"hyde-bsdf fit: warning: {text}", file=sys.stderr)
     print("\nMitsuba material (hyde plugin):")
@@ -256,6 +261,7 @@ def pbsdf_main(argv=None) -> int:
     if sel is not None:
         print(sel.summary())
     print(result.summary())
+    _warn_verdict(result)
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))
     if args.output:
