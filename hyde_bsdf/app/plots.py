@@ -48,6 +48,17 @@ def check_plot_path(path, what: str = "plot file (-o)") -> Path:
     return path
 
 
+def _save(fig, path, dpi) -> Path:
+    """Write a figure atomically in the format its extension names, and close it."""
+    import matplotlib.pyplot as plt
+
+    path = check_output_path(path, "plot file")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format=plot_format(path))
+    plt.close(fig)
+    return path
+
+
 def _signed_theta_r(theta_r, phi):
     """Signed observation angle in the plane of incidence: + forward (phi = pi), - backscatter."""
     return np.where(np.cos(phi) < 0, theta_r, -theta_r)
@@ -121,11 +132,7 @@ def plot_fit(result: FitResult, meas: Measurements, path, title: str = "", truth
                  rf"fit: $\eta$ = {pr['n']:.4g} - j{pr['k']:.4g}, rms_slope = {pr['rms_slope']:.4g}; "
                  rf"$\chi^2_\nu$ = {result.reduced_chi2:.3g}", fontsize=9)
     fig.tight_layout()
-    path = check_output_path(path, "plot file")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format=plot_format(path))
-    plt.close(fig)
-    return path
+    return _save(fig, path, 120)
 
 
 def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str = "", max_points: int = 1500):
@@ -173,11 +180,7 @@ def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str 
                  f"rms_slope = {result.rms_slope:.4g}; n = {', '.join(f'{v:.3g}' for v in result.n)}; "
                  f"k = {', '.join(f'{v:.3g}' for v in result.k)} ({len(rows)} of {len(data)} geometries)", fontsize=9)
     fig.subplots_adjust(left=0.06, right=0.98, bottom=0.05, top=0.92, wspace=0.3, hspace=0.35)
-    path = check_output_path(path, "plot file")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90, format=plot_format(path))
-    plt.close(fig)
-    return path
+    return _save(fig, path, 90)
 
 
 def plot_history(results: dict, path, title: str = "") -> Path:
@@ -236,8 +239,4 @@ def plot_selection(sel: ModelSelection, path, title: str = ""):
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    path = check_output_path(path, "plot file")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format=plot_format(path))
-    plt.close(fig)
-    return path
+    return _save(fig, path, 110)
