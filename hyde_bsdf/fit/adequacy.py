@@ -258,7 +258,7 @@ def floor_verdict(m00, elements, theta_i, theta_r, phi):
     th, td = half_angles(theta_i, theta_r, phi)
     figs, bad, trends = {}, [], {}
     parts = ([("M00", m00, M00_TOLERANCE)] if m00 is not None else []) + [("elements", elements, ELEMENT_TOLERANCE)]
-    systematic_dominates = False
+    systematic_dominates, unproven = False, []
     for name, r, tol in parts:
         st = residual_structure(r, nb)
         figs.update({f"{name}_{k}": v for k, v in st.items()})
@@ -267,11 +267,15 @@ def floor_verdict(m00, elements, theta_i, theta_r, phi):
         if st["systematic"] > tol and st["z"] > Z_LIMIT:
             bad.append(name)
             trends = trends or angle_trends(r, th, td)
+        elif st["systematic"] > tol:
+            unproven.append(f"{name} (z = {st['z']:.2g})")
     if not bad:
         what = "; ".join(_describe(name, figs) for name, _, _ in parts)
         errors = "robust" if systematic_dominates else "classic"
-        return Verdict(True, "floor", errors, figs,
-                       f"systematic misfit within tolerance ({what})" +
+        head = (f"not shown inadequate: the systematic misfit of {', '.join(unproven)} exceeds the tolerance but "
+                f"{np.shape(theta_i)[0]} geometries cannot show it is significant ({what})" if unproven else
+                f"systematic misfit within tolerance ({what})")
+        return Verdict(True, "floor", errors, figs, head +
                        ("; it exceeds the scatter, so the standard errors are robust (sandwich)" if errors == "robust" else ""))
     cause = _cause(trends, "elements" in bad, "M00" in bad)
     lead = bad[0]
