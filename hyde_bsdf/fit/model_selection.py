@@ -165,15 +165,19 @@ def _bic_weighted(rss, m, p):
 def select_model(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), rms_slope=0.3, n0=None, k0=None,
                  strict=False, **kwargs) -> ModelSelection:
     """Fit every candidate to normalized Mueller measurements (as :func:`hyde_bsdf.fit.fit_mueller`,
-    same arguments but no shadowing/diffuse) and choose; returns a :class:`ModelSelection`."""
+    same arguments but no shadowing/diffuse) and choose; returns a :class:`ModelSelection`.
+
+    More than :data:`CSV_SCREEN_ROWS` values per element: the candidates are fitted to that many
+    (a fixed random subset), and only the chosen one to all the data."""
     from hyde_bsdf.fit.mueller_fit import _check_fit_names, fit_mueller
 
     fitted_names = _check_fit_names(fit)
+    full = (theta_i, theta_r, phi, measured, sigma)
+    data, screened = _csv_subset(full)
     rows, results = [], []
     for model in _order():
         start = _neighbour_start(model, rows)
-        row, res = _csv_candidate(model, False, fitted_names, start, rms_slope, n0, k0,
-                                  (theta_i, theta_r, phi, measured, sigma), kwargs, fit_mueller)
+        row, res = _csv_candidate(model, False, fitted_names, start, rms_slope, n0, k0, data, kwargs, fit_mueller)
         rows.append(row)
         results.append(res)
     best_k = min(rows, key=lambda r: r.bic).params["k"]
@@ -181,13 +185,44 @@ def select_model(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"),
         for model in sorted({(r.shadowing, r.diffuse) for r in sorted(rows, key=lambda r: r.bic)[:3]}):
             start = next(r.params for r in rows if (r.shadowing, r.diffuse) == model)
             row, res = _csv_candidate(model, True, tuple(q for q in fitted_names if q != "k"), start, rms_slope,
-                                      n0, 0.0, (theta_i, theta_r, phi, measured, sigma), kwargs, fit_mueller)
+                                      n0, 0.0, data, kwargs, fit_mueller)
             rows.append(row)
             results.append(res)
     i, why = _choose(rows)
-    sel = ModelSelection(rows + _undefined_rows(), i, why, results[i])
+    result = results[i]
+    if screened:
+        r = rows[i]
+        rows[i], result = _csv_candidate((r.shadowing, r.diffuse), r.dielectric, result.fitted, r.params, rms_slope,
+                                         n0, 0.0 if r.dielectric else k0, full, kwargs, fit_mueller)
+        rows[i].note = "fitted to all the data; the others to a subset"
+    sel = ModelSelection(rows + _undefined_rows(), i, why, result)
     _finish(sel, strict)
     return sel
+
+
+#: above this many values per element, the candidates are fitted to a fixed random subset
+CSV_SCREEN_ROWS = 4000
+
+
+def _csv_subset(data):
+    """``data`` (theta_i, theta_r, phi, measured, sigma) flattened to at most CSV_SCREEN_ROWS rows
+    (fixed seed), and whether it was cut."""
+    ti, tr, ph, measured, sigma = data
+    arrays = [np.asarray(a, float) for a in (ti, tr, ph)] + [np.asarray(v, float) for v in measured.values()]
+    if sigma is not None:
+        arrays += [np.asarray(sigma[k], float) for k in measured]
+    try:
+        flat = [a.ravel() for a in np.broadcast_arrays(*arrays)]
+    except ValueError:
+        return data, False          # fit_mueller names the mismatch
+    if flat[0].size <= CSV_SCREEN_ROWS:
+        return data, False
+    keep = np.sort(np.random.default_rng(0).choice(flat[0].size, CSV_SCREEN_ROWS, replace=False))
+    flat = [a[keep] for a in flat]
+    names = list(measured)
+    values = dict(zip(names, flat[3:3 + len(names)]))
+    sig = dict(zip(names, flat[3 + len(names):])) if sigma is not None else None
+    return (flat[0], flat[1], flat[2], values, sig), True
 
 
 def _csv_candidate(model, dielectric, names, start, rms_slope, n0, k0, data, kwargs, fit_mueller):
