@@ -4,17 +4,24 @@
 Command lines::
 
     hyde-bsdf fit DATA.csv [--fit n,k,rms_slope] [--rms-slope X] [--n0 N] [--k0 K]
-                  [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
+                  [--model auto|fixed] [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
                   [--strict] [-o plot.png] [-q]
     hyde-bsdf fit FILE.pbsdf [--fit n,k,rms_slope] [--rms-slope 0.3] [--n0 N] [--k0 K]
-                  [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
+                  [--model auto|fixed] [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
                   [--max-points 3000] [--theta-max 80] [--tolerance 0.05] [--seed 0]
                   [--strict] [-o fit.png] [-q]
 
+Without ``--shadowing`` and ``--diffuse`` the model is chosen (``--model auto``,
+:mod:`hyde_bsdf.fit.model_selection`): every shadowing x diffuse model is fitted and the smallest
+adequate one kept; the table of models is printed and, with ``-o``, plotted (misfit against model
+size) beside the fit as ``NAME_models.EXT``.  Every fit prints its verdict
+(:mod:`hyde_bsdf.fit.adequacy`); an inadequate model is a ``WARNING:`` line in the summary and on
+stderr.
+
 (CSV format: :mod:`hyde_bsdf.io.measurements`; the fits: :mod:`hyde_bsdf.fit.mueller_fit`,
 :mod:`hyde_bsdf.fit.pbsdf_fit`.)  Options and the ``-o`` path are checked before the file is
-read; a user error prints one line on stderr and exits 2; an ill-posed fit with ``--strict`` or
-a fit that did not converge exits 1.  Large files report reading and fitting progress on stderr
+read; a user error prints one line on stderr and exits 2; a fit that did not converge, or with
+``--strict`` an inadequate model or an ill-posed fit, exits 1 (after the summary).  Large files report reading and fitting progress on stderr
 every few seconds (``-q``: none).
 """
 from __future__ import annotations
@@ -25,11 +32,13 @@ import warnings
 from pathlib import Path
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
-from hyde_bsdf.app.plots import PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.app.plots import PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit, plot_selection
+from hyde_bsdf.errors import RejectedResult, UsageError
+from hyde_bsdf.fit.adequacy import InadequateModelWarning
+from hyde_bsdf.fit.model_selection import select_model, select_model_pbsdf
+from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitWarning, check_options, fit_measurements
 from hyde_bsdf.io.input_gate import STDIN, check_input
 from hyde_bsdf.io.output_gate import output_gate
-from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitWarning, check_options, fit_measurements
 from hyde_bsdf.fit.pbsdf_fit import _check, fit_pbsdf
 from hyde_bsdf.fit.pbsdf_samples import pbsdf_samples
 from hyde_bsdf.io.measurements import read_measurements
@@ -90,13 +99,66 @@ def cli_main(argv=None) -> int:
     return pbsdf_main(argv) if data is not None and is_pbsdf(data) else csv_main(argv)
 
 
+MODEL_HELP = ("auto (the default unless --shadowing or --diffuse is given): fit every shadowing x diffuse "
+              "model (and k = 0 where the data allow a dielectric) and keep the smallest adequate one; "
+              "fixed: one model, --shadowing (default vgroove) and --diffuse (default paper)")
+STRICT_HELP = "fail (exit 1, after the summary) when the model does not describe the data or the fit is ill-posed"
+
+
+def _add_model_options(ap):
+    ap.add_argument("--model", default=None, choices=("auto", "fixed"), help=MODEL_HELP)
+    ap.add_argument("--shadowing", default=None, choices=SHADOWING, help="one shadowing model (default vgroove)")
+    ap.add_argument("--diffuse", default=None, choices=DIFFUSE, help="one diffuse term (default paper)")
+
+
+def _auto(args) -> bool:
+    """Whether the command chooses the model: --model auto, or neither --shadowing nor --diffuse."""
+    named = args.shadowing is not None or args.diffuse is not None
+    if args.model == "auto" and named:
+        raise UsageError("--model auto chooses the shadowing and the diffuse term: drop --shadowing/--diffuse, "
+                         "or use --model fixed")
+    if args.model is None:
+        return not named
+    return args.model == "auto"
+
+
+def _models_path(output) -> Path:
+    """Where ``-o PATH`` puts the misfit-against-model-size plot: PATH_models.EXT."""
+    p = Path(output)
+    return p.with_name(p.stem + "_models" + p.suffix)
+
+
+def _quiet_fit(fn, *args, **kwargs):
+    """Run a fit with its warnings kept for the summary (printed there, not twice)."""
+    with warnings.catch_warnings():
+        for category in (IllPosedFitWarning, FitDataWarning, InadequateModelWarning):
+            warnings.simplefilter("ignore", category)
+        return fn(*args, **kwargs)
+
+
+def _warn_verdict(result):
+    """An inadequate model's WARNING again on stderr, where a script's log sees it."""
+    if not result.verdict.adequate:
+        warnings.warn(result.verdict.message, InadequateModelWarning, stacklevel=1)
+
+
+def _finish(result, strict) -> int:
+    """Exit status after the summary: 1 for --strict failures (said on stderr) or no convergence."""
+    v = result.verdict
+    if strict and (not v.adequate or result.warnings):
+        why = v.message if not v.adequate else "ill-posed fit: " + "; ".join(result.warnings)
+        raise RejectedResult(f"--strict: {why}")
+    return 0 if result.success else 1
+
+
 def csv_parser() -> Parser:
     ap = Parser(
         prog="hyde-bsdf fit",
         description="Fit the Hyde-Schmidt-Havrilla pBRDF (n, k, rms_slope) to normalized Mueller-matrix "
                     "measurements in a CSV file (format: python -m pydoc hyde_bsdf.io.measurements). "
                     "The index is the paper's eta = n - jk (the plugin's eta = n, k = k). "
-                    "Exit status: 0 fitted, 1 not converged or ill-posed with --strict, 2 bad input.")
+                    "Exit status: 0 fitted, 1 not converged, or with --strict an inadequate model or an ill-posed "
+                    "fit, 2 bad input.")
     ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M01, M01_sigma, ...)")
     ap.add_argument("--fit", default="n,k", help="comma-separated parameters to fit, from n,k,rms_slope "
                     "(default n,k)")
@@ -104,13 +166,11 @@ def csv_parser() -> Parser:
                     help="rms_slope = sqrt(2) sigma_h/ell: start value if fitted, else held fixed (default 0.3)")
     ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n; default: several starts")
     ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k; default: several starts")
-    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING,
-                    help="shadowing-masking: the paper's V-groove, Smith's for Beckmann, or none (default %(default)s)")
-    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE,
-                    help="diffuse term: the paper's, a reciprocal variant, or none (default %(default)s)")
-    ap.add_argument("--strict", action="store_true", help="fail (exit 1) when the fit is ill-posed")
+    _add_model_options(ap)
+    ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
     ap.add_argument("-o", "--output", default=None,
-                    help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)})")
+                    help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)}); with --model "
+                         "auto also NAME_models.EXT, misfit against model size")
     quiet_option(ap)
     return ap
 
@@ -136,27 +196,39 @@ def _output_gate(args):
 
 def _csv_run(args) -> int:
     opts = dict(fit=args.fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
-                shadowing=args.shadowing, diffuse=args.diffuse)
+                shadowing=args.shadowing or "vgroove", diffuse=args.diffuse or "paper")
+    sel = None
     with user_input():
+        auto = _auto(args)
         check_options(**opts)
     if args.output:
         check_plot_path(args.output)
     meas = read_measurements(args.data, progress=_progress(args))
-    with warnings.catch_warnings(), user_input(f"data file {args.data!r}"):
-        warnings.simplefilter("ignore", IllPosedFitWarning)   # printed in the summary instead
-        warnings.simplefilter("ignore", FitDataWarning)
-        result = fit_measurements(meas, **opts, strict=args.strict, progress=_progress(args, auto=True))
+    with user_input(f"data file {args.data!r}"):
+        if auto:
+            sel = _quiet_fit(select_model, meas.theta_i, meas.theta_r, meas.phi, meas.values,
+                             sigma=meas.uncertainty(), fit=args.fit, rms_slope=args.rms_slope, n0=args.n0,
+                             k0=args.k0, progress=_progress(args, auto=True))
+            result = sel.result
+        else:
+            result = _quiet_fit(fit_measurements, meas, **opts, progress=_progress(args, auto=True))
     print(f"data: {meas.source} ({len(meas)} rows, elements {', '.join(meas.elements)}"
           + (", sigma / sqrt(n_samples)" if meas.n_samples is not None else "") + ")")
+    if sel is not None:
+        print(sel.summary())
     print(result.summary())
+    _warn_verdict(result)
     for text in result.data_warnings:          # also on stderr, where a script's log sees them
         warnings.warn(text, FitDataWarning, stacklevel=1)
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))
     if args.output:
-        plot_fit(result, meas, args.output, title=str(meas.source))
+        with user_input("cannot write the plot"):
+            plot_fit(result, meas, args.output, title=str(meas.source))
+            if sel is not None:
+                print(f"\nmodels plot: {plot_selection(sel, _models_path(args.output), title=str(meas.source))}")
         print(f"\nplot: {args.output}")
-    return 0 if result.success else 1
+    return _finish(result, args.strict)
 
 
 def pbsdf_parser() -> Parser:
@@ -164,25 +236,23 @@ def pbsdf_parser() -> Parser:
         "Fit the Hyde-Schmidt-Havrilla pBRDF to a Mitsuba measured_polarized table (FILE.pbsdf, e.g. the KAIST "
         "database): one rms_slope and n, k per band, from M00 and the 15 normalized elements; prints the cell "
         "counts (NaN, non-physical, below the horizon), the fit with standard errors, and the hyde <bsdf>. "
-        "Index: the paper's eta = n - jk (the plugin's eta = n, k = k). Exit status: 0 fitted, 1 not converged "
-        "or ill-posed with --strict, 2 bad input."))
+        "Index: the paper's eta = n - jk (the plugin's eta = n, k = k). Exit status: 0 fitted, 1 not converged, "
+        "or with --strict an inadequate model or an ill-posed fit, 2 bad input."))
     ap.add_argument("data", help="the measured_polarized table (.pbsdf)")
     ap.add_argument("--fit", default="n,k,rms_slope", help="parameters to fit (default n,k,rms_slope)")
     ap.add_argument("--rms-slope", type=float, default=0.3, help="start (or fixed) rms_slope (default 0.3)")
     ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n of every band; default: several")
     ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k of every band; default: several")
-    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING,
-                    help="shadowing-masking: the paper's V-groove, Smith's for Beckmann, or none (default %(default)s)")
-    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE,
-                    help="diffuse term: the paper's, a reciprocal variant, or none (default %(default)s)")
+    _add_model_options(ap)
     ap.add_argument("--max-points", type=int, default=3000, help="geometries drawn from the usable cells (default 3000)")
     ap.add_argument("--theta-max", type=float, default=80.0,
                     help="largest theta_i, theta_r used, degrees (default 80)")
     ap.add_argument("--tolerance", type=float, default=0.05,
                     help="a cell with |M_jk| or a degree of polarization above (1 + tolerance) M00 is non-physical")
     ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
-    ap.add_argument("--strict", action="store_true", help="fail (exit 1) when the fit is ill-posed")
-    ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element")
+    ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
+    ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element; "
+                    "with --model auto also NAME_models.EXT, misfit against model size")
     quiet_option(ap)
     return ap
 
@@ -196,7 +266,9 @@ def pbsdf_main(argv=None) -> int:
 
 def _pbsdf_run(args) -> int:
     with user_input():
-        fit = _check(args.fit, args.rms_slope, args.n0, args.k0, args.shadowing, args.diffuse)
+        auto = _auto(args)
+        shadowing, diffuse = args.shadowing or "vgroove", args.diffuse or "paper"
+        fit = _check(args.fit, args.rms_slope, args.n0, args.k0, shadowing, diffuse)
     if not 0 <= args.seed < 2**32:
         raise UsageError(f"--seed must be an integer in [0, 2^32), got {args.seed}")
     if not 0 < args.theta_max <= 90:
@@ -215,15 +287,18 @@ def _pbsdf_run(args) -> int:
     print(f"  {data.counts.summary()}")
     print(f"  fitting {len(data)} of {data.usable_geometries} geometries usable in every band "
           f"(theta <= {args.theta_max:g} deg, seed {args.seed})")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", IllPosedFitWarning)
-        result = fit_pbsdf(data, fit=fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
-                           shadowing=args.shadowing, diffuse=args.diffuse, strict=args.strict,
-                           progress=_progress(args))
+    opts = dict(fit=fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0, progress=_progress(args))
+    sel = _quiet_fit(select_model_pbsdf, data, **opts) if auto else None
+    result = sel.result if auto else _quiet_fit(fit_pbsdf, data, shadowing=shadowing, diffuse=diffuse, **opts)
+    if sel is not None:
+        print(sel.summary())
     print(result.summary())
+    _warn_verdict(result)
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))
     if args.output:
         plot_pbsdf_fit(result, data, args.output, title=str(args.data))
         print(f"\nplot: {args.output}")
-    return 0 if result.success else 1
+        if sel is not None:
+            print(f"models plot: {plot_selection(sel, _models_path(args.output), title=str(args.data))}")
+    return _finish(result, args.strict)

@@ -1,7 +1,8 @@
 """The plots of the commands (matplotlib): a fit against its data, an inversion's history.
 
 :func:`plot_fit` (``hyde-bsdf fit DATA.csv -o``), :func:`plot_pbsdf_fit` (``hyde-bsdf fit
-FILE.pbsdf -o``), :func:`plot_history` (``hyde-bsdf invert``).  Every plot is written atomically
+FILE.pbsdf -o``), :func:`plot_selection` (misfit against model size, ``-o`` with ``--model auto``),
+:func:`plot_history` (``hyde-bsdf invert``).  Every plot is written atomically
 (:mod:`hyde_bsdf.io.atomic`) in a format its extension names (:data:`PLOT_FORMATS`).
 """
 from __future__ import annotations
@@ -12,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.fit.model_selection import ModelSelection
 from hyde_bsdf.fit.mueller_fit import FitResult, mueller_elements
 from hyde_bsdf.fit.pbsdf_fit import PbsdfFitResult
 from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples
@@ -19,7 +21,8 @@ from hyde_bsdf.inverse.scalar import PARAMETERS
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
 from hyde_bsdf.io.measurements import Measurements
 
-__all__ = ["PLOT_FORMATS", "PLOT_POINTS", "check_plot_path", "plot_fit", "plot_pbsdf_fit", "plot_history"]
+__all__ = ["PLOT_FORMATS", "PLOT_POINTS", "check_plot_path", "plot_fit", "plot_pbsdf_fit", "plot_history",
+           "plot_selection"]
 
 
 #: at most this many geometries are plotted (a random subset of larger data sets)
@@ -42,6 +45,17 @@ def check_plot_path(path, what: str = "plot file (-o)") -> Path:
     """The plot's path checked before any work: writable, a format :data:`PLOT_FORMATS` names."""
     path = check_output_path(path, what)
     plot_format(path)
+    return path
+
+
+def _save(fig, path, dpi) -> Path:
+    """Write a figure atomically in the format its extension names, and close it."""
+    import matplotlib.pyplot as plt
+
+    path = check_output_path(path, "plot file")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format=plot_format(path))
+    plt.close(fig)
     return path
 
 
@@ -135,11 +149,7 @@ def plot_fit(result: FitResult, meas: Measurements, path, title: str = "", truth
                  rf"fit: $\eta$ = {pr['n']:.4g} - j{pr['k']:.4g}, rms_slope = {pr['rms_slope']:.4g}; "
                  rf"$\chi^2_\nu$ = {result.reduced_chi2:.3g}", fontsize=9)
     fig.tight_layout()
-    path = check_output_path(path, "plot file")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format=plot_format(path))
-    plt.close(fig)
-    return path
+    return _save(fig, path, 120)
 
 
 def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str = "", max_points: int = 1500):
@@ -187,11 +197,7 @@ def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str 
                  f"rms_slope = {result.rms_slope:.4g}; n = {', '.join(f'{v:.3g}' for v in result.n)}; "
                  f"k = {', '.join(f'{v:.3g}' for v in result.k)} ({len(rows)} of {len(data)} geometries)", fontsize=9)
     fig.subplots_adjust(left=0.06, right=0.98, bottom=0.05, top=0.92, wspace=0.3, hspace=0.35)
-    path = check_output_path(path, "plot file")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90, format=plot_format(path))
-    plt.close(fig)
-    return path
+    return _save(fig, path, 90)
 
 
 def plot_history(results: dict, path, title: str = "") -> Path:
@@ -224,3 +230,30 @@ def plot_history(results: dict, path, title: str = "") -> Path:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
     return path
+
+
+def plot_selection(sel: ModelSelection, path, title: str = ""):
+    """Misfit against model size, one point per candidate (the chosen one ringed), as PNG/PDF/SVG."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    live = [r for r in sel.rows if r.stage != "undefined"]
+    key = "reduced_chi2" if "reduced_chi2" in live[0].misfit else ("M00" if "M00" in live[0].misfit else "elements")
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for r in live:
+        y = r.misfit[key] * (100 if key == "M00" else 1)
+        ax.semilogy(r.size + (0.15 if r.dielectric else 0), y, "o", color="C2" if r.adequate else "C3", ms=7)
+        ax.annotate(r.label, (r.size + (0.15 if r.dielectric else 0), y), fontsize=7, xytext=(4, 2),
+                    textcoords="offset points")
+    c = sel.choice
+    ax.semilogy(c.size + (0.15 if c.dielectric else 0), c.misfit[key] * (100 if key == "M00" else 1), "o",
+                mfc="none", mec="k", ms=14, label=f"chosen: {c.label}")
+    ax.set_xlabel("model size (free parameters + terms)")
+    ax.set_ylabel({"reduced_chi2": "reduced chi^2", "M00": "M00 rms misfit (%)",
+                   "elements": "normalized-element rms misfit"}[key])
+    ax.set_title((title + "\n" if title else "") + "green: adequate, red: inadequate", fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path, 110)

@@ -32,6 +32,13 @@ above ``corr_limit``, relative errors above 50 %, a parameter on its bound) warn
 with :class:`IllPosedFitWarning` or, with ``strict=True``, raise
 :class:`IllPosedFitError`.  Fewer data than fitted parameters always raise.
 
+Every result carries a verdict (``FitResult.verdict``, :mod:`hyde_bsdf.fit.adequacy`): with
+sigmas, chi^2 and its p-value (p < 0.001: the model, or the sigmas, do not describe the data --
+:class:`InadequateModelWarning`, or :class:`InadequateModelError` with ``strict``, and the errors
+are lower bounds); without, the systematic part of the misfit against the data's scatter.  Where
+the misfit is systematic each error is the larger of the classic and the cluster-robust one.
+:func:`hyde_bsdf.fit.model_selection.select_model` chooses the shadowing and diffuse terms.
+
 What the data can and cannot say (:class:`FitDataWarning`, ``FitResult.data_warnings``):
 
 - *Repeated geometries* (rows with the same theta_i, theta_r, phi) are detected and
@@ -68,10 +75,14 @@ from hyde_bsdf.model.checks import real_array
 from hyde_bsdf.progress import Throttle, as_callback, check_progress
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
+from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
+                                    chi2_verdict, cluster_covariance, correlation, floor_verdict,
+                                    geometry_clusters, half_angles, larger_errors)
 from hyde_bsdf.io.measurements import ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index
 
 __all__ = ["PARAMETERS", "FIT_PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning",
-           "IllPosedFitError", "FitDataWarning", "merge_repeated_geometries", "impossible_values",
+           "IllPosedFitError", "FitDataWarning", "InadequateModelWarning", "InadequateModelError",
+           "merge_repeated_geometries", "impossible_values",
            "mueller_elements", "fit_mueller", "fit_measurements", "synthetic_measurements",
            ]
 
@@ -233,12 +244,21 @@ def mueller_elements(theta_i, theta_r, phi, names, *, rms_slope, n, k,
     ndarray of the broadcast shape.  Geometries with F_00 = 0 (at or below the
     horizon) raise ValueError: a normalized element is undefined there.
     """
+    return _elements(theta_i, theta_r, phi, names, rms_slope=rms_slope, n=n, k=k, shadowing=shadowing,
+                     diffuse=diffuse, strict=True)
+
+
+def _elements(theta_i, theta_r, phi, names, *, rms_slope, n, k, shadowing, diffuse, strict):
+    """F_jk / F_00; where F_00 = 0 above the horizon (the lobe underflows far from the specular
+    direction without a diffuse term, as the fit may try) 0 unless ``strict``."""
     F = pbrdf(theta_i, theta_r, phi, rms_slope=rms_slope, n=n, k=k, shadowing=shadowing,
               diffuse=diffuse)
     F00 = F[..., 0, 0]
     if np.any(F00 <= 0.0):
-        raise ValueError("theta_i and theta_r must be below 90 deg (pi/2): F_00 = 0 there and "
-                         "normalized Mueller elements are undefined")
+        if strict:
+            raise ValueError("theta_i and theta_r must be below 90 deg (pi/2): F_00 = 0 there and "
+                             "normalized Mueller elements are undefined")
+        F00 = np.where(F00 > 0.0, F00, np.inf)
     return {name: F[(...,) + element_index(name)] / F00 for name in names}
 
 
@@ -257,6 +277,9 @@ class FitResult:
     success : the optimizer converged (``message`` says how)
     sigma_given : whether chi^2 uses the given sigma (else unit weights)
     warnings : the ill-posedness diagnostics (also issued as IllPosedFitWarning)
+    verdict : :class:`~hyde_bsdf.fit.adequacy.Verdict`, whether the model describes the data
+        (chi^2 p-value with sigmas, the misfit against the data's floor without) and what the
+        standard errors mean (classic, robust, or lower bounds)
     """
 
     params: dict
@@ -282,6 +305,7 @@ class FitResult:
     repeats: dict | None = None
     stderr_scale: float = 1.0
     data_warnings: list = field(default_factory=list)
+    verdict: Verdict | None = None
 
     @property
     def ill_posed(self) -> bool:
@@ -326,8 +350,10 @@ class FitResult:
         """A human-readable report of the fit."""
         out = [f"pBRDF fit (paper Eq. 17; shadowing={self.shadowing!r}, diffuse={self.diffuse!r}): "
                f"{self.n_data} values, {len(self.fitted)} fitted parameters"]
-        caveat = " -- but the data warnings below limit what it means" if self.data_warnings else ""
-        out.append(f"  converged: {self.success} ({self.message}; {self.nfev} model evaluations){caveat}")
+        vd = self.verdict
+        caveat = (" -- but the model does NOT describe the data (WARNING below)" if vd is not None and not vd.adequate
+                  else " -- but the data warnings below limit what it means" if self.data_warnings else "")
+        out.append(f"  optimizer converged: {self.success} ({self.message}; {self.nfev} model evaluations){caveat}")
         if self.repeats:
             rp = self.repeats
             out.append(f"  repeated geometries: {rp['repeated_rows']} of {rp['rows']} rows repeat another row's "
@@ -353,7 +379,10 @@ class FitResult:
             for i, a in enumerate(self.fitted):
                 out.append(f"    {a:10s}" + "".join(f"{self.correlation[i, j]:10.4f}"
                                                     for j in range(len(self.fitted))))
-        for w in self.warnings + self.data_warnings:
+        if vd is not None:
+            out.append(f"  model {vd.line()}")
+            out.append("  standard errors: " + ERRORS_NOTE[vd.errors])
+        for w in self.warnings + self.data_warnings + ([vd.message] if vd is not None and not vd.adequate else []):
             out.append(f"  WARNING: {w}")
         return "\n".join(out)
 
@@ -549,7 +578,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
             wd = np.concatenate([w[n][sel] for n in names])
 
         def residual(x):
-            model = mueller_elements(a, b, c, names, **unpack(x), shadowing=shadowing, diffuse=mode)
+            model = _elements(a, b, c, names, **unpack(x), shadowing=shadowing, diffuse=mode, strict=False)
             r = (np.concatenate([model[n] for n in names]) - yd) / wd
             report.tick(r)
             return r
@@ -654,6 +683,11 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
                 f"theta_i={math.degrees(ti[i]):.4g}, theta_r={math.degrees(tr[i]):.4g}, "
                 f"phi={math.degrees(ph[i]):.4g} deg): no Mueller matrix has it -- unnormalized data or a "
                 "calibration error; the fit cannot describe these values")
+    classic = np.sqrt(np.diag(cov))
+    verdict, cov = _adequacy(r, J, cov, ti, tr, ph, len(names), chi2, dof, sigma is not None)
+    verdict.figures["stderr_classic"] = dict(zip(fitted, classic.tolist()))
+    if verdict.errors == "robust" or (not verdict.adequate and np.all(np.isfinite(cov))):
+        corr = correlation(cov)
     stderr = {q: float(math.sqrt(cov[i, i])) if math.isfinite(cov[i, i]) else float("inf")
               for i, q in enumerate(fitted)}
     vals = unpack(res.x)
@@ -691,15 +725,36 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
         residuals=residuals, success=bool(res.success), message=str(res.message), nfev=int(nfev),
         n_data=m, sigma_given=sigma is not None, shadowing=shadowing, diffuse=mode,
         warnings=diag, condition_number=cond, rows=rows_in, repeats=repeats, stderr_scale=scale,
-        data_warnings=data_diag)
+        data_warnings=data_diag, verdict=verdict)
     for text in data_diag:
         warnings.warn(text, FitDataWarning, stacklevel=2)
+    raise_or_warn(verdict, diag, strict, stacklevel=3)
+    return result
+
+
+def raise_or_warn(verdict, diag, strict, stacklevel=3):
+    """An inadequate model and an ill-posed fit: raise (``strict``) or warn, in that order."""
+    if not verdict.adequate:
+        if strict:
+            raise InadequateModelError(verdict.message)
+        warnings.warn(verdict.message, InadequateModelWarning, stacklevel=stacklevel)
     if diag:
         text = "ill-posed fit: " + "; ".join(diag)
         if strict:
             raise IllPosedFitError(text)
-        warnings.warn(text, IllPosedFitWarning, stacklevel=2)
-    return result
+        warnings.warn(text, IllPosedFitWarning, stacklevel=stacklevel)
+
+
+def _adequacy(r, J, cov, ti, tr, ph, n_elements, chi2, dof, sigma_given):
+    """The verdict (chi^2 with sigmas, the data's floor without) and the covariance: where the
+    misfit is systematic, each error the larger of the classic and the cluster-robust one."""
+    R = r.reshape(n_elements, -1)
+    verdict = (chi2_verdict(chi2, dof, R, ti, tr, ph) if sigma_given
+               else floor_verdict(None, R[None], ti, tr, ph))
+    if verdict.errors == "classic" or not np.all(np.isfinite(cov)):
+        return verdict, cov
+    th, td = half_angles(ti, tr, ph)
+    return verdict, larger_errors(cov, cluster_covariance(J, r, np.tile(geometry_clusters(th, td), n_elements)))
 
 
 def fit_measurements(meas: Measurements, **kwargs) -> FitResult:

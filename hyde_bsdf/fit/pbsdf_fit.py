@@ -14,13 +14,20 @@ A table has no uncertainties: ``s00`` (relative, of M00) and ``s_el`` (absolute,
 elements) are estimated from the residual scatter of a first fit, and the fit is repeated with
 them; the standard errors are then sqrt(diag((J^T J)^-1)) of the weighted residuals, i.e. they
 assume the misfit is noise.  A table written by ``hyde-bsdf export`` is fitted to ~1e-6 (only
-float32 rounding), a real material leaves model error that these errors include as if it were
-noise.  Ill-posed fits warn as :func:`hyde_bsdf.fit.fit_mueller` does (correlation > 0.999,
-relative error > 50 %, a parameter on its bound, no convergence).
+float32 rounding).  Every result carries a verdict (:mod:`hyde_bsdf.fit.adequacy`): the misfit
+split into its systematic part (shared between bands and neighbouring geometries) and the table's
+own scatter; a systematic misfit above the tolerance makes the model inadequate
+(:class:`~hyde_bsdf.fit.adequacy.InadequateModelWarning`, or an error with ``strict``; the errors are
+then lower bounds), one within it but above the scatter makes each standard error the larger of
+the classic and the cluster-robust one.  Ill-posed fits warn as :func:`hyde_bsdf.fit.fit_mueller`
+does (correlation > 0.999, relative error > 50 %, a parameter on its bound, no convergence).
+:func:`hyde_bsdf.fit.model_selection.select_model_pbsdf` chooses the shadowing and diffuse terms.
 
 Procedure: multi-start (n, k, rms_slope) on the middle band (starts as :func:`fit_mueller`'s),
 then (n, k) of each other band from its neighbour's solution, then all parameters jointly on all
-bands; then the weights and the final joint fit.  3000 geometries x 5 bands take a few seconds.
+bands; then the weights and the final joint fit.  Jacobians by forward differences with every
+band's n (and k) perturbed at once (n_b moves only band b's residuals): three residual evaluations
+per Jacobian, however many bands.  3000 geometries x 5 bands take a few seconds.
 
 The command line (``hyde-bsdf fit FILE.pbsdf``) and the plot are in :mod:`hyde_bsdf.app.fit`.
 
@@ -29,12 +36,13 @@ May import: ``hyde_bsdf.io``, ``hyde_bsdf.model``, ``hyde_bsdf.fit``.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, Verdict, cluster_covariance, correlation, floor_verdict,
+                                    geometry_clusters, half_angles, larger_errors)
 from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.parameters import NATURAL_INDEX
@@ -77,6 +85,7 @@ class PbsdfFitResult:
     warnings: list = field(default_factory=list)
     rms_m00: np.ndarray = None        # per band rms of the log residual of M00
     rms_elements: np.ndarray = None   # per band rms of the normalized-element residuals
+    verdict: Verdict = None           # does the model describe the table (hyde_bsdf.fit.adequacy)
 
     def params(self, band: int) -> dict:
         return {"rms_slope": self.rms_slope, "n": float(self.n[band]), "k": float(self.k[band])}
@@ -112,9 +121,12 @@ class PbsdfFitResult:
         def pm(v, e):
             return f"{v:.6g} +- {e:.3g}" if math.isfinite(e) else f"{v:.6g} (fixed)"
 
+        v = self.verdict
+        caveat = "" if v is None or v.adequate else " -- but the model does NOT describe the table (WARNING below)"
         out = [f"pBRDF fit to a measured_polarized table (paper Eq. 17; shadowing={self.shadowing!r}, "
                f"diffuse={self.diffuse!r}): {self.n_geometries} geometries x {len(self.wavelengths)} bands",
-               f"  converged: {self.success} ({self.message}; {self.nfev} residual evaluations, Jacobians included)",
+               f"  optimizer converged: {self.success} ({self.message}; {self.nfev} residual evaluations, "
+               f"Jacobians included){caveat}",
                f"  rms_slope = {pm(self.rms_slope, self.stderr['rms_slope'])}"]
         for b, wl in enumerate(self.wavelengths):
             out.append(f"  {wl:5.0f} nm: n = {pm(self.n[b], self.stderr['n'][b])}, "
@@ -122,9 +134,13 @@ class PbsdfFitResult:
                        f"elements {self.rms_elements[b]:.4f})")
         out.append(f"  scatter used as sigma: M00 {100 * self.sigma_m00:.3g} % (relative), normalized elements "
                    f"{self.sigma_elements:.3g}; chi^2 = {self.chi2:.4g}, dof = {self.dof}")
-        out.append("  (a table has no error bars: the standard errors treat the misfit as noise)")
+        if v is not None:
+            out.append(f"  model {v.line()}")
+            out.append("  standard errors: " + ERRORS_NOTE[v.errors])
         for w in self.warnings:
             out.append(f"  WARNING: {w}")
+        if v is not None and not v.adequate:
+            out.append(f"  WARNING: {v.message}")
         return "\n".join(out)
 
 
@@ -184,7 +200,38 @@ class _Problem:
         r00, rel = self.parts(x)
         r = np.concatenate([r00.ravel() / self.s00, rel.ravel() / self.sel])
         self.tick(r)
+        self.last = (np.array(x, float), r)
         return r
+
+    def _band_rows(self):
+        """Row indices of each band's residuals in the vector of :meth:`__call__`."""
+        N, K, E = self.ti.size, len(self.bands), len(ELEMENTS)
+        return {b: np.concatenate([np.arange(i * N, (i + 1) * N), K * N + np.arange(i * E * N, (i + 1) * E * N)])
+                for i, b in enumerate(self.bands)}
+
+    def jac(self, x, hi):
+        """Forward-difference Jacobian with the bands' n (and k) perturbed together: n_b and k_b move
+        only band b's residuals, so three residual evaluations (rms_slope, every n, every k) give
+        every column, however many bands (instead of one evaluation per column)."""
+        x = np.asarray(x, float)
+        last = getattr(self, "last", None)
+        r0 = last[1] if last is not None and np.array_equal(last[0], x) else self(x)
+        h = 1e-6 * np.maximum(1.0, np.abs(x))
+        h = np.where(x + h > hi, -h, h)
+        J = np.zeros((r0.size, x.size))
+        rows = self._band_rows()
+        groups = [[i for i, p in enumerate(self.free) if p == "rms_slope"]] + \
+                 [[i for i, p in enumerate(self.free) if isinstance(p, tuple) and p[0] == q] for q in ("n", "k")]
+        for g in (g for g in groups if g):
+            xp = x.copy()
+            xp[g] += h[g]
+            d = self(xp) - r0
+            for i in g:
+                p = self.free[i]
+                sel = rows[p[1]] if isinstance(p, tuple) else slice(None)
+                J[sel, i] = d[sel] / h[i]
+        self.last = (x, r0)
+        return J
 
 
 def _bounds(free):
@@ -195,7 +242,7 @@ def _bounds(free):
 
 def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=None, k0=None,
               shadowing: str = "vgroove", diffuse: str = "paper", strict: bool = False,
-              progress=None, **sample_options) -> PbsdfFitResult:
+              progress=None, start: dict | None = None, **sample_options) -> PbsdfFitResult:
     """Fit rms_slope and n, k per band to a table (see the module docstring).
 
     ``data``: :class:`~hyde_bsdf.fit.pbsdf_samples.PbsdfSamples`, a
@@ -205,10 +252,15 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     parameters held fixed (n0/k0 apply to every band).  ``strict``: raise instead of warning when
     the fit is ill-posed.  ``progress``: a callback ``progress(message)`` told every few seconds,
     True or None (the default) for lines on stderr, False for none (:mod:`hyde_bsdf.progress`).
+    ``start``: a warm start ``{"rms_slope", "n", "k"}`` (the middle band's values, e.g. another
+    model's fit) replacing the multi-start.
+
+    The result carries a :class:`~hyde_bsdf.fit.adequacy.Verdict` (``result.verdict``); an
+    inadequate model also warns (:class:`~hyde_bsdf.fit.adequacy.InadequateModelWarning`).
     """
     from scipy.optimize import least_squares
 
-    from hyde_bsdf.fit.mueller_fit import IllPosedFitError, IllPosedFitWarning
+    from hyde_bsdf.fit.mueller_fit import raise_or_warn
 
     fit = _check(fit, rms_slope, n0, k0, shadowing, diffuse)
     check_progress(progress)
@@ -237,8 +289,8 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         prob = _Problem(data, bands, rows, free, fixed, shadowing, diffuse, s00_, sel_, tick)
         lo, hi = _bounds(free)
         x0 = np.clip(np.asarray(x0, float), lo + 1e-9, hi - 1e-9)
-        res = least_squares(prob, x0, bounds=(lo, hi), method="trf", x_scale="jac", diff_step=1e-6,
-                            max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        res = least_squares(prob, x0, jac=lambda x: prob.jac(x, hi), bounds=(lo, hi), method="trf",
+                            x_scale="jac", max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
         nfev += int(res.nfev)
         return res, prob
 
@@ -250,6 +302,9 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     free_mid = [p for p in (("n", mid), ("k", mid)) if p[0] in fit] + (["rms_slope"] if "rms_slope" in fit else [])
     starts = [(n_, k_) for n_ in ((n0,) if n0 is not None else STARTS["n"])
               for k_ in ((k0,) if k0 is not None else STARTS["k"])]
+    if start is not None:
+        values["rms_slope"] = float(start["rms_slope"]) if "rms_slope" in fit else values["rms_slope"]
+        starts = [(float(start["n"]) if n0 is None else n0, float(start["k"]) if k0 is None else k0)]
     best = None
     for n_, k_ in starts:
         trial = {("n", mid): n_, ("k", mid): k_, "rms_slope": values["rms_slope"]}
@@ -284,24 +339,60 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     if report.elapsed >= PROGRESS_SECONDS:
         report(f"fit: done, {state['calls']} evaluations in {report.elapsed:.0f} s", force=True)
 
+    cov, corr, err, diag, verdict = _uncertainty(res, prob, free, values, data)
+    if not res.success:
+        diag.append(f"the optimizer did not converge: {res.message}")
     r = res.fun
-    chi2 = float(r @ r)
+    nan = float("nan")
+    stderr = {"rms_slope": err.get("rms_slope", nan),
+              "n": np.array([err.get(("n", b), nan) for b in range(K)]),
+              "k": np.array([err.get(("k", b), nan) for b in range(K)])}
+    names = _names(free, data.wavelengths)
+    result = PbsdfFitResult(
+        rms_slope=values["rms_slope"], n=np.array([values[("n", b)] for b in range(K)]),
+        k=np.array([values[("k", b)] for b in range(K)]), wavelengths=data.wavelengths.copy(),
+        stderr=stderr, fitted=tuple(fit), correlation=corr, names=names, sigma_m00=s00, sigma_elements=sel,
+        chi2=float(r @ r), dof=r.size - len(free), success=bool(res.success), message=str(res.message),
+        nfev=state["calls"], n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
+        rms_m00=np.sqrt(np.mean(r00 ** 2, axis=1)), rms_elements=np.sqrt(np.mean(rel ** 2, axis=(1, 2))),
+        verdict=verdict)
+    raise_or_warn(verdict, diag, strict, stacklevel=3)
+    return result
+
+
+def _names(free, wavelengths):
+    return tuple(q if isinstance(q, str) else f"{q[0]}@{wavelengths[q[1]]:g}nm" for q in free)
+
+
+def _uncertainty(res, prob, free, values, data):
+    """Covariance (classic, or robust where a systematic misfit dominates), correlation, standard
+    errors, ill-posedness diagnostics and the adequacy verdict of the final joint fit."""
+    r = res.fun
     m, p = r.size, len(free)
     J = np.asarray(res.jac, float)
+    names = _names(free, data.wavelengths)
     diag = []
     sv = np.linalg.svd(J, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+    r00, rel = prob.parts(res.x)
+    verdict = floor_verdict(r00, rel, prob.ti, prob.tr, prob.ph)
     if not math.isfinite(cond) or cond > 1e12:
         cov = np.full((p, p), np.inf)
         corr = np.eye(p)
         diag.append(f"the Jacobian is singular (condition number {cond:.3g}): the table does not constrain "
                     f"the fitted parameters separately")
     else:
-        cov = np.linalg.inv(J.T @ J) * (chi2 / max(m - p, 1))
-        se = np.sqrt(np.diag(cov))
-        corr = cov / np.outer(se, se)
+        cov = np.linalg.inv(J.T @ J) * (float(r @ r) / max(m - p, 1))
+        classic = np.sqrt(np.diag(cov))
+        if verdict.errors != "classic":
+            N, K = prob.ti.size, len(prob.bands)
+            geometry = np.concatenate([np.tile(np.arange(N), K), np.tile(np.arange(N), K * len(ELEMENTS))])
+            th, td = half_angles(prob.ti, prob.tr, prob.ph)
+            cov = larger_errors(cov, cluster_covariance(J, r, geometry_clusters(th, td)[geometry]))
+        corr = correlation(cov)
     err = {q: math.sqrt(cov[i, i]) if math.isfinite(cov[i, i]) else math.inf for i, q in enumerate(free)}
-    names = tuple(q if isinstance(q, str) else f"{q[0]}@{data.wavelengths[q[1]]:g}nm" for q in free)
+    verdict.figures["stderr_classic"] = dict(zip(names, (np.sqrt(np.diag(cov)) if cov[0, 0] == math.inf
+                                                         else classic).tolist()))
     for i in range(p):
         for j in range(i + 1, p):
             if math.isfinite(corr[i, j]) and abs(corr[i, j]) > 0.999:
@@ -313,22 +404,4 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         lo, hi = BOUNDS[q if isinstance(q, str) else q[0]]
         if v <= lo + 1e-6 * max(1.0, abs(lo)) or v >= hi * (1 - 1e-9):
             diag.append(f"{names[i]} = {v:.4g} sits on its bound [{lo:g}, {hi:g}]")
-    if not res.success:
-        diag.append(f"the optimizer did not converge: {res.message}")
-    nan = float("nan")
-    stderr = {"rms_slope": err.get("rms_slope", nan),
-              "n": np.array([err.get(("n", b), nan) for b in range(K)]),
-              "k": np.array([err.get(("k", b), nan) for b in range(K)])}
-    result = PbsdfFitResult(
-        rms_slope=values["rms_slope"], n=np.array([values[("n", b)] for b in range(K)]),
-        k=np.array([values[("k", b)] for b in range(K)]), wavelengths=data.wavelengths.copy(),
-        stderr=stderr, fitted=tuple(fit), correlation=corr, names=names, sigma_m00=s00, sigma_elements=sel,
-        chi2=chi2, dof=m - p, success=bool(res.success), message=str(res.message), nfev=state["calls"],
-        n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
-        rms_m00=np.sqrt(np.mean(r00 ** 2, axis=1)), rms_elements=np.sqrt(np.mean(rel ** 2, axis=(1, 2))))
-    if diag:
-        text = "ill-posed fit: " + "; ".join(diag)
-        if strict:
-            raise IllPosedFitError(text)
-        warnings.warn(text, IllPosedFitWarning, stacklevel=2)
-    return result
+    return cov, corr, err, diag, verdict
