@@ -1,4 +1,5 @@
-"""Small pieces the inverse modules share: luminance weights, sqrt(2), progress and error lines.
+"""Small pieces the inverse modules share: luminance weights, sqrt(2), progress and error lines, the
+not-converged warning.
 
 May import: the standard library only.
 """
@@ -19,3 +20,8 @@ def _first_line(exc) -> str:
 
 def _log(msg, end="\n"):
     print(f"[invert] {msg}", file=sys.stderr, end=end, flush=True)
+
+
+class NotConvergedWarning(UserWarning):
+    """A fitted parameter that had not reached the minimum (in some texels, for a map): its standard
+    errors there are NaN (they would understate the error); the value is not a result."""
