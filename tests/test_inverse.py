@@ -107,3 +107,18 @@ def test_cli_invert_end_to_end(tmp_path, capsys):
     assert (tmp_path / "invert.png").stat().st_size > 5_000
     assert inv.cli_main(["--start", "rms_slope=abc"]) == 2
     assert "not a number" in capsys.readouterr().err
+
+
+def test_stopped_early_scalar_inversion_warns(tiny):
+    """12 iterations from a start far from the truth: eta and k are still moving over the averaged
+    window, so the averaged values are not results -- a NotConvergedWarning (once per parameter) and
+    result.converged False for them."""
+    scene, ref = tiny
+    start = {"rms_slope": 0.4, "eta": 1.0, "k": 2.0}
+    with pytest.warns(inv.NotConvergedWarning) as caught:
+        res = inv.invert(scene, inv.StokesLoss(ref), start, iterations=12, lr=0.05, spp=SPP, seed=10,
+                         progress=False, average_last=8)
+    messages = [str(w.message) for w in caught if issubclass(w.category, inv.NotConvergedWarning)]
+    assert len(messages) == len(set(messages)) == len(res.warnings)
+    assert not all(res.converged.values())
+    assert all(m.split()[0] in inv.PARAMETERS and "has not converged" in m for m in messages)

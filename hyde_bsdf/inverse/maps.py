@@ -430,8 +430,8 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
                 average_last: int | None = None, progress: bool = True,
                 seen: np.ndarray | None = None, freeze: bool = True, uncertainty: bool = True,
                 uncertainty_spp: int = 16, polish: int = 2, noise=None,
-                threshold: float = STDERR_THRESHOLD,
-                convergence: float = CONVERGENCE_THRESHOLD) -> MapInversionResult:
+                threshold: float = STDERR_THRESHOLD, convergence: float = CONVERGENCE_THRESHOLD,
+                extra_polish: int = 3) -> MapInversionResult:
     """Optimise texture-valued BSDF parameters (a roughness map, optionally index maps) to match
     one or more reference Stokes images.
 
@@ -479,8 +479,9 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     naming it and the fraction of texels (also in ``result.warnings``).  ``noise``: the references'
     noise standard deviation per observation (a number or 4 numbers, S0..S3) when known; otherwise
     estimated from the residuals.  Convergence is tested before the standard errors are reported:
-    where the last Gauss-Newton step exceeds ``convergence`` standard errors the texel has not
-    reached the minimum, its standard error is NaN, ``result.converged[name]`` is False there and a
+    while the last two Gauss-Newton steps of some texel exceed ``convergence`` standard errors, up to
+    ``extra_polish`` more steps are taken (:func:`map_uncertainty`); where they still do the texel
+    has not reached the minimum, its standard error is NaN, ``result.converged[name]`` is False there and a
     :class:`~hyde_bsdf.inverse.uncertainty.NotConvergedWarning` names the parameter and the
     fraction of texels.  A fitted bitmap that filters bilinearly (Mitsuba's default) gives NaN
     standard errors and one :class:`~hyde_bsdf.inverse.uncertainty.BilinearFilterWarning`: load
@@ -570,7 +571,7 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
                  + (f", {polish} Gauss-Newton step(s)" if polish and regularizer is None else ""))
         final, unc = map_uncertainty(problem, final, spp=uncertainty_spp, seed=seed + 1 + iterations * n_obs,
                                      noise=noise, polish=polish if (regularizer is None or weight == 0) else 0,
-                                     threshold=threshold, convergence=convergence,
+                                     threshold=threshold, convergence=convergence, extra_polish=extra_polish,
                                      regularized=regularizer is not None and weight > 0)
     for n in problem.names:
         if n not in fit:

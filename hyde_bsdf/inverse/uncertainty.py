@@ -360,7 +360,8 @@ def convergence_warnings(converged: dict, step_se: dict, seen, threshold: float 
         cause = ("the regulariser holds them away from the data's minimum, or the fit stopped early"
                  if regularized else "the fit stopped before the minimum: run more iterations (or polish steps)")
         out[name] = (float(bad.mean()), f"{name} has not converged in {_percent(bad.mean())} % of the {n} seen texels "
-                     f"(last Gauss-Newton step up to {worst:.3g} standard errors; > {threshold:g}): {cause}; "
+                     f"(its last Gauss-Newton steps up to {worst:.3g} standard errors, > {threshold:g}, or at the step "
+                     f"limit): {cause}; "
                      f"their standard errors are set to NaN (result.converged marks them)")
     return out
 
