@@ -118,3 +118,33 @@ def test_trajectory_convergence_tells_drift_from_jitter():
     assert not ok and msg.startswith("eta has not converged: it moved by")
     assert inv.trajectory_converged(np.linspace(1.5, 1.5005, 20), "eta")[0]   # below the 0.1 % floor
     assert not inv.trajectory_converged([1.0, 1.1], "eta")[0]
+
+
+def test_monochrome_message_once_per_run():
+    """Mitsuba says 'Monochrome mode enabled' for every rgb hdrfilm loaded in a mono variant; within
+    log_once it reaches the logger's appenders once, and other messages pass."""
+    from hyde_bsdf.mitsuba.log import log_once
+
+    received = []
+
+    class Record(mi.Appender):
+        def append(self, level, text):
+            received.append(text)
+
+        def log_progress(self, *args):
+            pass
+
+    logger = mi.logger()
+    record = Record()
+    logger.add_appender(record)
+    scene = {"type": "scene", "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}}}
+    try:
+        with log_once():
+            for _ in range(3):
+                mi.load_dict(scene)
+            mi.Log(mi.LogLevel.Warn, "another message")
+        mi.load_dict(scene)           # restored: said again outside the block
+    finally:
+        logger.remove_appender(record)
+    texts = " | ".join(received)
+    assert texts.count("Monochrome mode enabled") == 2 and "another message" in texts
