@@ -148,3 +148,26 @@ def test_monochrome_message_once_per_run():
         logger.remove_appender(record)
     texts = " | ".join(received)
     assert texts.count("Monochrome mode enabled") == 2 and "another message" in texts
+
+
+def test_scene_bitmaps_are_loaded_nearest(tmp_path):
+    """A scene whose alpha bitmap has no filter_type (bilinear) is loaded with nearest lookup by
+    load_scene_nearest, which names what it changed; a nearest one is left alone."""
+    from hyde_bsdf.render.renderer import load_scene_nearest
+
+    mi.Bitmap(np.full((4, 4, 1), 0.3, np.float32)).write(str(tmp_path / "alpha.exr"))
+    xml = """<scene version="3.0.0">
+    <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="4"/>
+        <integer name="height" value="4"/><string name="pixel_format" value="luminance"/></film></sensor>
+    <shape type="rectangle"><bsdf type="hyde">
+        <texture name="alpha" type="bitmap"><string name="filename" value="alpha.exr"/>
+            <boolean name="raw" value="true"/>FILTER</texture>
+    </bsdf></shape></scene>"""
+    for filt, changed in (("", ["alpha"]), ('<string name="filter_type" value="nearest"/>', [])):
+        path = tmp_path / "scene.xml"
+        path.write_text(xml.replace("FILTER", filt))
+        scene, names = load_scene_nearest(path, ("alpha",))
+        assert names == changed
+        params = mi.traverse(scene)
+        key = inv.map_keys(params, ("alpha",))["alpha"]
+        assert not inv.filters_bilinearly(params, key, params[key].shape, inv.MAP_PARAMETERS["alpha"][1])
