@@ -86,6 +86,9 @@ from hyde_bsdf import inverse as inv  # noqa: E402
 from hyde_bsdf.inverse.uncertainty import STDERR_THRESHOLD  # noqa: E402
 from hyde_bsdf.inverse.acquisition import (design_acquisition, example_material,  # noqa: E402
                                            fixed_rig_acquisition, synthetic_observations)
+from hyde_bsdf.progress import stderr_lines  # noqa: E402
+
+_log = stderr_lines("[invert]")
 
 #: targets of the full run (issue 16): (median, 90th percentile) of |fit / truth - 1|
 TARGETS = {"eta": (0.01, 0.03), "alpha": (0.03, 0.08), "n": (0.03, 0.10), "k": (0.03, 0.10)}
@@ -197,7 +200,7 @@ def validate(outdir="out/validation", quick=False):
         for case, loss, scale in runs:
             if True:
                 key = (case, loss + ("+scale" if scale else ""))
-                inv._log(f"[svbrdf_index] {key[0]}, {key[1]} loss ({cfg['n']}x{cfg['n']} maps, "
+                _log(f"[svbrdf_index] {key[0]}, {key[1]} loss ({cfg['n']}x{cfg['n']} maps, "
                          f"{cfg['res']} px per view, {cfg['iterations']} iterations)")
                 if (case, scale) not in prepared:
                     prepared = {(case, scale): observations(case, scale, **obscfg)}     # one case's pictures at a time
@@ -205,7 +208,7 @@ def validate(outdir="out/validation", quick=False):
                 rows += _stats(key, results[key], stats)
                 # the table so far (a long full run leaves its finished rows behind if stopped)
                 write_csv(out / "svbrdf_index.csv", CSV_HEADER, rows)
-                inv._log(f"[svbrdf_index] {key[0]}, {key[1]}: {results[key][3]:.0f} s; " + "; ".join(
+                _log(f"[svbrdf_index] {key[0]}, {key[1]}: {results[key][3]:.0f} s; " + "; ".join(
                     f"{r[2]} {100 * float(r[3]):.2f} % / {100 * float(r[4]):.2f} %, pulls {r[5]}"
                     for r in rows if (r[0], r[1]) == key))
                 _plot(out / "svbrdf_index.png", results, cfg)
@@ -290,7 +293,7 @@ def honesty_cases(out, quick: bool) -> tuple:
             obs[filter_type] = synthetic_observations(acq, truth, start, res=cfg["res"], spp=4, spp_ref=cfg["spp_ref"],
                                                       noise=NOISE, seed=0, filter_type=filter_type)
         iterations = (QUICK_HONESTY_ITERATIONS[case] if quick else max(2, int(round(cfg["iterations"] * fraction))))
-        inv._log(f"[svbrdf_index] honesty case {case!r}: {iterations} iterations, {filter_type} maps")
+        _log(f"[svbrdf_index] honesty case {case!r}: {iterations} iterations, {filter_type} maps")
         t0 = time.perf_counter()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
@@ -305,7 +308,7 @@ def honesty_cases(out, quick: bool) -> tuple:
             row, check = _honesty_row(case, name, r, truth[name], iterations, filter_type, found, quick)
             rows.append(row)
             checks.append(check)
-        inv._log(f"[svbrdf_index] honesty case {case!r}: {time.perf_counter() - t0:.0f} s; "
+        _log(f"[svbrdf_index] honesty case {case!r}: {time.perf_counter() - t0:.0f} s; "
                  + "; ".join(f"{x[1]} pulls {x[5]} ({x[6]} of {x[7]} texels valid), unchecked {x[8]}"
                              for x in rows if x[0] == case))
         write_csv(out / "svbrdf_index_cases.csv", HONESTY_HEADER, rows)

@@ -1,6 +1,7 @@
 """``hyde-bsdf invert``: the command line of scalar and texture-valued (``--maps``) inversion.
 
-May import: every module of ``hyde_bsdf.inverse``.
+The options and outputs are described in :mod:`hyde_bsdf.inverse`; the plot is
+:func:`hyde_bsdf.app.plots.plot_history`.
 """
 from __future__ import annotations
 
@@ -8,57 +9,31 @@ import argparse
 import csv
 import math
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_group, atomic_open, atomic_path, check_output_path
+from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.inverse._common import Y_WEIGHTS, _log
+from hyde_bsdf.inverse._common import Y_WEIGHTS
+from hyde_bsdf.inverse.memory import check_memory
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
 from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
 from hyde_bsdf.inverse.maps import invert_maps
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, Observation, example_maps,
                                             map_keys, plane_scene_dict, render_stokes_np)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, invert, load_scene, parameter_keys,
-                                      plot_history, prepare, render_reference, write_history)
+                                      prepare, render_reference, write_history)
+from hyde_bsdf.io.atomic import atomic_group, atomic_open, atomic_path, check_output_path
+from hyde_bsdf.progress import stderr_lines
 
-__all__ = ["cli_main", "build_parser", "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE"]
+__all__ = ["cli_main", "build_parser"]
+
+_log = stderr_lines("[invert]")
 
 
-#: peak memory of one differentiable render (reverse mode through ``path``): a fixed part plus
-#: bytes per sample (measured: 1.4-1.5 kB/sample spectral polarized sphere at 64-128 px, 16 spp;
-#: 0.8-1.2 kB mono polarized plane, 3 x 80-160 px, 4 spp; the figure below has a margin)
-AD_BYTES_FIXED = 400 * 2**20
-AD_BYTES_PER_SAMPLE = 2048
 EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
-
-
-def estimate_memory(width: int, height: int, spp: int) -> int:
-    """Estimated peak memory (bytes) of one optimisation step on a ``width`` x ``height`` film."""
-    return AD_BYTES_FIXED + AD_BYTES_PER_SAMPLE * int(width) * int(height) * int(spp)
-
-
-def _mem_available():
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
-
-
-def check_memory(width: int, height: int, spp: int, hint: str) -> int:
-    """UsageError when :func:`estimate_memory` exceeds the available memory; returns the estimate."""
-    need, avail = estimate_memory(width, height, spp), _mem_available()
-    if avail is not None and need > avail:
-        raise UsageError(f"one optimisation step on the {width}x{height} film at {spp} spp needs about "
-                         f"{need / 2**30:.1f} GiB ({AD_BYTES_PER_SAMPLE} B per sample + "
-                         f"{AD_BYTES_FIXED // 2**20} MiB), but only {avail / 2**30:.1f} GiB is available; "
-                         f"lower {hint}")
-    return need
 
 
 def _one_line(exc) -> str:
@@ -202,7 +177,7 @@ def _check_out(path):
 
 def _read_reference(path, width, height, what="--reference"):
     """Luminance Stokes images (4, H, W) of a Stokes EXR, checked against the film size and for NaN."""
-    from hyde_bsdf.render.stokes_io import read_stokes_exr
+    from hyde_bsdf.io.stokes_exr import read_stokes_exr
 
     try:
         st = read_stokes_exr(path)
@@ -307,8 +282,10 @@ def _cli(argv):
         loss_fn = StokesLoss(ref, components=args.loss)
     except ValueError as exc:
         raise UsageError(f"--reference: {_one_line(exc)}") from None
-    res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
-                 seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
+    with warnings.catch_warnings(record=True) as caught:      # printed once each below, as WARNING: lines
+        warnings.simplefilter("always")
+        res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
+                     seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
     with atomic_group():      # the CSV and the plot replace the old pair together, or not at all
         write_history(res, paths[0])
         plot_history({args.loss: res}, paths[1],
@@ -322,6 +299,8 @@ def _cli(argv):
         elif p not in res.fitted:
             line += " (fixed)"
         print(line)
+    for message in dict.fromkeys(res.warnings + [str(w.message) for w in caught]):
+        print(f"WARNING: {message}")
     print(f"wrote {paths[0]} and {paths[1]}")
     return 0
 
@@ -352,6 +331,8 @@ def _cli_maps(args):
     for n in fit:
         outputs[n + ".npy"] = f"{n}.npy"
         outputs[n + ".exr"] = f"{n}.exr"
+        outputs[n + "_seen.npy"] = f"{n}_seen.npy"
+        outputs[n + "_seen.exr"] = f"{n}_seen.exr"
         if not args.no_uncertainty:
             outputs[n + "_stderr.npy"] = f"{n}_stderr.npy"
             outputs[n + "_stderr.exr"] = f"{n}_stderr.exr"
@@ -383,7 +364,7 @@ def _cli_maps(args):
                                               noise=args.noise, seed=args.seed)
         scenes = []
     elif args.scene:
-        scenes = [_load_user_scene(p) for p in args.scene]
+        scenes = _load_map_scenes(args.scene, fit)
     else:
         truth_map = example_maps(args.map_size)
         truth = {"alpha": truth_map} if fit == ("alpha",) else None
@@ -409,11 +390,18 @@ def _cli_maps(args):
         mask = _read_mask(args.mask[i], (H, W)) if args.mask else None
         observations.append(Observation(scene, ref, sensor=args.sensor, mask=mask))
     try:
-        res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
-                          seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
-                          truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
+        # the library's warnings are recorded and printed once each below (as WARNING: lines), not
+        # also by Python's warning display
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
+                              seed=args.seed, components=args.loss, regularizer=args.regularizer,
+                              weight=args.weight, truth=truth, prefix=args.target,
+                              uncertainty=not args.no_uncertainty)
     except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
         raise UsageError(_one_line(exc)) from None
+    messages = list(dict.fromkeys(res.warnings + [str(w.message) for w in caught
+                                                  if issubclass(w.category, UserWarning)]))
     with atomic_group():      # history, maps and plot replace the old set together, or not at all
         _write_map_outputs(res, paths, args)
     print(f"loss: {args.loss}; {args.iterations} iterations over {len(observations)} image(s), "
@@ -421,8 +409,7 @@ def _cli_maps(args):
     for n in fit:
         v = np.asarray(res.final[n])
         line = f"  {n:9s} start {start[n]:.4g} -> "
-        line += (f"map {v.shape[1]}x{v.shape[0]}, {v.min():.4g}..{v.max():.4g} (median {np.median(v):.4g})"
-                 if v.ndim == 2 else f"{float(v):.5g}")
+        line += (_map_range(res, n) if v.ndim == 2 else f"{float(v):.5g}")
         if truth and n in truth:
             e = res.texel_errors(n)
             line += (f"; per-texel error over the {int(res.seen.sum())} seen texels: median "
@@ -430,16 +417,52 @@ def _cli_maps(args):
         print(line)
         if n in res.rel_stderr:
             rel = res.rel_stderr[n][res.seen] if res.seen is not None else res.rel_stderr[n].ravel()
-            rel = rel[~np.isnan(rel)]            # NaN: no whole pixel in the texel, said in the warnings
+            rel = rel[~np.isnan(rel)]            # NaN: no whole pixel, not converged, bilinear: said in the warnings
             if rel.size:
                 print(f"  {'':9s} relative standard error: median {100 * np.median(rel):.3g} %, 90th percentile "
                       f"{100 * np.percentile(rel, 90):.3g} %")
     if res.seen is not None:
         print(f"  texels seen by the images: {int(res.seen.sum())} of {res.seen.size}")
-    for message in res.warnings:
-        print(f"  warning: {message}")
+    for message in messages:
+        print(f"WARNING: {message}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
     return 0
+
+
+def _load_map_scenes(paths, fit) -> list:
+    """The --scene files, their fitted bitmaps loaded with filter_type nearest (the per-texel
+    standard errors assume it; one WARNING naming the maps that filtered bilinearly) and Mitsuba's
+    per-scene 'Monochrome mode enabled' said once."""
+    from hyde_bsdf.mitsuba.log import log_once
+    from hyde_bsdf.render.renderer import load_scene_nearest
+
+    scenes, changed = [], []
+    with log_once():
+        for p in paths:
+            try:
+                scene, names = load_scene_nearest(p, fit)
+            except (RuntimeError, ValueError) as exc:
+                raise UsageError(f"--scene {str(p)!r}: Mitsuba could not load it: {_one_line(exc)[:400]}") from None
+            scenes.append(scene)
+            changed += [n for n in names if n not in changed]
+    if changed:
+        print(f"WARNING: the bitmap(s) of {', '.join(changed)} filter bilinearly (Mitsuba's default); they are "
+              "fitted with filter_type nearest, which the per-texel standard errors assume -- write "
+              "<string name=\"filter_type\" value=\"nearest\"/> in the scene to render what was fitted")
+    return scenes
+
+
+def _map_range(res, n) -> str:
+    """'map WxH, min..max (median m) over K of N texels with a valid standard error' (the texels
+    without one -- unseen, not converged, no whole pixel -- are not results)."""
+    v = np.asarray(res.final[n])
+    ok = res.valid(n)
+    if not ok.any():
+        return f"map {v.shape[1]}x{v.shape[0]}, no texel with a valid standard error"
+    w = v[ok]
+    what = "with a valid standard error" if n in res.rel_stderr else "seen"
+    return (f"map {v.shape[1]}x{v.shape[0]}, {w.min():.4g}..{w.max():.4g} (median {np.median(w):.4g}) over "
+            f"{int(ok.sum())} of {ok.size} texels {what}")
 
 
 def _write_map_outputs(res, paths, args):
@@ -455,6 +478,15 @@ def _write_map_outputs(res, paths, args):
                        + [f"{h[c]:.5f}" for c in extra])
     for n in res.fitted:
         v = np.asarray(res.final[n], np.float32)
+        if v.ndim == 2 and res.seen is not None:      # an unseen texel keeps no start value: NaN
+            v = np.where(res.seen, v, np.nan).astype(np.float32)
+        seen = (np.asarray(res.seen, np.float32) if res.seen is not None and v.ndim == 2
+                else np.ones(np.shape(v) or (1, 1), np.float32))
+        with atomic_path(paths[n + "_seen.npy"]) as tmp:
+            with open(tmp, "wb") as fh:
+                np.save(fh, seen)
+        with atomic_path(paths[n + "_seen.exr"]) as tmp:
+            mi.Bitmap(seen[..., None]).write(str(tmp))
         with atomic_path(paths[n + ".npy"]) as tmp:
             with open(tmp, "wb") as fh:
                 np.save(fh, v)
@@ -476,7 +508,8 @@ def _write_map_outputs(res, paths, args):
     fig, axes = plt.subplots(1, max(cols, 2), figsize=(4.2 * max(cols, 2), 3.6), layout="constrained")
     c = 0
     for n in maps:
-        im = axes[c].imshow(res.final[n], origin="lower", extent=(0, 1, 0, 1))
+        shown = np.where(res.seen, res.final[n], np.nan) if res.seen is not None else res.final[n]
+        im = axes[c].imshow(shown, origin="lower", extent=(0, 1, 0, 1))
         fig.colorbar(im, ax=axes[c], shrink=0.8)
         axes[c].set_title(f"recovered {n}")
         c += 1
