@@ -46,8 +46,9 @@ Texture mode::
                      [--iterations 100] [--spp 4] [--spp-ref 64] [--res 80] [--sensor 0] [-o OUTDIR]
 
 writes OUTDIR/invert_maps_history.csv, OUTDIR/NAME.npy and NAME.exr per fitted map (rows along
-v; load the EXR as a ``bitmap`` texture with ``raw`` true), NAME_stderr.npy/.exr (per-texel
-standard errors) and OUTDIR/invert_maps.png.  ``--preset`` captures the built-in synthetic sample
+v; load the EXR as a ``bitmap`` texture with ``raw`` true and ``filter_type`` nearest; NaN where no
+picture sees the texel), NAME_stderr.npy/.exr (per-texel standard errors; NaN where not valid),
+NAME_seen.npy/.exr (1 where a picture sees the texel) and OUTDIR/invert_maps.png.  ``--preset`` captures the built-in synthetic sample
 (:func:`example_material`) in the designed acquisition (:func:`design_acquisition`; --res default
 4 x --map-size, so that texels span pure pixels) and reports the errors against its truth.
 """
