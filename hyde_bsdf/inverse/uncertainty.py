@@ -69,7 +69,6 @@ May import: ``hyde_bsdf.inverse.observations``, ``hyde_bsdf.inverse.loss``, ``hy
 """
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -370,8 +369,3 @@ def _percent(fraction: float) -> str:
     """A fraction as a percentage: whole per cent from 1 % on, two significant digits below (a few
     texels of a large map must not read as '0 %')."""
     return f"{100 * fraction:.0f}" if fraction >= 0.01 else f"{100 * fraction:.2g}"
-
-
-def warn_unidentified(found: dict, category=UnidentifiedParameterWarning) -> None:
-    for name, (frac, message) in found.items():
-        warnings.warn(message, category, stacklevel=3)
