@@ -510,3 +510,19 @@ def test_report_tutorial_lists_every_validation_script():
     text = (REPO / "docs" / "tutorials" / "report.md").read_text(encoding="utf-8")
     missing = [s for _, scripts in sections for s in scripts if f"`{s}`" not in text]
     assert not missing, f"docs/tutorials/report.md does not list the report's scripts {missing}"
+
+
+#: what silences a warning in Python code (simplefilter/filterwarnings "ignore", -W ignore, a
+#: warnings.catch_warnings that records without re-issuing is allowed: the page then prints or asserts them)
+SILENCERS = re.compile(r"""(simplefilter|filterwarnings)\(\s*["']ignore["']|-W\s*["']?ignore|PYTHONWARNINGS\s*=\s*["']?ignore""")
+
+
+@pytest.mark.parametrize("page", PAGES, ids=_rel)
+def test_no_page_silences_warnings(page):
+    """A docs page must not hide a warning: the package's warnings (a parameter the data do not
+    determine, a fit that has not converged, a bilinear map) are the answer's honesty, and a page that
+    ignores them teaches users to do the same (issue 22: the capture tutorial hid a 267 % standard
+    error this way).  Recording them (``catch_warnings(record=True)``) and printing them is fine."""
+    found = [f"line {i + 1}: {line.strip()}" for i, line in enumerate(page.read_text(encoding="utf-8").splitlines())
+             if SILENCERS.search(line)]
+    assert not found, f"{_rel(page)} silences warnings: " + "; ".join(found)

@@ -107,5 +107,21 @@ def test_cli_invert_end_to_end(tmp_path, capsys):
     lines = (tmp_path / "invert_history.csv").read_text().splitlines()
     assert lines[1].startswith("iteration,loss") and len(lines) == 2 + 3
     assert (tmp_path / "invert.png").stat().st_size > 5_000
+    assert out.count("WARNING: rms_slope") == 1      # 3 iterates: too few to call it converged, said once
     assert main(["invert", "--start", "rms_slope=abc"]) == 2
     assert "not a number" in capsys.readouterr().err
+
+
+def test_stopped_early_scalar_inversion_warns(tiny):
+    """12 iterations from a start far from the truth: eta and k are still moving over the averaged
+    window, so the averaged values are not results -- a NotConvergedWarning (once per parameter) and
+    result.converged False for them."""
+    scene, ref = tiny
+    start = {"rms_slope": 0.4, "eta": 1.0, "k": 2.0}
+    with pytest.warns(inv.NotConvergedWarning) as caught:
+        res = inv.invert(scene, inv.StokesLoss(ref), start, iterations=12, lr=0.05, spp=SPP, seed=10,
+                         progress=False, average_last=8)
+    messages = [str(w.message) for w in caught if issubclass(w.category, inv.NotConvergedWarning)]
+    assert len(messages) == len(set(messages)) == len(res.warnings)
+    assert not all(res.converged.values())
+    assert all(m.split()[0] in inv.PARAMETERS and "has not converged" in m for m in messages)

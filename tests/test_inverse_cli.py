@@ -163,3 +163,45 @@ def test_ctrl_c_exits_130_with_a_short_message(tmp_path):
     assert proc.returncode == 130, err
     assert "hyde-bsdf invert: interrupted" in err and "Traceback" not in err
     assert not (tmp_path / "invert_history.csv").exists()
+
+
+def test_maps_user_scene_bilinear_unseen_and_warnings_once(capfd, tmp_path):
+    """Two --scene files whose alpha bitmap (4 x 4) has no filter_type (bilinear) and whose camera sees
+    only part of the plane: the bitmaps are fitted with nearest lookup and one WARNING says so;
+    alpha_seen.npy/.exr mark the texels seen; unseen texels are NaN in alpha.npy (no start value
+    posing as a result); every WARNING line appears once; Mitsuba's 'Monochrome mode enabled' (an rgb
+    film in the mono variant) at most once for the run; the printed range counts the valid texels."""
+    import re
+
+    import mitsuba as mi
+
+    mi.Bitmap(np.full((4, 4, 1), 0.3, np.float32)).write(str(tmp_path / "alpha_start.exr"))
+    xml = """<scene version="3.0.0">
+    <integrator type="stokes"><integrator type="path"><integer name="max_depth" value="2"/></integrator></integrator>
+    <sensor type="perspective"><float name="fov" value="14"/>
+        <transform name="to_world"><lookat origin="0.4, -0.3, 4" target="0.4, -0.3, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/><rfilter type="box"/></film>
+        <sampler type="independent"><integer name="sample_count" value="4"/></sampler></sensor>
+    <shape type="rectangle" id="plane"><bsdf type="hyde">
+        <texture name="alpha" type="bitmap"><string name="filename" value="alpha_start.exr"/>
+            <boolean name="raw" value="true"/></texture>
+        <float name="eta" value="1.5"/><float name="k" value="3"/></bsdf></shape>
+    <emitter type="directional"><vector name="direction" value="0.3, 0, -1"/><rgb name="irradiance" value="2"/></emitter>
+    </scene>"""
+    argv = ["invert", "--maps", "--iterations", "2", "--spp", "4", "-o", str(tmp_path / "out")]
+    for i in range(2):
+        (tmp_path / f"s{i}.xml").write_text(xml)
+        argv += ["--scene", str(tmp_path / f"s{i}.xml"), "--reference", _exr(tmp_path / f"r{i}.exr", 16, 16)]
+    capfd.readouterr()
+    rc = main(argv)
+    cap = capfd.readouterr()
+    assert rc == 0, cap.err
+    out = re.sub(r"\x1b\[[0-9;]*m", "", cap.out)          # Mitsuba's log colours (it logs to stdout)
+    warned = [line for line in out.splitlines() if line.startswith("WARNING:")]
+    assert len(warned) == len(set(warned)) and sum("filter bilinearly" in w for w in warned) == 1, cap.out
+    assert (cap.out + cap.err).count("Monochrome mode enabled") <= 1
+    seen = np.load(tmp_path / "out" / "alpha_seen.npy")
+    alpha = np.load(tmp_path / "out" / "alpha.npy")
+    assert seen.shape == (4, 4) and 0 < seen.sum() < 16 and (tmp_path / "out" / "alpha_seen.exr").stat().st_size > 0
+    assert np.all(np.isnan(alpha[seen == 0])) and np.all(np.isfinite(alpha[seen == 1]))
+    assert "texels with a valid standard error" in cap.out

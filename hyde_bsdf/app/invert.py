@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import csv
 import math
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -277,8 +278,10 @@ def _scalar_run(args, truth, start, fit, paths):
         truth_known = True
     with user_input("--reference"):
         loss_fn = StokesLoss(ref, components=args.loss)
-    res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
-                 seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
+    with warnings.catch_warnings(record=True) as caught:      # printed once each below, as WARNING: lines
+        warnings.simplefilter("always")
+        res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
+                     seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
     with atomic_group():      # the CSV and the plot replace the old pair together, or not at all
         write_history(res, paths[0])
         plot_history({args.loss: res}, paths[1],
@@ -292,6 +295,8 @@ def _scalar_run(args, truth, start, fit, paths):
         elif p not in res.fitted:
             line += " (fixed)"
         print(line)
+    for message in dict.fromkeys(res.warnings + [str(w.message) for w in caught]):
+        print(f"WARNING: {message}")
     print(f"wrote {paths[0]} and {paths[1]}")
     return 0
 
@@ -328,6 +333,8 @@ def _maps_outputs(args, fit) -> dict:
     for n in fit:
         outputs[n + ".npy"] = f"{n}.npy"
         outputs[n + ".exr"] = f"{n}.exr"
+        outputs[n + "_seen.npy"] = f"{n}_seen.npy"
+        outputs[n + "_seen.exr"] = f"{n}_seen.exr"
         if not args.no_uncertainty:
             outputs[n + "_stderr.npy"] = f"{n}_stderr.npy"
             outputs[n + "_stderr.exr"] = f"{n}_stderr.exr"
@@ -361,7 +368,7 @@ def _scene_observations(args, fit):
 
     truth = None
     if args.scene:
-        scenes = [_load_user_scene(p) for p in args.scene]
+        scenes = _load_map_scenes(args.scene, fit)
     else:
         if fit != ("alpha",):
             raise UsageError("the built-in --maps scene has a known index (eta 1.5, k 3) and an alpha map: "
@@ -388,14 +395,13 @@ def _scene_observations(args, fit):
     return observations, truth
 
 
-def _print_maps_result(res, args, fit, start, n_images, paths) -> None:
+def _print_maps_result(res, args, fit, start, n_images, paths, messages) -> None:
     print(f"loss: {args.loss}; {args.iterations} iterations over {n_images} image(s), "
           f"{res.seconds_per_iteration:.3f} s/iteration (first {res.first_iteration_seconds:.1f} s incl. JIT)")
     for n in fit:
         v = np.asarray(res.final[n])
         line = f"  {n:9s} start {start[n]:.4g} -> "
-        line += (f"map {v.shape[1]}x{v.shape[0]}, {v.min():.4g}..{v.max():.4g} (median {np.median(v):.4g})"
-                 if v.ndim == 2 else f"{float(v):.5g}")
+        line += (_map_range(res, n) if v.ndim == 2 else f"{float(v):.5g}")
         if res.truth and n in res.truth:
             e = res.texel_errors(n)
             line += (f"; per-texel error over the {int(res.seen.sum())} seen texels: median "
@@ -403,14 +409,14 @@ def _print_maps_result(res, args, fit, start, n_images, paths) -> None:
         print(line)
         if n in res.rel_stderr:
             rel = res.rel_stderr[n][res.seen] if res.seen is not None else res.rel_stderr[n].ravel()
-            rel = rel[~np.isnan(rel)]            # NaN: no whole pixel in the texel, said in the warnings
+            rel = rel[~np.isnan(rel)]            # NaN: no whole pixel, not converged, bilinear: said in the warnings
             if rel.size:
                 print(f"  {'':9s} relative standard error: median {100 * np.median(rel):.3g} %, 90th percentile "
                       f"{100 * np.percentile(rel, 90):.3g} %")
     if res.seen is not None:
         print(f"  texels seen by the images: {int(res.seen.sum())} of {res.seen.size}")
-    for message in res.warnings:
-        print(f"  warning: {message}")
+    for message in messages:
+        print(f"WARNING: {message}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
 
 
@@ -433,14 +439,55 @@ def _maps_run(args, fit, start, paths):
         observations, truth = _preset_observations(args, fit, start)
     else:
         observations, truth = _scene_observations(args, fit)
-    with user_input():                     # the inputs (masks, start shapes) found inconsistent
+    # the library's warnings are recorded and printed once each in the summary (as WARNING: lines),
+    # not also by Python's warning display; the inputs (masks, start shapes) found inconsistent: UsageError
+    with user_input(), warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
                           seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
                           truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
+    messages = list(dict.fromkeys(res.warnings + [str(w.message) for w in caught
+                                                  if issubclass(w.category, UserWarning)]))
     with atomic_group():      # history, maps and plot replace the old set together, or not at all
         _write_map_outputs(res, paths, args)
-    _print_maps_result(res, args, fit, start, len(observations), paths)
+    _print_maps_result(res, args, fit, start, len(observations), paths, messages)
     return 0
+
+
+def _load_map_scenes(paths, fit) -> list:
+    """The --scene files, their fitted bitmaps loaded with filter_type nearest (the per-texel
+    standard errors assume it; one WARNING naming the maps that filtered bilinearly) and Mitsuba's
+    per-scene 'Monochrome mode enabled' said once."""
+    from hyde_bsdf.mitsuba.log import log_once
+    from hyde_bsdf.render.renderer import load_scene_nearest
+
+    scenes, changed = [], []
+    with log_once():
+        for p in paths:
+            try:
+                scene, names = load_scene_nearest(p, fit)
+            except (RuntimeError, ValueError) as exc:
+                raise UsageError(f"--scene {shorten(str(p))}: Mitsuba could not load it: {one_line(exc)}") from None
+            scenes.append(scene)
+            changed += [n for n in names if n not in changed]
+    if changed:
+        print(f"WARNING: the bitmap(s) of {', '.join(changed)} filter bilinearly (Mitsuba's default); they are "
+              "fitted with filter_type nearest, which the per-texel standard errors assume -- write "
+              "<string name=\"filter_type\" value=\"nearest\"/> in the scene to render what was fitted")
+    return scenes
+
+
+def _map_range(res, n) -> str:
+    """'map WxH, min..max (median m) over K of N texels with a valid standard error' (the texels
+    without one -- unseen, not converged, no whole pixel -- are not results)."""
+    v = np.asarray(res.final[n])
+    ok = res.valid(n)
+    if not ok.any():
+        return f"map {v.shape[1]}x{v.shape[0]}, no texel with a valid standard error"
+    w = v[ok]
+    what = "with a valid standard error" if n in res.rel_stderr else "seen"
+    return (f"map {v.shape[1]}x{v.shape[0]}, {w.min():.4g}..{w.max():.4g} (median {np.median(w):.4g}) over "
+            f"{int(ok.sum())} of {ok.size} texels {what}")
 
 
 def _write_map_outputs(res, paths, args):
@@ -456,6 +503,15 @@ def _write_map_outputs(res, paths, args):
                        + [f"{h[c]:.5f}" for c in extra])
     for n in res.fitted:
         v = np.asarray(res.final[n], np.float32)
+        if v.ndim == 2 and res.seen is not None:      # an unseen texel keeps no start value: NaN
+            v = np.where(res.seen, v, np.nan).astype(np.float32)
+        seen = (np.asarray(res.seen, np.float32) if res.seen is not None and v.ndim == 2
+                else np.ones(np.shape(v) or (1, 1), np.float32))
+        with atomic_path(paths[n + "_seen.npy"]) as tmp:
+            with open(tmp, "wb") as fh:
+                np.save(fh, seen)
+        with atomic_path(paths[n + "_seen.exr"]) as tmp:
+            mi.Bitmap(seen[..., None]).write(str(tmp))
         with atomic_path(paths[n + ".npy"]) as tmp:
             with open(tmp, "wb") as fh:
                 np.save(fh, v)
@@ -477,7 +533,8 @@ def _write_map_outputs(res, paths, args):
     fig, axes = plt.subplots(1, max(cols, 2), figsize=(4.2 * max(cols, 2), 3.6), layout="constrained")
     c = 0
     for n in maps:
-        im = axes[c].imshow(res.final[n], origin="lower", extent=(0, 1, 0, 1))
+        shown = np.where(res.seen, res.final[n], np.nan) if res.seen is not None else res.final[n]
+        im = axes[c].imshow(shown, origin="lower", extent=(0, 1, 0, 1))
         fig.colorbar(im, ax=axes[c], shrink=0.8)
         axes[c].set_title(f"recovered {n}")
         c += 1

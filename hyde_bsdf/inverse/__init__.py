@@ -46,28 +46,31 @@ Texture mode::
                      [--iterations 100] [--spp 4] [--spp-ref 64] [--res 80] [--sensor 0] [-o OUTDIR]
 
 writes OUTDIR/invert_maps_history.csv, OUTDIR/NAME.npy and NAME.exr per fitted map (rows along
-v; load the EXR as a ``bitmap`` texture with ``raw`` true), NAME_stderr.npy/.exr (per-texel
-standard errors) and OUTDIR/invert_maps.png.  ``--preset`` captures the built-in synthetic sample
+v; load the EXR as a ``bitmap`` texture with ``raw`` true and ``filter_type`` nearest; NaN where no
+picture sees the texel), NAME_stderr.npy/.exr (per-texel standard errors; NaN where not valid),
+NAME_seen.npy/.exr (1 where a picture sees the texel) and OUTDIR/invert_maps.png.  ``--preset`` captures the built-in synthetic sample
 (:func:`example_material`) in the designed acquisition (:func:`design_acquisition`; --res default
 4 x --map-size, so that texels span pure pixels) and reports the errors against its truth.
 """
 
-from hyde_bsdf.inverse._common import Y_WEIGHTS
+from hyde_bsdf.inverse._common import Y_WEIGHTS, NotConvergedWarning
 from hyde_bsdf.inverse.memory import AD_BYTES_FIXED, AD_BYTES_PER_SAMPLE, check_memory, estimate_memory
 from hyde_bsdf.inverse.loss import (REFERENCE_RANGE, StokesLoss, channel_names, check_reference_scale,
                                     interior_mask, smoothness, stokes_images)
 from hyde_bsdf.inverse.acquisition import (Acquisition, Configuration, acquisition_scene_dict,
                                            design_acquisition, example_material, fixed_rig_acquisition,
                                            predicted_stderr, synthetic_observations)
-from hyde_bsdf.inverse.maps import LogAdam, MapInversionResult, MapProblem, invert_maps, map_loss, map_step, map_uncertainty
-from hyde_bsdf.inverse.uncertainty import STDERR_THRESHOLD, Uncertainty, UnidentifiedParameterWarning
+from hyde_bsdf.inverse.maps import (LogAdam, MapInversionResult, MapProblem, filters_bilinearly, invert_maps, map_loss,
+                                    map_step, map_uncertainty)
+from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, STDERR_THRESHOLD, BilinearFilterWarning, Uncertainty,
+                                           UnidentifiedParameterWarning)
 from hyde_bsdf.inverse.observations import _obs_mask  # noqa: F401
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, VIEW_AZIMUTHS, Observation,
                                             example_maps, film_channels, map_keys, plane_scene_dict,
                                             pixel_texels, render_stokes, render_stokes_np,
                                             texel_coverage)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, VARIANT, InversionResult,
-                                      check_gradients, finite_difference_gradient, invert, load_scene, loss_and_gradient,
+                                      check_gradients, finite_difference_gradient, invert, trajectory_converged, load_scene, loss_and_gradient,
                                       parameter_keys, prepare, render_reference, scene_dict,
                                       write_history)
 
@@ -78,6 +81,7 @@ __all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scen
            "write_history", "MAP_PARAMETERS", "MAP_VARIANT", "map_keys", "film_channels",
            "render_stokes", "render_stokes_np", "Observation", "texel_coverage", "smoothness",
            "MapInversionResult", "invert_maps", "MapProblem", "map_loss", "map_step", "LogAdam", "map_uncertainty",
-           "Uncertainty", "UnidentifiedParameterWarning", "STDERR_THRESHOLD", "pixel_texels", "Configuration",
+           "Uncertainty", "UnidentifiedParameterWarning", "STDERR_THRESHOLD", "NotConvergedWarning",
+           "BilinearFilterWarning", "CONVERGENCE_THRESHOLD", "trajectory_converged", "filters_bilinearly", "pixel_texels", "Configuration",
            "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition", "predicted_stderr", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",
            "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "Y_WEIGHTS"]

@@ -1,4 +1,5 @@
-"""Small pieces the inverse modules share: luminance weights, sqrt(2), error lines.
+"""Small pieces the inverse modules share: luminance weights, sqrt(2), error lines, the not-converged
+warning.
 
 May import: the standard library only.
 """
@@ -15,3 +16,7 @@ def _first_line(exc) -> str:
     text = str(exc).strip().splitlines()
     return text[0][:200] if text else type(exc).__name__
 
+
+class NotConvergedWarning(UserWarning):
+    """A fitted parameter that had not reached the minimum (in some texels, for a map): its standard
+    errors there are NaN (they would understate the error); the value is not a result."""

@@ -312,18 +312,19 @@ def predicted_stderr(acquisition: Acquisition, values: dict, *, fit=("alpha", "e
     return {n: out[:, i].reshape(shape) if shape else float(out[0, i]) for i, n in enumerate(fit)}
 
 
-def _texture(value):
+def _texture(value, filter_type: str = "nearest"):
     import mitsuba as mi
 
     if np.ndim(value) == 0:
         return float(value)
     arr = np.asarray(value, np.float32)
-    return {"type": "bitmap", "bitmap": mi.Bitmap(arr[..., None]), "raw": True, "filter_type": "nearest"}
+    return {"type": "bitmap", "bitmap": mi.Bitmap(arr[..., None]), "raw": True, "filter_type": filter_type}
 
 
 def acquisition_scene_dict(config: Configuration, material: dict, *, bsdf: str = "hyde", res: int = 48,
                            spp: int = 4, irradiance: float = 2.0, extent: float = 1.05, shape: dict | None = None,
-                           diffuse: str = "paper", shadowing: str | None = None) -> dict:
+                           diffuse: str = "paper", shadowing: str | None = None,
+                           filter_type: str = "nearest") -> dict:
     """The scene of one :class:`Configuration`: the sample (default a 2 x 2 ``rectangle``, id
     ``plane``, UV = (x + 1, y + 1) / 2; or ``shape``, any Mitsuba shape dict with UVs, whose
     ``bsdf`` is set here) with a BSDF whose parameters come from ``material`` (name -> float or an
@@ -333,12 +334,16 @@ def acquisition_scene_dict(config: Configuration, material: dict, *, bsdf: str =
     from ``light``, and the polarizer / retarder sheets of the configuration.
 
     ``bsdf="roughconductor"`` (Beckmann, the same alpha, eta, k, specular_reflectance) for
-    comparisons; ``shadowing`` is passed to ``hyde`` when given.
+    comparisons; ``shadowing`` is passed to ``hyde`` when given.  ``filter_type``: the maps' bitmap
+    lookup, ``"nearest"`` (what the per-texel standard errors assume) or ``"bilinear"`` (Mitsuba's
+    default; :func:`~hyde_bsdf.inverse.invert_maps` then gives NaN standard errors and a warning).
     """
     import mitsuba as mi
 
+    if filter_type not in ("nearest", "bilinear"):
+        raise ValueError(f"filter_type must be 'nearest' or 'bilinear', got {filter_type!r}")
     T = mi.ScalarTransform4f
-    mat = {name: _texture(v) for name, v in material.items()}
+    mat = {name: _texture(v, filter_type) for name, v in material.items()}
     if bsdf == "hyde":
         bsdf_dict = {"type": "hyde", "diffuse": diffuse, **mat}
         if shadowing is not None:

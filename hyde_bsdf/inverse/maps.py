@@ -24,11 +24,13 @@ from hyde_bsdf.inverse.observations import (MAP_PARAMETERS, _obs_mask, film_chan
                                             texel_coverage)
 from hyde_bsdf.inverse.scalar import check_gradients
 from hyde_bsdf.progress import as_callback
-from hyde_bsdf.inverse.uncertainty import (STDERR_THRESHOLD, Uncertainty, accumulate_blocks, gauss_newton_step,
-                                           identification_warnings, pixel_records, standard_errors,
-                                           warn_unidentified)
+from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, STDERR_THRESHOLD, BilinearFilterWarning,
+                                           NotConvergedWarning, UnidentifiedParameterWarning, Uncertainty,
+                                           accumulate_blocks, convergence_test, convergence_warnings,
+                                           gauss_newton_step, identification_warnings, pixel_records,
+                                           standard_errors)
 
-__all__ = ["MapInversionResult", "MapProblem", "map_loss", "map_step", "LogAdam", "map_uncertainty",
+__all__ = ["MapInversionResult", "MapProblem", "filters_bilinearly", "map_loss", "map_step", "LogAdam", "map_uncertainty",
            "invert_maps"]
 
 
@@ -48,7 +50,8 @@ class MapInversionResult:
     first_iteration_seconds: float = float("nan")
     stderr: dict = field(default_factory=dict)      # name -> (rows, cols) standard error of the final map
     rel_stderr: dict = field(default_factory=dict)  # name -> (rows, cols) stderr / value
-    warnings: list = field(default_factory=list)    # messages of parameters the data do not determine
+    warnings: list = field(default_factory=list)    # messages: undetermined, unconverged, bilinear (each once)
+    converged: dict = field(default_factory=dict)   # name -> (rows, cols) bool: False where the stderr is NaN
     uncertainty: Uncertainty | None = None
     adam_final: dict = field(default_factory=dict)  # the averaged Adam iterate before the polish
 
@@ -58,6 +61,19 @@ class MapInversionResult:
             raise ValueError(f"no truth for {name!r}")
         rel = np.abs(np.asarray(self.final[name]) / np.asarray(self.truth[name]) - 1.0)
         return rel[self.seen] if self.seen is not None and rel.shape == self.seen.shape else rel.ravel()
+
+    def valid(self, name: str) -> np.ndarray:
+        """(rows, cols) bool: texels seen, with a valid (finite) standard error -- the texels whose
+        values are measurements.  Without the uncertainty step: the seen texels."""
+        seen = np.ones(np.shape(self.final[name]), bool) if self.seen is None else np.asarray(self.seen, bool)
+        if name in self.rel_stderr:
+            seen = seen & np.isfinite(self.rel_stderr[name])
+        return seen
+
+    def measured(self, name: str) -> np.ndarray:
+        """The fitted map with NaN where :meth:`valid` is False (unseen texels keep their start value in
+        ``final``; this is what to report)."""
+        return np.where(self.valid(name), np.asarray(self.final[name], np.float64), np.nan)
 
     def pulls(self, name: str) -> np.ndarray:
         """(final - truth) / stderr over the seen texels (1-D): standard normal when the errors are right."""
@@ -86,6 +102,7 @@ class MapProblem:
     seen: np.ndarray | None
     prefix: str | None
     components: str
+    bilinear: tuple = ()              # fitted maps whose bitmap filters bilinearly (in any scene)
 
     @property
     def map_shape(self):
@@ -140,6 +157,8 @@ class MapProblem:
         if seen is None and problem.map_shape is not None:
             seen = sum(texel_coverage(o, problem.map_shape, prefix) for o in observations) > 0
         problem.seen = seen
+        problem.bilinear = tuple(n for n in fit if shapes[n] is not None and any(
+            filters_bilinearly(p, k[n], shapes[n], MAP_PARAMETERS[n][1]) for p, k in zip(all_params, keys)))
         for name in names:
             try:
                 value = problem.as_value(name, start[name])
@@ -168,6 +187,28 @@ class MapProblem:
             for name, v in values.items():
                 p[k[name]] = v
             p.update()
+
+
+def filters_bilinearly(params, key: str, shape, bounds) -> bool:
+    """True when the bitmap texture whose data is ``params[key]`` (shape (rows, cols, 1)) filters
+    bilinearly (Mitsuba's default): a test pattern that differs in every texel is written and the
+    texture is evaluated a quarter texel off the centre of a corner texel -- nearest returns one
+    texel's value exactly, bilinear a blend.  The caller writes its own values afterwards."""
+    import mitsuba as mi
+
+    rows, cols = int(shape[0]), int(shape[1])
+    node = params.properties[key][2]
+    if rows * cols < 2 or not isinstance(node, mi.Texture):
+        return False
+    lo, hi = bounds
+    base = min(max(0.3, lo * 2), hi / 2)
+    pattern = base * (1.0 + 0.01 * np.arange(rows * cols, dtype=np.float64)).reshape(rows, cols, 1)
+    params[key] = mi.TensorXf(pattern.astype(np.float32))
+    params.update()
+    si = mi.SurfaceInteraction3f()
+    si.uv = mi.Point2f(0.75 / cols, 0.75 / rows)
+    value = float(np.asarray(node.eval_1(si)).ravel()[0])
+    return not np.any(np.abs(pattern.ravel() - value) <= 1e-5 * base)
 
 
 def map_loss(problem: MapProblem, values: dict, spp: int, seed0, tensors, regularizer=None, weight=0.0):
@@ -266,41 +307,35 @@ class LogAdam:
 
 
 def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: int = 0, noise=None,
-                    polish: int = 2, threshold: float = STDERR_THRESHOLD, max_step: float = 0.25):
+                    polish: int = 2, threshold: float = STDERR_THRESHOLD, max_step: float = 0.25,
+                    convergence: float = CONVERGENCE_THRESHOLD, regularized: bool = False,
+                    extra_polish: int = 3):
     """Step 4, the uncertainty of the fitted *maps* at ``final`` (see :mod:`hyde_bsdf.inverse.uncertainty`):
     ``polish`` Gauss-Newton steps per texel (0: none) on the noise-weighted least squares (weights
     1 / variance per observation and Stokes component: the efficient estimate, which the loss's own
     normalisation is not), then the standard errors at the last point whose information was computed
     (the inverse Fisher information after polishing, with the noise estimated from the residuals
     linearised after the last step; the sandwich with the loss's weights without).
+
+    Convergence before uncertainty: the last two Gauss-Newton steps (without polishing: the step the
+    blocks predict, -A^-1 g) are measured in standard errors per texel and parameter; while one of
+    them exceeds ``convergence`` in some texel, up to ``extra_polish`` more steps are taken; where it
+    still does (or a step hit ``max_step``) the texel's standard error is NaN and
+    ``Uncertainty.converged`` is False there (:func:`~hyde_bsdf.inverse.uncertainty.convergence_test`).
+    Two steps, not one: Gauss-Newton from far away can take one small step and the next large
+    (measured: a texel 9-11 standard errors off after a last step of 1.9).
+    A fitted bitmap that filters bilinearly couples neighbouring texels, which the per-texel blocks
+    do not describe: every standard error is then NaN and ``Uncertainty.filter_valid`` False.
     Returns (final maps, :class:`Uncertainty`)."""
     names = tuple(n for n in problem.fit if problem.shapes[n] is not None)
     if not names:
         return final, None
     rows, cols = problem.map_shape
     seen = problem.seen if problem.seen is not None else np.ones((rows, cols), bool)
-    final = dict(final)
-    # with polishing steps the result is the weighted least-squares estimate (weights 1 / noise
-    # variance, the efficient one); without, Adam's minimiser of the loss, whose covariance is the
-    # sandwich with the loss's own weights
-    weighting = "fisher" if polish else "loss"
-    for k in range(max(1, int(polish))):
-        problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
-        records = pixel_records(problem, names, spp=spp, seed=seed + 1000 * k, noise=noise)
-        A, B, g, noise_std, n_data = accumulate_blocks(records, (rows, cols), len(names), weighting=weighting)
-        if polish:
-            d = gauss_newton_step(A, g, seen, max_step=max_step)
-            applied = np.zeros_like(d)
-            for i, n in enumerate(names):
-                lo, hi = MAP_PARAMETERS[n][1]
-                old = np.asarray(final[n], np.float64)
-                final[n] = np.clip(old * np.exp(d[:, i].reshape(rows, cols)), lo, hi)
-                applied[:, i] = np.log(final[n] / old).ravel()
-    if polish:
-        # the blocks after the last step, linearised (no further render): its residuals r + J d give the
-        # noise estimate without the misfit the step removed
-        A, B, g, noise_std, n_data = accumulate_blocks(records, (rows, cols), len(names), weighting=weighting,
-                                                       step=applied)
+    final, records, blocks, steps = _polish(problem, names, dict(final), spp=spp, seed=seed, noise=noise,
+                                            polish=polish, max_step=max_step, seen=seen, convergence=convergence,
+                                            extra=extra_polish)
+    A, B, g, noise_std, n_data = blocks
     problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
     rel = standard_errors(A, B, seen, dof=(n_data, len(names) * int(np.asarray(seen).sum())))
     # a texel no picture has a whole pixel inside got no information computed: unknown, not undetermined
@@ -309,11 +344,85 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
         if rec is not None:
             np.add.at(whole, rec["t"], 1)
     rel[whole == 0] = np.nan
-    rel_maps = {n: rel[:, i].reshape(rows, cols) for i, n in enumerate(names)}
+    clip = max_step if polish else None
+    (ok, ratio), (ok_prev, ratio_prev) = (convergence_test(d, rel, seen, convergence, clip=clip) for d in steps)
+    ok &= ok_prev
+    ratio = np.maximum(ratio, ratio_prev)
+    shape = lambda a, i: a[:, i].reshape(rows, cols)
+    rel_maps = {n: shape(rel, i) for i, n in enumerate(names)}
     found = identification_warnings(rel_maps, seen, threshold)
+    unchecked = rel_maps
+    rel = np.where(ok, rel, np.nan)            # an unconverged texel's standard error would understate its error
+    filter_valid = not problem.bilinear
+    if not filter_valid:
+        rel[:] = np.nan
+    rel_maps = {n: shape(rel, i) for i, n in enumerate(names)}
     unc = Uncertainty(names, {n: rel_maps[n] * np.asarray(final[n]) for n in names}, rel_maps, A, B, g, noise_std,
-                      {n: f for n, (f, _) in found.items()}, threshold)
+                      {n: f for n, (f, _) in found.items()}, threshold,
+                      step_se={n: shape(ratio, i) for i, n in enumerate(names)},
+                      converged={n: shape(ok, i) for i, n in enumerate(names)}, filter_valid=filter_valid,
+                      unchecked=unchecked)
+    unc.messages = _uncertainty_messages(problem, unc, found, seen, convergence, regularized)
     return final, unc
+
+
+def _polish(problem, names, final, *, spp, seed, noise, polish, max_step, seen, convergence, extra):
+    """At least ``polish`` Gauss-Newton steps, and up to ``extra`` more while some seen texel has not
+    converged (:func:`_steps_converged`: its last two steps within ``convergence`` standard errors);
+    returns (final, records of the last pass, the blocks (A, B, g, noise, n) to take the standard
+    errors from, and the last two steps (2, texels, P): the ones applied with polishing; without,
+    the step the blocks predict, -A^-1 g, twice)."""
+    rows, cols = problem.map_shape
+    # with polishing steps the result is the weighted least-squares estimate (weights 1 / noise
+    # variance, the efficient one); without, Adam's minimiser of the loss, whose covariance is the
+    # sandwich with the loss's own weights
+    weighting = "fisher" if polish else "loss"
+    steps = []
+    for k in range(max(1, int(polish) + int(extra) if polish else 1)):
+        problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
+        records = pixel_records(problem, names, spp=spp, seed=seed + 1000 * k, noise=noise)
+        blocks = accumulate_blocks(records, (rows, cols), len(names), weighting=weighting)
+        if not polish:
+            d = gauss_newton_step(blocks[0], blocks[2], seen, max_step=np.inf)
+            return final, records, blocks, np.array([d, d])
+        d = gauss_newton_step(blocks[0], blocks[2], seen, max_step=max_step)
+        steps.append(d)
+        applied = np.zeros_like(d)
+        for i, n in enumerate(names):
+            lo, hi = MAP_PARAMETERS[n][1]
+            old = np.asarray(final[n], np.float64)
+            final[n] = np.clip(old * np.exp(d[:, i].reshape(rows, cols)), lo, hi)
+            applied[:, i] = np.log(final[n] / old).ravel()
+        if k + 1 >= polish and _steps_converged(steps, blocks, seen, convergence, max_step).all():
+            break
+    # the blocks after the last step, linearised (no further render): its residuals r + J d give the
+    # noise estimate without the misfit the step removed
+    blocks = accumulate_blocks(records, (rows, cols), len(names), weighting=weighting, step=applied)
+    return final, records, blocks, np.array(steps[-2:] if len(steps) > 1 else [steps[-1]] * 2)
+
+
+def _steps_converged(steps, blocks, seen, convergence, max_step):
+    """(texels, P) bool: the last two Gauss-Newton steps (the last one alone after a single step) both
+    within ``convergence`` standard errors (those of ``blocks``) and below the clip."""
+    A, B, _, _, n_data = blocks
+    rel = standard_errors(A, B, seen)
+    ok = np.ones_like(steps[-1], bool)
+    for d in steps[-2:]:
+        ok &= convergence_test(d, rel, seen, convergence, clip=max_step)[0]
+    return ok
+
+
+def _uncertainty_messages(problem, unc, found, seen, convergence, regularized) -> list:
+    """The warnings of one uncertainty step, each once: (category, message)."""
+    out = [(UnidentifiedParameterWarning, m) for _, m in found.values()]
+    conv = convergence_warnings(unc.converged, unc.step_se, seen, convergence, regularized)
+    out += [(NotConvergedWarning, m) for _, m in conv.values()]
+    if not unc.filter_valid:
+        out.append((BilinearFilterWarning, f"the bitmap(s) of {', '.join(problem.bilinear)} filter bilinearly: "
+                    "a pixel then blends neighbouring texels, which the per-texel standard errors do not "
+                    "describe (measured 4x too small), so they are set to NaN; load the maps with "
+                    "<string name=\"filter_type\" value=\"nearest\"/>"))
+    return out
 
 
 def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 100, lr: float = 0.05,
@@ -322,7 +431,8 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
                 average_last: int | None = None, progress=True,
                 seen: np.ndarray | None = None, freeze: bool = True, uncertainty: bool = True,
                 uncertainty_spp: int = 16, polish: int = 2, noise=None,
-                threshold: float = STDERR_THRESHOLD) -> MapInversionResult:
+                threshold: float = STDERR_THRESHOLD, convergence: float = CONVERGENCE_THRESHOLD,
+                extra_polish: int = 3) -> MapInversionResult:
     """Optimise texture-valued BSDF parameters (a roughness map, optionally index maps) to match
     one or more reference Stokes images.
 
@@ -369,7 +479,14 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     in some seen texels raises an :class:`~hyde_bsdf.inverse.uncertainty.UnidentifiedParameterWarning`
     naming it and the fraction of texels (also in ``result.warnings``).  ``noise``: the references'
     noise standard deviation per observation (a number or 4 numbers, S0..S3) when known; otherwise
-    estimated from the residuals.
+    estimated from the residuals.  Convergence is tested before the standard errors are reported:
+    while the last two Gauss-Newton steps of some texel exceed ``convergence`` standard errors, up to
+    ``extra_polish`` more steps are taken (:func:`map_uncertainty`); where they still do the texel
+    has not reached the minimum, its standard error is NaN, ``result.converged[name]`` is False there and a
+    :class:`~hyde_bsdf.inverse.uncertainty.NotConvergedWarning` names the parameter and the
+    fraction of texels.  A fitted bitmap that filters bilinearly (Mitsuba's default) gives NaN
+    standard errors and one :class:`~hyde_bsdf.inverse.uncertainty.BilinearFilterWarning`: load
+    the maps with ``filter_type`` ``nearest``.  Each warning is issued once.
 
     The steps, each its own function: :meth:`MapProblem.build` (observation set-up: checks, losses,
     traverse keys, texel coverage), :func:`map_loss` (renders and the loss), :func:`map_step` (the
@@ -457,7 +574,8 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
                  + (f", {polish} Gauss-Newton step(s)" if polish and regularizer is None else ""))
         final, unc = map_uncertainty(problem, final, spp=uncertainty_spp, seed=seed + 1 + iterations * n_obs,
                                      noise=noise, polish=polish if (regularizer is None or weight == 0) else 0,
-                                     threshold=threshold)
+                                     threshold=threshold, convergence=convergence, extra_polish=extra_polish,
+                                     regularized=regularizer is not None and weight > 0)
     for n in problem.names:
         if n not in fit:
             final[n] = np.asarray(start[n], np.float64) if np.ndim(start[n]) else float(start[n])
@@ -467,8 +585,8 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
                              truth=truth, history=history, seconds_per_iteration=per_it,
                              first_iteration_seconds=t_first, adam_final=adam_final, uncertainty=unc)
     if unc is not None:
-        res.stderr, res.rel_stderr = unc.stderr, unc.rel_stderr
-        found = identification_warnings(unc.rel_stderr, seen, threshold)
-        res.warnings = [m for _, m in found.values()]
-        warn_unidentified(found)
+        res.stderr, res.rel_stderr, res.converged = unc.stderr, unc.rel_stderr, unc.converged
+        res.warnings = [m for _, m in unc.messages]
+        for category, message in unc.messages:        # each once
+            warnings.warn(message, category, stacklevel=2)
     return res

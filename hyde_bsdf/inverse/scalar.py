@@ -23,20 +23,21 @@ from __future__ import annotations
 import csv
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_open
-from hyde_bsdf.inverse._common import SQRT2
+from hyde_bsdf.inverse._common import SQRT2, NotConvergedWarning
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.loss import StokesLoss, channel_names, stokes_images
 from hyde_bsdf.model.parameters import INVERSE_ETA, INVERSE_K, INVERSE_PARAMETERS, RMS_SLOPE
 
 __all__ = ["VARIANT", "PARAMETERS", "INVERSE_PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict",
-           "load_scene", "parameter_keys", "render_reference", "InversionResult", "invert", "check_gradients",
-           "loss_and_gradient", "finite_difference_gradient", "write_history"]
+           "load_scene", "parameter_keys", "render_reference", "InversionResult", "invert", "trajectory_converged",
+           "check_gradients", "loss_and_gradient", "finite_difference_gradient", "write_history"]
 
 VARIANT = "llvm_ad_spectral_polarized"
 #: optimizable BSDF parameters (``parameters.INVERSE_PARAMETERS``: the plugin's names, Mitsuba's n + ik)
@@ -188,6 +189,8 @@ class InversionResult:
     history: list = field(default_factory=list)   # dicts: iteration, loss, seconds, params...
     seconds_per_iteration: float = float("nan")
     first_iteration_seconds: float = float("nan")
+    converged: dict = field(default_factory=dict)  # fitted name -> bool (:func:`trajectory_converged`)
+    warnings: list = field(default_factory=list)   # the NotConvergedWarning messages, each once
 
     def relative_errors(self) -> dict:
         if not self.truth:
@@ -205,7 +208,10 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
     Adam on log(parameter), lr decaying by 5 % per iteration over the last quarter;
     iteration i renders ``spp`` samples with seed ``seed + 1 + i``.  The final value
     is the mean of the parameters over the last ``average_last`` iterations
-    (Polyak averaging: it cancels the Monte-Carlo jitter of single steps).
+    (Polyak averaging: it cancels the Monte-Carlo jitter of single steps).  Before it is reported,
+    each parameter's convergence is tested on that window (:func:`trajectory_converged`): one still
+    drifting gets ``result.converged[name] = False`` and a
+    :class:`~hyde_bsdf.inverse._common.NotConvergedWarning` (once; also in ``result.warnings``).
     ``prefix`` picks the BSDF when the scene has several (see :func:`parameter_keys`).
     ``progress``: a callback ``progress(message)`` per iteration; True for ``[invert]`` lines on
     stderr, False for none (:mod:`hyde_bsdf.progress`).
@@ -277,9 +283,38 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
     final.update(fixed)
     per_it = ((history[-1]["seconds"] - history[0]["seconds"]) / (len(history) - 1)
               if len(history) > 1 else float("nan"))
-    return InversionResult(fitted=fit, start=dict(start), final=final, truth=truth,
-                           components=loss_fn.components, history=history,
-                           seconds_per_iteration=per_it, first_iteration_seconds=t_first)
+    result = InversionResult(fitted=fit, start=dict(start), final=final, truth=truth,
+                             components=loss_fn.components, history=history,
+                             seconds_per_iteration=per_it, first_iteration_seconds=t_first)
+    for p in fit:
+        result.converged[p], message = trajectory_converged([r[p] for r in tail], p)
+        if message:
+            result.warnings.append(message)
+            warnings.warn(message, NotConvergedWarning, stacklevel=2)
+    return result
+
+
+#: relative drift below which an averaged trajectory counts as settled whatever its scatter
+DRIFT_FLOOR = 1e-3
+
+
+def trajectory_converged(values, name: str = "parameter") -> tuple:
+    """(converged, message) of one parameter's iterates over the averaging window: the mean of the
+    window's second half against its first half.  A parameter that still moves has a drift larger
+    than the window's scatter (a pure linear trend: 1.7 x the standard deviation; jitter around a
+    level: ~0.45 x for 20 iterates) -- then, if the drift also exceeds :data:`DRIFT_FLOOR` of the
+    value, it has not converged and the averaged value is not a result (message says so; '' else)."""
+    v = np.asarray(values, np.float64)
+    if v.size < 4:
+        return False, (f"{name}: {v.size} iterates averaged, too few to test convergence; "
+                       "run more iterations")
+    half = v.size // 2
+    drift = abs(float(np.mean(v[half:]) - np.mean(v[:half])))
+    level = max(abs(float(np.mean(v))), 1e-12)
+    if drift <= float(np.std(v)) or drift <= DRIFT_FLOOR * level:
+        return True, ""
+    return False, (f"{name} has not converged: it moved by {100 * drift / level:.2g} % between the halves of the "
+                   f"last {v.size} iterations (more than their scatter); run more iterations or a larger lr")
 
 
 def check_gradients(grads: dict, iteration: int) -> None:

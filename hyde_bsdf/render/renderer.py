@@ -45,7 +45,7 @@ from hyde_bsdf.io.memory import available_bytes, check_memory
 from hyde_bsdf.io.stokes_exr import STOKES_NAMES
 from hyde_bsdf.progress import as_callback
 
-__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "scene_inputs", "render_stokes", "estimate_memory",
+__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "load_scene_nearest", "scene_inputs", "render_stokes", "estimate_memory",
            "plan_passes", "sensor_to_paper_rotation", "rotate_stokes"]
 
 DEFAULT_VARIANT = "llvm_ad_spectral_polarized"
@@ -211,6 +211,26 @@ class _SceneXML:
             if value < 1:
                 raise UsageError(f"{where}: {what} is {value}; it must be an integer >= 1{self.hint(key)}")
 
+    def to_nearest(self, names) -> list:
+        """Set ``filter_type`` ``nearest`` on every ``bitmap`` texture named in ``names`` (``alpha``,
+        ``eta``, ...) that filters otherwise (Mitsuba's default is bilinear), in the parsed tree;
+        returns the texture names changed (each once)."""
+        changed = []
+        if self.tree is None:
+            return changed
+        for tex in self.tree.getroot().iter("texture"):
+            if tex.get("type") != "bitmap" or tex.get("name") not in names:
+                continue
+            ft = next((e for e in tex if e.tag == "string" and e.get("name") == "filter_type"), None)
+            if ft is not None and ft.get("value") == "nearest":
+                continue
+            if ft is None:
+                ft = ET.SubElement(tex, "string", name="filter_type")
+            ft.set("value", "nearest")
+            if tex.get("name") not in changed:
+                changed.append(tex.get("name"))
+        return changed
+
     def without_stokes(self) -> str | None:
         """The scene's XML with a top-level ``stokes`` integrator replaced by the integrator it
         wraps (``path`` if none): unpolarized variants refuse ``stokes``.  None if no change."""
@@ -241,7 +261,15 @@ def load_scene(path, params: dict | None = None, polarized: bool | None = None):
     return _load_scene(path, params, polarized)[0]
 
 
-def _load_scene(path, params=None, polarized=None):
+def load_scene_nearest(path, names, params: dict | None = None, polarized: bool | None = None) -> tuple:
+    """:func:`load_scene` with every ``bitmap`` texture named in ``names`` loaded with ``filter_type``
+    ``nearest`` (what per-texel fitting assumes: a pixel inside a texel depends on that texel only);
+    returns (scene, the texture names that filtered otherwise and were changed)."""
+    scene, info = _load_scene(path, params, polarized, nearest=tuple(names))
+    return scene, info.nearest_changed
+
+
+def _load_scene(path, params=None, polarized=None, nearest=()):
     """:func:`load_scene`, also returning the checked XML (for the -D hints in messages)."""
     import mitsuba as mi
 
@@ -254,7 +282,10 @@ def _load_scene(path, params=None, polarized=None):
     info.check()
     if polarized is None:
         polarized = (mi.variant() or "").endswith("_polarized")
+    info.nearest_changed = info.to_nearest(nearest) if nearest else []
     text = None if polarized else info.without_stokes()
+    if text is None and info.nearest_changed:
+        text = ET.tostring(info.tree.getroot(), encoding="unicode")
     try:
         if text is None:
             scene = mi.load_file(str(path), **kwargs)
