@@ -65,7 +65,7 @@ from hyde_bsdf.errors import UsageError
 
 __all__ = ["CameraNoise", "StokesEstimate", "SONY_LAYOUT", "DEMOSAIC_METHODS", "MAX_CONDITION",
            "retarder_mueller", "analysis_matrix", "stokes_from_frames", "stokes_from_mosaic",
-           "simulate_frames", "simulate_mosaic", "propagated_sigma"]
+           "simulate_frames", "simulate_mosaic", "propagated_sigma", "stokes_sigma"]
 
 STOKES = ("S0", "S1", "S2", "S3")
 #: the 2 x 2 analyzer cell of the common Sony polarization sensors (IMX250MZR and kin), degrees
@@ -364,3 +364,18 @@ def simulate_mosaic(stokes, noise: CameraNoise, rng, layout=SONY_LAYOUT) -> np.n
     for i, (r, c) in enumerate(CELL):
         raw[r::2, c::2] = frames[i]
     return noise.simulate(raw, rng)
+
+
+def stokes_sigma(stokes, noise: CameraNoise, analysis=None) -> np.ndarray:
+    """The sigma (M, ...) that a camera with ``noise`` and the analysis matrix ``analysis`` (default: ideal
+    analyzers at 0/45/90/135 deg, a DoFP super-pixel) gives Stokes images ``stokes`` (M, ...) of its
+    measured components (S0..S2, or S0..S3 when ``analysis`` reaches S3), in DN above black: the
+    frames' variance from the noise model at the signal the Stokes vector predicts, propagated."""
+    S = np.asarray(stokes, np.float64)
+    A = analysis_matrix([0.0, 45.0, 90.0, 135.0]) if analysis is None else np.asarray(analysis, np.float64)
+    cols = _measured_columns(A)
+    if S.shape[0] != len(cols):
+        raise UsageError(f"stokes has {S.shape[0]} components but the analysis matrix measures {len(cols)}")
+    P, _ = _pseudo_inverse(A, cols, math.inf, None)
+    var = noise.variance(np.einsum("nm,m...->n...", A[:, list(cols)], S))
+    return np.sqrt(np.einsum("mn,n...->m...", P ** 2, var))
