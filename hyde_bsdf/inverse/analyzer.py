@@ -65,7 +65,8 @@ from hyde_bsdf.errors import UsageError
 
 __all__ = ["CameraNoise", "StokesEstimate", "SONY_LAYOUT", "DEMOSAIC_METHODS", "MAX_CONDITION",
            "retarder_mueller", "analysis_matrix", "stokes_from_frames", "stokes_from_mosaic",
-           "simulate_frames", "simulate_mosaic", "propagated_sigma", "stokes_sigma"]
+           "simulate_frames", "simulate_mosaic", "propagated_sigma", "stokes_sigma",
+           "write_stokes_estimate"]
 
 STOKES = ("S0", "S1", "S2", "S3")
 #: the 2 x 2 analyzer cell of the common Sony polarization sensors (IMX250MZR and kin), degrees
@@ -379,3 +380,31 @@ def stokes_sigma(stokes, noise: CameraNoise, analysis=None) -> np.ndarray:
     P, _ = _pseudo_inverse(A, cols, math.inf, None)
     var = noise.variance(np.einsum("nm,m...->n...", A[:, list(cols)], S))
     return np.sqrt(np.einsum("mn,n...->m...", P ** 2, var))
+
+
+def _colours(est: StokesEstimate) -> tuple:
+    C = est.stokes["S0"].shape[2] if est.stokes["S0"].ndim == 3 else 0
+    return () if C == 0 else (("R", "G", "B") if C == 3 else tuple(f"C{i}" for i in range(C)))
+
+
+def write_stokes_estimate(est: StokesEstimate, path, png_stem=None, title: str = "", metadata=None) -> dict:
+    """Write a :class:`StokesEstimate` as a camera Stokes EXR (``S0, S1, S2[, S3]`` -- with ``.R/.G/.B``
+    or ``.C0 ...`` for several channels -- their ``_sigma`` layers and the ``mask``; what ``invert --maps``
+    reads) and, with ``png_stem``, the intensity, DoLP and AoLP charts ``{png_stem}_intensity.png``,
+    ``_dolp.png``, ``_aolp.png`` (of the luminance, or of the single channel).  Atomic writes.
+    Returns {name: path}."""
+    from hyde_bsdf.render.stokes_io import save_polarization_pngs, write_camera_stokes
+
+    colours = _colours(est)
+    meta = {"measured": ",".join(est.measured), "demosaic": est.method, "condition": f"{est.condition:.4g}",
+            **(metadata or {})}
+    out = {"exr": write_camera_stokes(path, est.stokes, sigma=est.sigma, mask=est.mask, colours=colours,
+                                      metadata=meta)}
+    if png_stem is not None:
+        rgb = {}
+        for c in STOKES:
+            a = np.asarray(est.stokes[c], np.float64) if c in est.stokes else np.zeros(est.stokes["S0"].shape)
+            a = a[..., None] if a.ndim == 2 else a
+            rgb[c] = a if a.shape[2] == 3 else np.repeat(a.mean(axis=2, keepdims=True), 3, axis=2)
+        out.update(save_polarization_pngs(rgb, png_stem, title, charts=("intensity", "dolp", "aolp")))
+    return out
