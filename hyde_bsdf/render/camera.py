@@ -1,0 +1,206 @@
+"""Mitsuba sensors and emitters from a calibrated camera and measured lights.
+
+Conventions -- stated once here, converted at this boundary:
+
+* **Camera (input)**: the computer-vision pinhole model of OpenCV and most calibration tools.
+  World-to-camera pose ``R`` (3 x 3 rotation), ``t`` (3,): a world point X has camera coordinates
+  ``Xc = R X + t``; camera axes x right, y down, z forward (along the optical axis).  Intrinsics
+  ``fx, fy`` (focal length in pixels; square pixels required, ``fx = fy`` within 0.1 %), principal
+  point ``cx, cy`` in pixels with **pixel centres at integer coordinates** (the top-left pixel's
+  centre is (0, 0); OpenCV's convention), image ``width, height``.  The pixel of X is
+  ``u = fx Xc_x / Xc_z + cx``, ``v = fy Xc_y / Xc_z + cy`` (:meth:`Calibration.project`).
+* **Distortion**: refused.  A calibration with non-zero distortion coefficients must have its
+  images undistorted first (e.g. OpenCV's ``undistort`` with the same K) and then be given with
+  ``distortion`` absent or all zeros: Mitsuba's ``perspective`` sensor is an ideal pinhole.
+* **Mitsuba (output)**: the ``perspective`` sensor looks along its local +z with local +x to the
+  image's *left* and +y *up* (its film's column 0 is at local +x, row 0 at +y).  The CV camera frame
+  is therefore Mitsuba's turned 180 deg about z: ``to_world = [R^T diag(-1, -1, 1) | C]`` with the
+  camera centre C = -R^T t -- a rigid transform, no mirror.  ``fov`` = 2 atan(width / (2 fx)) along
+  x; the principal point becomes Mitsuba's ``principal_point_offset_x/y`` (fractions of the film,
+  added to the film position of a ray): ``0.5 - (cx + 0.5) / width`` and ``0.5 - (cy + 0.5) / height``.
+  tests/test_camera.py renders a marker at a known 3-D point and finds it on the predicted pixel
+  (within 0.5 px).
+* **Lights** (JSON): ``{"type": "point", "position": [x, y, z], "intensity": I}`` (world units;
+  I in W/sr, Mitsuba's radiant intensity) or ``{"type": "directional", "towards_light": [x, y, z],
+  "irradiance": E}`` -- the unit vector from the scene *towards* the light, as a mirror-sphere
+  calibration measures it (Mitsuba's ``direction`` is the opposite, the light's travel).
+
+File formats (JSON; :func:`load_cameras`, :func:`load_lights`)::
+
+    {"width": 64, "height": 48, "fx": 60, "fy": 60, "cx": 31.5, "cy": 23.5,
+     "R": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "t": [0, 0, 4], "distortion": [0, 0, 0, 0, 0]}
+
+(``"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` may replace fx, fy, cx, cy; ``{"cameras": [...]}``
+holds several) and ``{"lights": [{...}, ...]}`` (or one light object).  Mistakes raise
+:class:`~hyde_bsdf.errors.UsageError` naming the file and the key.
+
+May import: NumPy, Mitsuba, ``hyde_bsdf.errors``.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hyde_bsdf.errors import UsageError
+
+__all__ = ["Calibration", "load_cameras", "load_lights", "light_dict", "calibrated_sensors"]
+
+#: Mitsuba camera-local axes expressed in the CV camera frame: x left, y up, z forward
+CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0])
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """One calibrated pinhole camera (see the module docstring for the conventions)."""
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    R: np.ndarray
+    t: np.ndarray
+
+    @classmethod
+    def from_dict(cls, d: dict, where: str = "camera") -> "Calibration":
+        """Build and check one camera from a JSON object (``where`` names it in messages)."""
+        if not isinstance(d, dict):
+            raise UsageError(f"{where}: a camera is a JSON object with width, height, fx, fy, cx, cy, R, t")
+        if "K" in d:
+            K = _matrix(d["K"], (3, 3), f"{where}: K")
+            if abs(K[0, 1]) > 1e-9 or np.any(np.abs(K[2] - [0, 0, 1]) > 1e-9) or abs(K[1, 0]) > 1e-9:
+                raise UsageError(f"{where}: K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]] (no skew)")
+            d = {**d, "fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]}
+        missing = [k for k in ("width", "height", "fx", "fy", "cx", "cy", "R", "t") if k not in d]
+        if missing:
+            raise UsageError(f"{where}: missing {missing} (intrinsics fx, fy, cx, cy in pixels or K; "
+                             f"world-to-camera R, t; image width, height)")
+        dist = np.asarray(d.get("distortion", []) or [], np.float64).ravel()
+        if np.any(dist != 0):
+            raise UsageError(f"{where}: non-zero distortion {dist.tolist()}; undistort the images with the same "
+                             f"K first and give distortion as zeros (the renderer is an ideal pinhole)")
+        w, h = d["width"], d["height"]
+        if not all(isinstance(v, int) and v >= 1 for v in (w, h)):
+            raise UsageError(f"{where}: width and height must be integers >= 1, got {w!r}, {h!r}")
+        fx, fy, cx, cy = (_number(d[k], f"{where}: {k}") for k in ("fx", "fy", "cx", "cy"))
+        if not (fx > 0 and fy > 0):
+            raise UsageError(f"{where}: fx, fy must be > 0 pixels, got {fx}, {fy}")
+        if abs(fx / fy - 1.0) > 1e-3:
+            raise UsageError(f"{where}: fx = {fx:g} and fy = {fy:g} differ by more than 0.1 %; resample the images "
+                             f"to square pixels (the renderer's pixels are square)")
+        R = _matrix(d["R"], (3, 3), f"{where}: R")
+        if np.abs(R @ R.T - np.eye(3)).max() > 1e-6 or np.linalg.det(R) < 0:
+            raise UsageError(f"{where}: R is not a rotation (R R^T = I, det R = +1 within 1e-6); give the "
+                             f"world-to-camera rotation matrix")
+        return cls(w, h, fx, fy, cx, cy, R, _matrix(d["t"], (3,), f"{where}: t"))
+
+    @property
+    def center(self) -> np.ndarray:
+        """The camera centre in world coordinates, -R^T t."""
+        return -self.R.T @ self.t
+
+    def project(self, points) -> np.ndarray:
+        """Pixel coordinates (N, 2) (u right, v down; pixel centres at integers) of world points (N, 3)."""
+        Xc = np.atleast_2d(np.asarray(points, np.float64)) @ self.R.T + self.t
+        return np.stack([self.fx * Xc[:, 0] / Xc[:, 2] + self.cx, self.fy * Xc[:, 1] / Xc[:, 2] + self.cy], axis=1)
+
+    def to_world(self) -> np.ndarray:
+        """Mitsuba's camera-to-world matrix (4, 4): [R^T diag(-1, -1, 1) | C]."""
+        M = np.eye(4)
+        M[:3, :3] = self.R.T @ CV_TO_MITSUBA
+        M[:3, 3] = self.center
+        return M
+
+    def sensor_dict(self, *, spp: int = 16, film: dict | None = None, sampler: str = "independent") -> dict:
+        """The Mitsuba ``perspective`` sensor of this camera (film ``width`` x ``height``, box filter,
+        ``film`` entries added)."""
+        import mitsuba as mi
+
+        fov = math.degrees(2.0 * math.atan(self.width / (2.0 * self.fx)))
+        return {"type": "perspective", "fov": fov, "fov_axis": "x",
+                "principal_point_offset_x": 0.5 - (self.cx + 0.5) / self.width,
+                "principal_point_offset_y": 0.5 - (self.cy + 0.5) / self.height,
+                "to_world": mi.ScalarTransform4f(self.to_world().tolist()),
+                "film": {"type": "hdrfilm", "width": self.width, "height": self.height,
+                         "rfilter": {"type": "box"}, **(film or {})},
+                "sampler": {"type": sampler, "sample_count": int(spp)}}
+
+
+def _number(v, what) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise UsageError(f"{what} must be a finite number, got {v!r}")
+    return float(v)
+
+
+def _matrix(v, shape, what) -> np.ndarray:
+    try:
+        a = np.asarray(v, np.float64)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.shape != shape or not np.isfinite(a).all():
+        raise UsageError(f"{what} must be {'a 3 x 3 matrix' if len(shape) == 2 else 'a list of 3 numbers'} "
+                         f"of finite numbers, got {v!r}")
+    return a
+
+
+def _read_json(path, what):
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise UsageError(f"{what} {str(path)!r}: no such file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise UsageError(f"{what} {str(path)!r}: not readable JSON ({str(exc).splitlines()[0]})") from None
+
+
+def load_cameras(path) -> list:
+    """The :class:`Calibration` list of a camera JSON file (one camera object or ``{"cameras": [...]}``)."""
+    d = _read_json(path, "camera file")
+    items = d["cameras"] if isinstance(d, dict) and "cameras" in d else [d]
+    if not isinstance(items, list) or not items:
+        raise UsageError(f"camera file {str(path)!r}: 'cameras' must be a non-empty list")
+    return [Calibration.from_dict(c, f"{path}: camera {i}" if len(items) > 1 else str(path)) for i, c in enumerate(items)]
+
+
+def light_dict(d: dict, where: str = "light") -> dict:
+    """The Mitsuba emitter of one light object (see the module docstring)."""
+    kind = d.get("type") if isinstance(d, dict) else None
+    if kind == "point":
+        pos = _matrix(d.get("position"), (3,), f"{where}: position")
+        return {"type": "point", "position": pos.tolist(),
+                "intensity": {"type": "spectrum", "value": _positive(d.get("intensity", 1.0), f"{where}: intensity")}}
+    if kind == "directional":
+        v = _matrix(d.get("towards_light"), (3,), f"{where}: towards_light")
+        n = float(np.linalg.norm(v))
+        if not n > 0:
+            raise UsageError(f"{where}: towards_light must be a non-zero vector")
+        return {"type": "directional", "direction": (-v / n).tolist(),
+                "irradiance": {"type": "spectrum", "value": _positive(d.get("irradiance", 1.0), f"{where}: irradiance")}}
+    raise UsageError(f"{where}: type must be 'point' (with position, intensity) or 'directional' (with "
+                     f"towards_light, irradiance), got {kind!r}")
+
+
+def _positive(v, what) -> float:
+    x = _number(v, what)
+    if not x > 0:
+        raise UsageError(f"{what} must be > 0, got {x}")
+    return x
+
+
+def load_lights(path) -> list:
+    """The Mitsuba emitter dicts of a light JSON file (one light object or ``{"lights": [...]}``)."""
+    d = _read_json(path, "light file")
+    items = d["lights"] if isinstance(d, dict) and "lights" in d else [d]
+    if not isinstance(items, list) or not items:
+        raise UsageError(f"light file {str(path)!r}: 'lights' must be a non-empty list")
+    return [light_dict(x, f"{path}: light {i}") for i, x in enumerate(items)]
+
+
+def calibrated_sensors(cameras, **kwargs) -> dict:
+    """{"camera0": sensor, ...} for a list of :class:`Calibration` (``kwargs``: :meth:`Calibration.sensor_dict`)."""
+    return {f"camera{i}": c.sensor_dict(**kwargs) for i, c in enumerate(cameras)}
