@@ -160,3 +160,31 @@ def test_linear_only_dielectric_with_sigma_maps():
     assert np.median(res.texel_errors("eta")) < 0.03 and np.median(res.texel_errors("alpha")) < 0.08
     ratio = np.nanmedian(out[2.0].rel_stderr["eta"] / res.rel_stderr["eta"])
     assert 1.8 < ratio < 2.1, ratio
+
+
+def test_designs_know_the_camera():
+    """A linear camera misses the output's S3: behind the 45 deg polarizer it sees M22 but not M32; the
+    linear metal preset adds circular light (M23) at every mirror pair.  Its predicted standard errors
+    are never below the full-Stokes camera's (it has less data); for a dielectric under unpolarized
+    light they are equal (S3 = 0 carries nothing); a metal under unpolarized light is undetermined
+    (n above 10 %) with either camera."""
+    from hyde_bsdf import inverse as inv
+
+    lin = inv.design_acquisition("metal", camera="linear")
+    assert lin.measured == ("S0", "S1", "S2") and len(lin.configurations) == 12
+    assert sum(c.retarder is not None for c in lin.configurations) == 5
+    pol45 = next(c for c in lin.configurations if c.polarizer == 45.0)
+    assert "M22" in pol45.elements_for("linear") and "M32" not in pol45.elements_for("linear")
+    assert "M32" in pol45.elements_for("stokes")
+    texel = {"alpha": 0.25, "eta": 0.8, "k": 4.0}
+    full = inv.predicted_stderr(lin, texel, camera="stokes")
+    part = inv.predicted_stderr(lin, texel)
+    assert all(part[p] >= full[p] * (1 - 1e-9) for p in full) and part["k"] > 1.2 * full["k"]
+    diel = inv.design_acquisition("dielectric")
+    d_full = inv.predicted_stderr(diel, {"alpha": 0.25, "eta": 1.6}, fit=("alpha", "eta"), camera="stokes")
+    d_lin = inv.predicted_stderr(diel, {"alpha": 0.25, "eta": 1.6}, fit=("alpha", "eta"), camera="linear")
+    assert d_lin["eta"] == pytest.approx(d_full["eta"], rel=1e-6)
+    unpol = inv.design_acquisition("metal", polarizer_angles=(None,), retarder=(), camera="linear")
+    assert inv.predicted_stderr(unpol, texel)["eta"] > 0.10
+    with pytest.raises(ValueError, match="camera must be one of"):
+        inv.design_acquisition("metal", camera="mono")
