@@ -82,7 +82,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.inverse.analyzer import retarder_mueller
+from hyde_bsdf.inverse.analyzer import retarder_mueller, simulate_capture
 
 __all__ = ["Configuration", "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition",
            "PRESETS",
@@ -415,7 +415,7 @@ def acquisition_scene_dict(config: Configuration, material: dict, *, bsdf: str =
 
 def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *, res: int = 48, spp: int = 4,
                            spp_ref: int = 256, noise: float = 0.0, seed: int = 0, bsdf: str = "hyde",
-                           **scene_kwargs) -> list:
+                           camera_noise=None, signal: float = 1000.0, **scene_kwargs) -> list:
     """The observation set of ``acquisition`` for a synthetic sample: per configuration, a scene
     whose material holds ``start`` (the fit's start values; parameters absent there take
     ``truth``'s) and a reference rendered from ``truth`` at ``spp_ref`` samples, plus Gaussian
@@ -423,6 +423,12 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
     component (a camera's read noise; seeded by ``seed``).  Returns a list of
     :class:`~hyde_bsdf.inverse.observations.Observation`, each carrying the noise standard
     deviation it was given in ``.noise_std`` (0 when ``noise`` is 0).
+
+    ``camera_noise`` (a :class:`~hyde_bsdf.inverse.analyzer.CameraNoise`, instead of ``noise``): the
+    reference goes through the acquisition's camera instead -- raw frames at ``signal`` DN (median lit
+    S0) with that noise, a DoFP mosaic for a ``"linear"`` camera or six analyzer frames for a
+    ``"stokes"`` one, and the least-squares Stokes step (:func:`~hyde_bsdf.inverse.analyzer.simulate_capture`);
+    the observation then carries the step's sigma maps and the measured components.
     """
     import mitsuba as mi
 
@@ -435,7 +441,12 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
         ref = render_stokes_np(ref_scene, 0, spp_ref, seed=seed + i)
         del ref_scene
         sigma = 0.0
-        if noise > 0:
+        sig_maps = None
+        if camera_noise is not None:
+            est = simulate_capture(ref, camera_noise, rng, camera=acquisition.camera, signal=signal)
+            ref = np.array([est.stokes.get(c, np.zeros(ref.shape[1:])) for c in ("S0", "S1", "S2", "S3")])
+            sig_maps = np.array([est.sigma.get(c, np.zeros(ref.shape[1:])) for c in ("S0", "S1", "S2", "S3")])
+        elif noise > 0:
             lit = ref[0] > 0
             sigma = float(noise * np.median(ref[0][lit])) if lit.any() else 0.0
             ref = ref + rng.normal(0.0, sigma, ref.shape) * lit[None]
@@ -443,7 +454,7 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
         material = {n: (np.full(np.shape(truth[n]), float(start[n])) if n in start and np.ndim(start[n]) == 0
                         and np.ndim(truth[n]) == 2 else start.get(n, truth[n])) for n in truth}
         scene = mi.load_dict(acquisition_scene_dict(config, material, bsdf=bsdf, res=res, spp=spp, **scene_kwargs))
-        o = Observation(scene, ref, measured=acquisition.measured)
+        o = Observation(scene, ref, measured=acquisition.measured, sigma=sig_maps)
         o.noise_std = sigma
         observations.append(o)
     return observations
