@@ -188,3 +188,54 @@ def test_designs_know_the_camera():
     assert inv.predicted_stderr(unpol, texel)["eta"] > 0.10
     with pytest.raises(ValueError, match="camera must be one of"):
         inv.design_acquisition("metal", camera="mono")
+
+
+def test_calibrated_rig_recovers_an_alpha_map():
+    """The scene from calibration end to end: 2 calibrated CV cameras (32 x 32 px) x 2 point lights
+    from JSON-style dicts, references rendered through those sensors, captured by a DoFP camera
+    (linear-only, shot + read noise, Stokes step), and the 4 x 4 alpha map recovered from a constant
+    start through calibrated_observations: median error < 2 % (measured 0.09 % after 30 iterations)."""
+    pytest.importorskip("mitsuba")
+    from hyde_bsdf import inverse as inv
+    from hyde_bsdf.inverse import acquisition as acqm
+    from hyde_bsdf.inverse.analyzer import simulate_capture
+    from hyde_bsdf.inverse.camera_data import calibrated_observations
+    from hyde_bsdf.inverse.observations import render_stokes_np
+    from hyde_bsdf.render.camera import Calibration, calibrated_scene, light_dict
+
+    inv.prepare(inv.MAP_VARIANT)
+    alpha = 0.2 + 0.2 * np.linspace(0, 1, 16).reshape(4, 4)
+
+    def sample(a):
+        return {"integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": 2}},
+                "plane": {"type": "rectangle", "bsdf": {"type": "hyde", "alpha": acqm._texture(a), "eta": 1.5}}}
+
+    cams = []
+    for az in (0.0, 180.0):
+        eye = np.array([3.0 * np.cos(np.radians(az)), 3.0 * np.sin(np.radians(az)), 3.0])
+        z = -eye / np.linalg.norm(eye)
+        x = np.cross(z, [0.0, 0.0, 1.0])
+        x /= np.linalg.norm(x)
+        R = np.stack([x, np.cross(z, x), z])
+        cams.append(Calibration.from_dict({"width": 32, "height": 32, "fx": 40.0, "fy": 40.0, "cx": 15.5, "cy": 15.5,
+                                           "R": R.tolist(), "t": (-R @ eye).tolist()}))
+    lights = [light_dict({"type": "point", "position": [-3.0, 0.3, 3.0], "intensity": 30}),
+              light_dict({"type": "point", "position": [3.0, -0.3, 3.0], "intensity": 30})]
+    noise = CameraNoise(gain=1.0, read_noise=3.0, full_well=30000.0, black_level=64.0)
+    rng = np.random.default_rng(0)
+    data = []
+    for light in lights:
+        scene = calibrated_scene(sample(alpha), cams, light, spp=64)
+        data.append([simulate_capture(render_stokes_np(scene, i, 64, seed=1), noise, rng, signal=3000.0)
+                     for i in range(len(cams))])
+    obs = calibrated_observations(sample(np.full((4, 4), 0.3)), cams, lights, data)
+    assert len(obs) == 4 and all(o.measured == ("S0", "S1", "S2") and o.sigma is not None for o in obs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", inv.UnidentifiedParameterWarning)
+        res = inv.invert_maps(obs, {"alpha": 0.3}, fit=("alpha",), iterations=30, progress=False,
+                              truth={"alpha": alpha}, uncertainty_spp=16)
+    assert np.median(res.texel_errors("alpha")) < 0.02
+    with pytest.raises(UsageError, match=r"need 2 light\(s\) x 2 camera\(s\)"):
+        calibrated_observations(sample(0.3), cams, lights, data[:1])
+    with pytest.raises(UsageError, match="the base scene holds"):
+        calibrated_scene({**sample(0.3), "lamp": {"type": "point", "position": [0, 0, 1]}}, cams, lights[0])

@@ -36,7 +36,7 @@ from hyde_bsdf.inverse.analyzer import StokesEstimate, stokes_sigma
 from hyde_bsdf.inverse.loss import interior_mask
 from hyde_bsdf.inverse.observations import Observation
 
-__all__ = ["camera_reference", "camera_observation"]
+__all__ = ["camera_reference", "camera_observation", "calibrated_observations"]
 
 STOKES = ("S0", "S1", "S2", "S3")
 
@@ -130,3 +130,29 @@ def camera_observation(scene, data, *, sensor: int = 0, weight: float = 1.0, mas
             m &= np.asarray(extra, bool)
     return Observation(scene, ref["reference"], sensor=sensor, mask=m, weight=weight, measured=ref["measured"],
                        sigma=ref["sigma"])
+
+
+def calibrated_observations(base, cameras, lights, data, *, spp: int = 4, **kwargs) -> list:
+    """Observations of a calibrated rig: one scene per light (:func:`~hyde_bsdf.render.camera.calibrated_scene`:
+    the sample of ``base`` -- an XML file or a scene dict -- seen by every camera of ``cameras``, lit
+    by that light), and per light and camera the camera data ``data[light][camera]`` (any form
+    :func:`camera_reference` accepts; ``kwargs`` go there).  ``cameras``: a list of
+    :class:`~hyde_bsdf.render.camera.Calibration` or a camera JSON path; ``lights``: emitter dicts or a
+    light JSON path.  Returns the observations, light-major."""
+    from hyde_bsdf.render.camera import calibrated_scene, load_cameras, load_lights
+
+    cameras = load_cameras(cameras) if isinstance(cameras, (str, Path)) else list(cameras)
+    lights = load_lights(lights) if isinstance(lights, (str, Path)) else list(lights)
+    if len(data) != len(lights) or any(len(row) != len(cameras) for row in data):
+        raise UsageError(f"camera data: need {len(lights)} light(s) x {len(cameras)} camera(s) of Stokes data, got "
+                         f"{[len(row) for row in data]} per light")
+    out = []
+    for j, light in enumerate(lights):
+        scene = calibrated_scene(base, cameras, light, spp=spp)
+        for i, cam in enumerate(cameras):
+            o = camera_observation(scene, data[j][i], sensor=i, **kwargs)
+            if o.reference.shape[1:] != (cam.height, cam.width):
+                raise UsageError(f"camera data for light {j}, camera {i} is {o.reference.shape[2]}x{o.reference.shape[1]} "
+                                 f"but the calibration says {cam.width}x{cam.height}")
+            out.append(o)
+    return out

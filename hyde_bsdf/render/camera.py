@@ -47,7 +47,7 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError
 
-__all__ = ["Calibration", "load_cameras", "load_lights", "light_dict", "calibrated_sensors"]
+__all__ = ["Calibration", "load_cameras", "load_lights", "light_dict", "calibrated_sensors", "calibrated_scene"]
 
 #: Mitsuba camera-local axes expressed in the CV camera frame: x left, y up, z forward
 CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0])
@@ -122,12 +122,13 @@ class Calibration:
         import mitsuba as mi
 
         fov = math.degrees(2.0 * math.atan(self.width / (2.0 * self.fx)))
+        fmt = {"pixel_format": "luminance"} if mi.is_monochromatic else {}
         return {"type": "perspective", "fov": fov, "fov_axis": "x",
                 "principal_point_offset_x": 0.5 - (self.cx + 0.5) / self.width,
                 "principal_point_offset_y": 0.5 - (self.cy + 0.5) / self.height,
                 "to_world": mi.ScalarTransform4f(self.to_world().tolist()),
                 "film": {"type": "hdrfilm", "width": self.width, "height": self.height,
-                         "rfilter": {"type": "box"}, **(film or {})},
+                         "rfilter": {"type": "box"}, **fmt, **(film or {})},
                 "sampler": {"type": sampler, "sample_count": int(spp)}}
 
 
@@ -204,3 +205,40 @@ def load_lights(path) -> list:
 def calibrated_sensors(cameras, **kwargs) -> dict:
     """{"camera0": sensor, ...} for a list of :class:`Calibration` (``kwargs``: :meth:`Calibration.sensor_dict`)."""
     return {f"camera{i}": c.sensor_dict(**kwargs) for i, c in enumerate(cameras)}
+
+
+def calibrated_scene(base, cameras, light: dict, *, spp: int = 16, film: dict | None = None):
+    """A Mitsuba scene: the sample of ``base`` (an XML scene file, or a scene dict) with its integrator
+    and shapes (their BSDFs and textures keep their ids, so ``mi.traverse`` keys stay), seen by the
+    calibrated ``cameras`` (sensors 0..N-1 in order) and lit by ``light`` (a Mitsuba emitter dict,
+    :func:`light_dict`).  ``base`` must hold no sensor and no emitter (UsageError): the calibration
+    gives them, and one light per scene keeps the light-selection noise out of the renders."""
+    import mitsuba as mi
+
+    if isinstance(base, dict):
+        extra = [k for k, v in base.items() if isinstance(v, dict) and _plugin_kind(v.get("type")) in ("sensor", "emitter")]
+        if extra:
+            raise UsageError(f"the base scene holds {extra}: give the sample only (shapes, BSDFs, integrator); "
+                             f"the calibration and the light file give the sensors and the emitters")
+        d = {k: v for k, v in base.items() if k != "type"}
+    else:
+        path = Path(base)
+        try:
+            scene = mi.load_file(str(path))
+        except Exception as exc:  # noqa: BLE001 -- a user's file: its first line says what is wrong
+            raise UsageError(f"scene {str(path)!r}: {str(exc).strip().splitlines()[0][:200]}") from None
+        if scene.emitters():
+            raise UsageError(f"scene {str(path)!r} holds {len(scene.emitters())} emitter(s): give the sample only; "
+                             f"the light file gives the emitters")
+        d = {"integrator": scene.integrator()}
+        for i, shape in enumerate(scene.shapes()):
+            d[shape.id() or f"shape{i}"] = shape
+    d = {"type": "scene", **d, **calibrated_sensors(cameras, spp=spp, film=film), "calibrated_light": light}
+    return mi.load_dict(d)
+
+
+def _plugin_kind(name) -> str | None:
+    """'sensor' / 'emitter' for Mitsuba's sensor and emitter plugin names, else None."""
+    sensors = {"perspective", "thinlens", "orthographic", "radiancemeter", "irradiancemeter", "distant", "batch"}
+    emitters = {"point", "directional", "area", "constant", "envmap", "spot", "projector", "directionalarea"}
+    return "sensor" if name in sensors else "emitter" if name in emitters else None
