@@ -96,3 +96,18 @@ def test_bad_calibration_is_one_line(change, match, tmp_path):
     assert "\n" not in str(info.value) and str(path) in str(info.value)
     with pytest.raises(UsageError, match="no such file"):
         load_cameras(tmp_path / "missing.json")
+
+
+def test_superpixel_binning_keeps_the_projection(calibration):
+    """A DoFP camera calibrated on its raw pixels: the super-pixel image's calibration ("binning": 2)
+    puts a point at (u_raw - 0.5) / 2 -- the super-pixel covering raw pixels 2i, 2i + 1 is centred at
+    raw coordinate 2i + 0.5."""
+    raw = Calibration(128, 96, 116.0, 116.0, 55.1, 52.7, calibration.R, calibration.t)
+    sp = raw.binned(2)
+    p = [[0.5, 0.8, 0.6], [0.2, 0.1, 0.0]]
+    np.testing.assert_allclose(sp.project(p), (raw.project(p) - 0.5) / 2, atol=1e-12)
+    d = {"width": 128, "height": 96, "fx": 116.0, "fy": 116.0, "cx": 55.1, "cy": 52.7, "binning": 2,
+         "R": calibration.R.tolist(), "t": calibration.t.tolist()}
+    assert Calibration.from_dict(d).width == 64
+    with pytest.raises(UsageError, match="binning must be 1 or 2"):
+        Calibration.from_dict({**d, "binning": 3})

@@ -30,8 +30,9 @@ File formats (JSON; :func:`load_cameras`, :func:`load_lights`)::
     {"width": 64, "height": 48, "fx": 60, "fy": 60, "cx": 31.5, "cy": 23.5,
      "R": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "t": [0, 0, 4], "distortion": [0, 0, 0, 0, 0]}
 
-(``"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` may replace fx, fy, cx, cy; ``{"cameras": [...]}``
-holds several) and ``{"lights": [{...}, ...]}`` (or one light object).  Mistakes raise
+(``"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` may replace fx, fy, cx, cy; ``"binning": 2`` says the
+Stokes images are a DoFP camera's super-pixel grid while the intrinsics are the raw sensor's
+(:meth:`Calibration.binned`); ``{"cameras": [...]}`` holds several) and ``{"lights": [{...}, ...]}`` (or one light object).  Mistakes raise
 :class:`~hyde_bsdf.errors.UsageError` naming the file and the key.
 
 May import: NumPy, Mitsuba, ``hyde_bsdf.errors``.
@@ -97,7 +98,21 @@ class Calibration:
         if np.abs(R @ R.T - np.eye(3)).max() > 1e-6 or np.linalg.det(R) < 0:
             raise UsageError(f"{where}: R is not a rotation (R R^T = I, det R = +1 within 1e-6); give the "
                              f"world-to-camera rotation matrix")
-        return cls(w, h, fx, fy, cx, cy, R, _matrix(d["t"], (3,), f"{where}: t"))
+        cal = cls(w, h, fx, fy, cx, cy, R, _matrix(d["t"], (3,), f"{where}: t"))
+        binning = d.get("binning", 1)
+        if binning not in (1, 2):
+            raise UsageError(f"{where}: binning must be 1 or 2 (a DoFP camera's super-pixel grid), got {binning!r}")
+        return cal.binned(2) if binning == 2 else cal
+
+    def binned(self, b: int = 2) -> "Calibration":
+        """The calibration of the image binned ``b`` x ``b`` (a DoFP camera's super-pixel Stokes image, b = 2):
+        size and focal length / b; the centre of super-pixel i is raw coordinate b i + (b - 1) / 2, so
+        c -> (c - (b - 1) / 2) / b."""
+        if self.width % b or self.height % b:
+            raise UsageError(f"binning {b}: the image {self.width}x{self.height} is not a multiple of {b}")
+        o = (b - 1) / 2.0
+        return Calibration(self.width // b, self.height // b, self.fx / b, self.fy / b, (self.cx - o) / b,
+                           (self.cy - o) / b, self.R, self.t)
 
     @property
     def center(self) -> np.ndarray:
