@@ -239,3 +239,21 @@ def test_calibrated_rig_recovers_an_alpha_map():
         calibrated_observations(sample(0.3), cams, lights, data[:1])
     with pytest.raises(UsageError, match="the base scene holds"):
         calibrated_scene({**sample(0.3), "lamp": {"type": "point", "position": [0, 0, 1]}}, cams, lights[0])
+
+
+def test_observations_from_files_checks_before_rendering(tmp_path):
+    """invert --maps --camera/--light: the reference count (lights x cameras, light-major) and each
+    reference's size against its camera (with the DoFP binning hint) are checked, one line each."""
+    import json
+
+    from hyde_bsdf.inverse.camera_data import observations_from_files
+
+    cam = {"width": 8, "height": 6, "fx": 10.0, "fy": 10.0, "cx": 3.5, "cy": 2.5, "R": np.eye(3).tolist(), "t": [0, 0, 3]}
+    (tmp_path / "cam.json").write_text(json.dumps(cam))
+    (tmp_path / "lights.json").write_text(json.dumps({"lights": [{"type": "point", "position": [0, 0, 3]}] * 2}))
+    S = {k: v[:6, :5, 0] for k, v in _stokes(6, 5).items() if k != "S3"}
+    ref = write_camera_stokes(tmp_path / "s.exr", S)
+    with pytest.raises(UsageError, match=r"give 2 --reference files, light-major"):
+        observations_from_files("scene.xml", tmp_path / "cam.json", tmp_path / "lights.json", [ref])
+    with pytest.raises(UsageError, match=r"is 5x6 px but camera 0 of --camera is 8x6 .*binning"):
+        observations_from_files("scene.xml", tmp_path / "cam.json", tmp_path / "lights.json", [ref, ref])

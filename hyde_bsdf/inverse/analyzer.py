@@ -131,6 +131,16 @@ class StokesEstimate:
     def shape(self) -> tuple:
         return self.stokes["S0"].shape[:2]
 
+    def in_units(self, dn_per_unit: float) -> "StokesEstimate":
+        """The estimate in scene radiance units: Stokes and sigma divided by the radiometric calibration
+        ``dn_per_unit`` (DN per radiance unit at this exposure)."""
+        k = float(dn_per_unit)
+        if not (math.isfinite(k) and k > 0):
+            raise UsageError(f"dn_per_unit must be a finite number > 0, got {dn_per_unit!r}")
+        return StokesEstimate({c: v / k for c, v in self.stokes.items()}, {c: v / k for c, v in self.sigma.items()},
+                              self.measured, self.mask, self.method, self.condition,
+                              self.notes + [f"divided by {k:g} DN per radiance unit"])
+
 
 def retarder_mueller(fast_axis: float, retardance: float = 90.0) -> np.ndarray:
     """Mueller matrix (4, 4) of a linear retarder, fast axis at ``fast_axis`` deg, retardance
@@ -435,7 +445,4 @@ def simulate_capture(stokes, noise: CameraNoise, rng, *, camera: str = "linear",
                                  saturated="mask")
     else:
         raise UsageError(f"camera must be 'linear' or 'stokes', got {camera!r}")
-    est.stokes = {c: v / scale for c, v in est.stokes.items()}
-    est.sigma = {c: v / scale for c, v in est.sigma.items()}
-    est.notes.append(f"scaled by {scale:.6g} DN per radiance unit (median lit S0 = {signal:g} DN)")
-    return est
+    return est.in_units(scale)

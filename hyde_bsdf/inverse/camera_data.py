@@ -36,7 +36,7 @@ from hyde_bsdf.inverse.analyzer import StokesEstimate, stokes_sigma
 from hyde_bsdf.inverse.loss import interior_mask
 from hyde_bsdf.inverse.observations import Observation
 
-__all__ = ["camera_reference", "camera_observation", "calibrated_observations"]
+__all__ = ["camera_reference", "camera_observation", "calibrated_observations", "observations_from_files"]
 
 STOKES = ("S0", "S1", "S2", "S3")
 
@@ -155,4 +155,47 @@ def calibrated_observations(base, cameras, lights, data, *, spp: int = 4, **kwar
                 raise UsageError(f"camera data for light {j}, camera {i} is {o.reference.shape[2]}x{o.reference.shape[1]} "
                                  f"but the calibration says {cam.width}x{cam.height}")
             out.append(o)
+    return out
+
+
+def observations_from_files(scene, cameras, lights, references, *, masks=None, spp: int = 4,
+                            channel: str = "Y") -> list:
+    """What ``invert --maps --scene SAMPLE.xml --camera CAMERA.json --light LIGHT.json --reference ...``
+    builds: the calibrated observations (:func:`calibrated_observations`) of the sample ``scene`` (an XML
+    file holding no sensor or emitter) with the Stokes EXRs ``references`` given light-major (for each
+    light, one per camera) and optional ``masks`` (arrays (H, W), one per reference).  Every file is
+    checked before any rendering; mistakes are UsageErrors naming the file."""
+    from hyde_bsdf.render.camera import load_cameras, load_lights
+
+    cams, lts = load_cameras(cameras), load_lights(lights)
+    refs = [str(r) for r in references]
+    if len(refs) != len(cams) * len(lts):
+        raise UsageError(f"--camera has {len(cams)} camera(s) and --light {len(lts)} light(s): give "
+                         f"{len(cams) * len(lts)} --reference files, light-major (for each light, one per camera); "
+                         f"got {len(refs)}")
+    data = [[camera_reference(refs[j * len(cams) + i], channel=channel) for i in range(len(cams))]
+            for j in range(len(lts))]
+    for j in range(len(lts)):
+        for i, cam in enumerate(cams):
+            h, w = data[j][i]["reference"].shape[1:]
+            if (w, h) != (cam.width, cam.height):
+                raise UsageError(f"--reference {refs[j * len(cams) + i]!r} is {w}x{h} px but camera {i} of --camera is "
+                                 f"{cam.width}x{cam.height} (a DoFP camera's super-pixel images need \"binning\": 2)")
+    if masks is not None:
+        for k, m in enumerate(masks):
+            j, i = divmod(k, len(cams))
+            d = data[j][i]
+            d["mask"] = np.asarray(m, bool) if d["mask"] is None else d["mask"] & np.asarray(m, bool)
+    return calibrated_observations(scene, cams, lts, [[{**_stokes_dict(d)} for d in row] for row in data], spp=spp)
+
+
+def _stokes_dict(ref: dict) -> dict:
+    """A :func:`camera_reference` result as the dict form :func:`camera_reference` accepts (luminance, mono)."""
+    names = ref["measured"]
+    idx = [STOKES.index(c) for c in names]
+    out = {c: ref["reference"][i] for c, i in zip(names, idx)}
+    if ref["sigma"] is not None:
+        out["sigma"] = {c: ref["sigma"][i] for c, i in zip(names, idx)}
+    if ref["mask"] is not None:
+        out["mask"] = ref["mask"]
     return out
