@@ -76,7 +76,7 @@ def test_camera_centre_and_json(tmp_path, calibration):
     lights = tmp_path / "lights.json"
     lights.write_text(json.dumps({"lights": [{"type": "directional", "towards_light": [0, 0, 2], "irradiance": 3},
                                              {"type": "point", "position": [1, 2, 3], "intensity": 30}]}))
-    d, p = load_lights(lights)
+    d, p = (light.emitter for light in load_lights(lights))
     assert d["direction"] == [0.0, 0.0, -1.0] and p["position"] == [1.0, 2.0, 3.0]
 
 
@@ -111,3 +111,38 @@ def test_superpixel_binning_keeps_the_projection(calibration):
     assert Calibration.from_dict(d).width == 64
     with pytest.raises(UsageError, match="binning must be 1 or 2"):
         Calibration.from_dict({**d, "binning": 3})
+
+
+def test_polarized_calibrated_light():
+    """A point light behind a polarizer sheet ("polarizer": 45) lighting a glass-like plane seen by a
+    calibrated camera near the mirror direction: S0 is half that of the bare light (a polarizer passes
+    half of unpolarized light), and S2, zero for unpolarized light after one reflection, is not (the
+    C element); adding the quarter-wave retarder ("retarder": 45 after "polarizer": 0) makes S3 non-zero."""
+    from hyde_bsdf.render.camera import calibrated_scene, light_spec
+
+    prev = mi.variant()
+    mi.set_variant("llvm_ad_mono_polarized")
+    try:
+        from hyde_bsdf import register
+
+        register()
+        R, t = _pose(np.array([2.0, 0.0, 2.0]), [0.0, 0.0, 0.0], 0.0)
+        cam = Calibration.from_dict({"width": 16, "height": 16, "fx": 20.0, "fy": 20.0, "cx": 7.5, "cy": 7.5,
+                                     "R": R.tolist(), "t": t.tolist()})
+        base = {"integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": 2}},
+                "plane": {"type": "rectangle", "bsdf": {"type": "hyde", "alpha": 0.3, "eta": 1.5}}}
+        out = {}
+        for key, extra in (("bare", {}), ("pol45", {"polarizer": 45.0}), ("circ", {"polarizer": 0.0, "retarder": 45.0})):
+            light = light_spec({"type": "point", "position": [-2.0, 0.0, 2.0], "intensity": 10, **extra})
+            img = mi.render(calibrated_scene(base, [cam], light, spp=16), spp=64, seed=3)
+            arr = np.asarray(img, np.float64)
+            S = arr[..., 1::3].reshape(-1, 4)          # channels Y, S0.R, S0.G, S0.B, S1.R, ...: S0..S3 (mono)
+            out[key] = S[S[:, 0] > 0].mean(axis=0)
+        assert out["pol45"][0] / out["bare"][0] == pytest.approx(0.5, rel=0.03)
+        assert abs(out["bare"][2]) < 1e-3 * out["bare"][0] and abs(out["pol45"][2]) > 0.2 * out["pol45"][0]
+        assert abs(out["bare"][3]) < 1e-3 * out["bare"][0] and abs(out["circ"][3]) > 0.2 * out["circ"][0]
+    finally:
+        if prev is not None:
+            mi.set_variant(prev)
+    with pytest.raises(UsageError, match="a retarder needs a polarizer"):
+        light_spec({"type": "point", "position": [0, 0, 1], "retarder": 45})

@@ -23,7 +23,10 @@ Conventions -- stated once here, converted at this boundary:
 * **Lights** (JSON): ``{"type": "point", "position": [x, y, z], "intensity": I}`` (world units;
   I in W/sr, Mitsuba's radiant intensity) or ``{"type": "directional", "towards_light": [x, y, z],
   "irradiance": E}`` -- the unit vector from the scene *towards* the light, as a mirror-sphere
-  calibration measures it (Mitsuba's ``direction`` is the opposite, the light's travel).
+  calibration measures it (Mitsuba's ``direction`` is the opposite, the light's travel).  Optional
+  ``"polarizer": ANGLE`` (and ``"retarder": ANGLE``, a quarter-wave plate after it) put sheets on the
+  light facing ``"aim"`` (default the origin); angles as in :mod:`hyde_bsdf.inverse.acquisition`
+  (0 deg: horizontal, perpendicular to world z and the light's axis).
 
 File formats (JSON; :func:`load_cameras`, :func:`load_lights`)::
 
@@ -48,7 +51,8 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError
 
-__all__ = ["Calibration", "load_cameras", "load_lights", "light_dict", "calibrated_sensors", "calibrated_scene"]
+__all__ = ["Calibration", "Light", "load_cameras", "load_lights", "light_dict", "light_spec", "calibrated_sensors",
+           "calibrated_scene"]
 
 #: Mitsuba camera-local axes expressed in the CV camera frame: x left, y up, z forward
 CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0])
@@ -183,22 +187,82 @@ def load_cameras(path) -> list:
     return [Calibration.from_dict(c, f"{path}: camera {i}" if len(items) > 1 else str(path)) for i, c in enumerate(items)]
 
 
+@dataclass(frozen=True)
+class Light:
+    """One calibrated light: its Mitsuba ``emitter`` dict and, optionally, a linear polarizer (transmission
+    axis ``polarizer`` deg) and a quarter-wave retarder after it (fast axis ``retarder`` deg) on it, as
+    sheets facing the light's axis towards ``aim`` (0 deg: horizontal, perpendicular to world z and the
+    axis -- s for a plane of incidence containing z, the acquisition design's convention)."""
+
+    emitter: dict
+    polarizer: float | None = None
+    retarder: float | None = None
+    aim: tuple = (0.0, 0.0, 0.0)
+    sheet_size: float | None = None
+
+    def sheets(self) -> dict:
+        """The scene entries of the polarizer and retarder sheets (Mitsuba ``polarizer`` / ``retarder`` on
+        ``rectangle`` shapes; they transmit with ``stokes`` + ``volpath``)."""
+        import mitsuba as mi
+
+        if self.polarizer is None:
+            return {}
+        aim = np.asarray(self.aim, np.float64)
+        if self.emitter["type"] == "point":
+            pos = np.asarray(self.emitter["position"], np.float64)
+            D = float(np.linalg.norm(aim - pos))
+            axis = (aim - pos) / D
+            at = {"light_polarizer": pos + 0.10 * D * axis, "light_retarder": pos + 0.12 * D * axis}
+            size = 0.15 * D if self.sheet_size is None else self.sheet_size
+        else:
+            axis = np.asarray(self.emitter["direction"], np.float64)
+            at = {"light_polarizer": aim - 100.0 * axis, "light_retarder": aim - 90.0 * axis}
+            size = 3.0 if self.sheet_size is None else self.sheet_size
+        up = [0.0, 0.0, 1.0] if abs(axis[2]) < 0.999 else [0.0, 1.0, 0.0]
+        out = {}
+        for name, p in at.items():
+            if name == "light_retarder" and self.retarder is None:
+                continue
+            bsdf = ({"type": "polarizer", "theta": float(self.polarizer)} if name == "light_polarizer" else
+                    {"type": "retarder", "theta": float(self.retarder), "delta": 90.0})
+            T = mi.ScalarTransform4f
+            out[name] = {"type": "rectangle", "bsdf": bsdf,
+                         "to_world": T().look_at(origin=p.tolist(), target=aim.tolist(), up=up) @ T().scale(size)}
+        return out
+
+
 def light_dict(d: dict, where: str = "light") -> dict:
     """The Mitsuba emitter of one light object (see the module docstring)."""
+    return light_spec(d, where).emitter
+
+
+def light_spec(d: dict, where: str = "light") -> Light:
+    """One light object as a :class:`Light`: the emitter, and ``"polarizer"`` / ``"retarder"`` angles
+    (deg), ``"aim"`` (the point the sheets face, default the origin) when the light is polarized."""
     kind = d.get("type") if isinstance(d, dict) else None
     if kind == "point":
         pos = _matrix(d.get("position"), (3,), f"{where}: position")
-        return {"type": "point", "position": pos.tolist(),
-                "intensity": {"type": "spectrum", "value": _positive(d.get("intensity", 1.0), f"{where}: intensity")}}
-    if kind == "directional":
+        em = {"type": "point", "position": pos.tolist(),
+              "intensity": {"type": "spectrum", "value": _positive(d.get("intensity", 1.0), f"{where}: intensity")}}
+    elif kind == "directional":
         v = _matrix(d.get("towards_light"), (3,), f"{where}: towards_light")
         n = float(np.linalg.norm(v))
         if not n > 0:
             raise UsageError(f"{where}: towards_light must be a non-zero vector")
-        return {"type": "directional", "direction": (-v / n).tolist(),
-                "irradiance": {"type": "spectrum", "value": _positive(d.get("irradiance", 1.0), f"{where}: irradiance")}}
-    raise UsageError(f"{where}: type must be 'point' (with position, intensity) or 'directional' (with "
-                     f"towards_light, irradiance), got {kind!r}")
+        em = {"type": "directional", "direction": (-v / n).tolist(),
+              "irradiance": {"type": "spectrum", "value": _positive(d.get("irradiance", 1.0), f"{where}: irradiance")}}
+    else:
+        raise UsageError(f"{where}: type must be 'point' (with position, intensity) or 'directional' (with "
+                         f"towards_light, irradiance), got {kind!r}")
+    pol, ret = d.get("polarizer"), d.get("retarder")
+    if ret is not None and pol is None:
+        raise UsageError(f"{where}: a retarder needs a polarizer before it (give \"polarizer\": ANGLE)")
+    pol = None if pol is None else _number(pol, f"{where}: polarizer")
+    ret = None if ret is None else _number(ret, f"{where}: retarder")
+    aim = tuple(_matrix(d.get("aim", [0.0, 0.0, 0.0]), (3,), f"{where}: aim").tolist())
+    if em["type"] == "point" and np.allclose(aim, em["position"]):
+        raise UsageError(f"{where}: aim must differ from the light's position")
+    return Light(em, pol, ret, aim)
 
 
 def _positive(v, what) -> float:
@@ -209,12 +273,12 @@ def _positive(v, what) -> float:
 
 
 def load_lights(path) -> list:
-    """The Mitsuba emitter dicts of a light JSON file (one light object or ``{"lights": [...]}``)."""
+    """The :class:`Light` list of a light JSON file (one light object or ``{"lights": [...]}``)."""
     d = _read_json(path, "light file")
     items = d["lights"] if isinstance(d, dict) and "lights" in d else [d]
     if not isinstance(items, list) or not items:
         raise UsageError(f"light file {str(path)!r}: 'lights' must be a non-empty list")
-    return [light_dict(x, f"{path}: light {i}") for i, x in enumerate(items)]
+    return [light_spec(x, f"{path}: light {i}") for i, x in enumerate(items)]
 
 
 def calibrated_sensors(cameras, **kwargs) -> dict:
@@ -222,12 +286,14 @@ def calibrated_sensors(cameras, **kwargs) -> dict:
     return {f"camera{i}": c.sensor_dict(**kwargs) for i, c in enumerate(cameras)}
 
 
-def calibrated_scene(base, cameras, light: dict, *, spp: int = 16, film: dict | None = None):
+def calibrated_scene(base, cameras, light, *, spp: int = 16, film: dict | None = None):
     """A Mitsuba scene: the sample of ``base`` (an XML scene file, or a scene dict) with its integrator
     and shapes (their BSDFs and textures keep their ids, so ``mi.traverse`` keys stay), seen by the
-    calibrated ``cameras`` (sensors 0..N-1 in order) and lit by ``light`` (a Mitsuba emitter dict,
-    :func:`light_dict`).  ``base`` must hold no sensor and no emitter (UsageError): the calibration
-    gives them, and one light per scene keeps the light-selection noise out of the renders."""
+    calibrated ``cameras`` (sensors 0..N-1 in order) and lit by ``light`` (a :class:`Light`, or a
+    Mitsuba emitter dict).  ``base`` must hold no sensor and no emitter (UsageError): the calibration
+    gives them, and one light per scene keeps the light-selection noise out of the renders.  A
+    polarized light adds its sheets, which only ``volpath`` transmits: the integrator then becomes
+    ``stokes`` around ``volpath`` (max_depth 2, direct light, as the acquisition design's)."""
     import mitsuba as mi
 
     if isinstance(base, dict):
@@ -248,7 +314,12 @@ def calibrated_scene(base, cameras, light: dict, *, spp: int = 16, film: dict | 
         d = {"integrator": scene.integrator()}
         for i, shape in enumerate(scene.shapes()):
             d[shape.id() or f"shape{i}"] = shape
-    d = {"type": "scene", **d, **calibrated_sensors(cameras, spp=spp, film=film), "calibrated_light": light}
+    light = light if isinstance(light, Light) else Light(light)
+    sheets = light.sheets()
+    if sheets:
+        d["integrator"] = {"type": "stokes", "integrator": {"type": "volpath", "max_depth": 2}}
+    d = {"type": "scene", **d, **calibrated_sensors(cameras, spp=spp, film=film), "calibrated_light": light.emitter,
+         **sheets}
     return mi.load_dict(d)
 
 
