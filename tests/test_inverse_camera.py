@@ -1,5 +1,5 @@
 """Stokes inputs as cameras produce them (hyde_bsdf.inverse.camera_data, the loss's measured components
-and sigma weights, render.stokes_io's camera EXRs).
+and sigma weights, io.stokes_exr's camera EXRs).
 
 Checked: mono ``S0, S1, S2`` EXRs, Mitsuba's ``S0.R ... S3.B`` and spectral suffixes read into the
 luminance reference with the right components; sigma of the luminance is sqrt(sum w^2 sigma^2); a
@@ -17,7 +17,7 @@ from hyde_bsdf.errors import UsageError
 from hyde_bsdf.inverse._common import Y_WEIGHTS
 from hyde_bsdf.inverse.analyzer import CameraNoise, stokes_from_mosaic, simulate_mosaic
 from hyde_bsdf.inverse.camera_data import camera_reference
-from hyde_bsdf.render.stokes_io import read_camera_stokes, write_camera_stokes, write_stokes_exr
+from hyde_bsdf.io.stokes_exr import read_camera_stokes, write_camera_stokes, write_stokes_exr
 
 
 def _stokes(h=6, w=5, seed=0):

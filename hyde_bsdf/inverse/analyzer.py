@@ -52,7 +52,7 @@ problem: frames of unequal size, fewer than 3 frames, non-finite, negative or sa
 (``saturated="mask"`` masks saturated pixels out instead), a singular or badly conditioned
 analysis matrix.
 
-May import: NumPy, ``hyde_bsdf.errors``.
+May import: NumPy, ``hyde_bsdf.errors``, ``hyde_bsdf.io`` (the EXR writer, lazily).
 """
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ from hyde_bsdf.errors import UsageError
 __all__ = ["CameraNoise", "StokesEstimate", "SONY_LAYOUT", "DEMOSAIC_METHODS", "MAX_CONDITION",
            "retarder_mueller", "analysis_matrix", "stokes_from_frames", "stokes_from_mosaic",
            "simulate_frames", "simulate_mosaic", "propagated_sigma", "stokes_sigma",
-           "write_stokes_estimate", "simulate_capture", "FULL_STOKES_FRAMES"]
+           "write_stokes_estimate", "chart_stokes", "simulate_capture", "FULL_STOKES_FRAMES"]
 
 STOKES = ("S0", "S1", "S2", "S3")
 #: the 2 x 2 analyzer cell of the common Sony polarization sensors (IMX250MZR and kin), degrees
@@ -397,26 +397,25 @@ def _colours(est: StokesEstimate) -> tuple:
     return () if C == 0 else (("R", "G", "B") if C == 3 else tuple(f"C{i}" for i in range(C)))
 
 
-def write_stokes_estimate(est: StokesEstimate, path, png_stem=None, title: str = "", metadata=None) -> dict:
-    """Write a :class:`StokesEstimate` as a camera Stokes EXR (``S0, S1, S2[, S3]`` -- with ``.R/.G/.B``
-    or ``.C0 ...`` for several channels -- their ``_sigma`` layers and the ``mask``; what ``invert --maps``
-    reads) and, with ``png_stem``, the intensity, DoLP and AoLP charts ``{png_stem}_intensity.png``,
-    ``_dolp.png``, ``_aolp.png`` (of the luminance, or of the single channel).  Atomic writes.
-    Returns {name: path}."""
-    from hyde_bsdf.render.stokes_io import save_polarization_pngs, write_camera_stokes
+def write_stokes_estimate(est: StokesEstimate, path, metadata=None):
+    """Write a :class:`StokesEstimate` as a camera Stokes EXR, atomically: ``S0, S1, S2[, S3]`` -- with
+    ``.R/.G/.B`` or ``.C0 ...`` for several channels -- their ``_sigma`` layers and the ``mask``; what
+    ``invert --maps`` reads (:func:`hyde_bsdf.io.stokes_exr.write_camera_stokes`).  Returns the path."""
+    from hyde_bsdf.io.stokes_exr import write_camera_stokes
 
-    colours = _colours(est)
     meta = {"measured": ",".join(est.measured), "demosaic": est.method, "condition": f"{est.condition:.4g}",
             **(metadata or {})}
-    out = {"exr": write_camera_stokes(path, est.stokes, sigma=est.sigma, mask=est.mask, colours=colours,
-                                      metadata=meta)}
-    if png_stem is not None:
-        rgb = {}
-        for c in STOKES:
-            a = np.asarray(est.stokes[c], np.float64) if c in est.stokes else np.zeros(est.stokes["S0"].shape)
-            a = a[..., None] if a.ndim == 2 else a
-            rgb[c] = a if a.shape[2] == 3 else np.repeat(a.mean(axis=2, keepdims=True), 3, axis=2)
-        out.update(save_polarization_pngs(rgb, png_stem, title, charts=("intensity", "dolp", "aolp")))
+    return write_camera_stokes(path, est.stokes, sigma=est.sigma, mask=est.mask, colours=_colours(est), metadata=meta)
+
+
+def chart_stokes(est: StokesEstimate) -> dict:
+    """The estimate as the (H, W, 3) Stokes dict the polarization charts take (a mono or multi-channel
+    image as grey; S3 zero when not measured): for intensity, DoLP and AoLP pictures."""
+    out = {}
+    for c in STOKES:
+        a = np.asarray(est.stokes[c], np.float64) if c in est.stokes else np.zeros(est.stokes["S0"].shape)
+        a = a[..., None] if a.ndim == 2 else a
+        out[c] = a if a.shape[2] == 3 else np.repeat(a.mean(axis=2, keepdims=True), 3, axis=2)
     return out
 
 

@@ -6,7 +6,7 @@ pixels.  :func:`camera_reference` accepts
 
 * a Stokes EXR path: Mitsuba's channel names (``S0.R ... S3.B``), plain mono ``S0, S1, S2[, S3]``, any
   colour or spectral suffixes (``S0.550nm``), with optional ``S0_sigma...`` layers and a ``mask``
-  channel (:func:`hyde_bsdf.render.stokes_io.read_camera_stokes`; what ``hyde-bsdf stokes`` writes);
+  channel (:func:`hyde_bsdf.io.stokes_exr.read_camera_stokes`; what ``hyde-bsdf stokes`` writes);
 * a :class:`~hyde_bsdf.inverse.analyzer.StokesEstimate` (from raw analyzer frames);
 * a dict ``{"S0": array, "S1": ..., ["sigma": {"S0": ...}], ["mask": (H, W)]}`` of arrays (H, W) or
   (H, W, C);
@@ -22,7 +22,7 @@ the data carry none: the data are then in DN above black, and sigma is what idea
 (0/45/90/135 deg) with that noise give (:func:`~hyde_bsdf.inverse.analyzer.stokes_sigma`).
 
 May import: ``hyde_bsdf.inverse.observations``, ``hyde_bsdf.inverse.analyzer``, ``hyde_bsdf.inverse.loss``,
-``hyde_bsdf.render.stokes_io``.
+``hyde_bsdf.io.stokes_exr``.
 """
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ STOKES = ("S0", "S1", "S2", "S3")
 def _as_layers(data, measured):
     """(stokes dict, sigma dict, mask or None, colours) from any accepted form of camera data."""
     if isinstance(data, (str, Path)):
-        from hyde_bsdf.render.stokes_io import read_camera_stokes
+        from hyde_bsdf.io.stokes_exr import read_camera_stokes
 
         d = read_camera_stokes(data)
         return d["stokes"], d["sigma"], d["mask"], d["colours"], str(data)

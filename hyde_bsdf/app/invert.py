@@ -1,6 +1,7 @@
 """``hyde-bsdf invert``: the command line of scalar and texture-valued (``--maps``) inversion.
 
-May import: every module of ``hyde_bsdf.inverse``.
+The options and outputs are described in :mod:`hyde_bsdf.inverse`; the plot is
+:func:`hyde_bsdf.app.plots.plot_history`.
 """
 from __future__ import annotations
 
@@ -12,53 +13,26 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_group, atomic_open, atomic_path, check_output_path
+from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.inverse._common import Y_WEIGHTS, _log
+from hyde_bsdf.inverse._common import Y_WEIGHTS
+from hyde_bsdf.inverse.memory import check_memory
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
 from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
 from hyde_bsdf.inverse.maps import invert_maps
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, Observation, example_maps,
                                             map_keys, plane_scene_dict, render_stokes_np)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, invert, load_scene, parameter_keys,
-                                      plot_history, prepare, render_reference, write_history)
+                                      prepare, render_reference, write_history)
+from hyde_bsdf.io.atomic import atomic_group, atomic_open, atomic_path, check_output_path
+from hyde_bsdf.progress import stderr_lines
 
-__all__ = ["cli_main", "build_parser", "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE"]
+__all__ = ["cli_main", "build_parser"]
+
+_log = stderr_lines("[invert]")
 
 
-#: peak memory of one differentiable render (reverse mode through ``path``): a fixed part plus
-#: bytes per sample (measured: 1.4-1.5 kB/sample spectral polarized sphere at 64-128 px, 16 spp;
-#: 0.8-1.2 kB mono polarized plane, 3 x 80-160 px, 4 spp; the figure below has a margin)
-AD_BYTES_FIXED = 400 * 2**20
-AD_BYTES_PER_SAMPLE = 2048
 EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
-
-
-def estimate_memory(width: int, height: int, spp: int) -> int:
-    """Estimated peak memory (bytes) of one optimisation step on a ``width`` x ``height`` film."""
-    return AD_BYTES_FIXED + AD_BYTES_PER_SAMPLE * int(width) * int(height) * int(spp)
-
-
-def _mem_available():
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
-
-
-def check_memory(width: int, height: int, spp: int, hint: str) -> int:
-    """UsageError when :func:`estimate_memory` exceeds the available memory; returns the estimate."""
-    need, avail = estimate_memory(width, height, spp), _mem_available()
-    if avail is not None and need > avail:
-        raise UsageError(f"one optimisation step on the {width}x{height} film at {spp} spp needs about "
-                         f"{need / 2**30:.1f} GiB ({AD_BYTES_PER_SAMPLE} B per sample + "
-                         f"{AD_BYTES_FIXED // 2**20} MiB), but only {avail / 2**30:.1f} GiB is available; "
-                         f"lower {hint}")
-    return need
 
 
 def _one_line(exc) -> str:
@@ -106,10 +80,17 @@ def build_parser():
                     help="Mitsuba XML scene holding the BSDF (repeat for several scenes, e.g. one per light; "
                          "default: the built-in sphere (scalar) or textured plane, 3 views x 2 lights (--maps))")
     ap.add_argument("--reference", action="append", default=None,
-                    help="reference Stokes EXR of the matching --scene (hyde-bsdf render output; same film "
+                    help="reference Stokes EXR of the matching --scene (hyde-bsdf render or stokes output: "
+                         "S0.R..S3.B or mono S0, S1, S2[, S3], with optional _sigma layers and mask; same film "
                          "size); default: render one at --truth (built-in truth map with --maps)")
     ap.add_argument("--mask", action="append", default=None,
                     help="--maps: PNG or .npy of the pixels to use for the matching --reference (non-zero = use)")
+    ap.add_argument("--camera", default=None, help="--maps: camera calibration JSON (CV pinhole: world-to-camera R, t; "
+                    "fx, fy, cx, cy; see hyde_bsdf.render.camera): the sensors of the one --scene (the sample only)")
+    ap.add_argument("--light", default=None, help="--maps with --camera: light JSON (point positions or directional "
+                    "towards_light, optional polarizer/retarder); one scene per light, --reference light-major")
+    ap.add_argument("--channel", default="Y", help="--maps: the colour channel of multi-channel references (default "
+                    "Y, the luminance of R, G, B; or a channel suffix such as R or 550nm)")
     ap.add_argument("--sensor", type=int, default=0, help="index of the sensor of each --scene (default 0)")
     ap.add_argument("--target", default=None, help="key prefix of the BSDF to recover when the scene has "
                     "several, e.g. sphere.bsdf (mi.traverse names)")
@@ -169,7 +150,15 @@ def _check_args(args):
     if not maps and (args.regularizer or args.weight or args.mask):
         raise UsageError("--regularizer, --weight and --mask need --maps (they act on texture maps)")
     scenes, refs, masks = args.scene or [], args.reference or [], args.mask or []
-    if refs and len(refs) != max(1, len(scenes)):
+    if (args.camera is None) != (args.light is None):
+        raise UsageError("--camera and --light go together (the calibrated sensors and the lights)")
+    if args.camera and not (maps and len(scenes) == 1 and refs and not args.preset):
+        raise UsageError("--camera/--light need --maps, one --scene (the sample: shapes, BSDF, integrator) and the "
+                         "--reference files, light-major")
+    for path in [p for p in (args.camera, args.light) if p]:
+        if not Path(path).is_file():
+            raise UsageError(f"{path!r} is not an existing file")
+    if refs and len(refs) != max(1, len(scenes)) and not args.camera:
         raise UsageError(f"give one --reference per --scene: {len(scenes)} --scene, {len(refs)} --reference")
     if maps and scenes and not refs:
         raise UsageError("--maps with --scene needs a --reference per scene (the truth maps of a user scene "
@@ -202,7 +191,7 @@ def _check_out(path):
 
 def _read_reference(path, width, height, what="--reference"):
     """Luminance Stokes images (4, H, W) of a Stokes EXR, checked against the film size and for NaN."""
-    from hyde_bsdf.render.stokes_io import read_stokes_exr
+    from hyde_bsdf.io.stokes_exr import read_stokes_exr
 
     try:
         st = read_stokes_exr(path)
@@ -218,6 +207,51 @@ def _read_reference(path, width, height, what="--reference"):
     except ValueError as exc:
         raise UsageError(_one_line(exc)) from None
     return ref
+
+
+def _camera_observation(scene, args, path, width, height, mask):
+    """The observation of a user --reference: any camera Stokes EXR (measured components, sigma, mask;
+    :func:`hyde_bsdf.inverse.camera_data.camera_observation`), checked against the film size."""
+    from hyde_bsdf.inverse.camera_data import camera_observation
+
+    o = camera_observation(scene, path, sensor=args.sensor, mask=None, channel=args.channel)
+    h, w = o.reference.shape[1:]
+    if (w, h) != (width, height):
+        raise UsageError(f"--reference {str(path)!r} is {w}x{h} pixels but the scene's film is {width}x{height}: "
+                         f"render the reference with the same scene and film")
+    try:
+        check_reference_scale(o.reference, f"--reference {str(path)!r}")
+    except ValueError as exc:
+        raise UsageError(_one_line(exc)) from None
+    if mask is not None:
+        o.mask = o.mask & mask
+    return o
+
+
+def _calibrated(args, fit):
+    """The observations of --scene SAMPLE --camera --light --reference ... (light-major), checked."""
+    import mitsuba as mi
+
+    from hyde_bsdf.inverse.camera_data import observations_from_files
+
+    observations = observations_from_files(args.scene[0], args.camera, args.light, args.reference,
+                                           spp=args.spp, channel=args.channel)
+    for k, o in enumerate(observations):
+        try:
+            map_keys(mi.traverse(o.scene), fit, args.target)
+        except ValueError as exc:
+            raise UsageError(f"--scene {args.scene[0]!r}: {_one_line(exc)}") from None
+        H, W = o.reference.shape[1:]
+        check_memory(W, H, args.spp, "--spp or the camera's width/height")
+        try:
+            check_reference_scale(o.reference, f"--reference {args.reference[k]!r}")
+        except ValueError as exc:
+            raise UsageError(_one_line(exc)) from None
+        if args.mask:
+            o.mask = o.mask & _read_mask(args.mask[k], (H, W))
+    _log(f"{len(observations)} calibrated picture(s): measured {'+'.join(observations[0].measured)}"
+         f"{', with sigma maps' if observations[0].sigma is not None else ''}")
+    return observations
 
 
 def _read_mask(path, shape):
@@ -348,7 +382,7 @@ def _cli_maps(args):
         raise UsageError(f"--start must give a start value for {', '.join(missing)} (e.g. --start "
                          f"{','.join(f'{n}=1.5' for n in missing)})")
     out = Path(args.output)
-    outputs = {"history": "invert_maps_history.csv", "png": "invert_maps.png"}
+    outputs = {"history": "invert_maps_history.csv", "png": "invert_maps.png", "seen": "seen.npy"}
     for n in fit:
         outputs[n + ".npy"] = f"{n}.npy"
         outputs[n + ".exr"] = f"{n}.exr"
@@ -382,6 +416,9 @@ def _cli_maps(args):
         observations = synthetic_observations(acq, material, start, res=args.res, spp=args.spp, spp_ref=args.spp_ref,
                                               noise=args.noise, seed=args.seed)
         scenes = []
+    elif args.camera:
+        observations = _calibrated(args, fit)
+        scenes = []
     elif args.scene:
         scenes = [_load_user_scene(p) for p in args.scene]
     else:
@@ -401,12 +438,12 @@ def _cli_maps(args):
             raise UsageError(f"scene {i}: {_one_line(exc)}") from None
         W, H = scene.sensors()[args.sensor].film().crop_size()
         check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
-        if args.reference:
-            ref = _read_reference(args.reference[i], W, H)
-        else:
-            _log(f"rendering reference {i + 1}/{len(scenes)} ({args.spp_ref} spp)")
-            ref = render_stokes_np(scene, args.sensor, args.spp_ref, seed=args.seed)
         mask = _read_mask(args.mask[i], (H, W)) if args.mask else None
+        if args.reference:
+            observations.append(_camera_observation(scene, args, args.reference[i], W, H, mask))
+            continue
+        _log(f"rendering reference {i + 1}/{len(scenes)} ({args.spp_ref} spp)")
+        ref = render_stokes_np(scene, args.sensor, args.spp_ref, seed=args.seed)
         observations.append(Observation(scene, ref, sensor=args.sensor, mask=mask))
     try:
         res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
@@ -414,6 +451,8 @@ def _cli_maps(args):
                           truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
     except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
         raise UsageError(_one_line(exc)) from None
+    if res.seen is None:
+        paths.pop("seen")
     with atomic_group():      # history, maps and plot replace the old set together, or not at all
         _write_map_outputs(res, paths, args)
     print(f"loss: {args.loss}; {args.iterations} iterations over {len(observations)} image(s), "
@@ -453,6 +492,10 @@ def _write_map_outputs(res, paths, args):
         for h in res.history:
             w.writerow([h["iteration"]] + [f"{h[c]:.6e}" for c in cols[1:4]] + [f"{h['seconds']:.3f}"]
                        + [f"{h[c]:.5f}" for c in extra])
+    if res.seen is not None:
+        with atomic_path(paths["seen"]) as tmp:      # the texels some picture sees (bool, rows along v)
+            with open(tmp, "wb") as fh:
+                np.save(fh, np.asarray(res.seen, bool))
     for n in res.fitted:
         v = np.asarray(res.final[n], np.float32)
         with atomic_path(paths[n + ".npy"]) as tmp:

@@ -1,4 +1,4 @@
-"""Stokes images: EXR files, polarization quantities and their PNG charts.
+"""Stokes images as OpenEXR files: the layout, the writer and the reader.
 
 A *Stokes image* here is a dict of float32 arrays of shape ``(H, W, 3)``
 (one value per RGB channel, linear sRGB primaries, the scene's radiance units):
@@ -20,17 +20,16 @@ The EXR layout is one float32 channel per component and colour:
 ``stokes`` integrator gives its channels, so ``mi.Bitmap(path).split()`` reads
 our files and we read Mitsuba's.
 
-Derived quantities (computed from the luminance ``Y = 0.2126 R + 0.7152 G +
-0.0722 B`` of each component, or from one colour channel):
+Camera Stokes data (:func:`write_camera_stokes`, :func:`read_camera_stokes`): any subset of S0..S3
+containing S0, mono (``S0, S1, S2``) or any colour/spectral suffixes (``S0.R``, ``S0.550nm``), with
+optional standard-deviation layers ``S0_sigma[.R]`` ... and a ``mask`` channel -- what a
+polarization camera's Stokes step gives and ``invert --maps`` reads.
 
-* intensity ``I = S0``,
-* degree of linear polarization ``DoLP = sqrt(S1^2 + S2^2) / S0`` in [0, 1],
-* angle of linear polarization ``AoLP = atan2(S2, S1) / 2`` in (-pi/2, pi/2],
-  radians, counter-clockwise from the image's horizontal as seen by the viewer,
-* degree of circular polarization ``DoCP = S3 / S0`` in [-1, 1] (signed).
+The derived quantities (intensity, DoLP, AoLP, DoCP) are in
+:mod:`hyde_bsdf.render.polarization`; the PNG charts in :mod:`hyde_bsdf.app.pictures`.
 
-Where ``S0`` is zero (or not positive) the ratios are undefined: they are set
-to 0 and reported in the ``valid`` mask of :func:`polarization_quantities`.
+May import: the standard library, NumPy, :mod:`hyde_bsdf.errors`, :mod:`hyde_bsdf.io.atomic`
+(OpenEXR lazily, inside the reader and writer).
 """
 from __future__ import annotations
 
@@ -38,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_path
+from hyde_bsdf.io.atomic import atomic_path
 from hyde_bsdf.errors import UsageError
 
 __all__ = [
@@ -47,11 +46,6 @@ __all__ = [
     "exr_channel_names",
     "write_stokes_exr",
     "read_stokes_exr",
-    "luminance",
-    "polarization_quantities",
-    "save_polarization_pngs",
-    "save_rgb_png",
-    "polarization_png_paths",
     "camera_channel_names",
     "write_camera_stokes",
     "read_camera_stokes",
@@ -59,12 +53,6 @@ __all__ = [
 
 STOKES_NAMES = ("S0", "S1", "S2", "S3")
 COLOURS = ("R", "G", "B")
-#: Rec. 709 / sRGB luminance weights for linear RGB.
-LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
-#: S0 at or below this is treated as "no light" when forming ratios (float32 noise floor).
-S0_FLOOR = 1e-12
-
-
 def exr_channel_names() -> list[str]:
     """The channel names written by :func:`write_stokes_exr`, in order."""
     return list(COLOURS) + [f"{s}.{c}" for s in STOKES_NAMES for c in COLOURS]
@@ -99,7 +87,7 @@ def write_stokes_exr(path, stokes: dict, metadata: dict | None = None) -> Path:
 
     Channels: ``R, G, B`` (``RGB`` if given, else ``S0``) then ``S0.R ... S3.B``.
     Non-finite values are refused (ValueError), so no NaN reaches a file silently.  The file is
-    written to a temporary file beside ``path`` and renamed over it (:mod:`hyde_bsdf.atomic`):
+    written to a temporary file beside ``path`` and renamed over it (:mod:`hyde_bsdf.io.atomic`):
     an interrupted write leaves the previous file intact.
     """
     import OpenEXR
@@ -209,158 +197,6 @@ def read_stokes_exr(path) -> dict:
     return out
 
 
-def luminance(image, channel: str = "Y") -> np.ndarray:
-    """One scalar per pixel from an (H, W, 3) linear-RGB array.
-
-    channel: ``"Y"`` (Rec. 709 luminance, the default) or one of ``"R", "G", "B"``.
-    """
-    image = np.asarray(image, dtype=np.float64)
-    if image.ndim != 3 or image.shape[2] != 3:
-        raise ValueError(f"image must have shape (H, W, 3), got {image.shape}")
-    if channel == "Y":
-        return image @ LUMINANCE_WEIGHTS
-    if channel in COLOURS:
-        return image[..., COLOURS.index(channel)]
-    raise ValueError(f"channel must be one of 'Y', 'R', 'G', 'B', got {channel!r}")
-
-
-def polarization_quantities(stokes: dict, channel: str = "Y") -> dict:
-    """Intensity, DoLP, AoLP (radians) and DoCP of a Stokes image.
-
-    Returns a dict of float64 arrays (H, W): ``intensity`` (S0), ``dolp`` in [0, 1],
-    ``aolp`` in (-pi/2, pi/2] (radians, counter-clockwise from the image horizontal
-    as seen by the viewer), ``docp`` in [-1, 1], and ``valid`` (bool): S0 > 0, where
-    the ratios are defined.  Where ``valid`` is False, dolp/aolp/docp are 0.
-    DoLP and |DoCP| are clipped to 1 (Monte-Carlo noise can push a ratio of two
-    estimates past 1; a physical Stokes vector never exceeds it).
-    """
-    _check_stokes(stokes)
-    s0, s1, s2, s3 = (luminance(stokes[s], channel) for s in STOKES_NAMES)
-    for name, arr in zip(STOKES_NAMES, (s0, s1, s2, s3)):
-        if not np.all(np.isfinite(arr)):
-            raise ValueError(f"stokes[{name!r}] has non-finite values")
-    valid = s0 > S0_FLOOR
-    safe_s0 = np.where(valid, s0, 1.0)  # placeholder divisor where undefined; masked below
-    dolp = np.where(valid, np.minimum(np.hypot(s1, s2) / safe_s0, 1.0), 0.0)
-    aolp = np.where(valid, 0.5 * np.arctan2(s2, s1), 0.0)
-    docp = np.where(valid, np.clip(s3 / safe_s0, -1.0, 1.0), 0.0)
-    return {"intensity": s0, "dolp": dolp, "aolp": aolp, "docp": docp, "valid": valid}
-
-
-def _tonemap(rgb: np.ndarray, exposure: float = 1.0) -> np.ndarray:
-    """Linear RGB -> 8-bit-ready sRGB in [0, 1] (clip, then the sRGB transfer curve)."""
-    x = np.clip(np.asarray(rgb, dtype=np.float64) * exposure, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-
-
-def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "Y",
-                           dolp_mask: float = 0.01, charts=None) -> dict[str, Path]:
-    """Write the four polarization charts (plus a colour image) as PNGs with colour bars.
-
-    Files: ``{stem}_intensity.png`` (S0, inferno on a square-root scale, clipped at the
-    99.5th percentile),
-    ``{stem}_dolp.png`` (viridis, [0, 1]), ``{stem}_aolp.png`` (cyclic ``twilight``,
-    [-90, 90] deg, grey where DoLP < ``dolp_mask`` or no light), ``{stem}_docp.png``
-    (diverging, symmetric range), and ``{stem}_rgb.png`` (the colour image, sRGB).
-    ``charts``: the names to write (default all five; a linear-only camera's data: intensity, dolp, aolp).
-    Returns {name: path}.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    stem = Path(stem)
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    q = polarization_quantities(stokes, channel)
-    h, w = q["intensity"].shape
-    valid = q["valid"]
-    label = {"Y": "luminance", "R": "red channel", "G": "green channel", "B": "blue channel"}[channel]
-    prefix = f"{title}: " if title else ""
-    paths: dict[str, Path] = {}
-
-    def chart(name, data, cmap, vmin, vmax, cbar_label, heading, bad="0.5", gamma=None):
-        if charts is not None and name not in charts:
-            return
-        fig_w = 6.4
-        fig_h = max(2.4, fig_w * h / w * 0.85 + 0.6)
-        fig, ax = plt.subplots(figsize=(fig_w, fig_h), dpi=110)
-        cm = matplotlib.colormaps[cmap].with_extremes(bad=bad)
-        if gamma is None:
-            im = ax.imshow(data, cmap=cm, vmin=vmin, vmax=vmax, interpolation="nearest")
-        else:
-            norm = matplotlib.colors.PowerNorm(gamma, vmin=vmin, vmax=vmax)
-            im = ax.imshow(data, cmap=cm, norm=norm, interpolation="nearest")
-        ax.set_title(prefix + heading, fontsize=10)
-        ax.set_xticks([])
-        ax.set_yticks([])
-        cb = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03)
-        cb.set_label(cbar_label)
-        fig.tight_layout()
-        out = Path(f"{stem}_{name}.png")
-        _save_png(fig, out)
-        paths[name] = out
-
-    inten = q["intensity"]
-    vmax = float(np.percentile(inten, 99.5)) if np.any(inten > 0) else 1.0
-    vmax = vmax if vmax > 0 else 1.0
-    # Square-root colour scale: highlights are orders of magnitude above the rest.
-    chart("intensity", inten, "inferno", 0.0, vmax, f"S0 ({label}, scene radiance units; sqrt scale)",
-          "intensity S0", gamma=0.5)
-    chart("dolp", np.ma.masked_where(~valid, q["dolp"]), "viridis", 0.0, 1.0,
-          "DoLP = sqrt(S1² + S2²) / S0", "degree of linear polarization")
-    aolp_deg = np.degrees(q["aolp"])
-    chart("aolp", np.ma.masked_where(~valid | (q["dolp"] < dolp_mask), aolp_deg), "twilight",
-          -90.0, 90.0, "AoLP (deg, from image horizontal, counter-clockwise)",
-          f"angle of linear polarization (grey: DoLP < {dolp_mask:g})")
-    docp = q["docp"]
-    lim = float(np.percentile(np.abs(docp[valid]), 99.5)) if np.any(valid) else 1.0
-    lim = min(max(lim, 1e-3), 1.0)  # keep a visible range when S3 is ~0 everywhere
-    chart("docp", np.ma.masked_where(~valid, docp), "RdBu_r", -lim, lim, "DoCP = S3 / S0",
-          "degree of circular polarization")
-
-    if charts is None or "rgb" in charts:
-        paths["rgb"] = save_rgb_png(stokes.get("RGB", stokes["S0"]), Path(f"{stem}_rgb.png"), title)
-    return paths
-
-
-def polarization_png_paths(stem, polarized: bool = True) -> dict[str, Path]:
-    """The PNG files :func:`save_polarization_pngs` (or, unpolarized, :func:`save_rgb_png`)
-    writes for ``stem``: {name: path}, so a command can check them before rendering."""
-    names = ("intensity", "dolp", "aolp", "docp", "rgb") if polarized else ("rgb",)
-    return {name: Path(f"{stem}_{name}.png") for name in names}
-
-
-def _save_png(fig, path: Path) -> None:
-    """``fig.savefig`` as PNG through a temporary file (atomic), then close the figure."""
-    import matplotlib.pyplot as plt
-
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png")
-    finally:
-        plt.close(fig)
-
-
-def save_rgb_png(rgb, path, title: str = "") -> Path:
-    """The colour image (linear RGB (H, W, 3), clipped at 1, sRGB curve) as a PNG chart."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rgb = np.asarray(rgb)
-    h, w = rgb.shape[:2]
-    prefix = f"{title}: " if title else ""
-    fig, ax = plt.subplots(figsize=(6.4, max(2.4, 6.4 * h / w * 0.85 + 0.6)), dpi=110)
-    ax.imshow(_tonemap(rgb), interpolation="nearest")
-    ax.set_title(prefix + "colour image (sRGB, clipped at 1)", fontsize=10)
-    ax.set_xticks([])
-    ax.set_yticks([])
-    fig.tight_layout()
-    path = Path(path)
-    _save_png(fig, path)
-    return path
 
 
 # camera Stokes images: any subset of S0..S3, mono or any colour/spectral channels, sigma and mask
