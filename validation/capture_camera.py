@@ -48,6 +48,9 @@ from svbrdf_index import CSV_HEADER, _stats, run_case, start_values  # noqa: E40
 from hyde_bsdf import inverse as inv  # noqa: E402
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations  # noqa: E402
 from hyde_bsdf.inverse.analyzer import CameraNoise, simulate_capture  # noqa: E402
+from hyde_bsdf.progress import stderr_lines  # noqa: E402
+
+_log = stderr_lines("[capture_camera]")
 
 NOISE = CameraNoise(gain=1.0, read_noise=3.0, full_well=30000.0, black_level=64.0)
 SIGNAL = 5000.0
@@ -120,10 +123,10 @@ def validate(outdir="out/validation", quick=False):
     try:
         t0 = time.perf_counter()
         sig = sigma_check(16 if quick else 48, repeats=100)
-        inv._log(f"[capture_camera] sigma check ({time.perf_counter() - t0:.0f} s): "
+        _log(f"sigma check ({time.perf_counter() - t0:.0f} s): "
                  + ", ".join(f"{k[0]} {k[1]} {v:.3f}" for k, v in sig.items()))
         for case, camera in runs:
-            inv._log(f"[capture_camera] {case}, {camera} camera ({obscfg['n']}x{obscfg['n']} maps)")
+            _log(f"{case}, {camera} camera ({obscfg['n']}x{obscfg['n']} maps)")
             results[(case, camera)] = run_case(case, "stokes", prepared(case, camera, **obscfg), **fitcfg)
             rows += _stats((case, camera), results[(case, camera)], stats)
             write_csv(out / "capture_camera.csv", CSV_HEADER[:1] + ["camera"] + CSV_HEADER[2:], rows)
