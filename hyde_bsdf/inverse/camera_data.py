@@ -120,9 +120,13 @@ def camera_reference(data, *, channel: str = "Y", measured=None, noise=None, ana
 def camera_observation(scene, data, *, sensor: int = 0, weight: float = 1.0, mask=None, **kwargs) -> Observation:
     """An :class:`~hyde_bsdf.inverse.observations.Observation` of ``scene``'s sensor from camera data
     (:func:`camera_reference`; ``kwargs`` go there).  The loss mask is the interior of the lit object
-    (:func:`~hyde_bsdf.inverse.loss.interior_mask`), the data's own mask and ``mask``, together."""
+    (:func:`~hyde_bsdf.inverse.loss.interior_mask`; with sigma, lit means S0 > 3 sigma(S0): a camera's
+    background is noise around zero), the data's own mask and ``mask``, together."""
     ref = camera_reference(data, **kwargs)
-    m = interior_mask(ref["reference"][0])
+    s0 = ref["reference"][0]
+    if ref["sigma"] is not None:          # a camera's background is noise around 0: lit means S0 > 3 sigma
+        s0 = np.where(s0 > 3.0 * ref["sigma"][0], s0, 0.0)
+    m = interior_mask(s0)
     for extra in (ref["mask"], mask):
         if extra is not None:
             if np.shape(extra) != m.shape:
