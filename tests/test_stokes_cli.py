@@ -59,3 +59,34 @@ def test_invert_camera_options_are_checked_first(tmp_path, capsys):
     assert main(["invert", "--maps", "--camera", str(tmp_path / "cam.json"), "--light", str(tmp_path / "cam.json"),
                  "-o", str(tmp_path / "o")]) == 2
     assert "need --maps, one --scene" in capsys.readouterr().err
+
+
+def test_invert_reads_a_linear_camera_exr(tmp_path, capsys):
+    """--scene + --reference a mono S0, S1, S2 EXR with sigma (what `stokes` writes): accepted, the
+    maps and seen.npy written."""
+    import mitsuba as mi
+
+    from hyde_bsdf import inverse as inv
+    from hyde_bsdf.inverse.analyzer import simulate_capture, write_stokes_estimate
+
+    inv.prepare(inv.MAP_VARIANT)
+    mi.Bitmap(np.full((2, 2, 1), 0.3, np.float32)).write(str(tmp_path / "a.exr"))
+    xml = f"""<scene version="3.0.0">
+  <integrator type="stokes"><integrator type="path"><integer name="max_depth" value="2"/></integrator></integrator>
+  <sensor type="perspective"><float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, -3, 3" target="0, 0, 0" up="0, 0, 1"/></transform>
+    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
+      <string name="pixel_format" value="luminance"/><rfilter type="box"/></film></sensor>
+  <shape type="rectangle" id="plane"><bsdf type="hyde"><texture type="bitmap" name="alpha">
+    <string name="filename" value="{tmp_path / 'a.exr'}"/><boolean name="raw" value="true"/>
+    <string name="filter_type" value="nearest"/></texture><float name="eta" value="1.5"/></bsdf></shape>
+  <emitter type="point"><point name="position" x="0" y="3" z="3"/><float name="intensity" value="20"/></emitter>
+</scene>"""
+    (tmp_path / "s.xml").write_text(xml)
+    ref = inv.render_stokes_np(inv.load_scene(str(tmp_path / "s.xml")), 0, 32, seed=1)
+    est = simulate_capture(ref, CameraNoise(read_noise=3.0, black_level=64.0), np.random.default_rng(0), signal=3000.0)
+    write_stokes_estimate(est, tmp_path / "ref.exr")
+    out = tmp_path / "out"
+    assert main(["invert", "--maps", "--scene", str(tmp_path / "s.xml"), "--reference", str(tmp_path / "ref.exr"),
+                 "--iterations", "3", "--no-uncertainty", "-o", str(out)]) == 0
+    assert (out / "alpha.npy").is_file() and np.load(out / "seen.npy").dtype == bool

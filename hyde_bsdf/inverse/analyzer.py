@@ -107,10 +107,11 @@ class CameraNoise:
 
     def simulate(self, signal, rng) -> np.ndarray:
         """Raw frames (DN, float64) of a noiseless ``signal`` (DN above black): Poisson electrons,
-        Gaussian read noise, clipped at the full well."""
+        Gaussian read noise, clipped at the full well and at 0 DN (the converter's floor: with a black
+        level of a few read-noise widths, as real cameras set it, the floor is never reached)."""
         e = rng.poisson(np.maximum(np.asarray(signal, np.float64), 0.0) / self.gain).astype(np.float64)
         e = e + rng.normal(0.0, self.read_noise, e.shape) if self.read_noise > 0 else e
-        return np.minimum(e, self.full_well) * self.gain + self.black_level
+        return np.maximum(np.minimum(e, self.full_well) * self.gain + self.black_level, 0.0)
 
 
 @dataclass
