@@ -65,6 +65,10 @@ Presets (:func:`design_acquisition`): ``"dielectric"`` -- five mirror pairs at b
 pairs behind a polarizer at 45 deg, circular light (polarizer 0 deg + quarter-wave retarder at 45
 deg) at beta = 50 and 65 deg, and the off-specular pairs unpolarized (9 pictures);
 ``polarizer_angles`` adds more states (e.g. (0, 45, 90)), ``retarder`` sets the circular states.
+``camera="linear"`` (a linear polarization camera: S0, S1, S2 only) drops the row M3x from every
+configuration's elements; its metal preset puts circular light on every mirror pair besides the 45 deg
+polarizer (12 pictures), so that S (M23) still enters through S2; :func:`predicted_stderr` takes the
+camera (docs/tutorials/capture.md tabulates what linear-only loses per parameter).
 
 Scenes (:func:`acquisition_scene_dict`): Mitsuba's ``polarizer`` and ``retarder`` plugins are
 sheets (rectangles) perpendicular to the light, 100 and 90 units out along it, outside every
