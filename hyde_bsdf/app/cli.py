@@ -46,6 +46,7 @@ COMMANDS = {
     "render": ("hyde_bsdf.app.render", "render a scene to a Stokes EXR and polarization PNGs"),
     "fit": ("hyde_bsdf.app.fit", "fit n, k, rms_slope to a Mueller-matrix CSV or a measured_polarized table"),
     "export": ("hyde_bsdf.app.export", "write a hyde material as a measured_polarized table for C++ Mitsuba"),
+    "stokes": ("hyde_bsdf.app.stokes", "raw analyzer frames (DoFP mosaic or N angles) to a Stokes EXR with sigma"),
     "invert": ("hyde_bsdf.app.invert", "recover roughness and index from a Stokes image"),
     "validate": ("hyde_bsdf.app.report.build", "run the validation report"),
 }

@@ -70,10 +70,17 @@ def build_parser():
                     help="Mitsuba XML scene holding the BSDF (repeat for several scenes, e.g. one per light; "
                          "default: the built-in sphere (scalar) or textured plane, 3 views x 2 lights (--maps))")
     ap.add_argument("--reference", action="append", default=None,
-                    help="reference Stokes EXR of the matching --scene (hyde-bsdf render output; same film "
+                    help="reference Stokes EXR of the matching --scene (hyde-bsdf render or stokes output: "
+                         "S0.R..S3.B or mono S0, S1, S2[, S3], with optional _sigma layers and mask; same film "
                          "size); default: render one at --truth (built-in truth map with --maps)")
     ap.add_argument("--mask", action="append", default=None,
                     help="--maps: PNG or .npy of the pixels to use for the matching --reference (non-zero = use)")
+    ap.add_argument("--camera", default=None, help="--maps: camera calibration JSON (CV pinhole: world-to-camera R, t; "
+                    "fx, fy, cx, cy; see hyde_bsdf.render.camera): the sensors of the one --scene (the sample only)")
+    ap.add_argument("--light", default=None, help="--maps with --camera: light JSON (point positions or directional "
+                    "towards_light, optional polarizer/retarder); one scene per light, --reference light-major")
+    ap.add_argument("--channel", default="Y", help="--maps: the colour channel of multi-channel references (default "
+                    "Y, the luminance of R, G, B; or a channel suffix such as R or 550nm)")
     ap.add_argument("--sensor", type=int, default=0, help="index of the sensor of each --scene (default 0)")
     ap.add_argument("--target", default=None, help="key prefix of the BSDF to recover when the scene has "
                     "several, e.g. sphere.bsdf (mi.traverse names)")
@@ -134,7 +141,14 @@ def _check_args(args):
     if not maps and (args.regularizer or args.weight or args.mask):
         raise UsageError("--regularizer, --weight and --mask need --maps (they act on texture maps)")
     scenes, refs, masks = args.scene or [], args.reference or [], args.mask or []
-    if refs and len(refs) != max(1, len(scenes)):
+    if (args.camera is None) != (args.light is None):
+        raise UsageError("--camera and --light go together (the calibrated sensors and the lights)")
+    if args.camera and not (maps and len(scenes) == 1 and refs and not args.preset):
+        raise UsageError("--camera/--light need --maps, one --scene (the sample: shapes, BSDF, integrator) and the "
+                         "--reference files, light-major")
+    for path in [p for p in (args.camera, args.light) if p]:
+        check_input(path, "--camera/--light file", stdin=False)
+    if refs and len(refs) != max(1, len(scenes)) and not args.camera:
         raise UsageError(f"give one --reference per --scene: {len(scenes)} --scene, {len(refs)} --reference")
     if maps and scenes and not refs:
         raise UsageError("--maps with --scene needs a --reference per scene (the truth maps of a user scene "
@@ -201,6 +215,45 @@ def _read_reference(path, width, height, what="--reference"):
     with user_input():
         check_reference_scale(ref, f"{what} {str(path)!r}")
     return ref
+
+
+def _camera_observation(scene, args, path, width, height, mask):
+    """The observation of a user --reference: any camera Stokes EXR (measured components, sigma, mask;
+    :func:`hyde_bsdf.inverse.camera_data.camera_observation`), checked against the film size."""
+    from hyde_bsdf.inverse.camera_data import camera_observation
+
+    o = camera_observation(scene, path, sensor=args.sensor, mask=None, channel=args.channel)
+    h, w = o.reference.shape[1:]
+    if (w, h) != (width, height):
+        raise UsageError(f"--reference {shorten(str(path))} is {w}x{h} pixels but the scene's film is "
+                         f"{width}x{height}: render the reference with the same scene and film")
+    with user_input():
+        check_reference_scale(o.reference, f"--reference {shorten(str(path))}")
+    if mask is not None:
+        o.mask = o.mask & mask
+    return o
+
+
+def _calibrated(args, fit):
+    """The observations of --scene SAMPLE --camera --light --reference ... (light-major), checked."""
+    import mitsuba as mi
+
+    from hyde_bsdf.inverse.camera_data import observations_from_files
+
+    observations = observations_from_files(args.scene[0], args.camera, args.light, args.reference,
+                                           spp=args.spp, channel=args.channel)
+    for k, o in enumerate(observations):
+        with user_input(f"--scene {shorten(args.scene[0])}"):
+            map_keys(mi.traverse(o.scene), fit, args.target)
+        H, W = o.reference.shape[1:]
+        check_memory(W, H, args.spp, "--spp or the camera's width/height")
+        with user_input():
+            check_reference_scale(o.reference, f"--reference {shorten(args.reference[k])}")
+        if args.mask:
+            o.mask = o.mask & _read_mask(args.mask[k], (H, W))
+    _log(f"{len(observations)} calibrated picture(s): measured {'+'.join(observations[0].measured)}"
+         f"{', with sigma maps' if observations[0].sigma is not None else ''}")
+    return observations
 
 
 def _read_mask(path, shape):
@@ -367,6 +420,8 @@ def _scene_observations(args, fit):
     import mitsuba as mi
 
     truth = None
+    if args.camera:
+        return _calibrated(args, fit), truth
     if args.scene:
         scenes = _load_map_scenes(args.scene, fit)
     else:
@@ -385,12 +440,12 @@ def _scene_observations(args, fit):
             map_keys(mi.traverse(scene), fit, args.target)
         W, H = scene.sensors()[args.sensor].film().crop_size()
         check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
-        if args.reference:
-            ref = _read_reference(args.reference[i], W, H)
-        else:
-            _log(f"rendering reference {i + 1}/{len(scenes)} ({args.spp_ref} spp)")
-            ref = render_stokes_np(scene, args.sensor, args.spp_ref, seed=args.seed)
         mask = _read_mask(args.mask[i], (H, W)) if args.mask else None
+        if args.reference:
+            observations.append(_camera_observation(scene, args, args.reference[i], W, H, mask))
+            continue
+        _log(f"rendering reference {i + 1}/{len(scenes)} ({args.spp_ref} spp)")
+        ref = render_stokes_np(scene, args.sensor, args.spp_ref, seed=args.seed)
         observations.append(Observation(scene, ref, sensor=args.sensor, mask=mask))
     return observations, truth
 

@@ -16,7 +16,7 @@ from hyde_bsdf.render.polarization import polarization_quantities, tonemap
 __all__ = ["save_polarization_pngs", "save_rgb_png", "polarization_png_paths", "save_png"]
 
 def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "Y",
-                           dolp_mask: float = 0.01) -> dict[str, Path]:
+                           dolp_mask: float = 0.01, charts=None) -> dict[str, Path]:
     """Write the four polarization charts (plus a colour image) as PNGs with colour bars.
 
     Files: ``{stem}_intensity.png`` (S0, inferno on a square-root scale, clipped at the
@@ -24,6 +24,7 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
     ``{stem}_dolp.png`` (viridis, [0, 1]), ``{stem}_aolp.png`` (cyclic ``twilight``,
     [-90, 90] deg, grey where DoLP < ``dolp_mask`` or no light), ``{stem}_docp.png``
     (diverging, symmetric range), and ``{stem}_rgb.png`` (the colour image, sRGB).
+    ``charts``: the names to write (default all five; a linear-only camera's data: intensity, dolp, aolp).
     Returns {name: path}.
     """
     import matplotlib
@@ -38,6 +39,8 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
     paths: dict[str, Path] = {}
 
     def chart(name, data, cmap, vmin, vmax, cbar_label, heading, gamma=None):
+        if charts is not None and name not in charts:
+            return
         paths[name] = _chart(Path(f"{stem}_{name}.png"), data, cmap, vmin, vmax, cbar_label, prefix + heading, gamma)
 
     inten = q["intensity"]
@@ -58,7 +61,8 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
     chart("docp", np.ma.masked_where(~valid, docp), "RdBu_r", -lim, lim, "DoCP = S3 / S0",
           "degree of circular polarization")
 
-    paths["rgb"] = save_rgb_png(stokes.get("RGB", stokes["S0"]), Path(f"{stem}_rgb.png"), title)
+    if charts is None or "rgb" in charts:
+        paths["rgb"] = save_rgb_png(stokes.get("RGB", stokes["S0"]), Path(f"{stem}_rgb.png"), title)
     return paths
 
 

@@ -10,6 +10,8 @@ It uses the renderer and produces parameter maps, so it sits right of ``render``
 ``maps``          per-texel maps (:func:`invert_maps`): set-up, loss, step, update, uncertainty
 ``uncertainty``   per-texel standard errors (Gauss-Newton information, forward-mode AD), warnings
 ``memory``        the memory estimate of a differentiable render, checked before an inversion
+``analyzer``      raw analyzer frames / DoFP mosaics -> Stokes images with propagated sigma, the camera noise
+``camera_data``   Stokes inputs as cameras give them (measured components, sigma, masks), calibrated rigs
 
 Every public name of these modules is importable from ``hyde_bsdf.inverse`` itself.
 
@@ -44,6 +46,7 @@ Texture mode::
                      [--fit alpha[,eta,k][,specular_reflectance]] [--start alpha=0.3,eta=1.6]
                      [--regularizer tv|l2 --weight 0.1] [--no-uncertainty]
                      [--iterations 100] [--spp 4] [--spp-ref 64] [--res 80] [--sensor 0] [-o OUTDIR]
+    hyde-bsdf invert --maps --scene SAMPLE.xml --camera CAMERA.json --light LIGHT.json --reference R.exr ...
 
 writes OUTDIR/invert_maps_history.csv, OUTDIR/NAME.npy and NAME.exr per fitted map (rows along
 v; load the EXR as a ``bitmap`` texture with ``raw`` true and ``filter_type`` nearest; NaN where no
@@ -69,12 +72,20 @@ from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT,
                                             example_maps, film_channels, map_keys, plane_scene_dict,
                                             pixel_texels, render_stokes, render_stokes_np,
                                             texel_coverage)
+from hyde_bsdf.inverse.analyzer import (CameraNoise, StokesEstimate, analysis_matrix, retarder_mueller,
+                                        simulate_capture, simulate_frames, simulate_mosaic, stokes_from_frames,
+                                        stokes_from_mosaic, stokes_sigma, write_stokes_estimate)
+from hyde_bsdf.inverse.camera_data import (calibrated_observations, camera_observation, camera_reference,
+                                           observations_from_files)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, VARIANT, InversionResult,
                                       check_gradients, finite_difference_gradient, invert, trajectory_converged, load_scene, loss_and_gradient,
                                       parameter_keys, prepare, render_reference, scene_dict,
                                       write_history)
 
-__all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
+__all__ = ["CameraNoise", "StokesEstimate", "analysis_matrix", "retarder_mueller", "simulate_capture",
+           "simulate_frames", "simulate_mosaic", "stokes_from_frames", "stokes_from_mosaic", "stokes_sigma",
+           "write_stokes_estimate", "calibrated_observations", "camera_observation", "camera_reference",
+           "observations_from_files", "VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
            "parameter_keys", "stokes_images", "channel_names", "interior_mask", "StokesLoss", "REFERENCE_RANGE",
            "check_reference_scale", "render_reference",
            "InversionResult", "invert", "check_gradients", "loss_and_gradient", "finite_difference_gradient",

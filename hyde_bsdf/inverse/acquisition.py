@@ -65,6 +65,10 @@ Presets (:func:`design_acquisition`): ``"dielectric"`` -- five mirror pairs at b
 pairs behind a polarizer at 45 deg, circular light (polarizer 0 deg + quarter-wave retarder at 45
 deg) at beta = 50 and 65 deg, and the off-specular pairs unpolarized (9 pictures);
 ``polarizer_angles`` adds more states (e.g. (0, 45, 90)), ``retarder`` sets the circular states.
+``camera="linear"`` (a linear polarization camera: S0, S1, S2 only) drops the row M3x from every
+configuration's elements; its metal preset puts circular light on every mirror pair besides the 45 deg
+polarizer (12 pictures), so that S (M23) still enters through S2; :func:`predicted_stderr` takes the
+camera (docs/tutorials/capture.md tabulates what linear-only loses per parameter).
 
 Scenes (:func:`acquisition_scene_dict`): Mitsuba's ``polarizer`` and ``retarder`` plugins are
 sheets (rectangles) perpendicular to the light, 100 and 90 units out along it, outside every
@@ -72,7 +76,7 @@ camera's view (the cameras sit 30 units from the sample).  A point light behind 
 renders black with ``stokes`` + ``path`` (its shadow rays are blocked), so a configuration with a
 sheet uses ``stokes`` + ``volpath`` (which transmits through them); the others use ``path``.
 
-May import: ``hyde_bsdf.inverse.observations``, ``hyde_bsdf.model`` (the Fisher prediction) and the
+May import: ``hyde_bsdf.inverse.observations``, ``hyde_bsdf.inverse.analyzer``, ``hyde_bsdf.model`` (the Fisher prediction) and the
 standard library.
 """
 from __future__ import annotations
@@ -82,9 +86,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyde_bsdf.inverse.analyzer import retarder_mueller, simulate_capture
+
 __all__ = ["Configuration", "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition",
            "PRESETS",
-           "MIRROR_FACET_ANGLES", "OFF_SPECULAR", "METAL_RETARDER_FACET_ANGLES", "predicted_stderr"]
+           "MIRROR_FACET_ANGLES", "OFF_SPECULAR", "CAMERAS", "METAL_RETARDER_FACET_ANGLES", "predicted_stderr"]
 
 #: facet angles (deg) of the presets' mirror pairs
 MIRROR_FACET_ANGLES = (10.0, 25.0, 40.0, 55.0, 70.0)
@@ -92,6 +98,11 @@ MIRROR_FACET_ANGLES = (10.0, 25.0, 40.0, 55.0, 70.0)
 #: sides (their half-vectors tilt by 10 and 12.5 deg from the normal)
 OFF_SPECULAR = ((35.0, 15.0), (35.0, 60.0))
 PRESETS = ("dielectric", "metal")
+#: what the camera measures: ``"stokes"`` S0..S3 (a full-Stokes camera), ``"linear"`` S0..S2 (a linear
+#: polarization camera: DoFP or rotating analyzer without retarder)
+CAMERAS = ("stokes", "linear")
+#: the Stokes components each camera measures (indices)
+CAMERA_COMPONENTS = {"stokes": (0, 1, 2, 3), "linear": (0, 1, 2)}
 #: facet angles (deg) of the ``"metal"`` preset's circular states (polarizer 0 deg + quarter-wave
 #: retarder at 45 deg), where a metal's retardance carries n best for the pictures' cost
 METAL_RETARDER_FACET_ANGLES = (50.0, 65.0)
@@ -128,6 +139,14 @@ class Configuration:
     @property
     def elements(self) -> tuple:
         """The Mueller elements a Stokes camera measures in this configuration (module table)."""
+        return self._elements()
+
+    def elements_for(self, camera: str = "stokes") -> tuple:
+        """The Mueller elements ``camera`` ("stokes" or "linear") measures: a linear camera misses the
+        output's S3, i.e. the row M3x."""
+        return tuple(e for e in self._elements() if camera == "stokes" or e[1] != "3")
+
+    def _elements(self) -> tuple:
         if self.polarizer is None:
             return ("M00", "M10", "M20", "M30")
         if self.retarder is not None:
@@ -150,6 +169,12 @@ class Acquisition:
 
     configurations: list = field(default_factory=list)
     preset: str = ""
+    camera: str = "stokes"             # what the camera measures (:data:`CAMERAS`)
+
+    @property
+    def measured(self) -> tuple:
+        """The Stokes component names the camera measures."""
+        return tuple(f"S{i}" for i in CAMERA_COMPONENTS[self.camera])
 
     def facet_angles(self) -> np.ndarray:
         return np.array([c.facet_angle for c in self.configurations])
@@ -162,12 +187,13 @@ class Acquisition:
         rows = [f"{'#':>2}  {'configuration':48s} {'beta':>6} {'tilt':>6}  elements"]
         for i, c in enumerate(self.configurations):
             rows.append(f"{i:2d}  {c.label():48s} {c.facet_angle:6.1f} {c.half_vector_tilt:6.1f}  "
-                        + " ".join(c.elements))
+                        + " ".join(c.elements_for(self.camera)))
         return "\n".join(rows)
 
 
 def design_acquisition(preset: str = "dielectric", *, facet_angles=MIRROR_FACET_ANGLES,
-                       off_specular=OFF_SPECULAR, polarizer_angles=None, retarder=None) -> Acquisition:
+                       off_specular=OFF_SPECULAR, polarizer_angles=None, retarder=None,
+                       camera: str = "stokes") -> Acquisition:
     """The observation set for a material sample (see the module docstring for what each
     configuration constrains).
 
@@ -179,10 +205,17 @@ def design_acquisition(preset: str = "dielectric", *, facet_angles=MIRROR_FACET_
     the tuple means unpolarized); ``retarder``: circular states -- a polarizer at 0 deg followed by a
     quarter-wave retarder at 45 deg (M23, M33) -- at these facet angles (deg; ``True``: at every
     mirror pair, ``False`` or ``()``: none; default: none for "dielectric",
-    :data:`METAL_RETARDER_FACET_ANGLES` for "metal").
+    :data:`METAL_RETARDER_FACET_ANGLES` for "metal", and at every mirror pair for "metal" with a
+    linear camera).  ``camera``: what the camera measures, ``"stokes"`` (S0..S3) or ``"linear"``
+    (S0..S2).  A linear camera does not see the output's S3, so the 45 deg state gives C (M22) but
+    not S (M32); circular light brings S back through S2 (M23): the linear metal preset puts circular
+    light (polarizer 0 deg + quarter-wave retarder at 45 deg) on every mirror pair, besides the 45 deg
+    polarizer.
     """
     if preset not in PRESETS:
         raise ValueError(f"preset must be one of {PRESETS}, got {preset!r}")
+    if camera not in CAMERAS:
+        raise ValueError(f"camera must be one of {CAMERAS}, got {camera!r}")
     betas = [float(b) for b in facet_angles]
     if not betas or not all(0.0 < b < 89.0 for b in betas):
         raise ValueError(f"facet_angles must be angles in (0, 89) deg, got {tuple(facet_angles)}")
@@ -192,7 +225,7 @@ def design_acquisition(preset: str = "dielectric", *, facet_angles=MIRROR_FACET_
         if a is not None and not math.isfinite(float(a)):
             raise ValueError(f"polarizer_angles must be finite angles in deg or None, got {polarizer_angles}")
     if retarder is None:
-        retarder = () if preset == "dielectric" else METAL_RETARDER_FACET_ANGLES
+        retarder = () if preset == "dielectric" else (True if camera == "linear" else METAL_RETARDER_FACET_ANGLES)
     circular = list(betas) if retarder is True else [] if retarder is False else [float(b) for b in retarder]
     if not all(0.0 < b < 89.0 for b in circular):
         raise ValueError(f"retarder facet angles must be angles in (0, 89) deg, got {tuple(circular)}")
@@ -206,7 +239,7 @@ def design_acquisition(preset: str = "dielectric", *, facet_angles=MIRROR_FACET_
         if not (0.0 <= tv < 89.0 and 0.0 <= tl < 89.0):
             raise ValueError(f"off_specular polar angles must be in [0, 89) deg, got {(tv, tl)}")
         configs.append(Configuration((float(tv), 0.0), (float(tl), 180.0)))
-    return Acquisition(configs, preset)
+    return Acquisition(configs, preset, camera)
 
 
 def fixed_rig_acquisition(preset: str = "dielectric", *, facet_angle: float = 50.0,
@@ -240,21 +273,19 @@ def fixed_rig_acquisition(preset: str = "dielectric", *, facet_angle: float = 50
 
 def _input_stokes(config: Configuration) -> np.ndarray:
     """The light's Stokes vector after the configuration's polarizer and retarder (unit S0 before
-    them; an ideal polarizer passes half of unpolarized light, a quarter-wave retarder with its fast
-    axis at angle t has the Mueller matrix below)."""
+    them; an ideal polarizer passes half of unpolarized light; the retarder is a quarter-wave plate,
+    :func:`~hyde_bsdf.inverse.analyzer.retarder_mueller`)."""
     if config.polarizer is None:
         return np.array([1.0, 0.0, 0.0, 0.0])
     a = math.radians(2.0 * config.polarizer)
     s = np.array([1.0, math.cos(a), math.sin(a), 0.0]) / 2.0
     if config.retarder is not None:
-        r = math.radians(2.0 * config.retarder)
-        c, sn = math.cos(r), math.sin(r)
-        s = np.array([[1, 0, 0, 0], [0, c * c, c * sn, -sn], [0, c * sn, sn * sn, c], [0, sn, -c, 0]]) @ s
+        s = retarder_mueller(config.retarder, 90.0) @ s
     return s
 
 
 def predicted_stderr(acquisition: Acquisition, values: dict, *, fit=("alpha", "eta", "k"), noise: float = 0.01,
-                     pixels_per_texel: float = 16.0, diffuse: str = "paper") -> dict:
+                     pixels_per_texel: float = 16.0, diffuse: str = "paper", camera: str | None = None) -> dict:
     """Relative standard errors that ``acquisition`` would give a texel, from the Fisher information
     of the NumPy evaluator (:func:`hyde_bsdf.pbrdf`, an independent derivation of the plugin) -- in
     milliseconds, before rendering anything: the tool for designing an acquisition.
@@ -262,11 +293,13 @@ def predicted_stderr(acquisition: Acquisition, values: dict, *, fit=("alpha", "e
     ``values``: the texel's ``alpha`` (Beckmann), ``eta``, ``k`` and ``specular_reflectance`` (numbers
     or equal-shaped arrays: one prediction per entry); ``fit``: the parameters fitted (the others
     held at their values); ``noise``: the camera's noise standard deviation on each Stokes component,
-    as a fraction of the texel's S0 in each picture; ``pixels_per_texel``: pixels covering a texel
+    as a fraction of the texel's S0 in each picture (one number, or 4 for S0..S3: an ideal DoFP camera
+    limited by read noise has sigma(S1) = sigma(S2) = sqrt(2) sigma(S0)); ``pixels_per_texel``: pixels covering a texel
     seen along the normal.  A picture with view polar angle theta_v sees the texel foreshortened,
     and only the pixels lying wholly inside it count (as in :mod:`hyde_bsdf.inverse.uncertainty`):
     (side - 1) (side cos theta_v - 1) of them, side = sqrt(pixels_per_texel).  Every configuration
-    is taken as a mirror or off-specular pair in the plane of incidence (the presets').  Returns
+    is taken as a mirror or off-specular pair in the plane of incidence (the presets').  ``camera``:
+    "stokes" or "linear" (default: the acquisition's), the components that enter the information.  Returns
     name -> relative standard error (inf where the information is singular).  Agrees with the
     rendered information of :func:`~hyde_bsdf.inverse.uncertainty.information_blocks` to ~6 %
     (tests/test_inverse_capture.py)."""
@@ -276,8 +309,13 @@ def predicted_stderr(acquisition: Acquisition, values: dict, *, fit=("alpha", "e
     for n in fit:
         if n not in names:
             raise ValueError(f"fit names must be from {names}, got {n!r}")
-    if not (noise > 0 and pixels_per_texel > 0):
-        raise ValueError(f"noise and pixels_per_texel must be > 0, got {noise}, {pixels_per_texel}")
+    camera = acquisition.camera if camera is None else camera
+    if camera not in CAMERAS:
+        raise ValueError(f"camera must be one of {CAMERAS}, got {camera!r}")
+    rows = list(CAMERA_COMPONENTS[camera])
+    noise_c = np.broadcast_to(np.asarray(noise, np.float64), (4,)) if np.size(noise) in (1, 4) else None
+    if noise_c is None or not (np.all(noise_c > 0) and pixels_per_texel > 0):
+        raise ValueError(f"noise (a number or 4, S0..S3) and pixels_per_texel must be > 0, got {noise}, {pixels_per_texel}")
     if "alpha" not in values or "eta" not in values:
         raise ValueError(f"values must give alpha and eta, got {sorted(values)}")
     v = {n: np.asarray(values.get(n, {"k": 0.0, "specular_reflectance": 1.0}.get(n)), np.float64) for n in names}
@@ -304,8 +342,8 @@ def predicted_stderr(acquisition: Acquisition, values: dict, *, fit=("alpha", "e
                 up[n] *= math.exp(h)
                 dn[n] *= math.exp(-h)
                 J.append((stokes(cfg, *up.values()) - stokes(cfg, *dn.values())) / (2.0 * h))
-            J = np.array(J)
-            info += count * J @ J.T / (noise * S[0]) ** 2
+            J = np.array(J)[:, rows]
+            info += count * (J / (noise_c[rows] * S[0]) ** 2) @ J.T
         ev = np.linalg.eigvalsh(info)
         if ev.min() > 1e-12 * max(ev.max(), 1e-300):
             out[t] = np.sqrt(np.diag(np.linalg.inv(info)))
@@ -386,7 +424,7 @@ def acquisition_scene_dict(config: Configuration, material: dict, *, bsdf: str =
 
 def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *, res: int = 48, spp: int = 4,
                            spp_ref: int = 256, noise: float = 0.0, seed: int = 0, bsdf: str = "hyde",
-                           **scene_kwargs) -> list:
+                           camera_noise=None, signal: float = 1000.0, **scene_kwargs) -> list:
     """The observation set of ``acquisition`` for a synthetic sample: per configuration, a scene
     whose material holds ``start`` (the fit's start values; parameters absent there take
     ``truth``'s) and a reference rendered from ``truth`` at ``spp_ref`` samples, plus Gaussian
@@ -394,6 +432,12 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
     component (a camera's read noise; seeded by ``seed``).  Returns a list of
     :class:`~hyde_bsdf.inverse.observations.Observation`, each carrying the noise standard
     deviation it was given in ``.noise_std`` (0 when ``noise`` is 0).
+
+    ``camera_noise`` (a :class:`~hyde_bsdf.inverse.analyzer.CameraNoise`, instead of ``noise``): the
+    reference goes through the acquisition's camera instead -- raw frames at ``signal`` DN (median lit
+    S0) with that noise, a DoFP mosaic for a ``"linear"`` camera or six analyzer frames for a
+    ``"stokes"`` one, and the least-squares Stokes step (:func:`~hyde_bsdf.inverse.analyzer.simulate_capture`);
+    the observation then carries the step's sigma maps and the measured components.
     """
     import mitsuba as mi
 
@@ -406,7 +450,12 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
         ref = render_stokes_np(ref_scene, 0, spp_ref, seed=seed + i)
         del ref_scene
         sigma = 0.0
-        if noise > 0:
+        sig_maps = None
+        if camera_noise is not None:
+            est = simulate_capture(ref, camera_noise, rng, camera=acquisition.camera, signal=signal)
+            ref = np.array([est.stokes.get(c, np.zeros(ref.shape[1:])) for c in ("S0", "S1", "S2", "S3")])
+            sig_maps = np.array([est.sigma.get(c, np.zeros(ref.shape[1:])) for c in ("S0", "S1", "S2", "S3")])
+        elif noise > 0:
             lit = ref[0] > 0
             sigma = float(noise * np.median(ref[0][lit])) if lit.any() else 0.0
             ref = ref + rng.normal(0.0, sigma, ref.shape) * lit[None]
@@ -414,7 +463,7 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
         material = {n: (np.full(np.shape(truth[n]), float(start[n])) if n in start and np.ndim(start[n]) == 0
                         and np.ndim(truth[n]) == 2 else start.get(n, truth[n])) for n in truth}
         scene = mi.load_dict(acquisition_scene_dict(config, material, bsdf=bsdf, res=res, spp=spp, **scene_kwargs))
-        o = Observation(scene, ref)
+        o = Observation(scene, ref, measured=acquisition.measured, sigma=sig_maps)
         o.noise_std = sigma
         observations.append(o)
     return observations

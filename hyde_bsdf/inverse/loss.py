@@ -14,6 +14,18 @@ compares all of them in the same radiometric units.  With unpolarized light
 sources one reflection gives S3 = 0 (Eq. 11: the facet Mueller matrix maps an
 unpolarized Stokes vector to (M00, M01, 0, 0)); the S3 term then only has to
 stay zero.
+
+Camera data (``measured``, ``sigma``).  A camera measures some of the components: a linear
+polarization camera S0, S1, S2 only.  ``measured`` names them; the others are not in the loss (their
+reference values are ignored).  With per-pixel noise ``sigma`` (4, H, W) or (4,) -- standard
+deviations of the reference's components, from :mod:`hyde_bsdf.inverse.analyzer` or a noise model --
+each term is weighted by its inverse variance (the maximum-likelihood weights) and the loss is::
+
+    L = sum_{c measured} <m (Sc - Rc)^2 / sigma_c^2>  /  <m R0^2 / sigma_0^2>
+
+(1 = a black rendering, as without ``sigma``); pixels with sigma = 0 or non-finite are masked out.
+:attr:`StokesLoss.weights_np` gives the per-pixel, per-component weights either way (the uncertainty
+uses them).
 """
 from __future__ import annotations
 
@@ -78,10 +90,36 @@ def interior_mask(s0) -> np.ndarray:
     return mask
 
 
-class StokesLoss:
-    """The loss of the module docstring against reference luminance Stokes images ``ref`` (4, H, W)."""
+STOKES = ("S0", "S1", "S2", "S3")
 
-    def __init__(self, ref, mask=None, components: str = "stokes"):
+
+def _measured_indices(measured) -> tuple:
+    names = tuple(measured)
+    bad = [m for m in names if m not in STOKES]
+    if bad or "S0" not in names:
+        raise ValueError(f"measured must name S0 and any of S1, S2, S3; got {list(names)}")
+    return tuple(i for i, n in enumerate(STOKES) if n in names)
+
+
+def _sigma_maps(sigma, shape) -> np.ndarray:
+    """sigma (4,) or (4, H, W) as (4, H, W) float64; ValueError naming the problem."""
+    sig = np.asarray(sigma, np.float64)
+    if sig.shape == (4,):
+        sig = np.broadcast_to(sig[:, None, None], (4,) + tuple(shape))
+    if sig.shape != (4,) + tuple(shape):
+        raise ValueError(f"sigma must have shape (4,) or (4, {shape[0]}, {shape[1]}), got {sig.shape}")
+    if (sig < 0).any():
+        raise ValueError("sigma has negative values; it is a standard deviation (>= 0)")
+    return sig
+
+
+class StokesLoss:
+    """The loss of the module docstring against reference luminance Stokes images ``ref`` (4, H, W).
+
+    ``measured``: the components the camera measured (default all four); ``sigma``: their noise
+    standard deviations (4,) or (4, H, W) (None: the unweighted loss)."""
+
+    def __init__(self, ref, mask=None, components: str = "stokes", measured=STOKES, sigma=None):
         import mitsuba as mi
 
         if components not in ("stokes", "s0"):
@@ -90,47 +128,61 @@ class StokesLoss:
         check_reference_scale(ref)
         if mask is None:
             mask = interior_mask(ref[0])
+        mask = np.asarray(mask, bool)
+        active = _measured_indices(measured) if components == "stokes" else (0,)
+        if sigma is not None:
+            sig = _sigma_maps(sigma, ref.shape[1:])
+            ok = np.isfinite(sig) & (sig > 0)
+            mask = mask & np.all(ok[list(active)], axis=0)
         if not mask.any():
             raise ValueError("the reference image has no lit interior pixel: nothing to fit")
-        self.components = components
+        self.components, self.measured, self.active = components, tuple(STOKES[i] for i in active), active
         self.mask_np = mask
         m = mask.astype(np.float64)
         self.norm0 = float((m * ref[0] ** 2).mean())
-        self.normp = float((m * (ref[1:] ** 2).sum(0)).mean())
-        if self.normp <= 0 and components == "stokes":
+        self.normp = float((m * (ref[list(active[1:])] ** 2).sum(0)).mean()) if len(active) > 1 else 0.0
+        if self.normp <= 0 and components == "stokes" and len(active) > 1:
             raise ValueError("the reference has no polarization (S1 = S2 = S3 = 0): use components='s0'")
+        w = np.zeros((4,) + ref.shape[1:])
+        if sigma is None:
+            w[0] = m / self.norm0
+            for c in active[1:]:
+                w[c] = m / self.normp
+        else:
+            inv_var = np.where(ok, 1.0 / np.where(ok, sig, 1.0) ** 2, 0.0)
+            norm = float((m * inv_var[0] * ref[0] ** 2).mean())
+            for c in active:
+                w[c] = m * inv_var[c] / norm
+        self.weights_np = w
+        self.sigma_np = None if sigma is None else sig
         self.ref = [mi.TensorXf(r.astype(np.float32)) for r in ref]
-        self.mask = mi.TensorXf(m.astype(np.float32))
+        self.weights = [mi.TensorXf(x.astype(np.float32)) for x in w]
         self.ref_np = ref
 
     def __call__(self, S, tensors=None):
         """Differentiable loss of luminance Stokes images ``S`` (list of 4 tensors).
 
-        ``tensors``: this loss's own (reference list, mask) (:attr:`tensors`) passed in explicitly,
+        ``tensors``: this loss's own (reference list, weight list) (:attr:`tensors`) passed in explicitly,
         as a ``dr.freeze`` function needs every array it reads among its inputs.
         """
         import drjit as dr
 
-        ref, mask = self.tensors if tensors is None else tensors
-        loss = dr.mean(mask * dr.square(S[0] - ref[0]), axis=None) / self.norm0
-        if self.components == "stokes":
-            pol = sum(dr.square(S[c] - ref[c]) for c in (1, 2, 3))
-            loss = loss + dr.mean(mask * pol, axis=None) / self.normp
+        ref, w = self.tensors if tensors is None else tensors
+        loss = dr.mean(w[0] * dr.square(S[0] - ref[0]), axis=None)
+        if len(self.active) > 1:
+            pol = sum(w[c] * dr.square(S[c] - ref[c]) for c in self.active[1:])
+            loss = loss + dr.mean(pol, axis=None)
         return loss
 
     @property
     def tensors(self):
-        """(reference tensors S0..S3, mask tensor) as Dr.Jit arrays."""
-        return self.ref, self.mask
+        """(reference tensors S0..S3, per-component weight tensors) as Dr.Jit arrays."""
+        return self.ref, self.weights
 
     def numpy(self, S) -> float:
         """The same loss in float64 from NumPy images (4, H, W) (finite differences)."""
         S = np.asarray(S, dtype=np.float64)
-        m = self.mask_np.astype(np.float64)
-        loss = (m * (S[0] - self.ref_np[0]) ** 2).mean() / self.norm0
-        if self.components == "stokes":
-            loss += (m * ((S[1:] - self.ref_np[1:]) ** 2).sum(0)).mean() / self.normp
-        return float(loss)
+        return float(sum((self.weights_np[c] * (S[c] - self.ref_np[c]) ** 2).mean() for c in self.active))
 
 
 

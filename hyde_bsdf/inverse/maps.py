@@ -136,7 +136,8 @@ class MapProblem:
                                  f"film is {W}x{H}")
             if not np.isfinite(ref).all():
                 raise ValueError("reference contains NaN or infinite pixels")
-        losses = [StokesLoss(o.reference, mask=_obs_mask(o), components=components) for o in observations]
+        losses = [StokesLoss(o.reference, mask=_obs_mask(o), components=components, measured=o.measured,
+                             sigma=o.sigma) for o in observations]
         wsum = float(sum(o.weight for o in observations))
         if not wsum > 0:
             raise ValueError("the observations' weights must sum to > 0")

@@ -86,7 +86,12 @@ class Observation:
     ``reference``: luminance S0..S3, shape (4, H, W) (:func:`render_stokes_np` or a Stokes EXR
     through ``Y_WEIGHTS``).  ``mask``: bool (H, W) of the pixels the loss uses (default
     :func:`interior_mask` of S0: lit pixels away from silhouettes).  ``weight``: this image's
-    share of the data loss.  Several observations may share a scene (one per sensor) or use
+    share of the data loss.  ``measured``: the Stokes components the camera measured (a linear
+    polarization camera: ("S0", "S1", "S2")); the others are not in the loss and their reference
+    values are ignored.  ``sigma``: the reference's noise standard deviation per component, (4,) or
+    (4, H, W) (e.g. from :mod:`hyde_bsdf.inverse.analyzer`): the loss's weights (1 / sigma^2) and the
+    noise of the standard errors (:class:`~hyde_bsdf.inverse.loss.StokesLoss`); :func:`camera_observation`
+    builds one from camera data.  Several observations may share a scene (one per sensor) or use
     different scenes (e.g. one per light: one light per render avoids the light-selection noise
     of a scene with several lights); the fitted textures are written into every scene.
     """
@@ -96,6 +101,8 @@ class Observation:
     sensor: int = 0
     mask: np.ndarray | None = None
     weight: float = 1.0
+    measured: tuple = ("S0", "S1", "S2", "S3")
+    sigma: np.ndarray | None = None
 
 
 def texel_coverage(obs: Observation, shape, prefix: str | None = None, sub: int = 4) -> np.ndarray:

@@ -142,12 +142,8 @@ def stokes_tangents(scene, params, keys: dict, names, sensor: int, spp: int, see
 
 
 def _weights(loss, obs_weight: float):
-    """Per component (4,) weight maps of a StokesLoss: w = obs_weight * mask / (pixels * norm)."""
-    m = loss.mask_np.astype(np.float64) / loss.mask_np.size
-    w = [obs_weight * m / loss.norm0]
-    for _ in range(3):
-        w.append(obs_weight * m / loss.normp if loss.components == "stokes" else 0.0 * m)
-    return np.array(w)
+    """Per component (4,) weight maps of a StokesLoss: w = obs_weight * (the loss's weights) / pixels."""
+    return obs_weight * loss.weights_np / loss.mask_np.size
 
 
 def information_blocks(problem, names, *, spp: int = 16, seed: int = 0, noise=None, weighting: str = "fisher"):
@@ -176,7 +172,7 @@ def pixel_records(problem, names, *, spp: int = 16, seed: int = 0, noise=None) -
     a dict with ``t`` (texel of each pixel), ``J`` (P, 4, pixels) = dS/dlog(theta_t), ``r`` (4, pixels)
     = S - R, ``w`` (4, pixels) the loss's weights, ``mc_var`` (4,) the render's sampling variance,
     ``ref_var`` (4,) the reference's variance when ``noise`` gives it (else None: estimated from the
-    residuals), ``comps`` (4 for the Stokes loss, 1 for S0), ``obs_weight``, ``s0_power`` (mean S0^2).
+    residuals), ``comps`` (the indices of the components in the loss), ``obs_weight``, ``s0_power`` (mean S0^2).
     None for an observation with no such pixel."""
     rows, cols = problem.map_shape
     T, P = rows * cols, len(names)
@@ -204,10 +200,12 @@ def pixel_records(problem, names, *, spp: int = 16, seed: int = 0, noise=None) -
         if noise is not None:
             nj = noise if np.ndim(noise) == 0 else noise[j]          # one number for all, or one per observation
             ref_var = np.broadcast_to(np.asarray(nj, np.float64) ** 2, (4,)).copy()
+        elif loss.sigma_np is not None:                              # the reference's own sigma maps
+            ref_var = loss.sigma_np.reshape(4, H * W)[:, p_i] ** 2
         records.append(dict(t=t_i, J=J.reshape(P, 4, H * W)[:, :, p_i], r=r.reshape(4, H * W)[:, p_i],
                             w=_weights(loss, problem.weights[j]).reshape(4, H * W)[:, p_i],
                             mc_var=np.mean((Sf - S2f) ** 2, axis=1) / 2.0, ref_var=ref_var,
-                            comps=4 if loss.components == "stokes" else 1, obs_weight=problem.weights[j],
+                            comps=loss.active, obs_weight=problem.weights[j],
                             s0_power=float(np.mean(Sf[0] ** 2))))
     return records
 
@@ -234,20 +232,21 @@ def accumulate_blocks(records, map_shape, P: int, *, weighting: str = "fisher", 
             rf = rf + np.einsum("pcn,np->cn", Jf, np.asarray(step)[t_i])
         n_pix, comps, mc_var = t_i.size, rec["comps"], rec["mc_var"]
         if rec["ref_var"] is not None:
-            ref_var = rec["ref_var"]
+            ref_var = rec["ref_var"]           # (4,) per component, or (4, pixels) from sigma maps
         else:
             ref_var = np.maximum(np.mean(rf ** 2, axis=1) - mc_var, 0.0)
-        noise_out.append(np.sqrt(ref_var))
-        total_var = ref_var + mc_var           # the polishing render's own noise enters the estimate
-        n_data += n_pix * comps
+        noise_out.append(np.sqrt(ref_var if np.ndim(ref_var) == 1 else np.mean(ref_var, axis=1)))
+        # the polishing render's own noise enters the estimate; (4, pixels)
+        total_var = np.broadcast_to(np.reshape(ref_var, (4, -1)), (4, n_pix)) + np.asarray(mc_var)[:, None]
+        n_data += n_pix * len(comps)
         if weighting == "fisher":
             # 1 / variance per component (floored far below any camera's noise: a noiseless synthetic
             # component must not divide by zero)
             floor = 1e-12 * max(rec["s0_power"], 1e-30)
-            wf = (1.0 if rec["obs_weight"] > 0 else 0.0) / np.maximum(total_var, floor)[:, None] * np.ones((4, n_pix))
+            wf = (1.0 if rec["obs_weight"] > 0 else 0.0) / np.maximum(total_var, floor)
         else:
             wf = rec["w"]
-        for c in range(comps):
+        for c in comps:
             jc = Jf[:, c, :]                              # (P, pixels): d S_i / d log theta_t
             outer = np.einsum("ak,bk->kab", jc, jc)
             np.add.at(A, t_i, wf[c][:, None, None] * outer)

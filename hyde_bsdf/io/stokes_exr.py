@@ -20,6 +20,11 @@ The EXR layout is one float32 channel per component and colour:
 ``stokes`` integrator gives its channels, so ``mi.Bitmap(path).split()`` reads
 our files and we read Mitsuba's.
 
+Camera Stokes data (:func:`write_camera_stokes`, :func:`read_camera_stokes`): any subset of S0..S3
+containing S0, mono (``S0, S1, S2``) or any colour/spectral suffixes (``S0.R``, ``S0.550nm``), with
+optional standard-deviation layers ``S0_sigma[.R]`` ... and a ``mask`` channel -- what a
+polarization camera's Stokes step gives and ``invert --maps`` reads.
+
 The derived quantities (intensity, DoLP, AoLP, DoCP) are in
 :mod:`hyde_bsdf.render.polarization`; the PNG charts in :mod:`hyde_bsdf.app.pictures`.
 
@@ -42,6 +47,9 @@ __all__ = [
     "exr_channel_names",
     "write_stokes_exr",
     "read_stokes_exr",
+    "camera_channel_names",
+    "write_camera_stokes",
+    "read_camera_stokes",
 ]
 
 STOKES_NAMES = ("S0", "S1", "S2", "S3")
@@ -188,3 +196,104 @@ def read_stokes_exr(path) -> dict:
     return out
 
 
+
+
+# camera Stokes images: any subset of S0..S3, mono or any colour/spectral channels, sigma and mask
+
+#: suffix of the standard-deviation layer of a component: ``S0_sigma.R`` (or ``S0_sigma`` when mono)
+SIGMA_SUFFIX = "_sigma"
+MASK_CHANNEL = "mask"
+
+
+def camera_channel_names(components, colours=()) -> list[str]:
+    """EXR channel names of camera Stokes data: ``S0.R ...`` for colours (R, G, B; or spectral
+    names such as ``550nm``), ``S0, S1, S2`` for mono (``colours`` empty)."""
+    return [f"{c}.{x}" if x else c for c in components for x in (tuple(colours) or ("",))]
+
+
+def write_camera_stokes(path, stokes: dict, sigma: dict | None = None, mask=None, colours=(),
+                        metadata: dict | None = None) -> Path:
+    """Write camera Stokes data to an EXR, atomically: ``stokes``/``sigma`` map component names
+    (S0 and any of S1..S3) to arrays (H, W) (mono, ``colours`` empty) or (H, W, C) with C =
+    len(``colours``); ``mask`` bool (H, W) (1 = usable) as channel ``mask``.  Channels:
+    :func:`camera_channel_names` plus ``S0_sigma[.R]`` ... and ``mask``; ``invert --maps`` and
+    :func:`read_camera_stokes` read it.  Non-finite values are refused."""
+    import OpenEXR
+
+    path = Path(path)
+    if path.suffix.lower() != ".exr":
+        raise UsageError(f"path must end in .exr, got {str(path)!r}")
+    comps = [c for c in STOKES_NAMES if c in stokes]
+    if "S0" not in comps:
+        raise UsageError(f"stokes must hold S0 (and any of S1..S3), got {sorted(stokes)}")
+    colours = tuple(colours)
+    shape = np.shape(stokes["S0"])
+    want = shape[:2] + ((len(colours),) if colours else ())
+    channels: dict[str, np.ndarray] = {}
+    for layer, data in (("", stokes), (SIGMA_SUFFIX, sigma or {})):
+        for c in comps if layer == "" else [c for c in comps if c in data]:
+            arr = np.asarray(data[c], np.float32)
+            if arr.shape != want:
+                raise UsageError(f"{c}{layer} has shape {arr.shape}, expected {want} (colours {list(colours)})")
+            for j, name in enumerate(camera_channel_names([c + layer], colours)):
+                channels[name] = np.ascontiguousarray(arr[..., j] if colours else arr)
+    if mask is not None:
+        channels[MASK_CHANNEL] = np.ascontiguousarray(np.asarray(mask, np.float32).reshape(shape[:2]))
+    bad = [name for name, a in channels.items() if not np.all(np.isfinite(a))]
+    if bad:
+        raise UsageError(f"non-finite values in channel(s) {bad}; refusing to write {path}")
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+              "hyde_bsdf.stokes_basis": "Mitsuba sensor basis: x = image right, y = image up, k = towards the viewer"}
+    for key, value in (metadata or {}).items():
+        header[f"hyde_bsdf.{key}"] = str(value)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(path) as tmp:
+        OpenEXR.File(header, dict(channels)).write(str(tmp))
+        _verify_exr(tmp, channels)
+    return path
+
+
+def _layers(names) -> dict:
+    """{layer: [channel suffixes]} of EXR channel names ``LAYER.SUFFIX`` or plain ``LAYER`` ('')."""
+    out: dict = {}
+    for n in names:
+        layer, _, suffix = n.partition(".")
+        out.setdefault(layer, []).append(suffix)
+    return out
+
+
+def read_camera_stokes(path) -> dict:
+    """Read camera Stokes data from an EXR: Mitsuba's (``S0.R ... S3.B``), plain mono ``S0, S1, S2[, S3]``,
+    any colour or spectral channel suffixes, with optional ``S0_sigma...`` layers and a ``mask``.
+
+    Returns ``{"stokes": {name: (H, W, C)}, "sigma": {name: (H, W, C)}, "mask": (H, W) bool or None,
+    "colours": tuple of suffixes (("",) for mono), "metadata": {...}}`` -- only the components present
+    (the camera's measured ones).  UsageError naming the file when S0 is missing or the components'
+    channel suffixes differ."""
+    import OpenEXR
+
+    path = Path(path)
+    if not path.is_file():
+        raise UsageError(f"{str(path)!r} is not an existing file")
+    try:
+        f = OpenEXR.File(str(path), separate_channels=True)
+        chans = {name: ch.pixels for name, ch in f.channels().items()}
+    except Exception as exc:  # noqa: BLE001 -- any unreadable file is a user's input problem
+        raise UsageError(f"{path}: not a readable OpenEXR file ({type(exc).__name__})") from None
+    layers = _layers(chans)
+    if "S0" not in layers:
+        raise UsageError(f"{path}: no S0 channel (found {sorted(chans)}); a Stokes EXR has S0[.R ...], S1, S2[, S3]")
+    colours = tuple(sorted(layers["S0"], key=lambda x: ("RGB".find(x) if x in "RGB" and x else 9, x)))
+    out: dict = {"stokes": {}, "sigma": {}, "colours": colours}
+    for c in STOKES_NAMES:
+        for key, layer in (("stokes", c), ("sigma", c + SIGMA_SUFFIX)):
+            if layer not in layers:
+                continue
+            if sorted(layers[layer]) != sorted(colours):
+                raise UsageError(f"{path}: {layer} has channels {sorted(layers[layer])} but S0 has {sorted(colours)}")
+            out[key][c] = np.stack([chans[f"{layer}.{x}" if x else layer] for x in colours], axis=-1).astype(np.float64)
+    mask = chans.get(MASK_CHANNEL)
+    out["mask"] = None if mask is None else np.asarray(mask) > 0.5
+    out["metadata"] = {k[len("hyde_bsdf."):]: str(v) for k, v in f.header().items()
+                       if isinstance(k, str) and k.startswith("hyde_bsdf.")}
+    return out
