@@ -6,7 +6,10 @@ orders (roughconductor first, then reversed), ``--blocks`` times; per BSDF the f
 over blocks of the block's median iteration.  Per iteration, from Dr.Jit's kernel history
 (``dr.JitFlag.KernelHistory``): the wall time, the kernels launched, their codegen + backend
 (compile or cache lookup) time, their execution time, and the **host remainder** = wall - codegen -
-execution (Python tracing, Mitsuba's C++ host work, synchronisation).
+execution (Python tracing, Mitsuba's C++ host work, synchronisation).  "kernels" counts the traced
+(JIT) kernels, "launches" every launch (with memsets, copies, reductions).  Also the main thread's
+CPU time per iteration (``time.thread_time``: tracing, codegen, host work, not the worker threads'
+kernel execution), which a loaded machine inflates less than the wall time.
 
 Loops (both: ``stokes`` around ``path`` max_depth 2, 8 spp, 4 scenes = 4 perspective views of
 RES x RES px, each lit by its own directional light; one Adam variable written into all 4 scenes'
@@ -167,13 +170,13 @@ def run_child(config, loop, mode, iterations, warmup, res, spp):
     step = _step_function(params, spp)
     run = dr.freeze(step) if freeze else step
     dr.set_flag(dr.JitFlag.KernelHistory, True)
-    rows = {"wall_ms": [], "kernels": [], "launches": [], "codegen_ms": [], "exec_ms": []}
+    rows = {"wall_ms": [], "cpu_ms": [], "kernels": [], "launches": [], "codegen_ms": [], "exec_ms": []}
     for it in range(warmup + iterations):
         if freeze:
             gc.collect()        # no NumPy-backed arrays freed through host callbacks during a recording
         dr.sync_thread()
         dr.kernel_history()     # clears the history
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         values = {n: opt[n] for n in opt.keys()}
         write(params, keys, values)
         loss = run(scenes, refs, values, dr.opaque(mi.UInt32, 7 * it))
@@ -182,10 +185,11 @@ def run_child(config, loop, mode, iterations, warmup, res, spp):
             opt[n] = dr.clip(opt[n], 0.01, 3.0)
         dr.eval(loss)
         dr.sync_thread()
-        wall = 1e3 * (time.perf_counter() - t0)
+        wall, cpu = 1e3 * (time.perf_counter() - t0), 1e3 * (time.thread_time() - c0)
         hist = dr.kernel_history()
         if it >= warmup:
             rows["wall_ms"].append(wall)
+            rows["cpu_ms"].append(cpu)
             rows["kernels"].append(sum(str(h["type"]).endswith("JIT") for h in hist))   # traced kernels
             rows["launches"].append(len(hist))      # + memset/memcpy/reductions
             rows["codegen_ms"].append(sum(h.get("codegen_time", 0.0) + h.get("backend_time", 0.0) for h in hist))
@@ -193,7 +197,7 @@ def run_child(config, loop, mode, iterations, warmup, res, spp):
     return rows
 
 
-FIELDS = ("wall_ms", "kernels", "launches", "codegen_ms", "exec_ms", "host_ms")
+FIELDS = ("wall_ms", "cpu_ms", "kernels", "launches", "codegen_ms", "exec_ms", "host_ms")
 
 
 def _child(config, loop, mode, args):
@@ -232,13 +236,13 @@ def report(loop, mode, result, renders=len(VIEWS)):
     print(f"\nloop {loop!r}, {variant}, {'frozen (dr.freeze)' if freeze else 'unfrozen'}: per iteration "
           f"({renders} renders + backward), median of block medians")
     print(f"{'bsdf':16s} {'wall ms':>8s} {'ratio':>6s} {'kernels':>8s} {'launches':>9s} {'codegen ms':>11s} "
-          f"{'exec ms':>8s} {'host ms':>8s} {'host/render - rc':>17s}  wall per block")
+          f"{'exec ms':>8s} {'host ms':>8s} {'host/render - rc':>17s} {'main CPU ms':>12s} {'ratio':>6s}  wall per block")
     for name, r in result.items():
         extra = (r["host_ms"] - base["host_ms"]) / renders
         blocks = " ".join(f"{w:.0f}" for w in r["wall_blocks"])
         print(f"{name:16s} {r['wall_ms']:8.1f} {r['wall_ms'] / base['wall_ms']:6.3f} {r['kernels']:8.0f} "
               f"{r['launches']:9.0f} {r['codegen_ms']:11.1f} {r['exec_ms']:8.1f} {r['host_ms']:8.1f} "
-              f"{extra:+17.1f}  {blocks}")
+              f"{extra:+17.1f} {r['cpu_ms']:12.1f} {r['cpu_ms'] / base['cpu_ms']:6.3f}  {blocks}")
 
 
 def main(argv=None):
