@@ -381,7 +381,7 @@ def _make_class():
                 self.m_k = _texture(props, "k", 1.0)
                 self.m_material = None
             self.m_specular_reflectance = props.get_texture("specular_reflectance", 1.0)
-            self.m_snapshots = {}
+            self.m_snapshots, self.m_read = {}, {}
             self._validate()
             # textures whose values cannot be read at load: clamped at eval, one warning each
             lo, hi = ALPHA_RANGE if key == "alpha" else RMS_RANGE
@@ -451,41 +451,58 @@ def _make_class():
             """
             if dr.flag(dr.JitFlag.FreezingScope):
                 return
-            groups = self._changed_groups(keys)
+            names = self._changed(keys)
             try:
-                self._validate(groups)
+                self._validate(names)
             except ValueError:
                 # atomic update: a refused value leaves the BSDF as it was before the call
-                for group in groups:
+                for group in self._groups(names):
                     self.m_snapshots[group].restore()
+                self.m_read.clear()
                 raise
 
-        def _groups(self):
-            """{check group: its textures}: the roughness, the index (eta and k: checked together,
-            they must not both be 0) and specular_reflectance."""
-            return {"rough": [self.m_rough], "index": [self.m_eta, self.m_k],
-                    "scale": [self.m_specular_reflectance]}
+        def _textures(self):
+            """{traverse name: texture} of the checked parameters."""
+            return {self.m_rough_key: self.m_rough, "eta": self.m_eta, "k": self.m_k,
+                    "specular_reflectance": self.m_specular_reflectance}
 
-        def _changed_groups(self, keys):
-            """The check groups of the changed traverse names (``alpha`` or ``alpha.data``); all without keys."""
-            group_of = {self.m_rough_key: "rough", "eta": "index", "k": "index", "specular_reflectance": "scale"}
+        def _changed(self, keys):
+            """The changed traverse names among ``keys`` (``alpha`` or ``alpha.data``); all without keys."""
             names = {str(key).split(".")[0] for key in (keys or [])}
-            if not names or not names <= set(group_of):
-                return tuple(self._groups())
-            return tuple(dict.fromkeys(group_of[n] for n in names))
+            return tuple(names) if names and names <= set(self._textures()) else tuple(self._textures())
 
-        def _validate(self, groups=("rough", "index", "scale")):
-            """The checks of :mod:`hyde_bsdf.mitsuba.param_checks` for the given groups; on success
-            their values are kept as the state a refused update returns to."""
+        def _groups(self, names):
+            """{check group: its textures} of the groups the names belong to: the roughness, the index
+            (eta and k: checked together, they must not both be 0), specular_reflectance."""
+            groups = {"rough": [self.m_rough], "index": [self.m_eta, self.m_k],
+                      "scale": [self.m_specular_reflectance]}
+            of = {self.m_rough_key: "rough", "eta": "index", "k": "index", "specular_reflectance": "scale"}
+            return {g: groups[g] for g in dict.fromkeys(of[n] for n in names)}
+
+        def _validate(self, names=None):
+            """The checks of :mod:`hyde_bsdf.mitsuba.param_checks` of the named parameters (default
+            all); on success their values are kept as the state a refused update returns to."""
+            textures = self._textures()
+            names = tuple(textures) if names is None else names
+            for name in names:              # changed: read them again
+                self.m_read.pop(id(textures[name]), None)
+            groups = self._groups(names)
             if "rough" in groups:
                 pc.check_roughness(self.m_rough_key, self.m_rough, self.m_rough_scale)
             if "index" in groups:
-                pc.check_index(self.m_eta, self.m_k)
+                pc.check_index(self.m_eta, self.m_k, self._read_values)
             if "scale" in groups:
                 pc.check_reflectance(self.m_specular_reflectance)
-            textures = self._groups()
-            for group in groups:
-                self.m_snapshots[group] = pc.Snapshot(textures[group])
+            for group, members in groups.items():
+                self.m_snapshots[group] = pc.Snapshot(members)
+
+        def _read_values(self, tex):
+            """``pc.values_of(tex)``, remembered until the texture changes (:meth:`_validate`
+            forgets the changed groups' values): eta and k are checked together, and an update of
+            one does not read the other again."""
+            if id(tex) not in self.m_read:
+                self.m_read[id(tex)] = pc.values_of(tex)
+            return self.m_read[id(tex)]
 
         def to_string(self):
             index = (f"material={self.m_material!r}" if self.m_material else
