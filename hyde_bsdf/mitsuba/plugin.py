@@ -610,17 +610,24 @@ def _make_class():
             # ratio of the lobe albedos rho F : (1 - rho) F (F common to both)
             return dr.clip(1.0 - self.m_dhr.one_minus_rho(si.wi.z, rough[2]), 0.05, 0.95)
 
-        def _mueller(self, ctx, si, wo, h, n, k, spec, diff, active):
-            """Fresnel(h) * spec + M00(h) * diff as a Spectrum (Mueller matrix if polarized), 0 where
-            not ``active``.
+        def _mueller(self, ctx, si, wo, h, n, k, spec, diff, scale, active):
+            """(Fresnel(h) spec + M00(h) diff) scale as a Spectrum (Mueller matrix if polarized), 0
+            where not ``active``.
 
-            ``spec`` multiplies the facet Fresnel Mueller matrix (paper Eq. 11) rotated
-            into Mitsuba's Stokes bases; ``diff`` multiplies only its unpolarized
-            M00 and goes into the [0, 0] element (the diffuse term of Eq. 17).
+            ``spec`` (a Float) multiplies the facet Fresnel Mueller matrix (paper Eq. 11) rotated
+            into Mitsuba's Stokes bases; ``diff`` (a Float or 0.0) multiplies only its unpolarized
+            M00 and goes into the [0, 0] element (the diffuse term of Eq. 17); ``scale`` is
+            specular_reflectance.  Inactive lanes are masked on Floats (the lobe factors, cos beta
+            and the basis rotations), not on the 16 spectral entries: the Fresnel terms are
+            evaluated at cos beta = 1 there (finite), times factors that are 0.
             """
-            cos_beta = dr.dot(si.wi, h)     # a Float: broadcast to the index's spectrum where needed
+            spec = dr.select(active, spec, 0.0) * scale
+            if not (isinstance(diff, float) and diff == 0.0):
+                diff = dr.select(active, diff, 0.0) * scale
+            # a Float: broadcast to the index's spectrum where needed
+            cos_beta = dr.select(active, dr.dot(si.wi, h), 1.0)
             if not self.m_polarized:
-                return dr.select(active, po.fresnel_average(cos_beta, n, k) * (spec + diff), 0.0)
+                return po.fresnel_average(cos_beta, n, k) * (spec + diff)
             a, b, c, s = po.fresnel_mueller_entries(*po.facet_fresnel(cos_beta, n, k))
             # Light arrives along -wo_hat and leaves along +wi_hat (roughconductor's frames)
             if ctx.mode == mi.TransportMode.Radiance:
@@ -639,9 +646,10 @@ def _make_class():
             s_axis = po.safe_normalize(po.accurate_cross(wo_hat, wi_hat), basis_in)
             # the facet matrix rotated from (s_axis, s_axis) into (stokes_basis(-wo_hat),
             # stokes_basis(wi_hat)): mi.mueller.rotate_mueller_basis written out (stokes.py)
-            return ps.rotated_facet_mueller(a, b, c, s, ps.stokes_rotation(-wo_hat, s_axis, basis_in),
-                                            ps.stokes_rotation(wi_hat, s_axis, mi.mueller.stokes_basis(wi_hat)),
-                                            spec, diff, active)
+            rot_in = ps.stokes_rotation(-wo_hat, s_axis, basis_in)
+            rot_out = ps.stokes_rotation(wi_hat, s_axis, mi.mueller.stokes_basis(wi_hat))
+            return ps.rotated_facet_mueller(a, b, c, s, [dr.select(active, x, 0.0) for x in rot_in],
+                                            [dr.select(active, x, 0.0) for x in rot_out], spec, diff)
 
         def _value(self, ctx, si, wo, geo, rough, distr, inv_pdf=None):
             """f cos(theta_o) as a Spectrum (Mueller matrix in polarized variants); with ``inv_pdf``
@@ -656,12 +664,12 @@ def _make_class():
             if spec_on:
                 # D G / (4 cos_i) = (Eq. 13 without M) * cos_o
                 spec = dr.minimum(distr.eval(h) * self._shadowing(distr, si.wi, wo, h) / (4.0 * _pos(cos_i)),
-                                  MAX_LOBE) * scale
-            diff = self._diffuse_factor(ctx, si, wo, rough[2]) * cos_o * scale if diff_on else 0.0
+                                  MAX_LOBE)
+            diff = self._diffuse_factor(ctx, si, wo, rough[2]) * cos_o if diff_on else 0.0
             if inv_pdf is not None:     # scaled here: a division of the whole Mueller matrix is slow to trace
-                spec, diff = spec * inv_pdf, diff * inv_pdf
+                spec, diff = spec * inv_pdf, (diff * inv_pdf if diff_on else 0.0)
                 active = active & (inv_pdf > 0)
-            return self._mueller(ctx, si, wo, h, n, k, spec, diff, active)
+            return self._mueller(ctx, si, wo, h, n, k, spec, diff, scale, active)
 
         def _pdf(self, si, wo, geo, distr, p_spec):
             """The mixture density of :meth:`sample` (``p_spec`` from :meth:`_p_spec`)."""
@@ -719,9 +727,8 @@ def _make_class():
                 g_ratio = (self._shadowing(distr, si.wi, bs.wo, m) * dr.dot(si.wi, m)
                            / _pos(cos_i * mi.Frame3f.cos_theta(m)))
             n, k = self._index(si, active)
-            g_ratio = g_ratio * self._scale(si, active)
             bs.pdf = dr.select(active, bs.pdf, 0.0)
-            return bs, self._mueller(ctx, si, bs.wo, m, n, k, g_ratio, 0.0, active)
+            return bs, self._mueller(ctx, si, bs.wo, m, n, k, g_ratio, 0.0, self._scale(si, active), active)
 
         def sample(self, ctx, si, sample1, sample2, active=True):
             active = active & (mi.Frame3f.cos_theta(si.wi) > 0)

@@ -31,8 +31,8 @@ def stokes_rotation(forward, current, target):
     return cos_t * cos_t - sin_t * sin_t, 2.0 * sin_t * cos_t
 
 
-def rotated_facet_mueller(a, b, c, s, rot_in, rot_out, spec, diff, active):
-    """``spec`` R_out F R_in^T + ``diff`` a e00 as a ``mi.Spectrum`` (a Mueller matrix), 0 where not ``active``.
+def rotated_facet_mueller(a, b, c, s, rot_in, rot_out, spec, diff):
+    """``spec`` R_out F R_in^T + ``diff`` a e00 as a ``mi.Spectrum`` (a Mueller matrix).
 
     ``a, b, c, s``: the facet Fresnel entries (:func:`hyde_bsdf.mitsuba.optics.fresnel_mueller_entries`,
     F = [[a, b, 0, 0], [b, a, 0, 0], [0, 0, c, -s], [0, 0, s, c]] in the facet's s/p bases);
@@ -42,11 +42,10 @@ def rotated_facet_mueller(a, b, c, s, rot_in, rot_out, spec, diff, active):
     entries (one constructor call): an operation on a whole spectral Mueller matrix (a select, a
     product) costs ~50-200 us of host time each in Python, against ~3 us per entry.
     """
-    # inactive lanes may hold NaN (e.g. a Fresnel term at cos beta < 0): every factor is selected
-    # to 0 there (not multiplied by a 0 mask), so that each entry is 0 on those lanes
-    ci, si, co, so = (dr.select(active, x, 0.0) for x in (*rot_in, *rot_out))
-    a_s, b_s, c_s, s_s = (dr.select(active, x * spec, 0.0) for x in (a, b, c, s))
-    m00 = a_s if isinstance(diff, float) and diff == 0.0 else a_s + dr.select(active, a * diff, 0.0)
+    ci, si = rot_in
+    co, so = rot_out
+    a_s, b_s, c_s, s_s = a * spec, b * spec, c * spec, s * spec
+    m00 = a_s if isinstance(diff, float) and diff == 0.0 else a_s + a * diff
     cc, ss, sc, cs = co * ci, so * si, so * ci, co * si
     zero = dr.zeros(type(a_s), dr.width(a_s))      # as wide as the other entries (a literal: no memory)
     return mi.Spectrum(m00, ci * b_s, -si * b_s, zero,
