@@ -30,6 +30,8 @@ Variants: ``llvm_ad_spectral_polarized`` unfrozen (spectral variants cannot use 
                                          [--loops rough,index] [--modes spectral,frozen] [--quick]
 
 ``--quick`` (< 1 minute): the ``rough`` loop only, 16 px, 2 spp, 1 block, 3 iterations after 4 warm-up ones.
+``--calls``: only the host (main-thread CPU) cost of tracing one eval / eval_pdf / sample / pdf of
+each BSDF, the quantity the plugin's Python code adds to every render.
 """
 from __future__ import annotations
 
@@ -197,6 +199,48 @@ def run_child(config, loop, mode, iterations, warmup, res, spp):
     return rows
 
 
+def call_costs(variant="llvm_ad_spectral_polarized", lanes=1000, reps=40):
+    """Main-thread CPU ms to trace one call of eval / eval_pdf / sample / pdf (no kernel launched) of
+    each BSDF of the ``rough`` loop: the host cost a render pays per traced call (a render of this
+    loop traces 9 eval_pdf + 6 sample per live instance, primal and backward pass)."""
+    import time
+
+    import drjit as dr
+    import mitsuba as mi
+
+    mi.set_variant(variant)
+    import hyde_bsdf
+
+    hyde_bsdf.register(variant)
+    si = dr.zeros(mi.SurfaceInteraction3f, lanes)
+    si.wi = dr.normalize(mi.Vector3f(0.1, 0.2, 1.0) + dr.zeros(mi.Vector3f, lanes))
+    si.uv = mi.Point2f(0.3, 0.4)
+    if mi.is_spectral:
+        si.wavelengths = mi.UnpolarizedSpectrum(500.0, 550.0, 600.0, 650.0)
+    wo = dr.normalize(mi.Vector3f(-0.1, 0.3, 1.0) + dr.zeros(mi.Vector3f, lanes))
+    ctx, s1, s2 = mi.BSDFContext(), dr.full(mi.Float, 0.3, lanes), mi.Point2f(0.2, 0.7)
+    out = {}
+    for name in CONFIGS:
+        bsdf = mi.load_dict(bsdf_dict(name, "rough", {"alpha": maps("rough")["alpha"][1]}))
+        calls = {"eval": lambda: bsdf.eval(ctx, si, wo), "eval_pdf": lambda: bsdf.eval_pdf(ctx, si, wo),
+                 "sample": lambda: bsdf.sample(ctx, si, s1, s2), "pdf": lambda: bsdf.pdf(ctx, si, wo)}
+        out[name] = {}
+        for call, fn in calls.items():
+            fn()
+            times = []
+            for _ in range(5):
+                t0 = time.thread_time()
+                for _ in range(reps):
+                    fn()
+                times.append(1e3 * (time.thread_time() - t0) / reps)
+            out[name][call] = float(np.median(times))
+    print(f"\nhost cost of one traced call (main-thread CPU ms, {variant}, median of 5 x {reps}):")
+    print(f"{'bsdf':16s}" + "".join(f" {c:>14s}" for c in out["roughconductor"]))
+    for name, row in out.items():
+        print(f"{name:16s}" + "".join(f" {v:7.3f} ({v / out['roughconductor'][c]:4.2f})" for c, v in row.items()))
+    return out
+
+
 FIELDS = ("wall_ms", "cpu_ms", "kernels", "launches", "codegen_ms", "exec_ms", "host_ms")
 
 
@@ -255,11 +299,15 @@ def main(argv=None):
     ap.add_argument("--loops", default="rough,index")
     ap.add_argument("--modes", default="spectral,frozen")
     ap.add_argument("--quick", action="store_true", help="rough loop, 16 px, 2 spp, 1 block, 3 iterations")
+    ap.add_argument("--calls", action="store_true", help="only the host cost of one traced eval/eval_pdf/sample/pdf")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.child:
         config, loop, mode = json.loads(args.child)
         print(json.dumps(run_child(config, loop, mode, args.iterations, args.warmup, args.res, args.spp)))
+        return 0
+    if args.calls:
+        call_costs()
         return 0
     if args.quick:
         args.loops, args.res, args.spp, args.blocks, args.iterations, args.warmup = "rough", 16, 2, 1, 3, 4

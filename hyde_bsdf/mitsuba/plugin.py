@@ -115,8 +115,9 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
    - no
 
 Validation (:mod:`hyde_bsdf.mitsuba.param_checks`).  The constructor and every
-``params.update()`` (``parameters_changed``) apply the same checks, on the values the textures'
-own ``eval`` returns (an 8-bit PNG is read as 0-1, not as its stored 0-255): the roughness
+``params.update()`` (``parameters_changed``, to the parameters the update changed: an
+optimisation loop over a roughness map pays one small check kernel per update) apply the same
+checks, on the values the textures' own ``eval`` returns (an 8-bit PNG is read as 0-1, not as its stored 0-255): the roughness
 finite and in range (values in [0, lower bound) floored with a warning), eta and k finite and
 in [0, 1e6] and not both 0 for a constant, specular_reflectance finite and >= 0; constants at
 48 wavelengths 360-830 nm (spectral), every texel of a bitmap and both colours of a
