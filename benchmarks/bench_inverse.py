@@ -145,7 +145,7 @@ def bench_maps(res=80, rounds=7, iterations=6, variant=None, spp=4, csv_path=Non
     if csv_path:
         import csv
 
-        from hyde_bsdf.atomic import atomic_open
+        from hyde_bsdf.io.atomic import atomic_open
 
         os.makedirs(os.path.dirname(os.path.abspath(csv_path)), exist_ok=True)
         with atomic_open(csv_path, "w", newline="") as fh:

@@ -7,15 +7,17 @@ Public entry points
 ``rms_slope_from``     the paper's roughness sqrt(2)*sigma_h/ell from (sigma_h, ell).
 ``register``           register the ``hyde`` BSDF with Mitsuba (every usable variant).
 
-Subpackages (the dependency direction is model -> mitsuba / mom / fit -> render -> inverse -> report):
+Subpackages, in layers (a module imports only from layers to its left; ``errors`` and
+``progress`` from anywhere): io -> model -> mitsuba / mom / fit -> render -> inverse -> app:
 
+``hyde_bsdf.io``       files: atomic writes, Stokes EXR, ``.pbsdf`` tables, measurement CSVs
 ``hyde_bsdf.model``    the NumPy model, one module per paper equation group, and the DHR table
 ``hyde_bsdf.mitsuba``  the Mitsuba plugin ``hyde`` (an independent derivation of the model)
 ``hyde_bsdf.mom``      the method-of-moments reference and the 1-D model (``mom.scatter``)
 ``hyde_bsdf.fit``      fitting Mueller measurements (``fit.fit_mueller``)
-``hyde_bsdf.render``   polarized rendering, Stokes I/O, demo (``render.render_stokes``)
+``hyde_bsdf.render``   polarized rendering and polarization quantities (``render.render_stokes``)
 ``hyde_bsdf.inverse``  inverse rendering: global or per-texel roughness and index, uncertainty (``inverse.invert_maps``)
-``hyde_bsdf.report``   the validation report
+``hyde_bsdf.app``      the ``hyde-bsdf`` command line, plots, the demo and the validation report
 
 Importing this package does not import Mitsuba; ``register`` does.  The subpackages are
 imported on first attribute access (``hyde_bsdf.mom.scatter`` works after ``import hyde_bsdf``).
@@ -35,7 +37,7 @@ __all__ = [
 __version__ = "0.1.0"
 
 
-_SUBPACKAGES = ("model", "mitsuba", "mom", "fit", "render", "inverse", "report")
+_SUBPACKAGES = ("io", "model", "mitsuba", "mom", "fit", "render", "inverse", "app")
 #: public functions, imported on first use: ``import hyde_bsdf`` (and so the command line's
 #: start-up, before it can catch Ctrl-C) loads only the standard library
 _FUNCTIONS = {"pbrdf": "hyde_bsdf.model.evaluator", "dhr_specular_pec": "hyde_bsdf.model.dhr",

@@ -2,7 +2,7 @@
 
 :class:`UsageError` is a ``ValueError`` (so Python callers can keep catching ``ValueError``) that
 marks a *user* mistake -- a bad argument, input file, output path or scene -- as opposed to a bug.
-The command line (:func:`hyde_bsdf.cli.main` and each ``cli_main``) prints its message on one line,
+The command line (:func:`hyde_bsdf.app.cli.main` and each ``cli_main``) prints its message on one line,
 ``hyde-bsdf COMMAND: error: MESSAGE``, and exits with status 2; any other exception is a bug and
 keeps its traceback.  Messages name the parameter or file and the accepted range.
 

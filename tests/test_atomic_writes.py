@@ -36,8 +36,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hyde_bsdf import atomic
-from hyde_bsdf.atomic import (OutputWriteError, atomic_dir, atomic_group, atomic_open, atomic_path, check_output_dir,
+from hyde_bsdf.io import atomic
+from hyde_bsdf.io.atomic import (OutputWriteError, atomic_dir, atomic_group, atomic_open, atomic_path, check_output_dir,
                               check_output_path, read_manifest)
 from hyde_bsdf.errors import UsageError
 
@@ -50,7 +50,7 @@ SIZE = 256            # 256 x 256 px x 15 float32 channels: ~4 MB, ~0.1-0.2 s pe
 ZYGOTE = textwrap.dedent(r"""
     import os, sys, time
     import numpy as np
-    from hyde_bsdf.render.stokes_io import write_stokes_exr
+    from hyde_bsdf.io.stokes_exr import write_stokes_exr
 
     def image(parity, size):
         rng = np.random.default_rng(100 + parity)
@@ -91,7 +91,7 @@ def _image(parity, size=SIZE):
 
 def _intact(path, images):
     """True when ``path`` reads back and equals the image its 'gen' header names."""
-    from hyde_bsdf.render.stokes_io import read_stokes_exr
+    from hyde_bsdf.io.stokes_exr import read_stokes_exr
 
     try:
         st = read_stokes_exr(path)
@@ -103,7 +103,7 @@ def _intact(path, images):
 
 def _kill_trials(tmp_path, mode, trials, rng):
     """Run ``trials`` SIGKILLs against the writer; return (intact flags, temporaries left)."""
-    from hyde_bsdf.render.stokes_io import write_stokes_exr
+    from hyde_bsdf.io.stokes_exr import write_stokes_exr
 
     images = [_image(0), _image(1)]
     proc = subprocess.Popen([sys.executable, "-c", ZYGOTE, str(SIZE)], cwd=ROOT, stdin=subprocess.PIPE,
@@ -229,8 +229,9 @@ def test_atomic_dir_never_deletes_files_it_did_not_write(tmp_path):
 FSIZE_WRITER = textwrap.dedent(r"""
     import resource, signal, sys
     import numpy as np
-    from hyde_bsdf.atomic import atomic_group
-    from hyde_bsdf.render.stokes_io import save_polarization_pngs, write_stokes_exr
+    from hyde_bsdf.io.atomic import atomic_group
+    from hyde_bsdf.app.pictures import save_polarization_pngs
+    from hyde_bsdf.io.stokes_exr import write_stokes_exr
     ramp = np.broadcast_to(np.linspace(0.1, 0.5, 32, dtype=np.float32)[:, None, None], (32, 32, 3))
     st = {"S0": ramp + 0.5, "S1": ramp, "S2": 0.5 * ramp, "S3": 0.0 * ramp}   # a ~3 KB EXR, ~10 KB PNGs
     out, limit = sys.argv[1], int(sys.argv[2])
@@ -320,7 +321,7 @@ def test_temporary_names_fit_the_file_system(tmp_path):
 SIGTERM_WRITER = textwrap.dedent(r"""
     import sys, time
     from pathlib import Path
-    from hyde_bsdf.atomic import atomic_dir, atomic_path, install_signal_cleanup, Terminated
+    from hyde_bsdf.io.atomic import atomic_dir, atomic_path, install_signal_cleanup, Terminated
     install_signal_cleanup()
     out = Path(sys.argv[1])
     try:

@@ -9,8 +9,8 @@ before the output paths and the scene have been checked.
   ``inverse`` (scenes/inverse.xml), ``csv`` (a Mueller-measurement CSV), ``notreport``
   (a folder with a user's file in it));
 * ``needle``: a piece of the last stderr line (it names the parameter or file);
-* ``how``: ``"in"`` runs ``hyde_bsdf.cli.main`` in this process; ``"sub"`` runs
-  ``python -m hyde_bsdf.cli`` (where a crash or signal is the point); ``"lowmem"`` is ``"in"``
+* ``how``: ``"in"`` runs ``hyde_bsdf.app.cli.main`` in this process; ``"sub"`` runs
+  ``python -m hyde_bsdf.app.cli`` (where a crash or signal is the point); ``"lowmem"`` is ``"in"``
   with ``MemAvailable`` read as 2 GiB; ``"nocheckout"`` is ``"in"`` with the validation scripts'
   folder missing; ``"sigint"`` sends Ctrl-C once the render's progress line appears;
   ``"pipe"`` closes the reader of stdout at once (``hyde-bsdf fit ... | head -0``);
@@ -29,8 +29,8 @@ from pathlib import Path
 
 import pytest
 
-from hyde_bsdf import cli
-from hyde_bsdf.atomic import TEMP_NAME_RE
+from hyde_bsdf.app import cli
+from hyde_bsdf.io.atomic import TEMP_NAME_RE
 from hyde_bsdf.errors import UsageError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -173,7 +173,7 @@ def _scatter_on_a_dead_cluster(p):
 def _api_rows():
     from hyde_bsdf.mom import ExecutorError
     from hyde_bsdf.render.renderer import load_scene, plan_passes, prepare_variant, render_stokes
-    from hyde_bsdf.render.stokes_io import write_stokes_exr
+    from hyde_bsdf.io.stokes_exr import write_stokes_exr
 
     def loaded(path):            # a scene loaded by Mitsuba itself, without our XML checks
         import mitsuba as mi
@@ -258,7 +258,7 @@ def paths(tmp_path_factory):
     (tmp / "site").mkdir()                                  # a web site: its index.html is not a report
     (tmp / "site" / "index.html").write_text("<html>my site</html>")
     (tmp / "site" / "style.css").write_text("body {}")
-    from hyde_bsdf.atomic import write_manifest
+    from hyde_bsdf.io.atomic import write_manifest
 
     (tmp / "oldreport").mkdir()                             # an earlier report, then a user's file beside it
     for name in ("index.html", "checks.csv", "fig.png"):
@@ -271,7 +271,7 @@ def paths(tmp_path_factory):
     (tmp / "stale").mkdir()
     import numpy as np
 
-    from hyde_bsdf.fit.measurements import write_measurements
+    from hyde_bsdf.io.measurements import write_measurements
     from hyde_bsdf.fit.mueller_fit import synthetic_measurements
 
     th = np.radians([20.0, 40.0, 60.0])
@@ -307,7 +307,7 @@ def _fill(argv, paths):
 
 
 def _subprocess(argv, how, timeout=120):
-    cmd = [sys.executable, "-m", "hyde_bsdf.cli", *argv]
+    cmd = [sys.executable, "-m", "hyde_bsdf.app.cli", *argv]
     if how == "pipe":
         proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         proc.stdout.close()                       # the reader went away before any output
@@ -320,10 +320,10 @@ def _subprocess(argv, how, timeout=120):
         err = ""
         try:
             while "spp (" not in err:             # the first progress line: rendering has begun
-                ch = proc.stderr.read(1)
-                if not ch:
+                line = proc.stderr.readline()     # whole lines: what the reader buffers past them is lost
+                if not line:
                     break
-                err += ch
+                err += line
             proc.send_signal(signal.SIGINT if how == "sigint" else signal.SIGTERM)
             out, rest = proc.communicate(timeout=timeout)
         finally:
@@ -344,7 +344,7 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
             pytest.skip("hardware-dependent: this machine has a CUDA GPU, so the variant works")
     before = _snapshot(paths["tmp"])
     if how == "stale":                            # what a SIGKILLed run (a dead pid) left behind
-        from hyde_bsdf.atomic import _HOST
+        from hyde_bsdf.io.atomic import _HOST
 
         stale = [paths["stale"] / f".a.exr.{_HOST}4194999-abc123.tmp.exr",
                  paths["stale"] / f".a.exr.{_HOST}4194999-abc123.partial"]
@@ -366,7 +366,7 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
         if how == "lowmem":
             monkeypatch.setattr("hyde_bsdf.render.renderer.mem_available", lambda: 2 * 2**30)
         if how == "nocheckout":
-            monkeypatch.setattr("hyde_bsdf.report.build.VALIDATION_DIR", paths["tmp"] / "no_validation")
+            monkeypatch.setattr("hyde_bsdf.app.report.build.VALIDATION_DIR", paths["tmp"] / "no_validation")
         monkeypatch.chdir(paths["tmp"])
         try:
             got = cli.main(argv)

@@ -164,9 +164,11 @@ def test_directory_in_place_of_the_cache_file_leaves_no_temporary_files(cache, c
     path.mkdir()
     for _ in range(2):                       # two runs: each warns, rebuilds, leaks nothing
         dhr._TABLES.clear()
-        with pytest.warns(dhr.DHRCacheWarning, match=path.name):
+        with pytest.warns(dhr.DHRCacheWarning) as record:
             dhr.load_table("vgroove")
-        assert "could not cache the DHR table" in capsys.readouterr().err
+        texts = [str(w.message) for w in record]
+        assert any(path.name in text for text in texts), texts
+        assert any("could not cache the DHR table" in text for text in texts), texts
     assert builds == ["vgroove", "vgroove"]
     assert [p.name for p in folder.iterdir()] == [path.name] and not any(path.iterdir())
 

@@ -302,7 +302,7 @@ def test_named_python_objects_exist(page):
 def _cli_commands() -> dict:
     sys.path.insert(0, str(REPO))
     try:
-        spec = importlib.util.spec_from_file_location("_hyde_cli", REPO / "hyde_bsdf" / "cli.py")
+        spec = importlib.util.spec_from_file_location("_hyde_cli", REPO / "hyde_bsdf" / "app" / "cli.py")
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
         return dict(mod.COMMANDS)
@@ -312,7 +312,7 @@ def _cli_commands() -> dict:
 
 @functools.lru_cache(maxsize=None)
 def _cli_help(sub: str) -> str:
-    proc = subprocess.run([sys.executable, "-m", "hyde_bsdf.cli", sub, "--help"], cwd=REPO,
+    proc = subprocess.run([sys.executable, "-m", "hyde_bsdf.app.cli", sub, "--help"], cwd=REPO,
                           capture_output=True, text=True, timeout=120,
                           env=dict(os.environ, PYTHONPATH=str(REPO)))
     assert proc.returncode == 0, f"hyde-bsdf {sub} --help failed: {proc.stderr[-2000:]}"
@@ -500,12 +500,12 @@ def test_tables_have_one_cell_count(page):
 
 def test_report_tutorial_lists_every_validation_script():
     """docs/tutorials/report.md's table of sections names every script of the report's SECTIONS."""
-    tree = ast.parse((REPO / "hyde_bsdf" / "report" / "build.py").read_text(encoding="utf-8"))
+    tree = ast.parse((REPO / "hyde_bsdf" / "app" / "report" / "build.py").read_text(encoding="utf-8"))
     sections = None
     for node in ast.walk(tree):
         if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "SECTIONS" for t in node.targets):
             sections = ast.literal_eval(node.value)
-    assert sections, "hyde_bsdf/report/build.py defines SECTIONS"
+    assert sections, "hyde_bsdf/app/report/build.py defines SECTIONS"
     text = (REPO / "docs" / "tutorials" / "report.md").read_text(encoding="utf-8")
     missing = [s for _, scripts in sections for s in scripts if f"`{s}`" not in text]
     assert not missing, f"docs/tutorials/report.md does not list the report's scripts {missing}"

@@ -1,4 +1,4 @@
-"""``hyde-bsdf invert`` on bad input and interruption (through ``hyde_bsdf.cli.main``), and its
+"""``hyde-bsdf invert`` on bad input and interruption (through ``hyde_bsdf.app.cli.main``), and its
 texture-valued mode end to end.
 
 Behaviour checked: every user mistake is one line on stderr naming the parameter or file, exit 2,
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hyde_bsdf.cli import main
+from hyde_bsdf.app.cli import main
 from hyde_bsdf import inverse as inv
 
 TINY = ["--res", "16", "--spp", "4", "--spp-ref", "16"]
@@ -99,7 +99,7 @@ def test_bad_output_path_refused_before_optimising(capsys, tmp_path):
 
 
 def test_memory_estimate_refused_with_the_flag(capsys, monkeypatch, tmp_path):
-    monkeypatch.setattr("hyde_bsdf.inverse.cli._mem_available", lambda: 64 * 2**20)
+    monkeypatch.setattr("hyde_bsdf.inverse.memory._mem_available", lambda: 64 * 2**20)
     rc, _, err = _run(capsys, TINY + ["-o", str(tmp_path)])
     assert rc == 2
     line = _one_error_line(err)
@@ -141,7 +141,7 @@ def test_maps_preset_dielectric_end_to_end(capsys, tmp_path):
 
 
 def test_ctrl_c_exits_130_with_a_short_message(tmp_path):
-    code = ("import sys; from hyde_bsdf.cli import main; "
+    code = ("import sys; from hyde_bsdf.app.cli import main; "
             f"sys.exit(main(['invert', '--res', '16', '--spp', '4', '--spp-ref', '16', '--iterations', '100000', "
             f"'-o', {str(tmp_path)!r}]))")
     proc = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE, stdout=subprocess.PIPE,

@@ -21,13 +21,13 @@ import numpy as np
 import pytest
 
 from hyde_bsdf import pbrdf
-from hyde_bsdf.cli import main
+from hyde_bsdf.app.cli import main
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.pbsdf_export import (_query_geometries, check_table_size, error_statistics,
                                         export_pbsdf, grids)
-from hyde_bsdf.fit.pbsdf_file import (PbsdfFileError, directions_to_rusinkiewicz, paper_angles,
-                                      paper_to_table, pbsdf_samples, read_pbsdf,
-                                      rusinkiewicz_to_directions, table_to_paper, write_pbsdf)
+from hyde_bsdf.io.pbsdf_file import (PbsdfFileError, directions_to_rusinkiewicz, read_pbsdf,
+                                     rusinkiewicz_to_directions, write_pbsdf)
+from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, pbsdf_samples, table_to_paper
 
 PARAMS = dict(rms_slope=0.25, n=[1.4, 1.0, 0.6, 0.4, 0.3], k=[1.9, 2.2, 2.6, 3.0, 3.3])
 RES = (13, 9, 11)
@@ -147,7 +147,7 @@ def test_reader_refuses_broken_files_naming_them(exported, tmp_path, damage, mes
 
 
 def test_reader_refuses_a_table_mitsuba_would_refuse(tmp_path):
-    from hyde_bsdf.fit.pbsdf_file import _header
+    from hyde_bsdf.io.pbsdf_file import _header
     layout = {n: (np.dtype(np.float64 if n == "theta_h" else np.float32), (1, 3)) for n in ("theta_h", "theta_d", "phi_d")}
     layout["wvls"] = (np.dtype(np.uint16), (5,))
     layout["M"] = (np.dtype(np.float32), (3, 3, 3, 5, 4, 4))

@@ -65,7 +65,7 @@ def tiny_scene(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def tiny_render(tiny_scene, tmp_path_factory):
-    from hyde_bsdf.render import cli_main
+    from hyde_bsdf.app.render import cli_main
 
     out = tmp_path_factory.mktemp("render") / "tiny.exr"
     rc_ = cli_main([str(tiny_scene), "-o", str(out), "--spp", "8", "--seed", "3"])
@@ -97,7 +97,8 @@ def test_stokes_exr_reads_back(tiny_render):
     the light is partially polarized (the scene has polarizing reflections)."""
     import mitsuba as mi
 
-    from hyde_bsdf.render.stokes_io import polarization_quantities, read_stokes_exr
+    from hyde_bsdf.render.polarization import polarization_quantities
+    from hyde_bsdf.io.stokes_exr import read_stokes_exr
 
     _, out = tiny_render
     st = read_stokes_exr(out)
@@ -117,7 +118,7 @@ def test_stokes_exr_reads_back(tiny_render):
 
 def test_polarization_quantities_known_states():
     """DoLP, AoLP, DoCP of hand-made Stokes vectors; zero S0 is flagged, not NaN."""
-    from hyde_bsdf.render.stokes_io import polarization_quantities
+    from hyde_bsdf.render.polarization import polarization_quantities
 
     S = {k: np.zeros((1, 3, 3), np.float32) for k in ("S0", "S1", "S2", "S3")}
     # pixel 0: 30 deg linear, 50 % polarized; pixel 1: right circular 40 %; pixel 2: dark.
@@ -135,8 +136,9 @@ def test_polarization_quantities_known_states():
 
 
 def test_bad_arguments_give_clear_errors(tmp_path, tiny_scene, capsys):
-    from hyde_bsdf.render import cli_main, render_stokes
-    from hyde_bsdf.render.stokes_io import read_stokes_exr, write_stokes_exr
+    from hyde_bsdf.app.render import cli_main
+    from hyde_bsdf.render import render_stokes
+    from hyde_bsdf.io.stokes_exr import read_stokes_exr, write_stokes_exr
 
     assert cli_main([str(tmp_path / "missing.xml"), "-o", str(tmp_path / "a.exr")]) == 2
     assert "does not exist" in capsys.readouterr().err
@@ -164,7 +166,7 @@ def test_bad_arguments_give_clear_errors(tmp_path, tiny_scene, capsys):
 def test_cli_entry_point_dispatches_render(tmp_path):
     """``hyde-bsdf render`` (the installed dispatcher) reaches cli_main: a bad argument
     comes back as exit code 2 with the module's message, before Mitsuba is even imported."""
-    proc = subprocess.run([sys.executable, "-m", "hyde_bsdf.cli", "render", str(tmp_path / "nope.xml"),
+    proc = subprocess.run([sys.executable, "-m", "hyde_bsdf.app.cli", "render", str(tmp_path / "nope.xml"),
                            "-o", str(tmp_path / "x.exr")], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2
     assert "hyde-bsdf render: error: scene file" in proc.stderr
@@ -248,7 +250,7 @@ def test_white_furnace_paper_diffuse():
 
 def test_demo_cli_tiny(tmp_path):
     """The README's main job at toy size: demo.exr and the PNGs are written."""
-    from hyde_bsdf.render.demo import cli_main
+    from hyde_bsdf.app.demo import cli_main
 
     code = cli_main(["-o", str(tmp_path), "--width", "24", "--height", "16", "--spp", "2"])
     assert code == 0
@@ -260,8 +262,8 @@ def test_demo_cli_tiny(tmp_path):
 def test_demo_scalar_variant(tmp_path):
     """The scalar fallback path renders and writes the same files (roughconductor metals here,
     so that this test exercises the render/EXR code on the scalar variant only)."""
-    from hyde_bsdf.render.demo import cli_main
-    from hyde_bsdf.render.stokes_io import read_stokes_exr
+    from hyde_bsdf.app.demo import cli_main
+    from hyde_bsdf.io.stokes_exr import read_stokes_exr
 
     code = cli_main(["-o", str(tmp_path), "--variant", "scalar_spectral_polarized", "--bsdf", "roughconductor",
                      "--width", "12", "--height", "8", "--spp", "2"])
@@ -278,8 +280,9 @@ def test_render_unpolarized_variant_writes_colour_only(tmp_path, tiny_scene, tin
     5 % (measured 1.6 %; RGB against spectral rendering of the same materials, 8 spp each)."""
     import OpenEXR
 
-    from hyde_bsdf.render import cli_main
-    from hyde_bsdf.render.stokes_io import luminance, read_stokes_exr
+    from hyde_bsdf.app.render import cli_main
+    from hyde_bsdf.render.polarization import luminance
+    from hyde_bsdf.io.stokes_exr import read_stokes_exr
 
     out = tmp_path / "rgb.exr"
     assert cli_main([str(tiny_scene), "-o", str(out), "--spp", "8", "--seed", "3", "--variant", "llvm_ad_rgb"]) == 0

@@ -9,14 +9,14 @@ import csv
 
 import pytest
 
-from hyde_bsdf.report.build import SECTIONS, build_report, cli_main
+from hyde_bsdf.app.report.build import SECTIONS, build_report, cli_main
 
 SCRIPTS = [(title, stem) for title, names in SECTIONS for stem in names]
 
 
 @pytest.mark.parametrize("title,stem", SCRIPTS, ids=[stem for _, stem in SCRIPTS])
 def test_quick_report_of_each_script_builds_and_all_checks_pass(title, stem, tmp_path, monkeypatch):
-    monkeypatch.setattr("hyde_bsdf.report.build.SECTIONS", [(title, [stem])])
+    monkeypatch.setattr("hyde_bsdf.app.report.build.SECTIONS", [(title, [stem])])
     ok, rows, seconds = build_report(tmp_path, quick=True, progress=False)
     failed = [f"[{r['script']}] {r['name']}: {r['value']} (tolerance {r['tolerance']})" for r in rows if not r["passed"]]
     assert not failed, "\n".join(failed)
@@ -71,9 +71,9 @@ def _fake_validation(tmp_path, monkeypatch):
     vdir.mkdir()
     (vdir / "fake_check.py").write_text(FAKE_SCRIPT)
     shutil.copy(Path(__file__).resolve().parent.parent / "validation" / "_common.py", vdir / "_common.py")
-    monkeypatch.setattr("hyde_bsdf.report.build.VALIDATION_DIR", vdir)
-    monkeypatch.setattr("hyde_bsdf.report.build.SECTIONS", [("Fake", ["fake_check"])])
-    monkeypatch.setattr("hyde_bsdf.report.build.machine_info", lambda: {"CPU": "test"})
+    monkeypatch.setattr("hyde_bsdf.app.report.build.VALIDATION_DIR", vdir)
+    monkeypatch.setattr("hyde_bsdf.app.report.build.SECTIONS", [("Fake", ["fake_check"])])
+    monkeypatch.setattr("hyde_bsdf.app.report.build.machine_info", lambda: {"CPU": "test"})
 
 
 def test_interrupted_report_keeps_previous_report(tmp_path, monkeypatch):

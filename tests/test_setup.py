@@ -63,7 +63,7 @@ def test_unknown_variant_is_refused():
 
 
 def test_cli_lists_commands():
-    out = subprocess.run([sys.executable, "-m", "hyde_bsdf.cli", "--help"], capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-m", "hyde_bsdf.app.cli", "--help"], capture_output=True, text=True)
     assert out.returncode == 0
     for cmd in ("demo", "render", "fit", "invert", "validate"):
         assert cmd in out.stdout

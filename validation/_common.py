@@ -26,7 +26,7 @@ def write_csv(path, header, rows):
     file beside ``path``, renamed over it once complete)."""
     import csv
 
-    from hyde_bsdf.atomic import atomic_open
+    from hyde_bsdf.io.atomic import atomic_open
     with atomic_open(path, "w", newline="") as f:
         w = csv.writer(f)
         w.writerow(header)
@@ -37,7 +37,7 @@ def save_figure(fig, path, dpi=130):
     """Save a matplotlib figure as PNG (atomically) and close it."""
     import matplotlib.pyplot as plt
 
-    from hyde_bsdf.atomic import atomic_path
+    from hyde_bsdf.io.atomic import atomic_path
     try:
         with atomic_path(path) as tmp:
             fig.savefig(tmp, dpi=dpi, format="png")

@@ -33,9 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.fit import IllPosedFitWarning, fit_measurements, fit_mueller, plot_fit, synthetic_measurements
-from hyde_bsdf.fit.measurements import write_measurements
-from hyde_bsdf.atomic import atomic_open
+from hyde_bsdf.fit import IllPosedFitWarning, fit_measurements, fit_mueller, synthetic_measurements
+from hyde_bsdf.app.plots import plot_fit
+from hyde_bsdf.io.measurements import write_measurements
+from hyde_bsdf.io.atomic import atomic_open
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import save_figure  # noqa: E402
@@ -222,7 +223,7 @@ def large_file(out, rows=1_000_000, seed=4):
     import time
 
     from hyde_bsdf.fit import mueller_elements
-    from hyde_bsdf.fit.measurements import read_measurements
+    from hyde_bsdf.io.measurements import read_measurements
 
     rng = np.random.default_rng(seed)
     truth = truth_of("infragold")

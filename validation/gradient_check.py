@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf import inverse as inv
-from hyde_bsdf.atomic import atomic_open
+from hyde_bsdf.io.atomic import atomic_open
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import save_figure  # noqa: E402

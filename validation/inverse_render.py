@@ -34,10 +34,13 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf import inverse as inv
-from hyde_bsdf.atomic import atomic_open
+from hyde_bsdf.io.atomic import atomic_open
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import save_figure  # noqa: E402
+from hyde_bsdf.progress import stderr_lines  # noqa: E402
+
+_log = stderr_lines("[invert]")
 
 
 def recovery(out, iterations, spp, spp_ref, res, lighting, tag, runs=("stokes", "s0"), lr=0.05):
@@ -46,7 +49,7 @@ def recovery(out, iterations, spp, spp_ref, res, lighting, tag, runs=("stokes", 
     ref = inv.render_reference(scene, inv.TRUTH, spp_ref, seed=0)
     results = {}
     for comp in runs:
-        inv._log(f"[{tag}] {comp} loss, {iterations} iterations")
+        _log(f"[{tag}] {comp} loss, {iterations} iterations")
         loss_fn = inv.StokesLoss(ref, components=comp)
         res_ = inv.invert(scene, loss_fn, inv.START, iterations=iterations, spp=spp, seed=1000,
                           truth=inv.TRUTH, lr=lr)

@@ -24,7 +24,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_open
+from hyde_bsdf.io.atomic import atomic_open
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import cli, save_figure  # noqa: E402

@@ -67,7 +67,8 @@ def cpp_check(path, report, samples, seed):
     import mitsuba as mi
     import hyde_bsdf
     from hyde_bsdf.fit.pbsdf_export import _query_geometries, error_statistics
-    from hyde_bsdf.fit.pbsdf_file import paper_angles, read_pbsdf, table_to_paper
+    from hyde_bsdf.fit.pbsdf_samples import paper_angles, table_to_paper
+    from hyde_bsdf.io.pbsdf_file import read_pbsdf
     from hyde_bsdf.mitsuba.frames import eval_paper
     from hyde_bsdf.mitsuba.variants import set_variant
 
@@ -160,7 +161,7 @@ def validate(outdir="out/validation", quick=False):
 
     from hyde_bsdf.fit import export_pbsdf, fit_pbsdf, pbsdf_samples
     from hyde_bsdf.fit.pbsdf_export import DEFAULT_RESOLUTION, band_index, suggest_alpha_sample
-    from hyde_bsdf.fit.pbsdf_fit import plot_pbsdf_fit
+    from hyde_bsdf.app.plots import plot_pbsdf_fit
 
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)

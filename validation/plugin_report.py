@@ -25,7 +25,7 @@ import os
 import sys
 
 import numpy as np
-from hyde_bsdf.atomic import atomic_open
+from hyde_bsdf.io.atomic import atomic_open
 
 __all__ = ["main", "cli_main"]
 

@@ -53,7 +53,7 @@ import numpy as np
 
 from hyde_bsdf.render import prepare_variant, render_stokes, rotate_stokes, sensor_to_paper_rotation
 from hyde_bsdf.model.roughness import alpha_from_rms_slope
-from hyde_bsdf.atomic import atomic_open
+from hyde_bsdf.io.atomic import atomic_open
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import save_figure  # noqa: E402

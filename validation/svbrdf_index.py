@@ -72,6 +72,9 @@ from hyde_bsdf import inverse as inv  # noqa: E402
 from hyde_bsdf.inverse.uncertainty import STDERR_THRESHOLD  # noqa: E402
 from hyde_bsdf.inverse.acquisition import (design_acquisition, example_material,  # noqa: E402
                                            fixed_rig_acquisition, synthetic_observations)
+from hyde_bsdf.progress import stderr_lines  # noqa: E402
+
+_log = stderr_lines("[invert]")
 
 #: targets of the full run (issue 16): (median, 90th percentile) of |fit / truth - 1|
 TARGETS = {"eta": (0.01, 0.03), "alpha": (0.03, 0.08), "n": (0.03, 0.10), "k": (0.03, 0.10)}
@@ -183,7 +186,7 @@ def validate(outdir="out/validation", quick=False):
         for case, loss, scale in runs:
             if True:
                 key = (case, loss + ("+scale" if scale else ""))
-                inv._log(f"[svbrdf_index] {key[0]}, {key[1]} loss ({cfg['n']}x{cfg['n']} maps, "
+                _log(f"[svbrdf_index] {key[0]}, {key[1]} loss ({cfg['n']}x{cfg['n']} maps, "
                          f"{cfg['res']} px per view, {cfg['iterations']} iterations)")
                 if (case, scale) not in prepared:
                     prepared = {(case, scale): observations(case, scale, **obscfg)}     # one case's pictures at a time
@@ -191,7 +194,7 @@ def validate(outdir="out/validation", quick=False):
                 rows += _stats(key, results[key], stats)
                 # the table so far (a long full run leaves its finished rows behind if stopped)
                 write_csv(out / "svbrdf_index.csv", CSV_HEADER, rows)
-                inv._log(f"[svbrdf_index] {key[0]}, {key[1]}: {results[key][3]:.0f} s; " + "; ".join(
+                _log(f"[svbrdf_index] {key[0]}, {key[1]}: {results[key][3]:.0f} s; " + "; ".join(
                     f"{r[2]} {100 * float(r[3]):.2f} % / {100 * float(r[4]):.2f} %, pulls {r[5]}"
                     for r in rows if (r[0], r[1]) == key))
                 _plot(out / "svbrdf_index.png", results, cfg)

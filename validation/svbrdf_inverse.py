@@ -38,8 +38,11 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_open, atomic_path
+from hyde_bsdf.io.atomic import atomic_open, atomic_path
 from hyde_bsdf import inverse as inv
+from hyde_bsdf.progress import stderr_lines
+
+_log = stderr_lines("[invert]")
 
 ETA, K = 1.5, 3.0
 START_ALPHA = 0.3
@@ -78,7 +81,7 @@ def validate(outdir="out/validation", quick=False, bsdf="hyde", iterations=None,
         seen = coverage > 0
         runs = {}
         for comp in ("stokes", "s0"):
-            inv._log(f"[svbrdf] {comp} loss, {iterations} iterations, {len(observations)} images of "
+            _log(f"[svbrdf] {comp} loss, {iterations} iterations, {len(observations)} images of "
                      f"3 x {res} x {res} px")
             runs[comp] = inv.invert_maps(observations, {"alpha": START_ALPHA}, fit=("alpha",),
                                          iterations=iterations, spp=4, seed=100, components=comp,

@@ -129,7 +129,7 @@ def _describe(tree: ast.Module, name: str, lines=None, depth=0) -> tuple[str, st
 
 #: module order on the page: what a user calls first, then the layers below it
 ORDER = ("hyde_bsdf", "hyde_bsdf.render", "hyde_bsdf.inverse", "hyde_bsdf.fit", "hyde_bsdf.mom", "hyde_bsdf.mitsuba",
-         "hyde_bsdf.model", "hyde_bsdf.report", "hyde_bsdf.atomic", "hyde_bsdf.cli")
+         "hyde_bsdf.model", "hyde_bsdf.app.report", "hyde_bsdf.io.atomic", "hyde_bsdf.app.cli")
 
 
 def _order(mod: str):

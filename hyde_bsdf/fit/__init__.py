@@ -1,18 +1,20 @@
 """Fitting the model to Mueller-matrix measurements, and measured pBRDF tables.
 
-``mueller_fit`` (:func:`fit_mueller`, standard errors and ill-posedness checks, the
-``hyde-bsdf fit`` command for CSV files) and ``measurements`` (the CSV format, its reader and
-writer); ``pbsdf_file`` (Mitsuba ``measured_polarized`` tables: :func:`read_pbsdf`,
-:func:`pbsdf_samples` -- frames, masking, subsampling), ``pbsdf_fit`` (:func:`fit_pbsdf`, n and k
-per band and rms_slope; ``hyde-bsdf fit FILE.pbsdf``) and ``pbsdf_export`` (:func:`export_pbsdf`,
-the model as such a table for the C++ renderer; ``hyde-bsdf export``).
+``mueller_fit`` (:func:`fit_mueller`, standard errors and ill-posedness checks); ``pbsdf_samples``
+(a Mitsuba ``measured_polarized`` table in the paper's angles and bases: :func:`pbsdf_samples` --
+frames, masking, subsampling), ``pbsdf_fit`` (:func:`fit_pbsdf`, n and k per band and rms_slope)
+and ``pbsdf_export`` (:func:`export_pbsdf`, the model as such a table for the C++ renderer).
+The files themselves (the measurement CSV, the ``.pbsdf`` format) are read and written by
+:mod:`hyde_bsdf.io`; the commands (``hyde-bsdf fit``, ``hyde-bsdf export``) and the plots are in
+:mod:`hyde_bsdf.app`.
 
-May import: ``hyde_bsdf.model``.  Independent of Mitsuba.
+May import: ``hyde_bsdf.io``, ``hyde_bsdf.model``.  Independent of Mitsuba.
 """
 from hyde_bsdf.fit.mueller_fit import *  # noqa: F401,F403
 from hyde_bsdf.fit.mueller_fit import __all__ as _fit_all
 from hyde_bsdf.fit.pbsdf_export import export_pbsdf
-from hyde_bsdf.fit.pbsdf_file import pbsdf_samples, read_pbsdf
 from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
+from hyde_bsdf.fit.pbsdf_samples import pbsdf_samples
+from hyde_bsdf.io.pbsdf_file import read_pbsdf
 
 __all__ = list(_fit_all) + ["read_pbsdf", "pbsdf_samples", "fit_pbsdf", "export_pbsdf"]

@@ -50,40 +50,28 @@ What the data can and cannot say (:class:`FitDataWarning`, ``FitResult.data_warn
   (the given sigma, or the fit's residual scatter without sigma): no Mueller matrix has
   them, so the summary never reports a plain "converged".
 
-Command line::
-
-    hyde-bsdf fit DATA.csv [--fit n,k,rms_slope] [--rms-slope X] [--n0 N] [--k0 K]
-                  [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
-                  [--strict] [-o plot.png] [-q]
-
-(CSV format: :mod:`hyde_bsdf.fit.measurements`.)  Options and the ``-o`` path are checked
-before the file is read; a user error prints one line on stderr and exits 2; an ill-posed
-fit with ``--strict`` or a fit that did not converge exits 1.  Large files report reading
-and fitting progress on stderr every few seconds (``-q``: none); 10^6 rows read and fit in
-about 20-30 s on 2 cores (``validation/fit_synthetic.py``, part 5).
+The command line (``hyde-bsdf fit DATA.csv``, the plot) is :mod:`hyde_bsdf.app.fit`; the CSV
+format is :mod:`hyde_bsdf.io.measurements`.  Large data sets report progress through the
+``progress`` callback; 10^6 rows read and fit in about 20-30 s on 2 cores
+(``validation/fit_synthetic.py``, part 5).
 """
 from __future__ import annotations
 
-import argparse
 import math
-import sys
-import time
 import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_path, check_output_path
 from hyde_bsdf.model.checks import real_array
+from hyde_bsdf.progress import Throttle, as_callback, check_progress
 from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
-from hyde_bsdf.fit.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements,
-                                        MeasurementFileError, element_index, read_measurements)
+from hyde_bsdf.io.measurements import ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index
 
 __all__ = ["PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning", "IllPosedFitError",
            "FitDataWarning", "merge_repeated_geometries", "impossible_values",
            "mueller_elements", "fit_mueller", "fit_measurements", "synthetic_measurements",
-           "plot_fit", "cli_main"]
+           ]
 
 #: fittable parameters, in this order everywhere (vectors, covariance, correlation)
 PARAMETERS = ("n", "k", "rms_slope")
@@ -96,27 +84,26 @@ PLUGIN_RMS_RANGE = (0.01, 3.0)
 #: above this many geometries the multi-start search runs on a random subset of this size
 #: (fixed seed) and only its best point is refined on all the data (see fit_mueller)
 SEARCH_ROWS = 4000
-#: seconds between progress lines on stderr
+#: seconds between progress reports
 PROGRESS_SECONDS = 3.0
 
 
 class _Progress:
-    """Progress lines on stderr, at most one every PROGRESS_SECONDS, the first after that long."""
+    """Counts model evaluations; reports them through ``callback`` at most every PROGRESS_SECONDS."""
 
-    def __init__(self, enabled: bool):
-        self.enabled = enabled
-        self.t0 = self.last = time.perf_counter()
+    def __init__(self, callback):
+        self.throttle = Throttle(callback, PROGRESS_SECONDS)
         self.stage = ""
         self.calls = 0
 
     def tick(self, r):
         self.calls += 1
-        now = time.perf_counter()
-        if self.enabled and now - self.last >= PROGRESS_SECONDS:
-            self.last = now
-            chi2 = float(np.einsum("i,i->", r, r))
-            print(f"[hyde-bsdf] fit: {self.stage}: {self.calls} model evaluations, chi^2 = {chi2:.6g}, "
-                  f"{now - self.t0:.0f} s", file=sys.stderr, flush=True)
+        self.throttle(lambda: f"fit: {self.stage}: {self.calls} model evaluations, "
+                              f"chi^2 = {float(np.einsum('i,i->', r, r)):.6g}, {self.throttle.elapsed:.0f} s")
+
+    def done(self):
+        if self.throttle.elapsed >= PROGRESS_SECONDS:
+            self.throttle(f"fit: done, {self.calls} model evaluations in {self.throttle.elapsed:.0f} s", force=True)
 
 
 class IllPosedFitWarning(UserWarning):
@@ -502,8 +489,9 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     shadowing, diffuse : passed to :func:`hyde_bsdf.pbrdf` (default: the paper's model).
     corr_limit : |correlation| above which the fit is reported as ill-posed.
     strict : raise :class:`IllPosedFitError` instead of warning.
-    progress : progress lines on stderr every few seconds: True, False, or None (the
-        default: only for more than :data:`SEARCH_ROWS` geometries).
+    progress : a callback ``progress(message)`` told every few seconds, True (lines on stderr),
+        False, or None (the default: stderr lines only for more than :data:`SEARCH_ROWS`
+        geometries); see :mod:`hyde_bsdf.progress`.
 
     Large data sets: with more than :data:`SEARCH_ROWS` geometries the multi-start search
     runs on a random subset of that size and only its best point is refined on all the
@@ -525,8 +513,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     from scipy.stats import chi2 as chi2_dist
 
     fitted, mode, given = check_options(fit, rms_slope, n0, k0, shadowing, diffuse, corr_limit)
-    if progress is not None and not isinstance(progress, (bool, np.bool_)):
-        raise TypeError(f"progress must be True, False or None, got {progress!r}")
+    check_progress(progress)
     ti, tr, ph, y, w, _ = _as_arrays(theta_i, theta_r, phi, measured, sigma)
     rows_in = ti.size
     ti, tr, ph, y, w_merged, repeats = merge_repeated_geometries(ti, tr, ph, y, w if sigma is not None else None)
@@ -544,7 +531,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
                          f"(fit=...) at known values")
     rows = ti.size
     large = rows > SEARCH_ROWS
-    report = _Progress(large if progress is None else bool(progress))
+    report = _Progress(as_callback(large if progress is None else progress))
 
     def unpack(x):
         vals = dict(given)
@@ -608,9 +595,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
             if best is None or res.cost < best.cost:
                 best = res
         res = best
-    if report.enabled and time.perf_counter() - report.t0 >= PROGRESS_SECONDS:
-        print(f"[hyde-bsdf] fit: done, {report.calls} model evaluations in "
-              f"{time.perf_counter() - report.t0:.0f} s", file=sys.stderr, flush=True)
+    report.done()
     r = res.fun
     chi2 = float(r @ r)
     dof = m - p
@@ -720,7 +705,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
 
 
 def fit_measurements(meas: Measurements, **kwargs) -> FitResult:
-    """:func:`fit_mueller` on a :class:`~hyde_bsdf.fit.measurements.Measurements` (e.g. from a CSV)."""
+    """:func:`fit_mueller` on a :class:`~hyde_bsdf.io.measurements.Measurements` (e.g. from a CSV)."""
     return fit_mueller(meas.theta_i, meas.theta_r, meas.phi, meas.values,
                        sigma=meas.uncertainty(), **kwargs)
 
@@ -751,178 +736,3 @@ def synthetic_measurements(theta_i, theta_r, phi, names=("M01", "M11", "M22", "M
         sig[name] = draws.std(axis=1, ddof=1)
     return Measurements(theta_i=ti, theta_r=tr, phi=ph, values=values, sigma=sig,
                         n_samples=np.full(ti.size, float(n_samples)), source="<synthetic>")
-
-
-# ---------------------------------------------------------------------------
-# plot
-
-def _signed_theta_r(theta_r, phi):
-    """Signed observation angle in the plane of incidence: + forward (phi = pi), - backscatter."""
-    return np.where(np.cos(phi) < 0, theta_r, -theta_r)
-
-
-def plot_fit(result: FitResult, meas: Measurements, path, title: str = "", truth: dict | None = None):
-    """Plot data (means with +-1 sigma bars) against the fitted model, one panel per element.
-
-    Specular-plane data with theta_i = theta_r (the paper's Figs. 8-9) are plotted
-    against that angle with the model as a line; in-plane data (phi = 0 or pi) against
-    the signed theta_r with one line per theta_i; anything else point by point.
-    ``truth`` (n, k, rms_slope) adds the generating model as a dashed line.
-    """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    note = ""
-    if len(meas) > PLOT_POINTS:              # a plot of 10^6 error bars takes minutes and shows nothing
-        keep = np.sort(np.random.default_rng(0).choice(len(meas), PLOT_POINTS, replace=False))
-        note = f" ({PLOT_POINTS} of {len(meas)} geometries shown)"
-        meas = Measurements(meas.theta_i[keep], meas.theta_r[keep], meas.phi[keep],
-                            {e: v[keep] for e, v in meas.values.items()},
-                            None if meas.sigma is None else {e: v[keep] for e, v in meas.sigma.items()},
-                            None if meas.n_samples is None else meas.n_samples[keep], meas.source)
-    names = meas.elements
-    ncol = min(len(names), 4)
-    nrow = math.ceil(len(names) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.6 * ncol, 3.2 * nrow), squeeze=False)
-    ti, tr, ph = meas.theta_i, meas.theta_r, meas.phi
-    in_plane = np.all(np.isclose(np.cos(ph) ** 2, 1.0))
-    specular = in_plane and np.all(np.isclose(ti, tr)) and np.all(np.cos(ph) < 0)
-    bars = meas.sigma
-    for a, name in zip(axes.ravel(), names):
-        err = None if bars is None else bars[name]
-        if specular:
-            x = np.degrees(ti)
-            dense = np.radians(np.linspace(max(0.5, x.min() - 3), min(89.0, x.max() + 3), 200))
-            a.plot(np.degrees(dense), result.model(dense, dense, np.pi, (name,))[name], "C0-",
-                   label="fit")
-            if truth:
-                a.plot(np.degrees(dense), mueller_elements(dense, dense, np.pi, (name,), **truth,
-                       shadowing=result.shadowing, diffuse=result.diffuse)[name], "k--", lw=0.8,
-                       label="truth")
-            a.errorbar(x, meas.values[name], yerr=err, fmt="o", ms=4, color="C1", capsize=2,
-                       label="data")
-            a.set_xlabel(r"$\theta_i = \theta_r$ (deg), $\phi = 180°$")
-        elif in_plane:
-            xs = np.degrees(_signed_theta_r(tr, ph))
-            for c, t in enumerate(np.unique(np.round(ti, 9))):
-                sel = np.isclose(ti, t)
-                dense = np.radians(np.linspace(-89, 89, 300))
-                mod = result.model(t, np.abs(dense), np.where(dense >= 0, np.pi, 0.0), (name,))[name]
-                a.plot(np.degrees(dense), mod, f"C{c % 10}-", lw=1)
-                a.errorbar(xs[sel], meas.values[name][sel], yerr=None if err is None else err[sel],
-                           fmt="o", ms=3, color=f"C{c % 10}", capsize=2,
-                           label=rf"$\theta_i$={np.degrees(t):.0f}°")
-            a.set_xlabel(r"signed $\theta_r$ (deg; + forward)")
-        else:
-            idx = np.arange(len(meas))
-            a.plot(idx, result.model(ti, tr, ph, (name,))[name], "C0s", mfc="none", label="fit")
-            a.errorbar(idx, meas.values[name], yerr=err, fmt="o", ms=3, color="C1", label="data")
-            a.set_xlabel("measurement index")
-        a.set_title(f"{name}/M00")
-        a.grid(alpha=0.3)
-    for a in axes.ravel()[len(names):]:
-        a.axis("off")
-    axes.ravel()[0].legend(fontsize=7)
-    pr = result.params
-    fig.suptitle((title + note + "\n" if title or note else "") +
-                 rf"fit: $\eta$ = {pr['n']:.4g} - j{pr['k']:.4g}, rms_slope = {pr['rms_slope']:.4g}; "
-                 rf"$\chi^2_\nu$ = {result.reduced_chi2:.3g}", fontsize=9)
-    fig.tight_layout()
-    path = check_output_path(path, "plot file")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=120, format=_plot_format(path))
-    plt.close(fig)
-    return path
-
-
-# ---------------------------------------------------------------------------
-# command line
-
-#: at most this many geometries are plotted (a random subset of larger data sets)
-PLOT_POINTS = 2000
-#: plot formats matplotlib writes without extra packages
-PLOT_FORMATS = ("png", "pdf", "svg", "eps", "ps", "jpg", "jpeg", "tif", "tiff", "webp")
-
-
-def _plot_format(path) -> str:
-    ext = Path(path).suffix.lower().lstrip(".")
-    if ext not in PLOT_FORMATS:
-        raise ValueError(f"plot file {str(path)!r}: the extension must be one of "
-                         f"{', '.join('.' + e for e in PLOT_FORMATS)}")
-    return ext
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse with a one-line error (and exit status 2) instead of the usage block."""
-
-    def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
-def build_parser() -> argparse.ArgumentParser:
-    ap = _Parser(
-        prog="hyde-bsdf fit",
-        description="Fit the Hyde-Schmidt-Havrilla pBRDF (n, k, rms_slope) to normalized Mueller-matrix "
-                    "measurements in a CSV file (format: python -m pydoc hyde_bsdf.fit.measurements). "
-                    "The index is the paper's eta = n - jk (the plugin's eta = n, k = k). "
-                    "Exit status: 0 fitted, 1 not converged or ill-posed with --strict, 2 bad input.")
-    ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M01, M01_sigma, ...)")
-    ap.add_argument("--fit", default="n,k", help="comma-separated parameters to fit, from n,k,rms_slope "
-                    "(default n,k)")
-    ap.add_argument("--rms-slope", type=float, default=0.3,
-                    help="rms_slope = sqrt(2) sigma_h/ell: start value if fitted, else held fixed (default 0.3)")
-    ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n; default: several starts")
-    ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k; default: several starts")
-    ap.add_argument("--shadowing", default="vgroove", choices=("vgroove", "smith", "none"))
-    ap.add_argument("--diffuse", default="paper", choices=("paper", "reciprocal", "none"))
-    ap.add_argument("--strict", action="store_true", help="fail (exit 1) when the fit is ill-posed")
-    ap.add_argument("-o", "--output", default=None,
-                    help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)})")
-    ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
-    return ap
-
-
-def cli_main(argv=None) -> int:
-    """``hyde-bsdf fit``: read, fit, print the result and the plugin snippet, plot.
-
-    Options and the output path are checked before the file is read; a user error (bad
-    option, unreadable or malformed file, unwritable output) prints one line on stderr and
-    returns 2.
-    """
-    args = build_parser().parse_args(argv)
-    opts = dict(fit=args.fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
-                shadowing=args.shadowing, diffuse=args.diffuse)
-    try:
-        check_options(**opts)
-        if args.output:
-            check_output_path(args.output, "plot file (-o)")
-            _plot_format(args.output)
-        meas = read_measurements(args.data, progress=not args.quiet)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", IllPosedFitWarning)   # printed in the summary instead
-            warnings.simplefilter("ignore", FitDataWarning)
-            result = fit_measurements(meas, **opts, strict=args.strict,
-                                      progress=None if not args.quiet else False)
-    except IllPosedFitError as exc:
-        print(f"hyde-bsdf fit: {exc}", file=sys.stderr)
-        return 1
-    except (MeasurementFileError, ValueError, TypeError) as exc:
-        print(f"hyde-bsdf fit: error: {exc}", file=sys.stderr)
-        return 2
-    print(f"data: {meas.source} ({len(meas)} rows, elements {', '.join(meas.elements)}"
-          + (", sigma / sqrt(n_samples)" if meas.n_samples is not None else "") + ")")
-    print(result.summary())
-    for text in result.data_warnings:          # also on stderr, where a script's log sees them
-        print(f"hyde-bsdf fit: warning: {text}", file=sys.stderr)
-    print("\nMitsuba material (hyde plugin):")
-    print(result.plugin_xml(indent="    "))
-    if args.output:
-        try:
-            plot_fit(result, meas, args.output, title=str(meas.source))
-        except (ValueError, OSError) as exc:
-            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-            print(f"hyde-bsdf fit: error: cannot write the plot: {why}", file=sys.stderr)
-            return 2
-        print(f"\nplot: {args.output}")
-    return 0 if result.success else 1

@@ -2,7 +2,7 @@
 
 Python plugins are invisible to the C++ ``mitsuba`` executable and to CUDA without Python; a
 table of the model in the format of Mitsuba's ``measured_polarized`` plugin
-(:mod:`hyde_bsdf.fit.pbsdf_file`) renders in any Mitsuba 3 build (``*_spectral_polarized``
+(:mod:`hyde_bsdf.io.pbsdf_file`) renders in any Mitsuba 3 build (``*_spectral_polarized``
 variants).  :func:`export_pbsdf` tabulates the NumPy evaluator (:func:`hyde_bsdf.pbrdf`,
 paper Eq. 17):
 
@@ -25,7 +25,7 @@ paper Eq. 17):
   M00 over observer angles 0-80 deg (:func:`suggest_alpha_sample`).
 
 The interpolation error is measured on the written file (read back, interpolated as Mitsuba's
-lookup does, :meth:`~hyde_bsdf.fit.pbsdf_file.PbsdfTable.interpolate`) against the exact model
+lookup does, :meth:`~hyde_bsdf.io.pbsdf_file.PbsdfTable.interpolate`) against the exact model
 at random geometries (cosine-distributed light directions, observers half cosine-distributed
 and half from the Beckmann lobe; seeded): the relative L1 error of M00 weighted by
 cos theta_i cos theta_r, and the energy-weighted median and 95th percentile of the largest
@@ -38,40 +38,35 @@ Reliability: the table size is checked before any work against Mitsuba's 32-bit 
 loader holds the mapped file and a copy of it: 2x the file size); ``M`` is streamed slab by
 slab (one phi_d slice in memory) into a temporary file renamed at the end (atomic).
 
-Command line::
+The command line (``hyde-bsdf export``) is :mod:`hyde_bsdf.app.export`.
 
-    hyde-bsdf export OUT.pbsdf --rms-slope 0.3 (--material Au | --n N[,N,...] --k K[,K,...])
-                     [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
-                     [--resolution 37x55x55] [--error-samples 20000] [-q]
-
-May import: ``hyde_bsdf.model``, ``hyde_bsdf.fit``, ``hyde_bsdf.atomic``, ``hyde_bsdf.errors``.
+May import: ``hyde_bsdf.io``, ``hyde_bsdf.model``, ``hyde_bsdf.fit``, ``hyde_bsdf.errors``.
 """
 from __future__ import annotations
 
-import argparse
 import importlib.util
 import json
 import math
 import os
 import shutil
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_path, check_output_path
+from hyde_bsdf.io.atomic import atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.fit.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, paper_angles,
-                                      read_pbsdf, rusinkiewicz_to_directions, table_frame_x,
-                                      table_nbytes, table_to_paper, paper_to_table)
+from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
+from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, read_pbsdf,
+                                     rusinkiewicz_to_directions, table_frame_x, table_nbytes)
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.shadowing import SHADOWING
+from hyde_bsdf.progress import Throttle, as_callback
 
 __all__ = ["DEFAULT_RESOLUTION", "edge_deg", "ALPHA_CANDIDATES", "ExportReport", "grids",
            "band_index", "check_table_size", "interpolation_error", "suggest_alpha_sample",
-           "export_pbsdf", "cli_main"]
+           "export_pbsdf"]
 
 #: (N_phi_d, N_theta_d, N_theta_h) of the default export: the smallest table of the sweep in
 #: validation/pbsdf_export.py with an M00 L1 error <= 1 % and normalized elements within 2 % (95th
@@ -455,14 +450,15 @@ def _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths):
 
 def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="vgroove",
                  diffuse="paper", resolution=DEFAULT_RESOLUTION, error_samples: int = 20000,
-                 alpha_sample: float | None = None, seed: int = 0, progress: bool = False) -> ExportReport:
+                 alpha_sample: float | None = None, seed: int = 0, progress=None) -> ExportReport:
     """Write the ``hyde`` model as a ``measured_polarized`` table (see the module docstring).
 
     Parameters: ``rms_slope`` (the paper's), the index as ``n``/``k`` (eta = n - jk; one value or
     one per band) or ``material`` (Mitsuba ``data/ior`` name), ``shadowing``, ``diffuse`` (as
     :func:`hyde_bsdf.pbrdf`), ``resolution`` (N_phi_d, N_theta_d, N_theta_h) or "37x55x55",
     ``error_samples`` geometries for the error estimate (0: skip it), ``alpha_sample`` (default:
-    :func:`suggest_alpha_sample`), ``seed`` of the error geometries, ``progress`` on stderr.
+    :func:`suggest_alpha_sample`), ``seed`` of the error geometries, ``progress`` a callback
+    ``progress(message)`` (True: lines on stderr; :mod:`hyde_bsdf.progress`).
     Everything is checked, and the size refused (:func:`check_table_size`), before any work.
     """
     t0 = time.perf_counter()
@@ -476,16 +472,15 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     path = check_output_path(path, "pBSDF file")
     nbytes = check_table_size(path, res, len(wavelengths))
     pd, td, th = grids(res)
-    say = (lambda text: print(f"[hyde-bsdf] export: {text}", file=sys.stderr, flush=True)) if progress else (lambda t: None)
-    last = [time.perf_counter()]
+    callback = as_callback(progress)
+    say = (lambda text: callback(f"export: {text}")) if callback else (lambda text: None)
+    report = Throttle(say, PROGRESS_SECONDS)
 
     def slabs():
         for p in range(res[0]):
             yield _slab(p, pd, td, th, params)
-            now = time.perf_counter()
-            if progress and now - last[0] >= PROGRESS_SECONDS:
-                last[0] = now
-                say(f"tabulating phi_d {p + 1}/{res[0]} ({100 * (p + 1) / res[0]:.0f} %), {now - t0:.0f} s")
+            report(lambda: f"tabulating phi_d {p + 1}/{res[0]} ({100 * (p + 1) / res[0]:.0f} %), "
+                           f"{time.perf_counter() - t0:.0f} s")
 
     with atomic_path(path) as tmp:
         meta = {"producer": "hyde-bsdf export", "model": "Hyde, Schmidt, Havrilla, Opt. Express 17(24) 2009, Eq. 17",
@@ -525,56 +520,3 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     return ExportReport(path=Path(path), resolution=res, nbytes=os.path.getsize(path),
                         seconds=time.perf_counter() - t0, params=params, wavelengths=tuple(wavelengths),
                         alpha_sample=float(alpha_sample), errors=errors)
-
-
-# ---------------------------------------------------------------------------------------------
-# command line
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise UsageError(f"{message} (see hyde-bsdf export --help)")
-
-
-def _floats(text, name):
-    try:
-        vals = [float(v) for v in str(text).split(",")]
-    except ValueError:
-        raise UsageError(f"--{name} must be a number or 5 comma-separated numbers (one per band), got {text!r}") from None
-    return vals[0] if len(vals) == 1 else vals
-
-
-def build_parser():
-    ap = _Parser(prog="hyde-bsdf export",
-                 description="Write the hyde model as a Mitsuba measured_polarized table (.pbsdf) that the C++ "
-                             "renderer (mitsuba executable, CUDA without Python) renders in *_spectral_polarized "
-                             "variants; prints the measured interpolation error and the <bsdf> element to use. "
-                             "Index: the paper's eta = n - jk (the plugin's eta = n, k = k).")
-    ap.add_argument("output", help="the .pbsdf file to write (atomically)")
-    ap.add_argument("--rms-slope", type=float, required=True, help="the paper's rms_slope = sqrt(2) sigma_h/ell")
-    ap.add_argument("--material", default=None, help="a Mitsuba data/ior material (Au, Ag, Al, Cu, ...)")
-    ap.add_argument("--n", default=None, help="real part of the index: one value or 5 (450..650 nm)")
-    ap.add_argument("--k", default=None, help="imaginary part (paper's kappa >= 0): one value or 5")
-    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING)
-    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE)
-    ap.add_argument("--resolution", default="x".join(map(str, DEFAULT_RESOLUTION)),
-                    help="N_phi_d x N_theta_d x N_theta_h (default %(default)s)")
-    ap.add_argument("--error-samples", type=int, default=20000,
-                    help="geometries for the interpolation-error estimate (0: skip; default %(default)s)")
-    ap.add_argument("--alpha-sample", type=float, default=None, help="override the suggested alpha_sample")
-    ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
-    return ap
-
-
-def cli_main(argv=None) -> int:
-    """``hyde-bsdf export``: write the table, print the summary and the XML element."""
-    args = build_parser().parse_args(argv)
-    n = None if args.n is None else _floats(args.n, "n")
-    k = None if args.k is None else _floats(args.k, "k")
-    report = export_pbsdf(args.output, rms_slope=args.rms_slope, n=n, k=k, material=args.material,
-                          shadowing=args.shadowing, diffuse=args.diffuse, resolution=args.resolution,
-                          error_samples=args.error_samples, alpha_sample=args.alpha_sample,
-                          progress=not args.quiet)
-    print(report.summary())
-    print("\nMitsuba material (C++ measured_polarized, *_spectral_polarized variants):")
-    print(report.xml(indent="    "))
-    return 0

@@ -5,7 +5,7 @@
 
 over rms_slope (shared by the bands) and n_b, k_b (eta = n - jk per band; any subset can be held
 fixed), with F = :func:`hyde_bsdf.pbrdf` and M the table's usable cells in the paper's angles and
-bases (:func:`hyde_bsdf.fit.pbsdf_file.pbsdf_samples`).  M00 carries the roughness: the lobe's
+bases (:func:`hyde_bsdf.fit.pbsdf_samples.pbsdf_samples`).  M00 carries the roughness: the lobe's
 width and height (a fit of the normalized elements alone cannot identify rms_slope, which only
 enters them through the diffuse fraction); the normalized elements carry the index.  c_b =
 1e-4 max M00 keeps the log finite where the lobe falls to 0.
@@ -22,33 +22,25 @@ Procedure: multi-start (n, k, rms_slope) on the middle band (starts as :func:`fi
 then (n, k) of each other band from its neighbour's solution, then all parameters jointly on all
 bands; then the weights and the final joint fit.  3000 geometries x 5 bands take a few seconds.
 
-Command line::
+The command line (``hyde-bsdf fit FILE.pbsdf``) and the plot are in :mod:`hyde_bsdf.app.fit`.
 
-    hyde-bsdf fit FILE.pbsdf [--fit n,k,rms_slope] [--rms-slope 0.3] [--n0 N] [--k0 K]
-                  [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
-                  [--max-points 3000] [--theta-max 80] [--tolerance 0.05] [--seed 0]
-                  [--strict] [-o fit.png] [-q]
-
-May import: ``hyde_bsdf.model``, ``hyde_bsdf.fit``.
+May import: ``hyde_bsdf.io``, ``hyde_bsdf.model``, ``hyde_bsdf.fit``.
 """
 from __future__ import annotations
 
-import argparse
 import math
-import sys
-import time
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.fit.pbsdf_file import PbsdfSamples, pbsdf_samples, read_pbsdf
+from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.shadowing import SHADOWING
+from hyde_bsdf.progress import Throttle, as_callback, check_progress
 
-__all__ = ["PbsdfFitResult", "fit_pbsdf", "plot_pbsdf_fit", "cli_main"]
+__all__ = ["PbsdfFitResult", "fit_pbsdf"]
 
 #: elements fitted besides M00 (normalized by M00): all 15
 ELEMENTS = tuple((j, k) for j in range(4) for k in range(4) if (j, k) != (0, 0))
@@ -202,36 +194,34 @@ def _bounds(free):
 
 def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=None, k0=None,
               shadowing: str = "vgroove", diffuse: str = "paper", strict: bool = False,
-              progress: bool | None = None, **sample_options) -> PbsdfFitResult:
+              progress=None, **sample_options) -> PbsdfFitResult:
     """Fit rms_slope and n, k per band to a table (see the module docstring).
 
-    ``data``: :class:`~hyde_bsdf.fit.pbsdf_file.PbsdfSamples`, a
-    :class:`~hyde_bsdf.fit.pbsdf_file.PbsdfTable` or a path (then ``sample_options`` go to
-    :func:`~hyde_bsdf.fit.pbsdf_file.pbsdf_samples`).  ``fit``: the parameters to fit
+    ``data``: :class:`~hyde_bsdf.fit.pbsdf_samples.PbsdfSamples`, a
+    :class:`~hyde_bsdf.io.pbsdf_file.PbsdfTable` or a path (then ``sample_options`` go to
+    :func:`~hyde_bsdf.fit.pbsdf_samples.pbsdf_samples`).  ``fit``: the parameters to fit
     ("n,k,rms_slope" or a tuple); ``rms_slope``, ``n0``, ``k0``: start values, or the values of
     parameters held fixed (n0/k0 apply to every band).  ``strict``: raise instead of warning when
-    the fit is ill-posed.  ``progress``: lines on stderr every few seconds (default: when the
-    fit runs longer).
+    the fit is ill-posed.  ``progress``: a callback ``progress(message)`` told every few seconds,
+    True or None (the default) for lines on stderr, False for none (:mod:`hyde_bsdf.progress`).
     """
     from scipy.optimize import least_squares
 
     from hyde_bsdf.fit.mueller_fit import IllPosedFitError, IllPosedFitWarning
 
     fit = _check(fit, rms_slope, n0, k0, shadowing, diffuse)
+    check_progress(progress)
     if not isinstance(data, PbsdfSamples):
-        data = pbsdf_samples(data, progress=bool(progress), **sample_options)
+        data = pbsdf_samples(data, progress=progress or False, **sample_options)
     K = data.wavelengths.size
     rows_all = np.arange(len(data))
-    t0 = time.perf_counter()
-    state = {"calls": 0, "last": t0, "stage": ""}
+    report = Throttle(as_callback(True if progress is None else progress), PROGRESS_SECONDS)
+    state = {"calls": 0, "stage": ""}
 
     def tick(r):
         state["calls"] += 1
-        now = time.perf_counter()
-        if progress is not False and now - state["last"] >= PROGRESS_SECONDS:
-            state["last"] = now
-            print(f"[hyde-bsdf] fit: {state['stage']}: {state['calls']} evaluations, chi^2 = {float(r @ r):.6g}, "
-                  f"{now - t0:.0f} s", file=sys.stderr, flush=True)
+        report(lambda: f"fit: {state['stage']}: {state['calls']} evaluations, chi^2 = {float(r @ r):.6g}, "
+                       f"{report.elapsed:.0f} s")
 
     values = {"rms_slope": float(rms_slope)}
     for b in range(K):
@@ -290,9 +280,8 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     res, prob = solve(bands, rows_all, free, res.x, 20 * len(free), s00, sel)
     values.update(zip(free, res.x))
     r00, rel = prob.parts(res.x)
-    if progress and time.perf_counter() - t0 >= PROGRESS_SECONDS:
-        print(f"[hyde-bsdf] fit: done, {state['calls']} evaluations in {time.perf_counter() - t0:.0f} s",
-              file=sys.stderr, flush=True)
+    if report.elapsed >= PROGRESS_SECONDS:
+        report(f"fit: done, {state['calls']} evaluations in {report.elapsed:.0f} s", force=True)
 
     r = res.fun
     chi2 = float(r @ r)
@@ -342,133 +331,3 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
             raise IllPosedFitError(text)
         warnings.warn(text, IllPosedFitWarning, stacklevel=2)
     return result
-
-
-def plot_pbsdf_fit(result: PbsdfFitResult, data: PbsdfSamples, path, title: str = "", max_points: int = 1500):
-    """Fit against data per Mueller element: 16 panels of model (y) against table (x) at the fitted
-    geometries, every band in its own colour; M00 in 1/sr on log axes, the others normalized by M00."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rows = np.arange(len(data))
-    if rows.size > max_points:
-        rows = np.sort(np.random.default_rng(0).choice(rows, max_points, replace=False))
-    fig, axes = plt.subplots(4, 4, figsize=(12, 11))
-    cmap = plt.get_cmap("viridis")
-    K = data.wavelengths.size
-    model = np.stack([result.model(data.theta_i[rows], data.theta_r[rows], data.phi[rows], b) for b in range(K)])
-    table = data.F[:, rows]
-    colours = np.repeat([cmap(b / max(K - 1, 1)) for b in range(K)], rows.size, axis=0)
-    for j in range(4):
-        for k in range(4):
-            a = axes[j, k]
-            if (j, k) == (0, 0):       # one scatter per panel (every band at once): drawing is the cost
-                a.scatter(table[..., 0, 0].ravel(), model[..., 0, 0].ravel(), s=2, c=colours, lw=0)
-                a.set_xscale("log")
-                a.set_yscale("log")
-            else:
-                a.scatter((table[..., j, k] / table[..., 0, 0]).ravel(), (model[..., j, k] / model[..., 0, 0]).ravel(),
-                          s=2, c=colours, lw=0)
-    for b in range(K):
-        axes[0, 0].plot([], [], ".", color=cmap(b / max(K - 1, 1)), label=f"{data.wavelengths[b]:g} nm")
-    for j in range(4):
-        for k in range(4):
-            a = axes[j, k]
-            lo, hi = a.get_xlim()
-            lo, hi = min(lo, a.get_ylim()[0]), max(hi, a.get_ylim()[1])
-            a.plot([lo, hi], [lo, hi], "k-", lw=0.6)
-            a.set_title("M00 (1/sr)" if (j, k) == (0, 0) else f"M{j}{k}/M00", fontsize=9)
-            a.tick_params(labelsize=7)
-            if j == 3:
-                a.set_xlabel("table", fontsize=8)
-            if k == 0:
-                a.set_ylabel("fitted model", fontsize=8)
-    axes[0, 0].legend(fontsize=6, markerscale=2)
-    fig.suptitle((title + "\n" if title else "") +
-                 f"rms_slope = {result.rms_slope:.4g}; n = {', '.join(f'{v:.3g}' for v in result.n)}; "
-                 f"k = {', '.join(f'{v:.3g}' for v in result.k)} ({len(rows)} of {len(data)} geometries)", fontsize=9)
-    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.05, top=0.92, wspace=0.3, hspace=0.35)
-    path = check_output_path(path, "plot file")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90, format=path.suffix.lstrip(".").lower() or "png")
-    plt.close(fig)
-    return path
-
-
-# ---------------------------------------------------------------------------------------------
-# command line
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):
-        raise UsageError(f"{message} (see hyde-bsdf fit FILE.pbsdf --help)")
-
-
-def build_parser():
-    ap = _Parser(prog="hyde-bsdf fit", description=(
-        "Fit the Hyde-Schmidt-Havrilla pBRDF to a Mitsuba measured_polarized table (FILE.pbsdf, e.g. the KAIST "
-        "database): one rms_slope and n, k per band, from M00 and the 15 normalized elements; prints the cell "
-        "counts (NaN, non-physical, below the horizon), the fit with standard errors, and the hyde <bsdf>. "
-        "Index: the paper's eta = n - jk (the plugin's eta = n, k = k). Exit status: 0 fitted, 1 not converged "
-        "or ill-posed with --strict, 2 bad input."))
-    ap.add_argument("data", help="the measured_polarized table (.pbsdf)")
-    ap.add_argument("--fit", default="n,k,rms_slope", help="parameters to fit (default n,k,rms_slope)")
-    ap.add_argument("--rms-slope", type=float, default=0.3, help="start (or fixed) rms_slope (default 0.3)")
-    ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n of every band; default: several")
-    ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k of every band; default: several")
-    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING)
-    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE)
-    ap.add_argument("--max-points", type=int, default=3000, help="geometries drawn from the usable cells (default 3000)")
-    ap.add_argument("--theta-max", type=float, default=80.0,
-                    help="largest theta_i, theta_r used, degrees (default 80)")
-    ap.add_argument("--tolerance", type=float, default=0.05,
-                    help="a cell with |M_jk| or a degree of polarization above (1 + tolerance) M00 is non-physical")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
-    ap.add_argument("--strict", action="store_true", help="fail (exit 1) when the fit is ill-posed")
-    ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element")
-    ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
-    return ap
-
-
-def cli_main(argv=None) -> int:
-    """``hyde-bsdf fit FILE.pbsdf``: read, mask, subsample, fit, print, plot."""
-    from hyde_bsdf.fit.mueller_fit import IllPosedFitError, IllPosedFitWarning, _plot_format
-
-    args = build_parser().parse_args(argv)
-    fit = _check(args.fit, args.rms_slope, args.n0, args.k0, args.shadowing, args.diffuse)
-    if not 0 < args.theta_max <= 90:
-        raise UsageError(f"--theta-max must be in (0, 90] degrees, got {args.theta_max:g}")
-    if not 0 <= args.tolerance <= 1:
-        raise UsageError(f"--tolerance must be in [0, 1], got {args.tolerance:g}")
-    if args.max_points < 1:
-        raise UsageError(f"--max-points must be >= 1, got {args.max_points}")
-    if args.output:
-        check_output_path(args.output, "plot file (-o)")
-        try:
-            _plot_format(args.output)
-        except ValueError as exc:
-            raise UsageError(str(exc)) from None
-    table = read_pbsdf(args.data)
-    data = pbsdf_samples(table, max_points=args.max_points, theta_max=math.radians(args.theta_max),
-                         tolerance=args.tolerance, seed=args.seed, progress=not args.quiet)
-    print(f"data: {args.data} ({table.resolution} phi_d x theta_d x theta_h, bands "
-          f"{', '.join(f'{w:g}' for w in table.wavelengths)} nm)")
-    print(f"  {data.counts.summary()}")
-    print(f"  fitting {len(data)} of {data.usable_geometries} geometries usable in every band "
-          f"(theta <= {args.theta_max:g} deg, seed {args.seed})")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", IllPosedFitWarning)
-            result = fit_pbsdf(data, fit=fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
-                               shadowing=args.shadowing, diffuse=args.diffuse, strict=args.strict,
-                               progress=None if not args.quiet else False)
-    except IllPosedFitError as exc:
-        print(f"hyde-bsdf fit: {exc}", file=sys.stderr)
-        return 1
-    print(result.summary())
-    print("\nMitsuba material (hyde plugin):")
-    print(result.plugin_xml(indent="    "))
-    if args.output:
-        plot_pbsdf_fit(result, data, args.output, title=str(args.data))
-        print(f"\nplot: {args.output}")
-    return 0 if result.success else 1

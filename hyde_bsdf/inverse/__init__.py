@@ -1,7 +1,7 @@
 """Inverse rendering: BSDF parameters -- one global value or per-texel maps -- from Stokes images.
 
 It uses the renderer and produces parameter maps, so it sits right of ``render`` (may import
-``hyde_bsdf.model``, ``mitsuba``, ``fit``, ``render``; only ``report`` imports it).  Modules:
+``hyde_bsdf.io``, ``model``, ``mitsuba``, ``fit``, ``render``; only ``hyde_bsdf.app`` imports it).  Modules:
 
 ``loss``          the Stokes-image loss (:class:`StokesLoss`), its mask, the map regulariser
 ``scalar``        one global rms_slope, eta, k from one image (:func:`invert`; spectral polarized)
@@ -9,7 +9,7 @@ It uses the renderer and produces parameter maps, so it sits right of ``render``
 ``acquisition``   the designed observation set: views, lights, polarizer states (:func:`design_acquisition`)
 ``maps``          per-texel maps (:func:`invert_maps`): set-up, loss, step, update, uncertainty
 ``uncertainty``   per-texel standard errors (Gauss-Newton information, forward-mode AD), warnings
-``cli``           ``hyde-bsdf invert``
+``memory``        the memory estimate of a differentiable render, checked before an inversion
 
 Every public name of these modules is importable from ``hyde_bsdf.inverse`` itself.
 
@@ -27,7 +27,7 @@ errors are reported.  The validation (validation/svbrdf_inverse.py) and the benc
 scene).  Per-texel gradients: the rendering depends on exactly the texels the coverage pass finds
 (tests/test_inverse_maps.py: dL/dalpha != 0 there and only there).
 
-Command line (errors: one line on stderr, exit 2; Ctrl-C: exit 130; progress per iteration on
+Command line (:mod:`hyde_bsdf.app.invert`; errors: one line on stderr, exit 2; Ctrl-C: exit 130; progress per iteration on
 stderr; output paths and memory checked before any rendering; outputs written atomically)::
 
     hyde-bsdf invert [--scene SCENE.xml [--target PREFIX] | (built-in sphere)] [--truth rms_slope=0.3,eta=1.5,k=3]
@@ -52,8 +52,8 @@ standard errors) and OUTDIR/invert_maps.png.  ``--preset`` captures the built-in
 4 x --map-size, so that texels span pure pixels) and reports the errors against its truth.
 """
 
-from hyde_bsdf.inverse._common import Y_WEIGHTS, _log  # noqa: F401  (_log: the scripts' progress lines)
-from hyde_bsdf.inverse.cli import (AD_BYTES_FIXED, AD_BYTES_PER_SAMPLE, check_memory, cli_main, estimate_memory)
+from hyde_bsdf.inverse._common import Y_WEIGHTS
+from hyde_bsdf.inverse.memory import AD_BYTES_FIXED, AD_BYTES_PER_SAMPLE, check_memory, estimate_memory
 from hyde_bsdf.inverse.loss import (REFERENCE_RANGE, StokesLoss, channel_names, check_reference_scale,
                                     interior_mask, smoothness, stokes_images)
 from hyde_bsdf.inverse.acquisition import (Acquisition, Configuration, acquisition_scene_dict,
@@ -68,16 +68,16 @@ from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT,
                                             texel_coverage)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, VARIANT, InversionResult,
                                       check_gradients, finite_difference_gradient, invert, load_scene, loss_and_gradient,
-                                      parameter_keys, plot_history, prepare, render_reference, scene_dict,
+                                      parameter_keys, prepare, render_reference, scene_dict,
                                       write_history)
 
 __all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
            "parameter_keys", "stokes_images", "channel_names", "interior_mask", "StokesLoss", "REFERENCE_RANGE",
            "check_reference_scale", "render_reference",
            "InversionResult", "invert", "check_gradients", "loss_and_gradient", "finite_difference_gradient",
-           "plot_history", "write_history", "MAP_PARAMETERS", "MAP_VARIANT", "map_keys", "film_channels",
+           "write_history", "MAP_PARAMETERS", "MAP_VARIANT", "map_keys", "film_channels",
            "render_stokes", "render_stokes_np", "Observation", "texel_coverage", "smoothness",
            "MapInversionResult", "invert_maps", "MapProblem", "map_loss", "map_step", "LogAdam", "map_uncertainty",
            "Uncertainty", "UnidentifiedParameterWarning", "STDERR_THRESHOLD", "pixel_texels", "Configuration",
            "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition", "predicted_stderr", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",
-           "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "Y_WEIGHTS", "cli_main"]
+           "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "Y_WEIGHTS"]

@@ -13,15 +13,17 @@ from __future__ import annotations
 import gc
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.inverse._common import _first_line, _log
+from hyde_bsdf.inverse._common import _first_line
 from hyde_bsdf.inverse.loss import StokesLoss, smoothness
 from hyde_bsdf.inverse.observations import (MAP_PARAMETERS, _obs_mask, film_channels, map_keys, render_stokes,
                                             texel_coverage)
 from hyde_bsdf.inverse.scalar import check_gradients
+from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.uncertainty import (STDERR_THRESHOLD, Uncertainty, accumulate_blocks, gauss_newton_step,
                                            identification_warnings, pixel_records, standard_errors,
                                            warn_unidentified)
@@ -317,7 +319,7 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
 def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 100, lr: float = 0.05,
                 spp: int = 4, seed: int = 0, components: str = "stokes", regularizer: str | None = None,
                 weight: float = 0.0, truth: dict | None = None, prefix: str | None = None,
-                average_last: int | None = None, progress: bool = True,
+                average_last: int | None = None, progress=True,
                 seen: np.ndarray | None = None, freeze: bool = True, uncertainty: bool = True,
                 uncertainty_spp: int = 16, polish: int = 2, noise=None,
                 threshold: float = STDERR_THRESHOLD) -> MapInversionResult:
@@ -384,6 +386,7 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
         raise ValueError(f"regularizer must be None, 'tv' or 'l2', got {regularizer!r}")
     if not (math.isfinite(weight) and weight >= 0):
         raise ValueError(f"weight must be a finite number >= 0, got {weight!r}")
+    progress = as_callback(progress, "[invert]")
     problem = MapProblem.build(observations, start, fit, components=components, prefix=prefix, seen=seen)
     fit, seen, n_obs = problem.fit, problem.seen, len(problem.observations)
     average_last = max(1, iterations // 4) if average_last is None else max(1, int(average_last))
@@ -414,7 +417,8 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
                 raise
             # a scene object Dr.Jit cannot traverse (a custom plugin without traverse support):
             # run unfrozen, which gives the same results, only slower
-            _log(f"dr.freeze could not record the step ({_first_line(exc)}); running unfrozen")
+            warnings.warn(f"dr.freeze could not record the step ({_first_line(exc)}); running unfrozen",
+                          RuntimeWarning, stacklevel=2)
             step_fn = step
             values = adam.values()
             loss, data, reg = step_fn(problem.scenes, values, seed_it, tensors)
@@ -438,7 +442,7 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
         if progress:
             err = "".join(f"  {n} median err {100 * row[n + '_median_error']:.1f} %" for n in fit
                           if n + "_median_error" in row)
-            _log(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.4e}{err}  ({row['seconds']:.1f} s)")
+            progress(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.4e}{err}  ({row['seconds']:.1f} s)")
     final = adam.average()
     adam_final = dict(final)
     # the scenes keep the result, detached: the last iteration's gradient-enabled leaves must not
@@ -449,7 +453,7 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     unc = None
     if uncertainty:
         if progress:
-            _log(f"uncertainty: forward-mode information of {', '.join(fit)} at {uncertainty_spp} spp"
+            progress(f"uncertainty: forward-mode information of {', '.join(fit)} at {uncertainty_spp} spp"
                  + (f", {polish} Gauss-Newton step(s)" if polish and regularizer is None else ""))
         final, unc = map_uncertainty(problem, final, spp=uncertainty_spp, seed=seed + 1 + iterations * n_obs,
                                      noise=noise, polish=polish if (regularizer is None or weight == 0) else 0,

@@ -28,13 +28,14 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_open, atomic_path
-from hyde_bsdf.inverse._common import SQRT2, _log
+from hyde_bsdf.io.atomic import atomic_open
+from hyde_bsdf.inverse._common import SQRT2
+from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.loss import StokesLoss, channel_names, stokes_images
 
 __all__ = ["VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
            "parameter_keys", "render_reference", "InversionResult", "invert", "check_gradients", "loss_and_gradient",
-           "finite_difference_gradient", "plot_history", "write_history"]
+           "finite_difference_gradient", "write_history"]
 
 VARIANT = "llvm_ad_spectral_polarized"
 #: optimizable BSDF parameters (the plugin's names)
@@ -195,7 +196,7 @@ class InversionResult:
 
 def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iterations: int = 200,
            lr: float = 0.05, spp: int = 16, seed: int = 0, truth: dict | None = None,
-           bsdf: str = "hyde", progress: bool = True, average_last: int = 20,
+           bsdf: str = "hyde", progress=True, average_last: int = 20,
            prefix: str | None = None) -> InversionResult:
     """Optimize the BSDF parameters ``fit`` of ``scene`` to minimize ``loss_fn``.
 
@@ -205,10 +206,13 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
     is the mean of the parameters over the last ``average_last`` iterations
     (Polyak averaging: it cancels the Monte-Carlo jitter of single steps).
     ``prefix`` picks the BSDF when the scene has several (see :func:`parameter_keys`).
+    ``progress``: a callback ``progress(message)`` per iteration; True for ``[invert]`` lines on
+    stderr, False for none (:mod:`hyde_bsdf.progress`).
     """
     import drjit as dr
     import mitsuba as mi
 
+    progress = as_callback(progress, "[invert]")
     fit = tuple(p for p in PARAMETERS if p in fit)
     if not fit:
         raise ValueError(f"fit must name at least one of {PARAMETERS}")
@@ -265,8 +269,8 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
         row["seconds"] = time.perf_counter() - t0
         history.append(row)
         if progress:
-            _log(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.3e}  " +
-                 "  ".join(f"{p}={row[p]:.4f}" for p in fit) + f"  ({row['seconds']:.1f} s)")
+            progress(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.3e}  " +
+                     "  ".join(f"{p}={row[p]:.4f}" for p in fit) + f"  ({row['seconds']:.1f} s)")
     tail = history[-min(average_last, len(history)):]
     final = {p: float(np.mean([r[p] for r in tail])) for p in fit}
     final.update(fixed)
@@ -363,33 +367,3 @@ def write_history(result: InversionResult, path) -> Path:
     return path
 
 
-def plot_history(results: dict, path, title: str = "") -> Path:
-    """Loss and parameter trajectories (relative to the truth when known) of one or more runs."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 1 + len(PARAMETERS), figsize=(4.2 * (1 + len(PARAMETERS)), 3.4))
-    for c, (label, res) in enumerate(results.items()):
-        it = [r["iteration"] for r in res.history]
-        axes[0].semilogy(it, [r["loss"] for r in res.history], f"C{c}-", lw=1, label=label)
-        for a, p in zip(axes[1:], PARAMETERS):
-            a.plot(it, [r[p] for r in res.history], f"C{c}-", lw=1.2, label=label)
-            if res.truth:
-                a.axhline(res.truth[p], color="k", ls="--", lw=0.8)
-    axes[0].set_title("loss (each run's own)")
-    axes[0].set_xlabel("iteration")
-    axes[0].legend(fontsize=7)
-    for a, p in zip(axes[1:], PARAMETERS):
-        a.set_title(f"{p} (dashed: truth)")
-        a.set_xlabel("iteration")
-        a.grid(alpha=0.3)
-    if title:
-        fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
-    return path

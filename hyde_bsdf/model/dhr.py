@@ -50,7 +50,7 @@ if all of these match, its arrays have the grid's shapes and are finite, rho_avg
 the average of rho, and a few nodes re-integrated on the spot with
 :func:`dhr_quadrature` agree with the stored rho to 1e-9; otherwise a
 :class:`DHRCacheWarning` names the file and the reason, and the table is rebuilt
-and written back atomically (:mod:`hyde_bsdf.atomic`: no partial or temporary file
+and written back atomically (:mod:`hyde_bsdf.io.atomic`: no partial or temporary file
 is left behind).  A cache that cannot be written (read-only, a directory in the
 way) only costs the rebuild, with a one-line note on stderr.
 """
@@ -61,7 +61,6 @@ import inspect
 import json
 import math
 import os
-import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -70,10 +69,11 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_open
+from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
 from hyde_bsdf.model import shadowing as _shadowing_module
 from hyde_bsdf.model.shadowing import SHADOWING, g1_smith_beckmann
+from hyde_bsdf.progress import Throttle, as_callback
 
 __all__ = ["dhr_specular_pec", "dhr_quadrature", "DHRTable", "load_table", "build_table",
            "x_of_theta", "theta_of_x", "table_x_nodes", "cache_dir", "cache_path", "DHRCacheWarning",
@@ -328,7 +328,11 @@ def _rho_average(x, rho):
 
 
 def build_table(shadowing="vgroove", progress=True) -> DHRTable:
-    """Compute the table (no cache).  About 2-4 s on 2 cores."""
+    """Compute the table (no cache).  About 2-4 s on 2 cores.
+
+    ``progress``: a callback ``progress(message)`` told every few seconds; True for lines on
+    stderr unless the command line's ``-q`` silenced them (:mod:`hyde_bsdf.progress`).
+    """
     t0 = time.perf_counter()
     x, log_slope = _grid()
     theta = theta_of_x(x)
@@ -336,14 +340,11 @@ def build_table(shadowing="vgroove", progress=True) -> DHRTable:
     rho = np.empty(T.size)
     flat_t, flat_s = T.ravel(), np.exp(L.ravel())
     step = 1024
+    report = Throttle(as_callback(progress), 1.0)
     for i in range(0, flat_t.size, step):
         rho[i:i + step] = dhr_quadrature(flat_t[i:i + step], flat_s[i:i + step], shadowing,
                                          *_TABLE_ORDER[shadowing])
-        if progress:
-            print(f"\r[hyde-bsdf] building DHR table ({shadowing}): "
-                  f"{min(i + step, flat_t.size)}/{flat_t.size}", end="", file=sys.stderr, flush=True)
-    if progress:
-        print(file=sys.stderr)
+        report(lambda: f"building DHR table ({shadowing}): {min(i + step, flat_t.size)}/{flat_t.size}")
     rho = rho.reshape(T.shape)
     return DHRTable(x, theta, log_slope, rho, _rho_average(x, rho), shadowing,
                     time.perf_counter() - t0)
@@ -490,8 +491,8 @@ def load_table(shadowing="vgroove") -> DHRTable:
             path.parent.mkdir(parents=True, exist_ok=True)
             _save_table(path, table)
         except OSError as exc:       # read-only cache, a directory in the way: memory only
-            print(f"[hyde-bsdf] could not cache the DHR table at {str(path)!r}: "
-                  f"{exc.strerror or exc}; it is kept in memory for this run", file=sys.stderr)
+            warnings.warn(f"could not cache the DHR table at {str(path)!r}: {exc.strerror or exc}; "
+                          "it is kept in memory for this run", DHRCacheWarning, stacklevel=2)
     _TABLES[shadowing] = table
     return table
 

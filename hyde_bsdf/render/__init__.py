@@ -1,14 +1,15 @@
-"""Rendering with the plugin: polarized renders, Stokes I/O and the demo.
+"""Rendering with the plugin: polarized renders and the polarization quantities of a Stokes image.
 
-``renderer`` (:func:`render_stokes`, the ``hyde-bsdf render`` command), ``stokes_io`` (Stokes
-EXR files and the DoLP/AoLP/DoCP pictures), ``demo`` (``hyde-bsdf demo``).
-Inverse rendering, which uses the renderer, is its own subpackage, :mod:`hyde_bsdf.inverse`.
+``renderer`` (:func:`render_stokes`), ``polarization`` (intensity, DoLP, AoLP, DoCP).  Stokes EXR
+files are :mod:`hyde_bsdf.io.stokes_exr`; the ``hyde-bsdf render`` and ``demo`` commands and the
+PNG charts are in :mod:`hyde_bsdf.app`.  Inverse rendering, which uses the renderer, is its own
+subpackage, :mod:`hyde_bsdf.inverse`.
 
-May import: ``hyde_bsdf.model``, ``hyde_bsdf.mitsuba``, ``hyde_bsdf.fit``.  Only ``hyde_bsdf.inverse`` and
-``hyde_bsdf.report`` import this subpackage.
+May import: ``hyde_bsdf.io``, ``hyde_bsdf.model``, ``hyde_bsdf.mitsuba``, ``hyde_bsdf.fit``.  Only
+``hyde_bsdf.inverse`` and ``hyde_bsdf.app`` import this subpackage.
 """
-from hyde_bsdf.render.renderer import (DEFAULT_VARIANT, cli_main, load_scene, prepare_variant,
-                                       render_stokes, rotate_stokes, sensor_to_paper_rotation)
+from hyde_bsdf.render.renderer import (DEFAULT_VARIANT, load_scene, prepare_variant, render_stokes, rotate_stokes,
+                                       sensor_to_paper_rotation)
 
 __all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "render_stokes",
-           "sensor_to_paper_rotation", "rotate_stokes", "cli_main"]
+           "sensor_to_paper_rotation", "rotate_stokes"]

@@ -2,12 +2,12 @@
 
 ``render_stokes(scene_or_path, variant=..., spp=..., seed=...)`` renders with
 Mitsuba's ``stokes`` integrator (the scene's own integrator is wrapped in one if
-it is not already) in ``spp`` chunks, showing a progress line on stderr, and
+it is not already) in ``spp`` chunks, reporting each through a progress callback, and
 returns the mean image and, from the spread between chunks, its Monte-Carlo
 standard error.  In an *unpolarized* variant (``llvm_ad_rgb``, ``scalar_rgb``, ...) it
 renders the ordinary colour image instead (a ``stokes`` wrapper in the scene is dropped).
 
-Stokes basis of the result: Mitsuba's sensor basis (see :mod:`hyde_bsdf.render.stokes_io`):
+Stokes basis of the result: Mitsuba's sensor basis (see :mod:`hyde_bsdf.io.stokes_exr`):
 for light travelling towards the camera, S1 > 0 is polarization along the image
 rows, S2 > 0 is at +45 deg counter-clockwise from image-right as seen by the
 viewer.  :func:`hyde_bsdf.render.sensor_to_paper_rotation` re-expresses it in
@@ -21,28 +21,15 @@ values (Dr.Jit's array limit), and the estimated memory (:func:`estimate_memory`
 passes (Mitsuba's own limit is 2^32 samples per pass, src/render/integrator.cpp, and a pass of
 that size does not fit in memory).
 
-Command line::
-
-    hyde-bsdf render SCENE.xml -o OUT.exr [--variant V] [--spp N] [--seed S]
-                     [--chunks C] [-D name=value ...] [--no-png]
-
-writes ``OUT.exr`` (channels R, G, B, S0.R ... S3.B, float32) and
-``OUT_intensity.png``, ``OUT_dolp.png``, ``OUT_aolp.png``, ``OUT_docp.png``,
-``OUT_rgb.png``; with an unpolarized variant ``OUT.exr`` (R, G, B) and ``OUT_rgb.png``.
-Every output path is checked before the render starts (a name too long for the file system
-included).  The files are written as one set (:func:`hyde_bsdf.atomic.atomic_group`): each to a
-hidden temporary, renamed only when every write has succeeded, so a full disk or a failed write
-leaves the previous EXR and PNGs complete and consistent and ends in one line naming the file
-(exit 2).
+The command line (``hyde-bsdf render SCENE.xml -o OUT.exr``: the EXR and its PNG charts, written
+as one set) is :mod:`hyde_bsdf.app.render`.
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import math
 import re
 import signal
-import sys
 import threading
 import time
 import warnings
@@ -51,13 +38,12 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_group, check_output_path
 from hyde_bsdf.errors import UsageError, one_line
-from hyde_bsdf.render.stokes_io import (STOKES_NAMES, polarization_png_paths, save_polarization_pngs,
-                                        save_rgb_png, write_stokes_exr)
+from hyde_bsdf.io.stokes_exr import STOKES_NAMES
+from hyde_bsdf.progress import as_callback
 
 __all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "render_stokes", "estimate_memory",
-           "plan_passes", "sensor_to_paper_rotation", "rotate_stokes", "cli_main"]
+           "plan_passes", "sensor_to_paper_rotation", "rotate_stokes"]
 
 DEFAULT_VARIANT = "llvm_ad_spectral_polarized"
 
@@ -83,10 +69,6 @@ MAX_FILM_VALUES = 2**32 - 1
 BYTES_PER_PIXEL_STOKES = 800
 BYTES_PER_PIXEL_COLOUR = 250
 BYTES_FIXED = 400 * 2**20
-
-
-def _log(msg: str) -> None:
-    print(f"[render] {msg}", file=sys.stderr, flush=True)
 
 
 def prepare_variant(variant: str = DEFAULT_VARIANT, fallback: bool = True) -> str:
@@ -118,7 +100,8 @@ def prepare_variant(variant: str = DEFAULT_VARIANT, fallback: bool = True) -> st
         raise UsageError(f"variant {variant!r} cannot be used on this machine ({one_line(exc)[:160]}); "
                          f"use one of {', '.join(usable)}") from None
     if chosen != variant:
-        _log(f"no usable LLVM back end: falling back to the {chosen!r} variant (slower)")
+        warnings.warn(f"no usable LLVM back end: falling back to the {chosen!r} variant (slower)",
+                      RuntimeWarning, stacklevel=2)
     _register_hyde()
     return chosen
 
@@ -368,7 +351,7 @@ def _render_pass(mi, scene, n, seed, integrator):
 
 def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None = None,
                   seed: int = 0, chunks: int | None = None, params: dict | None = None,
-                  progress: bool = True, fallback: bool = True) -> dict:
+                  progress=True, fallback: bool = True) -> dict:
     """Render a scene with the ``stokes`` integrator; return its Stokes image.
 
     Parameters
@@ -385,6 +368,8 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
         exceed :data:`MAX_SAMPLES_PER_PASS` samples); progress is reported after each, and the
         spread between chunks gives the Monte-Carlo error.
     params : ``$name`` values for the XML scene.
+    progress : a callback ``progress(message)`` called after each chunk; True (the default) for
+        ``[render] ...`` lines on stderr, False for none (:mod:`hyde_bsdf.progress`).
 
     Returns
     -------
@@ -399,7 +384,8 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
     module docstring, before rendering.
     """
     with _ctrl_c_flag() as interrupted:
-        return _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, fallback,
+        return _render_stokes(scene_or_path, variant, spp, seed, chunks, params,
+                              as_callback(progress, "[render]"), fallback,
                               interrupted)
 
 
@@ -444,32 +430,25 @@ def _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, 
     names = None
     acc = acc2 = None
     done = 0
-    try:
-        for c, n in enumerate(sizes):
-            img = np.asarray(_render_pass(mi, scene, n, seed * 2**16 + c, integrator), dtype=np.float32)
-            if interrupted() or integrator.should_stop():
-                # Mitsuba's own SIGINT handler cancels the pass and returns a partial image:
-                # never average that in; stop here.
-                raise KeyboardInterrupt
-            if names is None:
-                names = [f.name for f in sensor.film().bitmap().struct_()]
-                acc = np.zeros(img.shape, np.float64)
-                acc2 = np.zeros(img.shape, np.float64)
-            acc += n * img                   # float64 accumulators; one float32 temporary at a time
-            img *= img
-            acc2 += n * img
-            del img
-            done += n
-            if progress:
-                el = time.perf_counter() - t0
-                left = el / done * (spp - done)
-                end = "\n" if c == chunks - 1 else "\r"
-                print(f"[render] {done:6d}/{spp} spp ({c + 1}/{chunks} chunks)  {el:6.1f} s elapsed, "
-                      f"~{left:5.1f} s left", file=sys.stderr, end=end, flush=True)
-    except KeyboardInterrupt:
-        if progress and done:
-            print(file=sys.stderr, flush=True)    # end the progress line before the message
-        raise
+    for c, n in enumerate(sizes):
+        img = np.asarray(_render_pass(mi, scene, n, seed * 2**16 + c, integrator), dtype=np.float32)
+        if interrupted() or integrator.should_stop():
+            # Mitsuba's own SIGINT handler cancels the pass and returns a partial image:
+            # never average that in; stop here.
+            raise KeyboardInterrupt
+        if names is None:
+            names = [f.name for f in sensor.film().bitmap().struct_()]
+            acc = np.zeros(img.shape, np.float64)
+            acc2 = np.zeros(img.shape, np.float64)
+        acc += n * img                   # float64 accumulators; one float32 temporary at a time
+        img *= img
+        acc2 += n * img
+        del img
+        done += n
+        if progress:
+            el = time.perf_counter() - t0
+            progress(f"{done:6d}/{spp} spp ({c + 1}/{chunks} chunks)  {el:6.1f} s elapsed, "
+                     f"~{el / done * (spp - done):5.1f} s left")
     seconds = time.perf_counter() - t0
     mean = acc
     mean /= spp
@@ -556,93 +535,3 @@ def sensor_to_paper_rotation(ray_d, up, normal=(0.0, 0.0, 1.0), phi_r=None):
     return math.atan2(float(np.dot(k, np.cross(x_m, s_r))), float(np.dot(x_m, s_r)))
 
 
-def _parse_define(text: str) -> tuple[str, str]:
-    if "=" not in text or not text.split("=", 1)[0].strip():
-        raise argparse.ArgumentTypeError(f"-D expects name=value, got {text!r}")
-    name, value = text.split("=", 1)
-    return name.strip(), value.strip()
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
-    return value
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="hyde-bsdf render",
-        description="Render a Mitsuba scene to a Stokes EXR (R,G,B,S0.R..S3.B, float32) and PNG "
-                    "charts of intensity, DoLP, AoLP and DoCP.  The scene may use the 'hyde' BSDF.  "
-                    "An unpolarized --variant writes the colour image only.")
-    p.add_argument("scene", help="Mitsuba 3 scene (.xml)")
-    p.add_argument("-o", "--output", required=True, help="output EXR path (must end in .exr)")
-    p.add_argument("--variant", default=DEFAULT_VARIANT,
-                   help=f"Mitsuba variant (default {DEFAULT_VARIANT}; falls back to "
-                        "scalar_spectral_polarized without a usable libLLVM); unpolarized variants "
-                        "(llvm_ad_rgb, scalar_rgb, ...) write the colour image only")
-    p.add_argument("--spp", type=_positive_int, default=None,
-                   help="samples per pixel (default: the scene's sampler)")
-    p.add_argument("--seed", type=int, default=0, help=f"random seed, 0..{MAX_SEED} (default 0)")
-    p.add_argument("--chunks", type=_positive_int, default=None,
-                   help="render in at least this many spp chunks (progress + error estimate; "
-                        "default min(spp, 8))")
-    p.add_argument("-D", dest="define", action="append", type=_parse_define, default=[],
-                   metavar="NAME=VALUE", help="set a $NAME default of the scene (repeatable)")
-    p.add_argument("--no-png", action="store_true", help="write only the EXR")
-    return p
-
-
-def check_outputs(out, polarized: bool, png: bool = True) -> list[Path]:
-    """Check, before rendering, every file ``render`` will write for ``out`` (UsageError)."""
-    out = Path(out)
-    if out.suffix.lower() != ".exr":
-        raise UsageError(f"--output must end in .exr, got {str(out)!r}")
-    paths = [check_output_path(out, "--output")]
-    if png:
-        paths += [check_output_path(p, "PNG output") for p in polarization_png_paths(out.with_suffix(""),
-                                                                                     polarized).values()]
-    return paths
-
-
-def _run(args) -> int:
-    out = Path(args.output)
-    polarized = str(args.variant).endswith("_polarized")
-    check_outputs(out, polarized, png=not args.no_png)
-    if not Path(args.scene).is_file():
-        raise UsageError(f"scene file {args.scene!r} does not exist")
-    result = render_stokes(args.scene, variant=args.variant, spp=args.spp, seed=args.seed,
-                           chunks=args.chunks, params=dict(args.define))
-    meta = result["meta"]
-    with atomic_group():      # the EXR and its PNGs replace the old set together, or not at all
-        write_stokes_exr(out, result, metadata=meta)
-        written = [out]
-        if not args.no_png:
-            stem = out.with_suffix("")
-            title = Path(args.scene).stem
-            if meta["polarized"]:
-                written += list(save_polarization_pngs(result, stem, title=title).values())
-            else:
-                written.append(save_rgb_png(result["RGB"], polarization_png_paths(stem, False)["rgb"], title))
-    _log(f"{meta['spp']} spp in {meta['seconds']:.1f} s ({meta['variant']}); wrote "
-         + ", ".join(str(p) for p in written))
-    return 0
-
-
-def cli_main(argv=None) -> int:
-    """``hyde-bsdf render``: returns 0 on success, 2 on bad arguments, inputs or output paths
-    (one line on stderr: ``hyde-bsdf render: error: ...``)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse prints its message; hand back its code
-        return int(exc.code or 0)
-    try:
-        return _run(args)
-    except UsageError as exc:
-        print(f"hyde-bsdf render: error: {exc}", file=sys.stderr)
-        return 2

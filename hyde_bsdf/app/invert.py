@@ -1,6 +1,7 @@
 """``hyde-bsdf invert``: the command line of scalar and texture-valued (``--maps``) inversion.
 
-May import: every module of ``hyde_bsdf.inverse``.
+The options and outputs are described in :mod:`hyde_bsdf.inverse`; the plot is
+:func:`hyde_bsdf.app.plots.plot_history`.
 """
 from __future__ import annotations
 
@@ -12,53 +13,26 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_group, atomic_open, atomic_path, check_output_path
+from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.inverse._common import Y_WEIGHTS, _log
+from hyde_bsdf.inverse._common import Y_WEIGHTS
+from hyde_bsdf.inverse.memory import check_memory
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
 from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
 from hyde_bsdf.inverse.maps import invert_maps
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, Observation, example_maps,
                                             map_keys, plane_scene_dict, render_stokes_np)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, invert, load_scene, parameter_keys,
-                                      plot_history, prepare, render_reference, write_history)
+                                      prepare, render_reference, write_history)
+from hyde_bsdf.io.atomic import atomic_group, atomic_open, atomic_path, check_output_path
+from hyde_bsdf.progress import stderr_lines
 
-__all__ = ["cli_main", "build_parser", "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE"]
+__all__ = ["cli_main", "build_parser"]
+
+_log = stderr_lines("[invert]")
 
 
-#: peak memory of one differentiable render (reverse mode through ``path``): a fixed part plus
-#: bytes per sample (measured: 1.4-1.5 kB/sample spectral polarized sphere at 64-128 px, 16 spp;
-#: 0.8-1.2 kB mono polarized plane, 3 x 80-160 px, 4 spp; the figure below has a margin)
-AD_BYTES_FIXED = 400 * 2**20
-AD_BYTES_PER_SAMPLE = 2048
 EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
-
-
-def estimate_memory(width: int, height: int, spp: int) -> int:
-    """Estimated peak memory (bytes) of one optimisation step on a ``width`` x ``height`` film."""
-    return AD_BYTES_FIXED + AD_BYTES_PER_SAMPLE * int(width) * int(height) * int(spp)
-
-
-def _mem_available():
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
-
-
-def check_memory(width: int, height: int, spp: int, hint: str) -> int:
-    """UsageError when :func:`estimate_memory` exceeds the available memory; returns the estimate."""
-    need, avail = estimate_memory(width, height, spp), _mem_available()
-    if avail is not None and need > avail:
-        raise UsageError(f"one optimisation step on the {width}x{height} film at {spp} spp needs about "
-                         f"{need / 2**30:.1f} GiB ({AD_BYTES_PER_SAMPLE} B per sample + "
-                         f"{AD_BYTES_FIXED // 2**20} MiB), but only {avail / 2**30:.1f} GiB is available; "
-                         f"lower {hint}")
-    return need
 
 
 def _one_line(exc) -> str:
@@ -202,7 +176,7 @@ def _check_out(path):
 
 def _read_reference(path, width, height, what="--reference"):
     """Luminance Stokes images (4, H, W) of a Stokes EXR, checked against the film size and for NaN."""
-    from hyde_bsdf.render.stokes_io import read_stokes_exr
+    from hyde_bsdf.io.stokes_exr import read_stokes_exr
 
     try:
         st = read_stokes_exr(path)

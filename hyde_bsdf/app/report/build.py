@@ -11,7 +11,7 @@ cannot be written or holds files an earlier report did not write, no ``validatio
 not a source checkout).
 
 Nothing but an earlier report's own files is ever deleted.  The report is built in a fresh hidden
-folder beside ``DIR`` and moved in at the end (:func:`hyde_bsdf.atomic.atomic_dir`), with a
+folder beside ``DIR`` and moved in at the end (:func:`hyde_bsdf.io.atomic.atomic_dir`), with a
 manifest ``DIR/.hyde-report-manifest.json`` listing every file it wrote: an interrupted run
 (Ctrl-C, SIGTERM, a kill) leaves the previous report as it was, never an old ``index.html``
 beside new figures.  ``DIR`` must be new, empty, or hold only an earlier report's files (those its
@@ -35,8 +35,8 @@ import time
 import traceback
 from pathlib import Path
 
-from hyde_bsdf.atomic import (TEMP_NAME_RE, atomic_dir, atomic_open, check_dir_owned, check_name_fits,
-                              check_output_dir, read_manifest, write_manifest)
+from hyde_bsdf.io.atomic import (TEMP_NAME_RE, atomic_dir, atomic_open, check_dir_owned, check_name_fits,
+                                 check_output_dir, read_manifest, write_manifest)
 from hyde_bsdf.errors import UsageError
 
 __all__ = ["SECTIONS", "MANIFEST", "build_report", "check_report_dir", "cli_main"]
@@ -54,7 +54,7 @@ SECTIONS = [
 
 
 #: Where the validation scripts live: ``validation/`` of the source checkout this package is in.
-VALIDATION_DIR = Path(__file__).resolve().parents[2] / "validation"
+VALIDATION_DIR = Path(__file__).resolve().parents[3] / "validation"
 
 
 def validation_dir() -> Path:

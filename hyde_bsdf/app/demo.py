@@ -16,7 +16,7 @@ and writes into the output folder:
 
 With an unpolarized ``--variant`` (``llvm_ad_rgb``, ...) only ``demo.exr`` (R, G, B) and
 ``demo_rgb.png`` are written.  The output folder and every file in it are checked before the
-render starts; the files are written as one set (:func:`hyde_bsdf.atomic.atomic_group`): the
+render starts; the files are written as one set (:func:`hyde_bsdf.io.atomic.atomic_group`): the
 old pictures are replaced only once every new file is written, so a full disk leaves them as
 they were.
 
@@ -34,11 +34,14 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_group, atomic_path, check_output_dir, check_output_path
+from hyde_bsdf.app.args import positive_int
+from hyde_bsdf.app.pictures import polarization_png_paths, save_polarization_pngs, save_rgb_png
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.render.renderer import DEFAULT_VARIANT, _positive_int, prepare_variant, render_stokes
-from hyde_bsdf.render.stokes_io import (_tonemap, polarization_png_paths, polarization_quantities,
-                                        save_polarization_pngs, save_rgb_png, write_stokes_exr)
+from hyde_bsdf.io.atomic import atomic_group, atomic_path, check_output_dir, check_output_path
+from hyde_bsdf.io.stokes_exr import write_stokes_exr
+from hyde_bsdf.progress import stderr_lines
+from hyde_bsdf.render.polarization import polarization_quantities, tonemap
+from hyde_bsdf.render.renderer import DEFAULT_VARIANT, prepare_variant, render_stokes
 
 __all__ = ["DEMO_SCENE", "cli_main", "render_demo"]
 
@@ -46,8 +49,7 @@ __all__ = ["DEMO_SCENE", "cli_main", "render_demo"]
 DEMO_SCENE = Path(__file__).resolve().parents[2] / "scenes" / "demo.xml"
 
 
-def _log(msg: str) -> None:
-    print(f"[demo] {msg}", file=sys.stderr, flush=True)
+_log = stderr_lines("[demo]")
 
 
 #: Default picture size and samples: (width, height, spp) for LLVM and for the scalar fallback.
@@ -87,7 +89,8 @@ def render_demo(outdir, width=None, height=None, spp=None, variant=DEFAULT_VARIA
     _log(f"rendering {scene.name} with the '{bsdf}' BSDF, {width}x{height} px, {spp} spp, "
          f"variant {chosen}")
     params = {"width": width, "height": height, "spp": spp, "conductor": bsdf, "floor": bsdf}
-    result = render_stokes(scene, variant=chosen, spp=spp, seed=seed, params=params)
+    result = render_stokes(scene, variant=chosen, spp=spp, seed=seed, params=params,
+                           progress=stderr_lines("[render]"))
     meta = dict(result["meta"], bsdf=bsdf, scene=scene.name)
     with atomic_group():      # the EXR and PNGs replace the old set together, or not at all
         paths = {"exr": write_stokes_exr(outdir / "demo.exr", result, metadata=meta)}
@@ -129,7 +132,7 @@ def _overview(stokes: dict, path: Path, title: str) -> Path:
     h, w = valid.shape
     fig, axes = plt.subplots(2, 2, figsize=(12, 12 * h / w + 1.2), dpi=100)
     ax = axes[0, 0]
-    ax.imshow(_tonemap(stokes["RGB"]))
+    ax.imshow(tonemap(stokes["RGB"]))
     ax.set_title("colour (sRGB)")
     panels = [
         (axes[0, 1], np.ma.masked_where(~valid, q["dolp"]), "viridis", 0, 1, "DoLP"),
@@ -162,13 +165,13 @@ def cli_main(argv=None) -> int:
     """``hyde-bsdf demo -o OUTDIR``: 0 on success, 2 on bad arguments or failure."""
     p = argparse.ArgumentParser(prog="hyde-bsdf demo", description=__doc__.split("\n\n")[0])
     p.add_argument("-o", "--outdir", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--width", type=_positive_int, default=None,
+    p.add_argument("--width", type=positive_int, default=None,
                    help="image width in pixels (default %d; %d on the scalar fallback)"
                    % (DEFAULTS_LLVM[0], DEFAULTS_SCALAR[0]))
-    p.add_argument("--height", type=_positive_int, default=None,
+    p.add_argument("--height", type=positive_int, default=None,
                    help="image height in pixels (default %d; %d on the scalar fallback)"
                    % (DEFAULTS_LLVM[1], DEFAULTS_SCALAR[1]))
-    p.add_argument("--spp", type=_positive_int, default=None,
+    p.add_argument("--spp", type=positive_int, default=None,
                    help="samples per pixel (default %d; %d on the scalar fallback)"
                    % (DEFAULTS_LLVM[2], DEFAULTS_SCALAR[2]))
     p.add_argument("--variant", default=DEFAULT_VARIANT,

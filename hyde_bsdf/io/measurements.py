@@ -43,7 +43,6 @@ from __future__ import annotations
 import csv
 import io
 import re
-import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -51,7 +50,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.atomic import atomic_open, check_output_path
+from hyde_bsdf.io.atomic import atomic_open, check_output_path
+from hyde_bsdf.progress import as_callback
 
 __all__ = ["ELEMENT_NAMES", "ANGLE_COLUMNS", "SIGMA_RANGE", "ELEMENT_LIMIT", "MeasurementFileError", "Measurements",
            "read_measurements", "write_measurements", "element_index"]
@@ -289,10 +289,11 @@ def _check_values(name, columns, linenos, data):
         raise _error(name, int(linenos[r]), col, msg)
 
 
-def read_measurements(path, progress: bool = False) -> Measurements:
+def read_measurements(path, progress=None) -> Measurements:
     """Read a measurement CSV (format: module docstring) into :class:`Measurements`.
 
-    ``progress``: report reading a large file (> 10 MB) on stderr.
+    ``progress``: a callback told about reading a large file (> 10 MB); True for lines on stderr
+    (:mod:`hyde_bsdf.progress`).
 
     Raises
     ------
@@ -303,14 +304,15 @@ def read_measurements(path, progress: bool = False) -> Measurements:
     line (1-based, counting comment lines) and the column.
     """
     t0 = time.perf_counter()
+    report = as_callback(progress)
     path = Path(path)
     name = str(path)
     if path.is_dir():
         raise MeasurementFileError(f"{name}: is a directory, not a measurement file")
     try:
         size = path.stat().st_size
-        if progress and size > 10e6:
-            print(f"[hyde-bsdf] reading {name} ({size / 1e6:.0f} MB)", file=sys.stderr, flush=True)
+        if report and size > 10e6:
+            report(f"reading {name} ({size / 1e6:.0f} MB)")
         raw = path.read_bytes()
     except FileNotFoundError:
         raise MeasurementFileError(f"{name}: measurement file does not exist") from None
@@ -371,9 +373,8 @@ def read_measurements(path, progress: bool = False) -> Measurements:
     _check_values(name, columns, linenos, table)
     table = np.ascontiguousarray(table.T)          # one copy: each column contiguous
     data = dict(zip(columns, table))
-    if progress and size > 10e6:
-        print(f"[hyde-bsdf] read {len(linenos)} rows in {time.perf_counter() - t0:.1f} s",
-              file=sys.stderr, flush=True)
+    if report and size > 10e6:
+        report(f"read {len(linenos)} rows in {time.perf_counter() - t0:.1f} s")
 
     return Measurements(
         theta_i=np.radians(data["theta_i_deg"]),
@@ -390,7 +391,7 @@ def read_measurements(path, progress: bool = False) -> Measurements:
 def write_measurements(path, meas: Measurements, comments=()) -> Path:
     """Write ``meas`` in the format :func:`read_measurements` reads (angles in degrees).
 
-    The file appears complete or not at all (:mod:`hyde_bsdf.atomic`); ValueError naming the
+    The file appears complete or not at all (:mod:`hyde_bsdf.io.atomic`); ValueError naming the
     path if it cannot be written."""
     path = check_output_path(path, "measurement file")
     cols = list(ANGLE_COLUMNS)

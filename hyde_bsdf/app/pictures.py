@@ -1,0 +1,122 @@
+"""PNG charts of a Stokes image: intensity, DoLP, AoLP, DoCP and the colour image (matplotlib).
+
+The quantities come from :mod:`hyde_bsdf.render.polarization`; every PNG is written atomically
+(:mod:`hyde_bsdf.io.atomic`).  Used by ``hyde-bsdf render``, ``hyde-bsdf demo`` and the
+validation scripts.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from hyde_bsdf.io.atomic import atomic_path
+from hyde_bsdf.render.polarization import polarization_quantities, tonemap
+
+__all__ = ["save_polarization_pngs", "save_rgb_png", "polarization_png_paths", "save_png"]
+
+def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "Y",
+                           dolp_mask: float = 0.01) -> dict[str, Path]:
+    """Write the four polarization charts (plus a colour image) as PNGs with colour bars.
+
+    Files: ``{stem}_intensity.png`` (S0, inferno on a square-root scale, clipped at the
+    99.5th percentile),
+    ``{stem}_dolp.png`` (viridis, [0, 1]), ``{stem}_aolp.png`` (cyclic ``twilight``,
+    [-90, 90] deg, grey where DoLP < ``dolp_mask`` or no light), ``{stem}_docp.png``
+    (diverging, symmetric range), and ``{stem}_rgb.png`` (the colour image, sRGB).
+    Returns {name: path}.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    stem = Path(stem)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    q = polarization_quantities(stokes, channel)
+    h, w = q["intensity"].shape
+    valid = q["valid"]
+    label = {"Y": "luminance", "R": "red channel", "G": "green channel", "B": "blue channel"}[channel]
+    prefix = f"{title}: " if title else ""
+    paths: dict[str, Path] = {}
+
+    def chart(name, data, cmap, vmin, vmax, cbar_label, heading, bad="0.5", gamma=None):
+        fig_w = 6.4
+        fig_h = max(2.4, fig_w * h / w * 0.85 + 0.6)
+        fig, ax = plt.subplots(figsize=(fig_w, fig_h), dpi=110)
+        cm = matplotlib.colormaps[cmap].with_extremes(bad=bad)
+        if gamma is None:
+            im = ax.imshow(data, cmap=cm, vmin=vmin, vmax=vmax, interpolation="nearest")
+        else:
+            norm = matplotlib.colors.PowerNorm(gamma, vmin=vmin, vmax=vmax)
+            im = ax.imshow(data, cmap=cm, norm=norm, interpolation="nearest")
+        ax.set_title(prefix + heading, fontsize=10)
+        ax.set_xticks([])
+        ax.set_yticks([])
+        cb = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03)
+        cb.set_label(cbar_label)
+        fig.tight_layout()
+        out = Path(f"{stem}_{name}.png")
+        save_png(fig, out)
+        paths[name] = out
+
+    inten = q["intensity"]
+    vmax = float(np.percentile(inten, 99.5)) if np.any(inten > 0) else 1.0
+    vmax = vmax if vmax > 0 else 1.0
+    # Square-root colour scale: highlights are orders of magnitude above the rest.
+    chart("intensity", inten, "inferno", 0.0, vmax, f"S0 ({label}, scene radiance units; sqrt scale)",
+          "intensity S0", gamma=0.5)
+    chart("dolp", np.ma.masked_where(~valid, q["dolp"]), "viridis", 0.0, 1.0,
+          "DoLP = sqrt(S1² + S2²) / S0", "degree of linear polarization")
+    aolp_deg = np.degrees(q["aolp"])
+    chart("aolp", np.ma.masked_where(~valid | (q["dolp"] < dolp_mask), aolp_deg), "twilight",
+          -90.0, 90.0, "AoLP (deg, from image horizontal, counter-clockwise)",
+          f"angle of linear polarization (grey: DoLP < {dolp_mask:g})")
+    docp = q["docp"]
+    lim = float(np.percentile(np.abs(docp[valid]), 99.5)) if np.any(valid) else 1.0
+    lim = min(max(lim, 1e-3), 1.0)  # keep a visible range when S3 is ~0 everywhere
+    chart("docp", np.ma.masked_where(~valid, docp), "RdBu_r", -lim, lim, "DoCP = S3 / S0",
+          "degree of circular polarization")
+
+    paths["rgb"] = save_rgb_png(stokes.get("RGB", stokes["S0"]), Path(f"{stem}_rgb.png"), title)
+    return paths
+
+
+def polarization_png_paths(stem, polarized: bool = True) -> dict[str, Path]:
+    """The PNG files :func:`save_polarization_pngs` (or, unpolarized, :func:`save_rgb_png`)
+    writes for ``stem``: {name: path}, so a command can check them before rendering."""
+    names = ("intensity", "dolp", "aolp", "docp", "rgb") if polarized else ("rgb",)
+    return {name: Path(f"{stem}_{name}.png") for name in names}
+
+
+def save_png(fig, path: Path) -> None:
+    """``fig.savefig`` as PNG through a temporary file (atomic), then close the figure."""
+    import matplotlib.pyplot as plt
+
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png")
+    finally:
+        plt.close(fig)
+
+
+def save_rgb_png(rgb, path, title: str = "") -> Path:
+    """The colour image (linear RGB (H, W, 3), clipped at 1, sRGB curve) as a PNG chart."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rgb = np.asarray(rgb)
+    h, w = rgb.shape[:2]
+    prefix = f"{title}: " if title else ""
+    fig, ax = plt.subplots(figsize=(6.4, max(2.4, 6.4 * h / w * 0.85 + 0.6)), dpi=110)
+    ax.imshow(tonemap(rgb), interpolation="nearest")
+    ax.set_title(prefix + "colour image (sRGB, clipped at 1)", fontsize=10)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    fig.tight_layout()
+    path = Path(path)
+    save_png(fig, path)
+    return path
+
