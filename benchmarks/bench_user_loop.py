@@ -29,7 +29,8 @@ Variants: ``llvm_ad_spectral_polarized`` unfrozen (spectral variants cannot use 
     python benchmarks/bench_user_loop.py [--blocks 3] [--iterations 6] [--res 48] [--spp 8]
                                          [--loops rough,index] [--modes spectral,frozen] [--quick]
 
-``--quick`` (< 1 minute): the ``rough`` loop only, 16 px, 2 spp, 1 block, 3 iterations after 4 warm-up ones.
+``--quick`` (< 1 minute on a quiet machine): the ``rough`` loop only, 16 px, 2 spp, 1 block, 2 iterations
+after 1 warm-up one (4 frozen).
 ``--calls``: only the host (main-thread CPU) cost of tracing one eval / eval_pdf / sample / pdf of
 each BSDF, the quantity the plugin's Python code adds to every render.
 """
@@ -171,6 +172,7 @@ def run_child(config, loop, mode, iterations, warmup, res, spp):
     scenes, params, keys, refs, opt = _setup(config, loop, res, spp)
     step = _step_function(params, spp)
     run = dr.freeze(step) if freeze else step
+    warmup = max(warmup + 2, 4) if freeze else warmup     # a frozen function records up to 3 times in its first 4 calls
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     rows = {"wall_ms": [], "cpu_ms": [], "kernels": [], "launches": [], "codegen_ms": [], "exec_ms": []}
     for it in range(warmup + iterations):
@@ -293,12 +295,13 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--blocks", type=int, default=3, help="fresh processes per BSDF (orders alternate)")
     ap.add_argument("--iterations", type=int, default=6, help="timed iterations per process")
-    ap.add_argument("--warmup", type=int, default=4, help="untimed iterations first (JIT compilation; a frozen function records up to 3 times: 4)")
+    ap.add_argument("--warmup", type=int, default=2,
+                    help="untimed iterations first (JIT compilation; frozen: 2 more, at least 4: it records up to 3 times)")
     ap.add_argument("--res", type=int, default=48)
     ap.add_argument("--spp", type=int, default=8)
     ap.add_argument("--loops", default="rough,index")
     ap.add_argument("--modes", default="spectral,frozen")
-    ap.add_argument("--quick", action="store_true", help="rough loop, 16 px, 2 spp, 1 block, 3 iterations")
+    ap.add_argument("--quick", action="store_true", help="rough loop, 16 px, 2 spp, 1 block, 2 iterations")
     ap.add_argument("--calls", action="store_true", help="only the host cost of one traced eval/eval_pdf/sample/pdf")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -310,7 +313,7 @@ def main(argv=None):
         call_costs()
         return 0
     if args.quick:
-        args.loops, args.res, args.spp, args.blocks, args.iterations, args.warmup = "rough", 16, 2, 1, 3, 4
+        args.loops, args.res, args.spp, args.blocks, args.iterations, args.warmup = "rough", 16, 2, 1, 2, 1
     loops, modes = args.loops.split(","), args.modes.split(",")
     bad = [x for x in loops if x not in ("rough", "index")] + [x for x in modes if x not in MODES]
     if bad or min(args.blocks, args.iterations, args.res, args.spp) < 1 or args.warmup < 1:
