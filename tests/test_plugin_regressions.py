@@ -128,3 +128,29 @@ def test_written_out_basis_rotation_equals_mitsubas():
             g = np.array(got[i, j]).reshape(4, n)
             assert np.abs(g[:, keep] - r[:, keep]).max() < 2e-6, (i, j)
             assert not g[:, ~keep].any(), (i, j)
+
+
+def test_update_of_eta_alone_is_checked_against_the_current_k():
+    """parameters_changed checks only the changed parameters and reuses the values of the one that
+    did not change (issue 26): eta -> 0 with k = 0 is still refused (no material has index 0),
+    after k moved to 2 it is accepted, and k -> 0 then is refused again; a refusal restores."""
+    import mitsuba as mi
+    import pytest
+
+    set_variant("llvm_ad_rgb")
+    hyde_bsdf.register()
+    b = mi.load_dict({"type": "hyde", "alpha": 0.3, "eta": 1.5, "k": 0.0})
+    p = mi.traverse(b)
+    p["eta.value"] = 0.0
+    with pytest.raises(ValueError, match="cannot both be 0"):
+        p.update()
+    assert np.array(mi.traverse(b)["eta.value"]).ravel()[0] == 1.5
+    p = mi.traverse(b)
+    p["k.value"] = 2.0
+    p.update()
+    p["eta.value"] = 0.0
+    p.update()
+    p["k.value"] = 0.0
+    with pytest.raises(ValueError, match="cannot both be 0"):
+        p.update()
+    assert np.array(mi.traverse(b)["k.value"]).ravel()[0] == 2.0
