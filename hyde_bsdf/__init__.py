@@ -34,7 +34,28 @@ __all__ = [
     "rms_slope_from_alpha",
     "register",
 ]
-__version__ = "0.1.0"
+
+
+def _version() -> str:
+    """The installed distribution's version (pyproject.toml's, through the package metadata);
+    a checkout that was never installed reads pyproject.toml itself."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("hyde-bsdf")
+    except metadata.PackageNotFoundError:
+        import re
+        from pathlib import Path
+
+        try:
+            text = (Path(__file__).resolve().parent.parent / "pyproject.toml").read_text(encoding="utf-8")
+        except OSError:
+            return "unknown"
+        found = re.search(r'^version\s*=\s*"([^"]+)"', text, re.M)
+        return found.group(1) if found else "unknown"
+
+
+__version__ = _version()
 
 
 _SUBPACKAGES = ("io", "model", "mitsuba", "mom", "fit", "render", "inverse", "app")

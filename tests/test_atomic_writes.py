@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import scaled
 
 from hyde_bsdf.io import atomic
 from hyde_bsdf.io.atomic import (OutputWriteError, atomic_dir, atomic_group, atomic_open, atomic_path, check_output_dir,
@@ -108,7 +109,7 @@ def _kill_trials(tmp_path, mode, trials, rng):
     images = [_image(0), _image(1)]
     proc = subprocess.Popen([sys.executable, "-c", ZYGOTE, str(SIZE)], cwd=ROOT, stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, text=True, bufsize=1)
-    watchdog = threading.Timer(120, proc.kill)
+    watchdog = threading.Timer(scaled(120), proc.kill)
     watchdog.start()
     intact, leftovers = [], 0
     try:
@@ -130,7 +131,7 @@ def _kill_trials(tmp_path, mode, trials, rng):
     finally:
         watchdog.cancel()
         proc.stdin.close()
-        proc.wait(timeout=30)
+        proc.wait(timeout=scaled(30))
     return intact, leftovers
 
 
@@ -261,7 +262,7 @@ def test_file_size_limit_keeps_the_old_output_set(tmp_path, limit, failing):
     and PNGs byte for byte, no temporary."""
     before = _old_set(tmp_path)
     proc = subprocess.run([sys.executable, "-c", FSIZE_WRITER, str(tmp_path / "a"), str(limit)], cwd=ROOT,
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=scaled(120))
     assert proc.returncode == 0, proc.stderr[-2000:]
     # OpenEXR's C++ stream may swallow the error of its last flush: the read-back check names it then
     reason = "(File too large|the file written does not read back complete .disk full or a file-size limit..)"
@@ -345,7 +346,7 @@ def test_sigterm_removes_temporaries_and_partial_folders(tmp_path):
         assert proc.stdout.readline().strip() == "ready"
         assert len(list(tmp_path.iterdir())) == 3          # a.exr, its temporary, the .partial folder
         proc.send_signal(signal.SIGTERM)
-        out, _ = proc.communicate(timeout=30)
+        out, _ = proc.communicate(timeout=scaled(30))
     finally:
         proc.kill()
     assert proc.returncode == 143 and out.strip() == "terminated 15"

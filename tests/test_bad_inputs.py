@@ -28,6 +28,7 @@ import threading
 from pathlib import Path
 
 import pytest
+from conftest import scaled
 
 from hyde_bsdf.app import cli
 from hyde_bsdf.io.atomic import TEMP_NAME_RE
@@ -306,7 +307,8 @@ def _fill(argv, paths):
     return [a.format(**{k: str(v) for k, v in paths.items()}) for a in argv]
 
 
-def _subprocess(argv, how, timeout=120):
+def _subprocess(argv, how, timeout=None):
+    timeout = scaled(120) if timeout is None else timeout
     cmd = [sys.executable, "-m", "hyde_bsdf.app.cli", *argv]
     if how == "pipe":
         proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)

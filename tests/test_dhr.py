@@ -1,6 +1,5 @@
 """Directional-hemispherical reflectance of the specular lobe (paper Eqs. 14-16) and its table."""
 import math
-import time
 
 import numpy as np
 import pytest
@@ -109,7 +108,6 @@ def test_table_ends_near_mirror_and_very_rough():
 def test_table_is_cached_on_disk_and_reloaded(tmp_path, monkeypatch):
     monkeypatch.setenv("HYDE_BSDF_CACHE", str(tmp_path))
     monkeypatch.setattr(dhr, "_TABLES", {})
-    t0 = time.perf_counter()
     first = dhr.load_table("vgroove")
     assert list(tmp_path.glob("dhr_vgroove_*.npz"))
     monkeypatch.setattr(dhr, "_TABLES", {})
@@ -117,7 +115,6 @@ def test_table_is_cached_on_disk_and_reloaded(tmp_path, monkeypatch):
     second = dhr.load_table("vgroove")
     np.testing.assert_array_equal(first.rho, second.rho)
     assert first.rho.shape == (dhr.TABLE_THETA_POINTS, dhr.TABLE_SLOPE_POINTS)
-    assert time.perf_counter() - t0 < 60          # generous: the benchmark reports the real figure
 
 
 def test_rho_avg_is_the_cosine_weighted_mean():

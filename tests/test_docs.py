@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from conftest import scaled
 
 REPO = Path(__file__).resolve().parents[1]
 PAGES = [REPO / "README.md", *sorted((REPO / "docs").rglob("*.md"))]
@@ -177,7 +178,7 @@ def test_code_blocks_run(page, tmp_path):
     env = dict(os.environ, HYDE_DOCS_FAST="1", MPLBACKEND="Agg",
                PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.run([sys.executable, "_driver.py", "_spec.json"], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=PAGE_TIMEOUT_S)
+                          capture_output=True, text=True, timeout=scaled(PAGE_TIMEOUT_S))
     assert proc.returncode == 0 and "DOCS-PAGE-OK" in proc.stdout, (
         f"{_rel(page)}: a code block failed\n--- stdout\n{proc.stdout[-3000:]}\n"
         f"--- stderr\n{proc.stderr[-6000:]}")
@@ -313,7 +314,7 @@ def _cli_commands() -> dict:
 @functools.lru_cache(maxsize=None)
 def _cli_help(sub: str) -> str:
     proc = subprocess.run([sys.executable, "-m", "hyde_bsdf.app.cli", sub, "--help"], cwd=REPO,
-                          capture_output=True, text=True, timeout=120,
+                          capture_output=True, text=True, timeout=scaled(120),
                           env=dict(os.environ, PYTHONPATH=str(REPO)))
     assert proc.returncode == 0, f"hyde-bsdf {sub} --help failed: {proc.stderr[-2000:]}"
     return proc.stdout
@@ -363,7 +364,7 @@ def _check_command(cmd: str, commands: dict) -> list[str]:
             elif len(tok) > 1 and tok[1] == "test":
                 problems += _check_pytest_args(tok[2:], part)
         elif prog == "hyde-bsdf":
-            if len(tok) < 2 or tok[1] in ("-h", "--help"):
+            if len(tok) < 2 or tok[1] in ("-h", "--help", "--version", "-V"):
                 continue
             sub = tok[1]
             if sub not in commands:

@@ -97,7 +97,9 @@ def test_parameter_keys_and_errors(tiny):
 
 
 def test_cli_invert_end_to_end(tmp_path, capsys):
-    rc = inv.cli_main(["--res", "16", "--spp", "16", "--spp-ref", "64", "--iterations", "3", "--fit", "rms_slope",
+    from hyde_bsdf.app.cli import main
+
+    rc = main(["invert", "--res", "16", "--spp", "16", "--spp-ref", "64", "--iterations", "3", "--fit", "rms_slope",
                        "-o", str(tmp_path)])
     out = capsys.readouterr().out
     assert rc == 0
@@ -105,5 +107,5 @@ def test_cli_invert_end_to_end(tmp_path, capsys):
     lines = (tmp_path / "invert_history.csv").read_text().splitlines()
     assert lines[1].startswith("iteration,loss") and len(lines) == 2 + 3
     assert (tmp_path / "invert.png").stat().st_size > 5_000
-    assert inv.cli_main(["--start", "rms_slope=abc"]) == 2
+    assert main(["invert", "--start", "rms_slope=abc"]) == 2
     assert "not a number" in capsys.readouterr().err

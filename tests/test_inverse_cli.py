@@ -9,12 +9,13 @@ and exit 130; outputs appear complete (atomic, no temporary files left).
 """
 import signal
 import subprocess
+import threading
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import scaled
 
 from hyde_bsdf.app.cli import main
 from hyde_bsdf import inverse as inv
@@ -72,7 +73,6 @@ def test_usage_errors_are_one_line_exit_2(capsys, argv, words):
 
 
 def test_reference_of_wrong_size_and_with_nan(capsys, tmp_path):
-    t0 = time.perf_counter()
     rc, _, err = _run(capsys, TINY + ["--reference", _exr(tmp_path / "small.exr", 10, 12), "-o", str(tmp_path)])
     assert rc == 2
     line = _one_error_line(err)
@@ -84,7 +84,6 @@ def test_reference_of_wrong_size_and_with_nan(capsys, tmp_path):
     assert "--reference" in line and "nan.exr" in line and "1 pixel(s) with NaN" in line
     assert "[invert] it" not in err                # refused before any optimisation step
     assert not list(tmp_path.glob("invert*"))
-    assert time.perf_counter() - t0 < 60
 
 
 def test_bad_output_path_refused_before_optimising(capsys, tmp_path):
@@ -147,16 +146,17 @@ def test_ctrl_c_exits_130_with_a_short_message(tmp_path):
     proc = subprocess.Popen([sys.executable, "-c", code], stderr=subprocess.PIPE, stdout=subprocess.PIPE,
                             text=True, cwd=Path(__file__).resolve().parents[1])
     lines = []
-    deadline = time.time() + 120
-    for line in proc.stderr:                       # wait until the work has begun (reference render,
-        lines.append(line)                         # then the JIT compilation and the optimisation)
-        if line.startswith("[invert]") or time.time() > deadline:
-            break
-    time.sleep(0.5)
-    proc.send_signal(signal.SIGINT)
+    watchdog = threading.Timer(scaled(300), proc.kill)   # a hang guard only: the waits are events
+    watchdog.start()
     try:
-        _, rest = proc.communicate(timeout=60)
+        for line in proc.stderr:                   # wait until the optimisation runs: its first
+            lines.append(line)                     # iteration line (after the reference and the JIT)
+            if line.startswith("[invert] it"):
+                break
+        proc.send_signal(signal.SIGINT)
+        _, rest = proc.communicate()
     finally:
+        watchdog.cancel()
         if proc.poll() is None:
             proc.kill()
     err = "".join(lines) + rest

@@ -15,6 +15,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import scaled
 
 from hyde_bsdf.mitsuba.variants import set_variant
 
@@ -81,7 +82,7 @@ def test_import_does_not_import_mitsuba_and_register_covers_later_set_variant():
             "    mi.set_variant(v); assert mi.load_dict({'type': 'hyde'}) is not None\n"
             "print('OK', len(done))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
-                         timeout=120)
+                         timeout=scaled(120))
     assert out.returncode == 0, out.stderr
     assert "OK" in out.stdout
 

@@ -5,10 +5,11 @@ May import: anything (this is the application layer).
 from __future__ import annotations
 
 import argparse
+import contextlib
 
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import HydeError, UsageError, one_line
 
-__all__ = ["Parser", "positive_int"]
+__all__ = ["Parser", "positive_int", "user_input", "quiet_option"]
 
 
 class Parser(argparse.ArgumentParser):
@@ -17,6 +18,12 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message):
         raise UsageError(f"{message} (see {self.prog} --help)")
+
+
+def quiet_option(parser: argparse.ArgumentParser) -> None:
+    """The ``-q``/``--quiet`` every sub-command has (read by :func:`hyde_bsdf.app.cli.main`)."""
+    parser.add_argument("-q", "--quiet", action="store_true",
+                        help="no progress or summary lines on stderr (warnings and errors stay)")
 
 
 def positive_int(text: str) -> int:
@@ -28,3 +35,18 @@ def positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
     return value
+
+
+@contextlib.contextmanager
+def user_input(what: str = ""):
+    """Inside a command, around a library call whose arguments and data come straight from the
+    user: the library's own checks raise ``ValueError`` / ``TypeError`` (a Python caller's
+    mistake), which here is the user's, so they leave as :class:`~hyde_bsdf.errors.UsageError`
+    (``what`` prefixes the message).  The package's own exceptions pass unchanged, and
+    :func:`hyde_bsdf.app.cli.main` alone turns them into a line and an exit status."""
+    try:
+        yield
+    except HydeError:
+        raise
+    except (ValueError, TypeError) as exc:
+        raise UsageError(f"{what}: {one_line(exc)}" if what else one_line(exc)) from exc

@@ -10,9 +10,12 @@ What happens when things go wrong, for every sub-command (handled once here):
 
 * a user mistake (:class:`hyde_bsdf.errors.UsageError`: bad argument, input file, output path,
   scene, variant) -- one line ``hyde-bsdf COMMAND: error: MESSAGE`` on stderr, exit 2;
+* a refused result (:class:`hyde_bsdf.errors.RejectedResult`: an ill-posed fit with ``--strict``)
+  or a numerical failure (``FloatingPointError``: a loss that became NaN) -- one line, exit 1;
 * an operating-system error on a file (missing, no permission, disk full, ...) -- one line, exit 2;
 * a missing optional Python package -- one line naming it, exit 2;
-* Ctrl-C -- ``hyde-bsdf COMMAND: interrupted``, exit 130 (outputs are atomic: the old files stay);
+* Ctrl-C -- ``hyde-bsdf COMMAND: interrupted``, exit 130 (outputs are atomic: the old files stay),
+  also when Mitsuba hands it back wrapped in a RuntimeError;
 * SIGTERM / SIGHUP -- ``hyde-bsdf COMMAND: terminated (SIGTERM)``, exit 143 / 129: the signal
   unwinds like Ctrl-C, so hidden temporary files and ``.partial`` folders are removed
   (:func:`hyde_bsdf.io.atomic.install_signal_cleanup`; after a SIGKILL the next run removes them);
@@ -20,6 +23,12 @@ What happens when things go wrong, for every sub-command (handled once here):
   output set is unchanged (:class:`hyde_bsdf.io.atomic.OutputWriteError`);
 * a closed output pipe (``hyde-bsdf fit data.csv | head``) -- quiet, exit 141 (as for SIGPIPE);
 * anything else is a bug and keeps its Python traceback (exit 1).
+
+Each sub-command raises; none converts an exception itself.  A Python warning is one line
+``hyde-bsdf COMMAND: warning: MESSAGE``.  ``-q``/``--quiet`` (every sub-command has it) silences
+progress and summary lines on stderr, never a warning or an error (:func:`hyde_bsdf.progress.set_quiet`).
+``hyde-bsdf --version`` prints the package's version (:data:`hyde_bsdf.__version__`, from the
+installed package's metadata).
 
 Documented exit codes of the commands themselves stay: 1 for "fit did not converge" and for
 "a validation check failed".
@@ -42,6 +51,7 @@ COMMANDS = {
 }
 
 EXIT_USAGE = 2
+EXIT_FAILED = 1
 EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141
 
@@ -56,32 +66,95 @@ def _quiet_stdout() -> None:
 
 
 def _error(command: str, message: str) -> None:
+    """One line ``hyde-bsdf COMMAND: MESSAGE`` on stderr, long values in it cut to a readable length."""
+    from hyde_bsdf.errors import shorten_values
+
     try:
-        print(f"hyde-bsdf {command}: {message}", file=sys.stderr, flush=True)
+        print(f"hyde-bsdf {command}: {shorten_values(message)}", file=sys.stderr, flush=True)
     except (OSError, ValueError):
         pass
 
 
-def main(argv: list[str] | None = None) -> int:
-    from hyde_bsdf.errors import UsageError, one_line
+def _usage(argv, command) -> int:
+    """The top-level help, ``--version``, or an unknown command."""
+    if command in ("--version", "-V"):
+        from hyde_bsdf import __version__
 
+        print(f"hyde-bsdf {__version__}")
+        return 0
+    print("usage: hyde-bsdf COMMAND [options]   (hyde-bsdf COMMAND --help; hyde-bsdf --version)\n\ncommands:")
+    for name, (_, text) in COMMANDS.items():
+        print(f"  {name:10s} {text}")
+    if argv and command not in ("-h", "--help"):
+        from hyde_bsdf.errors import shorten
+
+        _error(command[:40], f"error: unknown command {shorten(command)}; one of {', '.join(COMMANDS)}")
+        return EXIT_USAGE
+    return 0 if argv else EXIT_USAGE
+
+
+def _interrupt_in(exc) -> bool:
+    """Whether a Ctrl-C (or SIGTERM) is the cause of ``exc`` (Mitsuba wraps it in a RuntimeError)."""
+    cause = exc
+    while cause is not None:
+        if isinstance(cause, KeyboardInterrupt):
+            return True
+        cause = cause.__cause__ or cause.__context__
+    return False
+
+
+def _one_line_warnings(command):
+    """``warnings.showwarning`` printing ``hyde-bsdf COMMAND: warning: MESSAGE`` (one line)."""
+    from hyde_bsdf.errors import one_line
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        _error(command, f"warning: {one_line(message)}")
+
+    return show
+
+
+def _run(command: str, argv: list) -> int:
+    import warnings
+
+    from hyde_bsdf.progress import set_quiet
+
+    quiet = any(a in ("-q", "--quiet") for a in argv)
+    old_quiet, old_show = set_quiet(quiet), warnings.showwarning
+    warnings.showwarning = _one_line_warnings(command)
+    try:
+        module = importlib.import_module(COMMANDS[command][0])
+        code = int(module.cli_main(argv) or 0)
+        sys.stdout.flush()        # a closed pipe shows up here, inside the handler of main
+        return code
+    finally:
+        set_quiet(old_quiet)
+        warnings.showwarning = old_show
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``hyde-bsdf COMMAND ...``: run the sub-command and turn what it raises into one line and
+    an exit status (the module docstring lists them)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     command = argv[0] if argv else ""
-    from hyde_bsdf.io.atomic import Terminated, install_signal_cleanup, remove_live_temporaries
+    if command not in COMMANDS:
+        return _usage(argv, command)
+    from hyde_bsdf.io.atomic import install_signal_cleanup
 
     previous = install_signal_cleanup()
     try:
-        if not argv or command in ("-h", "--help") or command not in COMMANDS:
-            print("usage: hyde-bsdf COMMAND [options]\n\ncommands:")
-            for name, (_, text) in COMMANDS.items():
-                print(f"  {name:10s} {text}")
-            if argv and command not in ("-h", "--help"):
-                _error(command, f"error: unknown command {command!r}; one of {', '.join(COMMANDS)}")
-            return 0 if argv and command in ("-h", "--help") else EXIT_USAGE
-        module = importlib.import_module(COMMANDS[command][0])
-        code = int(module.cli_main(argv[1:]) or 0)
-        sys.stdout.flush()        # a closed pipe shows up here, inside the handler below
-        return code
+        return _convert(command, argv[1:])
+    finally:
+        for sig, handler in previous.items():   # in-process callers (tests) get their handlers back
+            signal.signal(sig, handler)
+
+
+def _convert(command: str, argv: list) -> int:
+    """The one place where exceptions become messages and exit codes."""
+    from hyde_bsdf.errors import RejectedResult, UsageError, one_line
+    from hyde_bsdf.io.atomic import Terminated, remove_live_temporaries
+
+    try:
+        return _run(command, argv)
     except Terminated as exc:
         remove_live_temporaries()   # any a Python callback inside Mitsuba could not unwind
         _error(command, f"terminated ({exc})")
@@ -96,6 +169,9 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as exc:
         _error(command, f"error: {one_line(exc)}")
         return EXIT_USAGE
+    except (RejectedResult, FloatingPointError) as exc:
+        _error(command, f"error: {one_line(exc)}")
+        return EXIT_FAILED
     except ModuleNotFoundError as exc:
         if exc.name is None or exc.name.split(".")[0] == "hyde_bsdf":
             raise                 # our own module missing: a packaging bug, keep the traceback
@@ -106,9 +182,12 @@ def main(argv: list[str] | None = None) -> int:
         where = f": {exc.filename!r}" if getattr(exc, "filename", None) else ""
         _error(command, f"error: {exc.strerror or one_line(exc)}{where}")
         return EXIT_USAGE
-    finally:
-        for sig, handler in previous.items():   # in-process callers (tests) get their handlers back
-            signal.signal(sig, handler)
+    except RuntimeError as exc:
+        if not _interrupt_in(exc):
+            raise
+        remove_live_temporaries()
+        _error(command, "interrupted")
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":

@@ -27,14 +27,12 @@ pixels, 8 spp (~30 s) unless given explicitly.
 """
 from __future__ import annotations
 
-import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.app.args import positive_int
+from hyde_bsdf.app.args import Parser, positive_int, quiet_option
 from hyde_bsdf.app.pictures import polarization_png_paths, save_polarization_pngs, save_rgb_png
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.atomic import atomic_group, atomic_path, check_output_dir, check_output_path
@@ -161,9 +159,8 @@ def _overview(stokes: dict, path: Path, title: str) -> Path:
     return path
 
 
-def cli_main(argv=None) -> int:
-    """``hyde-bsdf demo -o OUTDIR``: 0 on success, 2 on bad arguments or failure."""
-    p = argparse.ArgumentParser(prog="hyde-bsdf demo", description=__doc__.split("\n\n")[0])
+def build_parser() -> Parser:
+    p = Parser(prog="hyde-bsdf demo", description=__doc__.split("\n\n")[0])
     p.add_argument("-o", "--outdir", default="out/demo", help="output folder (default out/demo)")
     p.add_argument("--width", type=positive_int, default=None,
                    help="image width in pixels (default %d; %d on the scalar fallback)"
@@ -181,16 +178,14 @@ def cli_main(argv=None) -> int:
     p.add_argument("--bsdf", choices=("hyde", "roughconductor"), default="hyde",
                    help="BSDF of the metals and the floor (default hyde; roughconductor to compare)")
     p.add_argument("--scene", default=str(DEMO_SCENE), help="scene file (default scenes/demo.xml)")
-    try:
-        args = p.parse_args(argv)
-    except SystemExit as exc:
-        return int(exc.code or 0)
+    quiet_option(p)
+    return p
+
+
+def cli_main(argv=None) -> int:
+    """``hyde-bsdf demo -o OUTDIR``: 0 on success; user errors raise UsageError (exit 2)."""
+    args = build_parser().parse_args(argv)
     t0 = time.perf_counter()
-    try:
-        render_demo(args.outdir, args.width, args.height, args.spp, args.variant, args.seed,
-                    args.bsdf, args.scene)
-    except UsageError as exc:
-        print(f"hyde-bsdf demo: error: {exc}", file=sys.stderr)
-        return 2
+    render_demo(args.outdir, args.width, args.height, args.spp, args.variant, args.seed, args.bsdf, args.scene)
     _log(f"done in {time.perf_counter() - t0:.1f} s")
     return 0

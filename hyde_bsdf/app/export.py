@@ -10,8 +10,8 @@ prints the measured interpolation error and the ``<bsdf>`` element to use.
 """
 from __future__ import annotations
 
-from hyde_bsdf.app.args import Parser
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.pbsdf_export import DEFAULT_RESOLUTION, export_pbsdf
 from hyde_bsdf.model.evaluator import DIFFUSE
 from hyde_bsdf.model.shadowing import SHADOWING
@@ -24,7 +24,7 @@ def _floats(text, name):
     try:
         vals = [float(v) for v in str(text).split(",")]
     except ValueError:
-        raise UsageError(f"--{name} must be a number or 5 comma-separated numbers (one per band), got {text!r}") from None
+        raise UsageError(f"--{name} must be a number or 5 comma-separated numbers (one per band), got {shorten(text)}") from None
     return vals[0] if len(vals) == 1 else vals
 
 
@@ -39,14 +39,16 @@ def build_parser() -> Parser:
     ap.add_argument("--material", default=None, help="a Mitsuba data/ior material (Au, Ag, Al, Cu, ...)")
     ap.add_argument("--n", default=None, help="real part of the index: one value or 5 (450..650 nm)")
     ap.add_argument("--k", default=None, help="imaginary part (paper's kappa >= 0): one value or 5")
-    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING)
-    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE)
+    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING,
+                    help="shadowing-masking: the paper's V-groove, Smith's for Beckmann, or none (default %(default)s)")
+    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE,
+                    help="diffuse term: the paper's, a reciprocal variant, or none (default %(default)s)")
     ap.add_argument("--resolution", default="x".join(map(str, DEFAULT_RESOLUTION)),
                     help="N_phi_d x N_theta_d x N_theta_h (default %(default)s)")
     ap.add_argument("--error-samples", type=int, default=20000,
                     help="geometries for the interpolation-error estimate (0: skip; default %(default)s)")
     ap.add_argument("--alpha-sample", type=float, default=None, help="override the suggested alpha_sample")
-    ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    quiet_option(ap)
     return ap
 
 
@@ -55,10 +57,11 @@ def cli_main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     n = None if args.n is None else _floats(args.n, "n")
     k = None if args.k is None else _floats(args.k, "k")
-    report = export_pbsdf(args.output, rms_slope=args.rms_slope, n=n, k=k, material=args.material,
-                          shadowing=args.shadowing, diffuse=args.diffuse, resolution=args.resolution,
-                          error_samples=args.error_samples, alpha_sample=args.alpha_sample,
-                          progress=False if args.quiet else stderr_lines())
+    with user_input():
+        report = export_pbsdf(args.output, rms_slope=args.rms_slope, n=n, k=k, material=args.material,
+                              shadowing=args.shadowing, diffuse=args.diffuse, resolution=args.resolution,
+                              error_samples=args.error_samples, alpha_sample=args.alpha_sample,
+                              progress=False if args.quiet else stderr_lines())
     print(report.summary())
     print("\nMitsuba material (C++ measured_polarized, *_spectral_polarized variants):")
     print(report.xml(indent="    "))

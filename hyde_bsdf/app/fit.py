@@ -20,18 +20,16 @@ every few seconds (``-q``: none).
 from __future__ import annotations
 
 import math
-import sys
 import warnings
 from pathlib import Path
 
-from hyde_bsdf.app.args import Parser
+from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.app.plots import PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.fit.mueller_fit import (FitDataWarning, IllPosedFitError, IllPosedFitWarning, check_options,
-                                       fit_measurements)
+from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitWarning, check_options, fit_measurements
 from hyde_bsdf.fit.pbsdf_fit import _check, fit_pbsdf
 from hyde_bsdf.fit.pbsdf_samples import pbsdf_samples
-from hyde_bsdf.io.measurements import MeasurementFileError, read_measurements
+from hyde_bsdf.io.measurements import read_measurements
 from hyde_bsdf.io.pbsdf_file import read_pbsdf
 from hyde_bsdf.model.evaluator import DIFFUSE
 from hyde_bsdf.model.shadowing import SHADOWING
@@ -49,26 +47,39 @@ def _progress(args, auto: bool = False):
 
 
 def is_pbsdf(path) -> bool:
-    """Whether ``path`` names a measured_polarized table (by its suffix or its header)."""
+    """Whether ``path`` names a measured_polarized table: by its suffix, or by the header of a
+    regular file (a pipe or a device is never read here: its bytes belong to the reader)."""
     p = Path(path)
     if p.suffix.lower() == ".pbsdf":
         return True
     try:
+        if not p.is_file():
+            return False
         with open(p, "rb") as f:
             return f.read(12) == b"tensor_file\0"
     except OSError:
         return False
 
 
+def _data_file(argv):
+    """The data file among ``argv``, wherever the options stand (``--fit n,k t.pbsdf`` as well
+    as ``t.pbsdf --fit n,k``); None when there is none or the options do not parse."""
+    try:
+        args, _ = pbsdf_parser().parse_known_args(argv)   # its options are a superset of the CSV's
+    except (UsageError, SystemExit):
+        return None
+    return args.data
+
+
 def cli_main(argv=None) -> int:
+    """``hyde-bsdf fit FILE``: a ``.pbsdf`` table (:func:`pbsdf_main`) or a CSV (:func:`csv_main`)."""
     argv = list(argv or [])
-    positional = [a for a in argv if not a.startswith("-")]
-    if positional and is_pbsdf(positional[0]):
-        return pbsdf_main(argv)
-    if not positional and any(a in ("-h", "--help") for a in argv):
+    if any(a in ("-h", "--help") for a in argv):
         print(pbsdf_parser().format_help().replace("usage: hyde-bsdf fit", "usage: hyde-bsdf fit FILE.pbsdf", 1))
         print("----- Mueller-matrix CSV files -----")
-    return csv_main(argv)
+        return csv_main(argv)
+    data = _data_file(argv)
+    return pbsdf_main(argv) if data is not None and is_pbsdf(data) else csv_main(argv)
 
 
 def csv_parser() -> Parser:
@@ -85,55 +96,44 @@ def csv_parser() -> Parser:
                     help="rms_slope = sqrt(2) sigma_h/ell: start value if fitted, else held fixed (default 0.3)")
     ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n; default: several starts")
     ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k; default: several starts")
-    ap.add_argument("--shadowing", default="vgroove", choices=("vgroove", "smith", "none"))
-    ap.add_argument("--diffuse", default="paper", choices=("paper", "reciprocal", "none"))
+    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING,
+                    help="shadowing-masking: the paper's V-groove, Smith's for Beckmann, or none (default %(default)s)")
+    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE,
+                    help="diffuse term: the paper's, a reciprocal variant, or none (default %(default)s)")
     ap.add_argument("--strict", action="store_true", help="fail (exit 1) when the fit is ill-posed")
     ap.add_argument("-o", "--output", default=None,
                     help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)})")
-    ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    quiet_option(ap)
     return ap
 
 
 def csv_main(argv=None) -> int:
     """``hyde-bsdf fit DATA.csv``: read, fit, print the result and the plugin snippet, plot.
 
-    Options and the output path are checked before the file is read; a user error (bad
-    option, unreadable or malformed file, unwritable output) prints one line on stderr and
-    returns 2.
+    Options and the output path are checked before the file is read.  Exit status 0 fitted, 1 not
+    converged (an ill-posed fit with ``--strict`` raises, 1 too); user errors raise UsageError.
     """
     args = csv_parser().parse_args(argv)
     opts = dict(fit=args.fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
                 shadowing=args.shadowing, diffuse=args.diffuse)
-    try:
+    with user_input():
         check_options(**opts)
-        if args.output:
-            check_plot_path(args.output)
-        meas = read_measurements(args.data, progress=_progress(args))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", IllPosedFitWarning)   # printed in the summary instead
-            warnings.simplefilter("ignore", FitDataWarning)
-            result = fit_measurements(meas, **opts, strict=args.strict,
-                                      progress=_progress(args, auto=True))
-    except IllPosedFitError as exc:
-        print(f"hyde-bsdf fit: {exc}", file=sys.stderr)
-        return 1
-    except (MeasurementFileError, ValueError, TypeError) as exc:
-        print(f"hyde-bsdf fit: error: {exc}", file=sys.stderr)
-        return 2
+    if args.output:
+        check_plot_path(args.output)
+    meas = read_measurements(args.data, progress=_progress(args))
+    with warnings.catch_warnings(), user_input(f"data file {args.data!r}"):
+        warnings.simplefilter("ignore", IllPosedFitWarning)   # printed in the summary instead
+        warnings.simplefilter("ignore", FitDataWarning)
+        result = fit_measurements(meas, **opts, strict=args.strict, progress=_progress(args, auto=True))
     print(f"data: {meas.source} ({len(meas)} rows, elements {', '.join(meas.elements)}"
           + (", sigma / sqrt(n_samples)" if meas.n_samples is not None else "") + ")")
     print(result.summary())
     for text in result.data_warnings:          # also on stderr, where a script's log sees them
-        print(f"hyde-bsdf fit: warning: {text}", file=sys.stderr)
+        warnings.warn(text, FitDataWarning, stacklevel=1)
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))
     if args.output:
-        try:
-            plot_fit(result, meas, args.output, title=str(meas.source))
-        except (ValueError, OSError) as exc:
-            why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
-            print(f"hyde-bsdf fit: error: cannot write the plot: {why}", file=sys.stderr)
-            return 2
+        plot_fit(result, meas, args.output, title=str(meas.source))
         print(f"\nplot: {args.output}")
     return 0 if result.success else 1
 
@@ -150,8 +150,10 @@ def pbsdf_parser() -> Parser:
     ap.add_argument("--rms-slope", type=float, default=0.3, help="start (or fixed) rms_slope (default 0.3)")
     ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n of every band; default: several")
     ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k of every band; default: several")
-    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING)
-    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE)
+    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING,
+                    help="shadowing-masking: the paper's V-groove, Smith's for Beckmann, or none (default %(default)s)")
+    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE,
+                    help="diffuse term: the paper's, a reciprocal variant, or none (default %(default)s)")
     ap.add_argument("--max-points", type=int, default=3000, help="geometries drawn from the usable cells (default 3000)")
     ap.add_argument("--theta-max", type=float, default=80.0,
                     help="largest theta_i, theta_r used, degrees (default 80)")
@@ -160,14 +162,17 @@ def pbsdf_parser() -> Parser:
     ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
     ap.add_argument("--strict", action="store_true", help="fail (exit 1) when the fit is ill-posed")
     ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element")
-    ap.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
+    quiet_option(ap)
     return ap
 
 
 def pbsdf_main(argv=None) -> int:
     """``hyde-bsdf fit FILE.pbsdf``: read, mask, subsample, fit, print, plot."""
     args = pbsdf_parser().parse_args(argv)
-    fit = _check(args.fit, args.rms_slope, args.n0, args.k0, args.shadowing, args.diffuse)
+    with user_input():
+        fit = _check(args.fit, args.rms_slope, args.n0, args.k0, args.shadowing, args.diffuse)
+    if not 0 <= args.seed < 2**32:
+        raise UsageError(f"--seed must be an integer in [0, 2^32), got {args.seed}")
     if not 0 < args.theta_max <= 90:
         raise UsageError(f"--theta-max must be in (0, 90] degrees, got {args.theta_max:g}")
     if not 0 <= args.tolerance <= 1:
@@ -184,15 +189,11 @@ def pbsdf_main(argv=None) -> int:
     print(f"  {data.counts.summary()}")
     print(f"  fitting {len(data)} of {data.usable_geometries} geometries usable in every band "
           f"(theta <= {args.theta_max:g} deg, seed {args.seed})")
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", IllPosedFitWarning)
-            result = fit_pbsdf(data, fit=fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
-                               shadowing=args.shadowing, diffuse=args.diffuse, strict=args.strict,
-                               progress=_progress(args))
-    except IllPosedFitError as exc:
-        print(f"hyde-bsdf fit: {exc}", file=sys.stderr)
-        return 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IllPosedFitWarning)
+        result = fit_pbsdf(data, fit=fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
+                           shadowing=args.shadowing, diffuse=args.diffuse, strict=args.strict,
+                           progress=_progress(args))
     print(result.summary())
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))

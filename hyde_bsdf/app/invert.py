@@ -5,16 +5,15 @@ The options and outputs are described in :mod:`hyde_bsdf.inverse`; the plot is
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 
+from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.app.plots import plot_history
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
 from hyde_bsdf.inverse.memory import check_memory
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
@@ -30,13 +29,6 @@ from hyde_bsdf.progress import stderr_lines
 __all__ = ["cli_main", "build_parser"]
 
 _log = stderr_lines("[invert]")
-
-
-EXIT_USAGE, EXIT_INTERRUPTED = 2, 130
-
-
-def _one_line(exc) -> str:
-    return " | ".join(p.strip() for p in str(exc).strip().splitlines() if p.strip())
 
 
 def _parse_values(text, what, names=PARAMETERS, ranges=None):
@@ -60,15 +52,8 @@ def _parse_values(text, what, names=PARAMETERS, ranges=None):
     return out
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse, but a bad argument is one UsageError line (not usage text + exit)."""
-
-    def error(self, message):
-        raise UsageError(message)
-
-
 def build_parser():
-    ap = _Parser(
+    ap = Parser(
         prog="hyde-bsdf invert",
         description="Recover the hyde BSDF's roughness and index from Stokes images by differentiable "
                     "rendering.  Scalar mode (default): rms_slope, eta, k (Mitsuba n + ik; the paper's "
@@ -118,6 +103,7 @@ def build_parser():
                     "per map unit (tv) or squared map unit (l2); 0.1 mild, >= 1 flattens; default 0)")
     ap.add_argument("--seed", type=int, default=0, help="random seed (integer >= 0)")
     ap.add_argument("-o", "--output", default="out/invert", help="output folder (default out/invert)")
+    quiet_option(ap)
     return ap
 
 
@@ -168,10 +154,8 @@ def _check_args(args):
 
 def _check_out(path):
     """An output file checked writable before any long work (a UsageError naming -o otherwise)."""
-    try:
+    with user_input():
         return check_output_path(path, "-o/--output file")
-    except ValueError as exc:
-        raise UsageError(_one_line(exc)) from None
 
 
 def _read_reference(path, width, height, what="--reference"):
@@ -181,16 +165,14 @@ def _read_reference(path, width, height, what="--reference"):
     try:
         st = read_stokes_exr(path)
     except (ValueError, OSError, RuntimeError) as exc:
-        raise UsageError(f"{what} {str(path)!r}: {_one_line(exc)}") from None
+        raise UsageError(f"{what} {str(path)!r}: {one_line(exc)}") from None
     ref = np.array([np.asarray(st[s], np.float64) @ np.array(Y_WEIGHTS) for s in ("S0", "S1", "S2", "S3")])
     h, w = ref.shape[1:]
     if (w, h) != (width, height):
         raise UsageError(f"{what} {str(path)!r} is {w}x{h} pixels but the scene's film is {width}x{height}: "
                          f"render the reference with the same scene and film")
-    try:
+    with user_input():
         check_reference_scale(ref, f"{what} {str(path)!r}")
-    except ValueError as exc:
-        raise UsageError(_one_line(exc)) from None
     return ref
 
 
@@ -204,7 +186,7 @@ def _read_mask(path, shape):
 
             m = mpimg.imread(str(path))
     except (OSError, ValueError) as exc:
-        raise UsageError(f"--mask {str(path)!r}: cannot read it ({_one_line(exc)}); give a PNG or .npy") from None
+        raise UsageError(f"--mask {str(path)!r}: cannot read it ({one_line(exc)}); give a PNG or .npy") from None
     m = np.asarray(m)
     if m.ndim == 3:
         m = m[..., :3].max(axis=2)
@@ -218,30 +200,17 @@ def _load_user_scene(path):
     try:
         return load_scene(path)
     except (RuntimeError, ValueError) as exc:
-        raise UsageError(f"--scene {str(path)!r}: Mitsuba could not load it: {_one_line(exc)[:400]}") from None
+        raise UsageError(f"--scene {str(path)!r}: Mitsuba could not load it: {one_line(exc)[:400]}") from None
 
 
 def cli_main(argv=None) -> int:
-    """``hyde-bsdf invert``: one-line errors (exit 2), Ctrl-C exit 130, progress on stderr."""
+    """``hyde-bsdf invert``: 0 on success; user errors raise UsageError, a diverging run
+    FloatingPointError (with a hint), Ctrl-C KeyboardInterrupt -- :func:`hyde_bsdf.app.cli.main`
+    turns each into one line and an exit status.  Progress per iteration on stderr."""
     try:
         return _cli(argv)
-    except KeyboardInterrupt:
-        print("hyde-bsdf invert: interrupted (no output written for this run)", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    except UsageError as exc:
-        print(f"hyde-bsdf invert: error: {_one_line(exc)}", file=sys.stderr)
-        return EXIT_USAGE
     except FloatingPointError as exc:
-        print(f"hyde-bsdf invert: error: {_one_line(exc)} (try a smaller --lr or more --spp)", file=sys.stderr)
-        return 1
-    except RuntimeError as exc:
-        cause = exc
-        while cause is not None:               # Ctrl-C inside mi.render comes back wrapped
-            if isinstance(cause, KeyboardInterrupt):
-                print("hyde-bsdf invert: interrupted (no output written for this run)", file=sys.stderr)
-                return EXIT_INTERRUPTED
-            cause = cause.__cause__ or cause.__context__
-        raise
+        raise FloatingPointError(f"{one_line(exc)} (try a smaller --lr or more --spp)") from exc
 
 
 def _cli(argv):
@@ -260,14 +229,12 @@ def _cli(argv):
     try:
         prepare()
     except RuntimeError as exc:
-        raise UsageError(_one_line(exc)) from None
+        raise UsageError(one_line(exc)) from None
     import mitsuba as mi
 
     scene = (load_scene(None, res=args.res, spp=args.spp) if not args.scene else _load_user_scene(args.scene[0]))
-    try:
+    with user_input():
         parameter_keys(mi.traverse(scene), PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
-    except ValueError as exc:
-        raise UsageError(_one_line(exc)) from None
     W, H = scene.sensors()[0].film().crop_size()
     check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
     if args.reference:
@@ -277,10 +244,8 @@ def _cli(argv):
         _log(f"rendering the reference at {truth} ({args.spp_ref} spp)")
         ref = render_reference(scene, truth, args.spp_ref, seed=args.seed, prefix=args.target)
         truth_known = True
-    try:
+    with user_input("--reference"):
         loss_fn = StokesLoss(ref, components=args.loss)
-    except ValueError as exc:
-        raise UsageError(f"--reference: {_one_line(exc)}") from None
     res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
                  seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
     with atomic_group():      # the CSV and the plot replace the old pair together, or not at all
@@ -300,14 +265,15 @@ def _cli(argv):
     return 0
 
 
-def _cli_maps(args):
+def _maps_fit_and_start(args):
+    """The fitted map names and their start values, from --fit, --preset and --start."""
     names = tuple(MAP_PARAMETERS)
     ranges = {n: MAP_PARAMETERS[n][1] for n in names}
     preset_fit = {"dielectric": "alpha,eta", "metal": "alpha,eta,k"}
     fit = tuple(s.strip() for s in (args.fit or preset_fit.get(args.preset, "alpha")).split(",") if s.strip())
     bad = [p for p in fit if p not in names]
     if bad or not fit:
-        raise UsageError(f"--fit must list parameters from {', '.join(names)}, got {args.fit!r}")
+        raise UsageError(f"--fit must list parameters from {', '.join(names)}, got {shorten(args.fit)}")
     if "alpha" in fit and "rms_slope" in fit:
         raise UsageError("--fit: alpha and rms_slope are the same roughness; fit one of them")
     start = {n: 0.3 for n in fit if n in ("alpha", "rms_slope")}
@@ -321,6 +287,11 @@ def _cli_maps(args):
     if missing:
         raise UsageError(f"--start must give a start value for {', '.join(missing)} (e.g. --start "
                          f"{','.join(f'{n}=1.5' for n in missing)})")
+    return fit, start
+
+
+def _maps_outputs(args, fit) -> dict:
+    """Every file the maps mode writes, checked before any work: {key: path}."""
     out = Path(args.output)
     outputs = {"history": "invert_maps_history.csv", "png": "invert_maps.png"}
     for n in fit:
@@ -329,50 +300,51 @@ def _cli_maps(args):
         if not args.no_uncertainty:
             outputs[n + "_stderr.npy"] = f"{n}_stderr.npy"
             outputs[n + "_stderr.exr"] = f"{n}_stderr.exr"
-    paths = {k: _check_out(out / v) for k, v in outputs.items()}
-    try:
-        prepare(MAP_VARIANT)
-    except RuntimeError as exc:
-        raise UsageError(_one_line(exc)) from None
+    return {k: _check_out(out / v) for k, v in outputs.items()}
+
+
+def _preset_observations(args, fit, start):
+    """--preset: the built-in sample captured in the designed acquisition; (observations, truth)."""
+    if args.scene:
+        raise UsageError("--preset renders the built-in sample; with --scene give the references of your own "
+                         "acquisition instead")
+    if "rms_slope" in fit or ("k" in fit and args.preset == "dielectric"):
+        raise UsageError(f"--fit: the {args.preset} preset fits alpha, eta"
+                         f"{', k' if args.preset == 'metal' else ''} and specular_reflectance; got {shorten(args.fit)}")
+    material = example_material(args.preset, args.map_size)
+    if "specular_reflectance" not in fit:
+        material["specular_reflectance"] = 1.0
+    truth = {n: np.asarray(material[n], float) for n in fit}
+    acq = design_acquisition(args.preset)
+    check_memory(args.res, args.res, args.spp, "--spp or --res")
+    _log(f"{args.preset} preset: {len(acq.configurations)} pictures of {args.res}x{args.res} px "
+         f"({acq.polarized()} behind a polarizer), references at {args.spp_ref} spp + {100 * args.noise:g} % noise")
+    observations = synthetic_observations(acq, material, start, res=args.res, spp=args.spp, spp_ref=args.spp_ref,
+                                          noise=args.noise, seed=args.seed)
+    return observations, truth
+
+
+def _scene_observations(args, fit):
+    """--scene (the user's) or the built-in textured plane: (observations, truth or None)."""
     import mitsuba as mi
 
     truth = None
-    observations = []
-    if args.preset:
-        if args.scene:
-            raise UsageError("--preset renders the built-in sample; with --scene give the references of your own "
-                             "acquisition instead")
-        if "rms_slope" in fit or ("k" in fit and args.preset == "dielectric"):
-            raise UsageError(f"--fit: the {args.preset} preset fits alpha, eta"
-                             f"{', k' if args.preset == 'metal' else ''} and specular_reflectance; got {args.fit!r}")
-        material = example_material(args.preset, args.map_size)
-        if "specular_reflectance" not in fit:
-            material["specular_reflectance"] = 1.0
-        truth = {n: np.asarray(material[n], float) for n in fit}
-        acq = design_acquisition(args.preset)
-        check_memory(args.res, args.res, args.spp, "--spp or --res")
-        _log(f"{args.preset} preset: {len(acq.configurations)} pictures of {args.res}x{args.res} px "
-             f"({acq.polarized()} behind a polarizer), references at {args.spp_ref} spp + {100 * args.noise:g} % noise")
-        observations = synthetic_observations(acq, material, start, res=args.res, spp=args.spp, spp_ref=args.spp_ref,
-                                              noise=args.noise, seed=args.seed)
-        scenes = []
-    elif args.scene:
+    if args.scene:
         scenes = [_load_user_scene(p) for p in args.scene]
     else:
-        truth_map = example_maps(args.map_size)
-        truth = {"alpha": truth_map} if fit == ("alpha",) else None
         if fit != ("alpha",):
             raise UsageError("the built-in --maps scene has a known index (eta 1.5, k 3) and an alpha map: "
                              "--fit alpha (give --scene/--reference for other fits)")
+        truth_map = example_maps(args.map_size)
+        truth = {"alpha": truth_map}
         scenes = [mi.load_dict(plane_scene_dict(truth_map, light=j, res=args.res, spp=args.spp))
                   for j in range(len(LIGHTS))]
+    observations = []
     for i, scene in enumerate(scenes):
         if args.sensor >= len(scene.sensors()):
             raise UsageError(f"--sensor {args.sensor}: scene {i} has {len(scene.sensors())} sensor(s)")
-        try:
+        with user_input(f"scene {i}"):
             map_keys(mi.traverse(scene), fit, args.target)
-        except ValueError as exc:
-            raise UsageError(f"scene {i}: {_one_line(exc)}") from None
         W, H = scene.sensors()[args.sensor].film().crop_size()
         check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
         if args.reference:
@@ -382,22 +354,18 @@ def _cli_maps(args):
             ref = render_stokes_np(scene, args.sensor, args.spp_ref, seed=args.seed)
         mask = _read_mask(args.mask[i], (H, W)) if args.mask else None
         observations.append(Observation(scene, ref, sensor=args.sensor, mask=mask))
-    try:
-        res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
-                          seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
-                          truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
-    except ValueError as exc:              # the inputs (masks, start shapes) found inconsistent
-        raise UsageError(_one_line(exc)) from None
-    with atomic_group():      # history, maps and plot replace the old set together, or not at all
-        _write_map_outputs(res, paths, args)
-    print(f"loss: {args.loss}; {args.iterations} iterations over {len(observations)} image(s), "
+    return observations, truth
+
+
+def _print_maps_result(res, args, fit, start, n_images, paths) -> None:
+    print(f"loss: {args.loss}; {args.iterations} iterations over {n_images} image(s), "
           f"{res.seconds_per_iteration:.3f} s/iteration (first {res.first_iteration_seconds:.1f} s incl. JIT)")
     for n in fit:
         v = np.asarray(res.final[n])
         line = f"  {n:9s} start {start[n]:.4g} -> "
         line += (f"map {v.shape[1]}x{v.shape[0]}, {v.min():.4g}..{v.max():.4g} (median {np.median(v):.4g})"
                  if v.ndim == 2 else f"{float(v):.5g}")
-        if truth and n in truth:
+        if res.truth and n in res.truth:
             e = res.texel_errors(n)
             line += (f"; per-texel error over the {int(res.seen.sum())} seen texels: median "
                      f"{100 * np.median(e):.2f} %, 90th percentile {100 * np.percentile(e, 90):.2f} %")
@@ -413,6 +381,27 @@ def _cli_maps(args):
     for message in res.warnings:
         print(f"  warning: {message}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
+
+
+def _cli_maps(args):
+    """``hyde-bsdf invert --maps``: check, gather the observations, invert, write, report."""
+    fit, start = _maps_fit_and_start(args)
+    paths = _maps_outputs(args, fit)
+    try:
+        prepare(MAP_VARIANT)
+    except RuntimeError as exc:
+        raise UsageError(one_line(exc)) from None
+    if args.preset:
+        observations, truth = _preset_observations(args, fit, start)
+    else:
+        observations, truth = _scene_observations(args, fit)
+    with user_input():                     # the inputs (masks, start shapes) found inconsistent
+        res = invert_maps(observations, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
+                          seed=args.seed, components=args.loss, regularizer=args.regularizer, weight=args.weight,
+                          truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
+    with atomic_group():      # history, maps and plot replace the old set together, or not at all
+        _write_map_outputs(res, paths, args)
+    _print_maps_result(res, args, fit, start, len(observations), paths)
     return 0
 
 

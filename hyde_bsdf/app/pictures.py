@@ -29,36 +29,16 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     q = polarization_quantities(stokes, channel)
-    h, w = q["intensity"].shape
     valid = q["valid"]
     label = {"Y": "luminance", "R": "red channel", "G": "green channel", "B": "blue channel"}[channel]
     prefix = f"{title}: " if title else ""
     paths: dict[str, Path] = {}
 
-    def chart(name, data, cmap, vmin, vmax, cbar_label, heading, bad="0.5", gamma=None):
-        fig_w = 6.4
-        fig_h = max(2.4, fig_w * h / w * 0.85 + 0.6)
-        fig, ax = plt.subplots(figsize=(fig_w, fig_h), dpi=110)
-        cm = matplotlib.colormaps[cmap].with_extremes(bad=bad)
-        if gamma is None:
-            im = ax.imshow(data, cmap=cm, vmin=vmin, vmax=vmax, interpolation="nearest")
-        else:
-            norm = matplotlib.colors.PowerNorm(gamma, vmin=vmin, vmax=vmax)
-            im = ax.imshow(data, cmap=cm, norm=norm, interpolation="nearest")
-        ax.set_title(prefix + heading, fontsize=10)
-        ax.set_xticks([])
-        ax.set_yticks([])
-        cb = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03)
-        cb.set_label(cbar_label)
-        fig.tight_layout()
-        out = Path(f"{stem}_{name}.png")
-        save_png(fig, out)
-        paths[name] = out
+    def chart(name, data, cmap, vmin, vmax, cbar_label, heading, gamma=None):
+        paths[name] = _chart(Path(f"{stem}_{name}.png"), data, cmap, vmin, vmax, cbar_label, prefix + heading, gamma)
 
     inten = q["intensity"]
     vmax = float(np.percentile(inten, 99.5)) if np.any(inten > 0) else 1.0
@@ -80,6 +60,30 @@ def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "
 
     paths["rgb"] = save_rgb_png(stokes.get("RGB", stokes["S0"]), Path(f"{stem}_rgb.png"), title)
     return paths
+
+
+def _chart(path: Path, data, cmap, vmin, vmax, cbar_label, heading, gamma=None) -> Path:
+    """One chart with a colour bar (grey where ``data`` is masked), written atomically."""
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    h, w = data.shape
+    fig_w = 6.4
+    fig, ax = plt.subplots(figsize=(fig_w, max(2.4, fig_w * h / w * 0.85 + 0.6)), dpi=110)
+    cm = matplotlib.colormaps[cmap].with_extremes(bad="0.5")
+    if gamma is None:
+        im = ax.imshow(data, cmap=cm, vmin=vmin, vmax=vmax, interpolation="nearest")
+    else:
+        norm = matplotlib.colors.PowerNorm(gamma, vmin=vmin, vmax=vmax)
+        im = ax.imshow(data, cmap=cm, norm=norm, interpolation="nearest")
+    ax.set_title(heading, fontsize=10)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    cb = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03)
+    cb.set_label(cbar_label)
+    fig.tight_layout()
+    save_png(fig, path)
+    return path
 
 
 def polarization_png_paths(stem, polarized: bool = True) -> dict[str, Path]:

@@ -50,6 +50,53 @@ def _signed_theta_r(theta_r, phi):
     return np.where(np.cos(phi) < 0, theta_r, -theta_r)
 
 
+def _subsample(meas: Measurements):
+    """At most :data:`PLOT_POINTS` geometries (fixed seed) and a note saying so: a plot of 10^6
+    error bars takes minutes and shows nothing."""
+    if len(meas) <= PLOT_POINTS:
+        return meas, ""
+    keep = np.sort(np.random.default_rng(0).choice(len(meas), PLOT_POINTS, replace=False))
+    return (Measurements(meas.theta_i[keep], meas.theta_r[keep], meas.phi[keep],
+                         {e: v[keep] for e, v in meas.values.items()},
+                         None if meas.sigma is None else {e: v[keep] for e, v in meas.sigma.items()},
+                         None if meas.n_samples is None else meas.n_samples[keep], meas.source),
+            f" ({PLOT_POINTS} of {len(meas)} geometries shown)")
+
+
+def _specular_panel(a, name, meas, result, truth, err):
+    """Specular-plane data with theta_i = theta_r (the paper's Figs. 8-9) against that angle."""
+    x = np.degrees(meas.theta_i)
+    dense = np.radians(np.linspace(max(0.5, x.min() - 3), min(89.0, x.max() + 3), 200))
+    a.plot(np.degrees(dense), result.model(dense, dense, np.pi, (name,))[name], "C0-", label="fit")
+    if truth:
+        a.plot(np.degrees(dense), mueller_elements(dense, dense, np.pi, (name,), **truth, shadowing=result.shadowing,
+                                                   diffuse=result.diffuse)[name], "k--", lw=0.8, label="truth")
+    a.errorbar(x, meas.values[name], yerr=err, fmt="o", ms=4, color="C1", capsize=2, label="data")
+    a.set_xlabel(r"$\theta_i = \theta_r$ (deg), $\phi = 180°$")
+
+
+def _in_plane_panel(a, name, meas, result, err):
+    """In-plane data (phi = 0 or pi) against the signed theta_r, one line per theta_i."""
+    ti = meas.theta_i
+    xs = np.degrees(_signed_theta_r(meas.theta_r, meas.phi))
+    for c, t in enumerate(np.unique(np.round(ti, 9))):
+        sel = np.isclose(ti, t)
+        dense = np.radians(np.linspace(-89, 89, 300))
+        mod = result.model(t, np.abs(dense), np.where(dense >= 0, np.pi, 0.0), (name,))[name]
+        a.plot(np.degrees(dense), mod, f"C{c % 10}-", lw=1)
+        a.errorbar(xs[sel], meas.values[name][sel], yerr=None if err is None else err[sel],
+                   fmt="o", ms=3, color=f"C{c % 10}", capsize=2, label=rf"$\theta_i$={np.degrees(t):.0f}°")
+    a.set_xlabel(r"signed $\theta_r$ (deg; + forward)")
+
+
+def _pointwise_panel(a, name, meas, result, err):
+    """Any other geometry: point by point."""
+    idx = np.arange(len(meas))
+    a.plot(idx, result.model(meas.theta_i, meas.theta_r, meas.phi, (name,))[name], "C0s", mfc="none", label="fit")
+    a.errorbar(idx, meas.values[name], yerr=err, fmt="o", ms=3, color="C1", label="data")
+    a.set_xlabel("measurement index")
+
+
 def plot_fit(result: FitResult, meas: Measurements, path, title: str = "", truth: dict | None = None):
     """Plot data (means with +-1 sigma bars) against the fitted model, one panel per element.
 
@@ -62,52 +109,22 @@ def plot_fit(result: FitResult, meas: Measurements, path, title: str = "", truth
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    note = ""
-    if len(meas) > PLOT_POINTS:              # a plot of 10^6 error bars takes minutes and shows nothing
-        keep = np.sort(np.random.default_rng(0).choice(len(meas), PLOT_POINTS, replace=False))
-        note = f" ({PLOT_POINTS} of {len(meas)} geometries shown)"
-        meas = Measurements(meas.theta_i[keep], meas.theta_r[keep], meas.phi[keep],
-                            {e: v[keep] for e, v in meas.values.items()},
-                            None if meas.sigma is None else {e: v[keep] for e, v in meas.sigma.items()},
-                            None if meas.n_samples is None else meas.n_samples[keep], meas.source)
+    meas, note = _subsample(meas)
     names = meas.elements
     ncol = min(len(names), 4)
     nrow = math.ceil(len(names) / ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(3.6 * ncol, 3.2 * nrow), squeeze=False)
-    ti, tr, ph = meas.theta_i, meas.theta_r, meas.phi
+    ph = meas.phi
     in_plane = np.all(np.isclose(np.cos(ph) ** 2, 1.0))
-    specular = in_plane and np.all(np.isclose(ti, tr)) and np.all(np.cos(ph) < 0)
-    bars = meas.sigma
+    specular = in_plane and np.all(np.isclose(meas.theta_i, meas.theta_r)) and np.all(np.cos(ph) < 0)
     for a, name in zip(axes.ravel(), names):
-        err = None if bars is None else bars[name]
+        err = None if meas.sigma is None else meas.sigma[name]
         if specular:
-            x = np.degrees(ti)
-            dense = np.radians(np.linspace(max(0.5, x.min() - 3), min(89.0, x.max() + 3), 200))
-            a.plot(np.degrees(dense), result.model(dense, dense, np.pi, (name,))[name], "C0-",
-                   label="fit")
-            if truth:
-                a.plot(np.degrees(dense), mueller_elements(dense, dense, np.pi, (name,), **truth,
-                       shadowing=result.shadowing, diffuse=result.diffuse)[name], "k--", lw=0.8,
-                       label="truth")
-            a.errorbar(x, meas.values[name], yerr=err, fmt="o", ms=4, color="C1", capsize=2,
-                       label="data")
-            a.set_xlabel(r"$\theta_i = \theta_r$ (deg), $\phi = 180°$")
+            _specular_panel(a, name, meas, result, truth, err)
         elif in_plane:
-            xs = np.degrees(_signed_theta_r(tr, ph))
-            for c, t in enumerate(np.unique(np.round(ti, 9))):
-                sel = np.isclose(ti, t)
-                dense = np.radians(np.linspace(-89, 89, 300))
-                mod = result.model(t, np.abs(dense), np.where(dense >= 0, np.pi, 0.0), (name,))[name]
-                a.plot(np.degrees(dense), mod, f"C{c % 10}-", lw=1)
-                a.errorbar(xs[sel], meas.values[name][sel], yerr=None if err is None else err[sel],
-                           fmt="o", ms=3, color=f"C{c % 10}", capsize=2,
-                           label=rf"$\theta_i$={np.degrees(t):.0f}°")
-            a.set_xlabel(r"signed $\theta_r$ (deg; + forward)")
+            _in_plane_panel(a, name, meas, result, err)
         else:
-            idx = np.arange(len(meas))
-            a.plot(idx, result.model(ti, tr, ph, (name,))[name], "C0s", mfc="none", label="fit")
-            a.errorbar(idx, meas.values[name], yerr=err, fmt="o", ms=3, color="C1", label="data")
-            a.set_xlabel("measurement index")
+            _pointwise_panel(a, name, meas, result, err)
         a.set_title(f"{name}/M00")
         a.grid(alpha=0.3)
     for a in axes.ravel()[len(names):]:

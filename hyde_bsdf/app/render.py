@@ -17,12 +17,11 @@ leaves the previous EXR and PNGs complete and consistent and ends in one line na
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
-from hyde_bsdf.app.args import positive_int
+from hyde_bsdf.app.args import Parser, positive_int, quiet_option
 from hyde_bsdf.app.pictures import polarization_png_paths, save_polarization_pngs, save_rgb_png
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_group, check_output_path
 from hyde_bsdf.io.stokes_exr import write_stokes_exr
 from hyde_bsdf.progress import stderr_lines
@@ -40,8 +39,8 @@ def _parse_define(text: str) -> tuple[str, str]:
     return name.strip(), value.strip()
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+def build_parser() -> Parser:
+    p = Parser(
         prog="hyde-bsdf render",
         description="Render a Mitsuba scene to a Stokes EXR (R,G,B,S0.R..S3.B, float32) and PNG "
                     "charts of intensity, DoLP, AoLP and DoCP.  The scene may use the 'hyde' BSDF.  "
@@ -61,6 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-D", dest="define", action="append", type=_parse_define, default=[],
                    metavar="NAME=VALUE", help="set a $NAME default of the scene (repeatable)")
     p.add_argument("--no-png", action="store_true", help="write only the EXR")
+    quiet_option(p)
     return p
 
 
@@ -68,7 +68,7 @@ def check_outputs(out, polarized: bool, png: bool = True) -> list[Path]:
     """Check, before rendering, every file ``render`` will write for ``out`` (UsageError)."""
     out = Path(out)
     if out.suffix.lower() != ".exr":
-        raise UsageError(f"--output must end in .exr, got {str(out)!r}")
+        raise UsageError(f"--output must end in .exr, got {shorten(str(out))}")
     paths = [check_output_path(out, "--output")]
     if png:
         paths += [check_output_path(p, "PNG output") for p in polarization_png_paths(out.with_suffix(""),
@@ -81,7 +81,7 @@ def _run(args) -> int:
     polarized = str(args.variant).endswith("_polarized")
     check_outputs(out, polarized, png=not args.no_png)
     if not Path(args.scene).is_file():
-        raise UsageError(f"scene file {args.scene!r} does not exist")
+        raise UsageError(f"scene file {shorten(args.scene)} does not exist")
     result = render_stokes(args.scene, variant=args.variant, spp=args.spp, seed=args.seed,
                            chunks=args.chunks, params=dict(args.define), progress=_log)
     meta = result["meta"]
@@ -101,15 +101,6 @@ def _run(args) -> int:
 
 
 def cli_main(argv=None) -> int:
-    """``hyde-bsdf render``: returns 0 on success, 2 on bad arguments, inputs or output paths
-    (one line on stderr: ``hyde-bsdf render: error: ...``)."""
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse prints its message; hand back its code
-        return int(exc.code or 0)
-    try:
-        return _run(args)
-    except UsageError as exc:
-        print(f"hyde-bsdf render: error: {exc}", file=sys.stderr)
-        return 2
+    """``hyde-bsdf render``: 0 on success; a bad argument, input or output path raises
+    :class:`~hyde_bsdf.errors.UsageError` (one line and exit 2 from :func:`hyde_bsdf.app.cli.main`)."""
+    return _run(build_parser().parse_args(argv))

@@ -63,6 +63,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyde_bsdf.errors import RejectedResult
 from hyde_bsdf.model.checks import real_array
 from hyde_bsdf.progress import Throttle, as_callback, check_progress
 from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
@@ -110,8 +111,8 @@ class IllPosedFitWarning(UserWarning):
     """The data do not determine the fitted parameters well (see the message)."""
 
 
-class IllPosedFitError(ValueError):
-    """Raised instead of :class:`IllPosedFitWarning` when ``strict=True``."""
+class IllPosedFitError(RejectedResult):
+    """Raised instead of :class:`IllPosedFitWarning` when ``strict=True`` (a ``ValueError``)."""
 
 
 class FitDataWarning(UserWarning):

@@ -56,7 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
 from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, read_pbsdf,
                                      rusinkiewicz_to_directions, table_frame_x, table_nbytes)
@@ -148,7 +148,7 @@ def band_index(wavelengths=KAIST_WAVELENGTHS, n=None, k=None, material=None):
         eta_file = None if folder is None else folder / f"{material}.eta.spd"
         if eta_file is None or not eta_file.is_file() or "/" in str(material):
             known = sorted(p.name[:-8] for p in folder.glob("*.eta.spd")) if folder and folder.is_dir() else []
-            raise UsageError(f"material {material!r} is not one of Mitsuba's data/ior tables"
+            raise UsageError(f"material {shorten(material)} is not one of Mitsuba's data/ior tables"
                              + (f" ({', '.join(known)})" if known else " (Mitsuba is not installed)"))
         out = []
         for suffix in (".eta.spd", ".k.spd"):

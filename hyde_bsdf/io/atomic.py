@@ -56,7 +56,7 @@ import threading
 import time
 from pathlib import Path
 
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import OutputError, UsageError
 
 __all__ = ["atomic_path", "atomic_open", "atomic_group", "atomic_dir", "check_output_path", "check_output_dir",
            "check_name_fits", "OutputWriteError", "Terminated", "install_signal_cleanup",
@@ -82,7 +82,7 @@ _CLEANED: set = set()                   # folders already swept for stale tempor
 _GROUP: contextvars.ContextVar = contextvars.ContextVar("hyde_atomic_group", default=None)
 
 
-class OutputWriteError(OSError):
+class OutputWriteError(OutputError):
     """A write of an output failed (disk full, quota, I/O error...); the previous file(s) are unchanged."""
 
 

@@ -50,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hyde_bsdf.errors import InputFileError
 from hyde_bsdf.io.atomic import atomic_open, check_output_path
 from hyde_bsdf.progress import as_callback
 
@@ -69,7 +70,7 @@ ELEMENT_LIMIT = 1.5
 SIGMA_RANGE = (1e-12, 1e3)
 
 
-class MeasurementFileError(ValueError):
+class MeasurementFileError(InputFileError):
     """A measurement file that cannot be read: the message names file, line and column."""
 
 

@@ -57,7 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import InputFileError
 
 __all__ = ["PbsdfFileError", "PbsdfTable", "KAIST_WAVELENGTHS", "MITSUBA_BANDS", "read_pbsdf", "write_pbsdf",
            "read_tensor_file", "table_nbytes", "rusinkiewicz_to_directions", "directions_to_rusinkiewicz",
@@ -73,7 +73,7 @@ _DTYPES = {1: np.uint8, 2: np.int8, 3: np.uint16, 4: np.int16, 5: np.uint32, 6: 
            7: np.uint64, 8: np.int64, 9: np.float16, 10: np.float32, 11: np.float64}
 _CODES = {np.dtype(v): k for k, v in _DTYPES.items()}
 _FIELDS = ("theta_h", "theta_d", "phi_d", "wvls", "M")
-class PbsdfFileError(UsageError):
+class PbsdfFileError(InputFileError):
     """A file that is not a readable ``measured_polarized`` table (the message names it)."""
 
 

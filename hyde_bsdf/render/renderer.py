@@ -389,46 +389,30 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
                               interrupted)
 
 
-def _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, fallback, interrupted):
+def _scene_of(mi, scene_or_path, variant, params, fallback, interrupted):
+    """(scene, film info or None, variant) of a path (variant set, XML loaded) or a loaded scene."""
     def check_interrupt():
         if interrupted():
             raise KeyboardInterrupt
-
-    import mitsuba as mi
 
     if isinstance(scene_or_path, (str, Path)):
         variant = prepare_variant(variant, fallback=fallback)
         check_interrupt()
         scene, info = _load_scene(scene_or_path, params)
         check_interrupt()
-    else:
-        info = None
-        if not isinstance(scene_or_path, mi.Scene):
-            raise UsageError(f"scene_or_path must be an XML path or a mi.Scene, "
-                             f"got {type(scene_or_path).__name__}")
-        variant = mi.variant()
-        scene = scene_or_path
-    polarized = variant.endswith("_polarized")
-    if not scene.sensors():
-        raise UsageError("the scene has no sensor: add a camera, e.g. <sensor type=\"perspective\">")
-    if not isinstance(scene.integrator(), mi.SamplingIntegrator):
-        raise UsageError(f"the scene's integrator ({type(scene.integrator()).__name__}) is not a sampling "
-                         "integrator; render needs path, direct, volpath, ... (or stokes around one)")
-    sensor = scene.sensors()[0]
-    if spp is None:
-        spp = int(sensor.sampler().sample_count())
-    spp = _check_int("spp", spp, 1)
-    if chunks is not None:
-        chunks = _check_int("chunks", chunks, 1, spp)
-    seed = _check_int("seed", seed, 0, MAX_SEED)
-    width, height = _check_film(scene, polarized, info)
-    sizes = plan_passes(width, height, spp, chunks)
-    chunks = len(sizes)
-    integrator = _stokes_integrator(scene) if polarized else scene.integrator()
+        return scene, info, variant
+    if not isinstance(scene_or_path, mi.Scene):
+        raise UsageError(f"scene_or_path must be an XML path or a mi.Scene, got {type(scene_or_path).__name__}")
+    return scene_or_path, None, mi.variant()
 
+
+def _accumulate(mi, scene, integrator, sizes, seed, progress, interrupted):
+    """Render the passes ``sizes`` (spp each); (sum of n * image, sum of n * image^2, channel
+    names, seconds), float64 accumulators with one float32 temporary at a time."""
+    sensor = scene.sensors()[0]
+    spp = sum(sizes)
     t0 = time.perf_counter()
-    names = None
-    acc = acc2 = None
+    names = acc = acc2 = None
     done = 0
     for c, n in enumerate(sizes):
         img = np.asarray(_render_pass(mi, scene, n, seed * 2**16 + c, integrator), dtype=np.float32)
@@ -440,46 +424,78 @@ def _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, 
             names = [f.name for f in sensor.film().bitmap().struct_()]
             acc = np.zeros(img.shape, np.float64)
             acc2 = np.zeros(img.shape, np.float64)
-        acc += n * img                   # float64 accumulators; one float32 temporary at a time
+        acc += n * img
         img *= img
         acc2 += n * img
         del img
         done += n
         if progress:
             el = time.perf_counter() - t0
-            progress(f"{done:6d}/{spp} spp ({c + 1}/{chunks} chunks)  {el:6.1f} s elapsed, "
+            progress(f"{done:6d}/{spp} spp ({c + 1}/{len(sizes)} chunks)  {el:6.1f} s elapsed, "
                      f"~{el / done * (spp - done):5.1f} s left")
-    seconds = time.perf_counter() - t0
+    return acc, acc2, names, time.perf_counter() - t0
+
+
+def _mean_and_sem(acc, acc2, spp, chunks):
+    """The mean image and its standard error from the chunk-to-chunk spread (in place)."""
     mean = acc
     mean /= spp
-    if chunks > 1:
-        # Weighted spread of chunk means; a chunk of n samples has variance sigma^2 / n:
-        # sem^2 = (E[x^2] - mean^2) / (chunks - 1), computed in place in acc2.
-        sem = acc2
-        sem /= spp
-        sem -= mean * mean
-        np.maximum(sem, 0.0, out=sem)
-        sem /= chunks - 1
-        np.sqrt(sem, out=sem)
-    else:
-        sem = np.zeros_like(mean)
-    if not np.all(np.isfinite(mean)):
-        raise UsageError("the render produced non-finite pixel values (NaN/Inf) -- "
-                         "a BSDF or emitter in the scene returned invalid values")
+    if chunks == 1:
+        return mean, np.zeros_like(mean)
+    # Weighted spread of chunk means; a chunk of n samples has variance sigma^2 / n:
+    # sem^2 = (E[x^2] - mean^2) / (chunks - 1), computed in place in acc2.
+    sem = acc2
+    sem /= spp
+    sem -= mean * mean
+    np.maximum(sem, 0.0, out=sem)
+    sem /= chunks - 1
+    np.sqrt(sem, out=sem)
+    return mean, sem
 
+
+def _split_channels(mean, sem, names, polarized) -> dict:
+    """``RGB`` and ``S0..S3`` (with ``_sem``) arrays (H, W, 3) from the film's channels."""
     index = {name: i for i, name in enumerate(names)}
     out: dict = {}
     # Mono variants write one luminance channel "Y" instead of R, G, B.
     rgb_idx = [index[c] for c in ("R", "G", "B")] if "R" in index else [index["Y"]] * 3
     out["RGB"] = mean[..., rgb_idx].astype(np.float32)
-    if polarized:
-        for s in STOKES_NAMES:
-            idx = [index[f"{s}.{c}"] for c in ("R", "G", "B")]
-            out[s] = mean[..., idx].astype(np.float32)
-            out[s + "_sem"] = sem[..., idx].astype(np.float32)
-    else:
+    if not polarized:
         out["RGB_sem"] = sem[..., rgb_idx].astype(np.float32)
-    out["meta"] = {"variant": variant, "polarized": polarized, "spp": spp, "chunks": chunks,
+        return out
+    for s in STOKES_NAMES:
+        idx = [index[f"{s}.{c}"] for c in ("R", "G", "B")]
+        out[s] = mean[..., idx].astype(np.float32)
+        out[s + "_sem"] = sem[..., idx].astype(np.float32)
+    return out
+
+
+def _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, fallback, interrupted):
+    import mitsuba as mi
+
+    scene, info, variant = _scene_of(mi, scene_or_path, variant, params, fallback, interrupted)
+    polarized = variant.endswith("_polarized")
+    if not scene.sensors():
+        raise UsageError("the scene has no sensor: add a camera, e.g. <sensor type=\"perspective\">")
+    if not isinstance(scene.integrator(), mi.SamplingIntegrator):
+        raise UsageError(f"the scene's integrator ({type(scene.integrator()).__name__}) is not a sampling "
+                         "integrator; render needs path, direct, volpath, ... (or stokes around one)")
+    if spp is None:
+        spp = int(scene.sensors()[0].sampler().sample_count())
+    spp = _check_int("spp", spp, 1)
+    if chunks is not None:
+        chunks = _check_int("chunks", chunks, 1, spp)
+    seed = _check_int("seed", seed, 0, MAX_SEED)
+    width, height = _check_film(scene, polarized, info)
+    sizes = plan_passes(width, height, spp, chunks)
+    integrator = _stokes_integrator(scene) if polarized else scene.integrator()
+    acc, acc2, names, seconds = _accumulate(mi, scene, integrator, sizes, seed, progress, interrupted)
+    mean, sem = _mean_and_sem(acc, acc2, spp, len(sizes))
+    if not np.all(np.isfinite(mean)):
+        raise UsageError("the render produced non-finite pixel values (NaN/Inf) -- "
+                         "a BSDF or emitter in the scene returned invalid values")
+    out = _split_channels(mean, sem, names, polarized)
+    out["meta"] = {"variant": variant, "polarized": polarized, "spp": spp, "chunks": len(sizes),
                    "seed": int(seed), "seconds": round(seconds, 3)}
     return out
 

@@ -33,11 +33,14 @@ import platform
 import sys
 import time
 import traceback
+import warnings
 from pathlib import Path
 
 from hyde_bsdf.io.atomic import (TEMP_NAME_RE, atomic_dir, atomic_open, check_dir_owned, check_name_fits,
                                  check_output_dir, read_manifest, write_manifest)
+from hyde_bsdf.app.args import Parser, quiet_option
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.progress import as_callback
 
 __all__ = ["SECTIONS", "MANIFEST", "build_report", "check_report_dir", "cli_main"]
 
@@ -197,11 +200,11 @@ def build_report(outdir, quick=False, progress=True, force=False):
     vdir = validation_dir()
 
     def kept(paths):
-        print(f"[validate] kept your file(s) the report's names would replace as: "
-              + ", ".join(str(p) for p in paths), file=sys.stderr)
+        warnings.warn("kept your file(s) the report's names would replace as: " + ", ".join(str(p) for p in paths),
+                      UserWarning, stacklevel=2)
 
     with atomic_dir(final, manifest=MANIFEST, force=force, on_kept=kept) as out:
-        result = _build(out, vdir, quick, progress)
+        result = _build(out, vdir, quick, as_callback(progress, "[validate]"))
     return result
 
 
@@ -215,13 +218,13 @@ def _build(out: Path, vdir: Path, quick: bool, progress: bool):
         entries = []
         for stem in names:
             if progress:
-                print(f"[validate] {done + 1}/{len(scripts)} {stem} ...", file=sys.stderr, flush=True)
+                progress(f"{done + 1}/{len(scripts)} {stem} ...")
             before = set(out.glob("*.png"))
             checks, seconds, doc = _run_script(vdir / f"{stem}.py", out, quick)
             figures = sorted(set(out.glob("*.png")) - before)
             if progress:
                 bad = sum(not c["passed"] for c in checks)
-                print(f"[validate]    {seconds:.1f} s, {len(checks)} checks, {bad} failed", file=sys.stderr)
+                progress(f"   {seconds:.1f} s, {len(checks)} checks, {bad} failed")
             for c in checks:
                 rows.append(dict(script=stem, **{k: c.get(k, "") for k in ("name", "value", "tolerance", "passed")}))
             entries.append((stem, doc, seconds, checks, figures))
@@ -276,23 +279,21 @@ def _write_html(out, info, sections, rows, all_passed, quick):
         f.write("\n".join(parts))
 
 
-def cli_main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="hyde-bsdf validate", description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> Parser:
+    ap = Parser(prog="hyde-bsdf validate", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)")
     ap.add_argument("--quick", action="store_true", help="small sweeps; under 3 minutes on 2 cores")
     ap.add_argument("--force", action="store_true",
                     help="write into a folder that holds files no earlier report wrote; they are kept "
                          "(a file whose name the report takes is renamed NAME.orig)")
-    try:
-        a = ap.parse_args(argv)
-    except SystemExit as exc:  # argparse printed its message
-        return int(exc.code or 0)
-    try:
-        ok, rows, seconds = build_report(a.outdir, quick=a.quick, force=a.force)
-    except UsageError as exc:
-        print(f"hyde-bsdf validate: error: {exc}", file=sys.stderr)
-        return 2
+    quiet_option(ap)
+    return ap
+
+
+def cli_main(argv=None) -> int:
+    """``hyde-bsdf validate``: 0 when every check passes, 1 otherwise; user errors raise UsageError."""
+    a = build_parser().parse_args(argv)
+    ok, rows, seconds = build_report(a.outdir, quick=a.quick, force=a.force, progress=not a.quiet)
     n_fail = sum(not r["passed"] for r in rows)
     print(f"{len(rows) - n_fail} of {len(rows)} checks pass in {seconds:.0f} s; report: {Path(a.outdir) / 'index.html'}")
     for r in rows:
