@@ -1,11 +1,24 @@
-"""Does a plain Mitsuba optimisation loop slow down as it runs?  hyde against roughconductor.
+"""hyde and roughconductor **interleaved in one process**: does the loop drift as it runs?
 
-The loop a user writes for roughconductor (``mi.traverse`` + ``mi.ad.Adam`` on a 16 x 16 alpha
-bitmap, one plane seen by 3 views of RES x RES px, SPP samples per pixel, unfrozen, one
-``mi.render`` + ``dr.backward`` per iteration), run for both BSDFs in one process with their
+What it measures.  The loop a user writes for roughconductor (``mi.traverse`` + ``mi.ad.Adam`` on a
+16 x 16 alpha bitmap, one plane seen by 3 views of RES x RES px, SPP samples per pixel, unfrozen, one
+``mi.render`` + ``dr.backward`` per iteration), run for both BSDFs in ONE process with their
 iterations interleaved; prints the median iteration time per block of ten iterations and the ratio
-hyde / roughconductor per block.  A per-process drift would show as times rising from block to
-block.
+hyde / roughconductor per block.  A per-process drift (a cache, a registry or an AD graph that
+grows) would show as times rising from block to block; none was measured (2026-12-02: flat blocks).
+
+What it does NOT measure: the plugin's cost against roughconductor's in a user's loop.  With both
+scenes alive, every render traces the BSDFs of BOTH scenes: the integrator's BSDF dispatch is a
+symbolic Dr.Jit virtual function call, which records every live instance of the ``BSDF`` domain
+(Dr.Jit cannot know which pointers the call will see), so a roughconductor render also traces the
+hyde plugin's Python ``eval_pdf``/``sample`` (measured: 2 of each per live hyde instance per
+primal render; a roughconductor render's main-thread CPU time went from 11 to 34 ms with 4 hyde
+scenes alive, back to 14 ms once they were deleted).  The two BSDFs' iterations then cost nearly
+the same and the ratio reads ~1.0 whatever the plugin costs (this script reported 1.03-1.06 where
+one BSDF per process gave 1.46-1.64).  Mitsuba's developers describe the same effect for sensors:
+mitsuba-renderer/mitsuba3 issue 1700 ("Dr.Jit is unaware of that and cautiously records/traces all
+200 of them"; their advice: keep alive only what a render needs, or ``dr.freeze``).  Use
+``bench_user_loop.py`` (one BSDF per fresh process) for the ratio.
 
     python benchmarks/bench_inverse_drift.py [--iterations 40] [--res 48] [--spp 8]
                                              [--variant llvm_ad_spectral_polarized]

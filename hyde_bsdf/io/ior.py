@@ -48,12 +48,20 @@ def known_materials() -> tuple:
     return tuple(sorted(n for n in names if (folder / f"{n}.k.spd").is_file()))
 
 
+def _examples(name, known) -> list:
+    """A few names to suggest: the closest to ``name``, then the common metals."""
+    import difflib
+
+    close = difflib.get_close_matches(name, known, n=3) if isinstance(name, str) and len(name) < 100 else []
+    return list(dict.fromkeys(close + [m for m in ("Au", "Ag", "Al", "Cu", "Cr") if m in known]))
+
+
 def material_files(name) -> tuple:
     """(eta file, k file) of the ``data/ior`` material ``name``; UsageError unless ``name`` is
     exactly one of :func:`known_materials`."""
     known = known_materials()
     if not isinstance(name, str) or name not in known:
-        listed = (f"one of the {len(known)} names in Mitsuba's data/ior folder, e.g. {', '.join(known[:6])}"
+        listed = (f"one of the {len(known)} names in Mitsuba's data/ior folder, e.g. {', '.join(_examples(name, known))}"
                   if known else "none: Mitsuba is not installed")
         raise UsageError(f"material {shorten(name)} is not one of Mitsuba's data/ior tables ({listed})")
     folder = ior_folder()

@@ -121,9 +121,10 @@ def complex_sqrt_lower(zr, zi):
     mod = dr.sqrt(zr * zr + zi * zi)
     t1 = dr.sqrt(0.5 * (mod + dr.abs(zr)))
     # t1 == 0 only for z == 0 (dielectric at its critical angle); the root is then 0
-    t2 = dr.select(t1 > 0, 0.5 * dr.abs(zi) / dr.select(t1 > 0, t1, 1.0), 0.0)
-    re = dr.select(zr >= 0, t1, t2)
-    im = -dr.select(zr >= 0, t2, t1)
+    t1_pos, zr_pos = t1 > 0, zr >= 0        # each mask traced once (host cost per render)
+    t2 = dr.select(t1_pos, 0.5 * dr.abs(zi) / dr.select(t1_pos, t1, 1.0), 0.0)
+    re = dr.select(zr_pos, t1, t2)
+    im = -dr.select(zr_pos, t2, t1)
     return re, im
 
 

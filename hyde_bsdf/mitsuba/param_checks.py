@@ -231,13 +231,15 @@ def check_roughness(name, tex, scale):
     return values
 
 
-def check_index(eta, k):
-    """eta, k finite, in [0, INDEX_MAX] wherever they can be read, and not both 0 everywhere."""
+def check_index(eta, k, reader=None):
+    """eta, k finite, in [0, INDEX_MAX] wherever they can be read, and not both 0 everywhere.
+    ``reader``: reads a texture's values in place of :func:`values_of` (the plugin's, which
+    does not read again a texture that did not change)."""
     _raw_finite("eta", eta, f"[0, {INDEX_MAX:g}]")
     _raw_finite("k", k, f"[0, {INDEX_MAX:g}]")
     read = {}
     for name, tex in (("eta", eta), ("k", k)):
-        values = values_of(tex)
+        values = (reader or values_of)(tex)
         read[name] = values
         if values is None:
             continue

@@ -17,6 +17,7 @@ import mitsuba as mi
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.mitsuba import optics as po
 from hyde_bsdf.mitsuba import param_checks as pc
+from hyde_bsdf.mitsuba import stokes as ps
 from hyde_bsdf.model.parameters import ALPHA, DHR_TABLE_RMS_SLOPE, ETA, INDEX_MIN, RMS_SLOPE
 
 __all__ = ["register", "plugin_class", "DOC", "SHADOWING", "DIFFUSE", "RMS_RANGE", "ALPHA_RANGE", "INDEX_MAX"]
@@ -115,8 +116,9 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
    - no
 
 Validation (:mod:`hyde_bsdf.mitsuba.param_checks`).  The constructor and every
-``params.update()`` (``parameters_changed``) apply the same checks, on the values the textures'
-own ``eval`` returns (an 8-bit PNG is read as 0-1, not as its stored 0-255): the roughness
+``params.update()`` (``parameters_changed``, to the parameters the update changed: an
+optimisation loop over a roughness map pays one small check kernel per update) apply the same
+checks, on the values the textures' own ``eval`` returns (an 8-bit PNG is read as 0-1, not as its stored 0-255): the roughness
 finite and in range (values in [0, lower bound) floored with a warning), eta and k finite and
 in @INDEX@ and not both 0 for a constant, specular_reflectance finite and >= 0; constants at
 48 wavelengths 360-830 nm (spectral), every texel of a bitmap and both colours of a
@@ -355,6 +357,7 @@ def _make_class():
             self.m_rough_key = key
             # alpha = sqrt(2) rms_slope: eval converts the texture's alpha into rms_slope
             self.m_rough_scale = 1.0 / SQRT2 if key == "alpha" else 1.0
+            self.m_rough_range = ALPHA_RANGE if key == "alpha" else RMS_RANGE
             # ---- index: eta/k or material ("none": roughconductor's spelling of "eta/k given")
             material = str(props.get("material", "none")) if "material" in props else "none"
             if material.lower() != "none":
@@ -377,6 +380,7 @@ def _make_class():
                 self.m_k = _texture(props, "k", 1.0)
                 self.m_material = None
             self.m_specular_reflectance = props.get_texture("specular_reflectance", 1.0)
+            self.m_snapshots, self.m_read = {}, {}
             self._validate()
             # textures whose values cannot be read at load: clamped at eval, one warning each
             lo, hi = ALPHA_RANGE if key == "alpha" else RMS_RANGE
@@ -437,25 +441,67 @@ def _make_class():
         def parameters_changed(self, keys=[]):
             """Validate updated values exactly as the constructor does (ValueError naming the key).
 
+            Only the textures named in ``keys`` are checked: ``params.update()`` passes the names
+            of the children whose values changed (e.g. ``["alpha"]``; eta and k are checked
+            together), so an optimisation loop pays for the check of what it changes, once per
+            update (a readable texture: one small kernel and a read-back).  No ``keys``: all.
             Inside a ``dr.freeze`` recording values cannot be read back: the checks are skipped
             there (call ``params.update()`` outside the frozen function to keep them).
             """
             if dr.flag(dr.JitFlag.FreezingScope):
                 return
+            names = self._changed(keys)
             try:
-                self._validate()
+                self._validate(names)
             except ValueError:
                 # atomic update: a refused value leaves the BSDF as it was before the call
-                self.m_snapshot.restore()
+                for group in self._groups(names):
+                    self.m_snapshots[group].restore()
+                self.m_read.clear()
                 raise
 
-        def _validate(self):
-            """The checks of :mod:`hyde_bsdf.mitsuba.param_checks`; on success the values are kept
-            as the state a refused update returns to."""
-            pc.check_roughness(self.m_rough_key, self.m_rough, self.m_rough_scale)
-            pc.check_index(self.m_eta, self.m_k)
-            pc.check_reflectance(self.m_specular_reflectance)
-            self.m_snapshot = pc.Snapshot([self.m_rough, self.m_eta, self.m_k, self.m_specular_reflectance])
+        def _textures(self):
+            """{traverse name: texture} of the checked parameters."""
+            return {self.m_rough_key: self.m_rough, "eta": self.m_eta, "k": self.m_k,
+                    "specular_reflectance": self.m_specular_reflectance}
+
+        def _changed(self, keys):
+            """The changed traverse names among ``keys`` (``alpha`` or ``alpha.data``); all without keys."""
+            names = {str(key).split(".")[0] for key in (keys or [])}
+            return tuple(names) if names and names <= set(self._textures()) else tuple(self._textures())
+
+        def _groups(self, names):
+            """{check group: its textures} of the groups the names belong to: the roughness, the index
+            (eta and k: checked together, they must not both be 0), specular_reflectance."""
+            groups = {"rough": [self.m_rough], "index": [self.m_eta, self.m_k],
+                      "scale": [self.m_specular_reflectance]}
+            of = {self.m_rough_key: "rough", "eta": "index", "k": "index", "specular_reflectance": "scale"}
+            return {g: groups[g] for g in dict.fromkeys(of[n] for n in names)}
+
+        def _validate(self, names=None):
+            """The checks of :mod:`hyde_bsdf.mitsuba.param_checks` of the named parameters (default
+            all); on success their values are kept as the state a refused update returns to."""
+            textures = self._textures()
+            names = tuple(textures) if names is None else names
+            for name in names:              # changed: read them again
+                self.m_read.pop(id(textures[name]), None)
+            groups = self._groups(names)
+            if "rough" in groups:
+                pc.check_roughness(self.m_rough_key, self.m_rough, self.m_rough_scale)
+            if "index" in groups:
+                pc.check_index(self.m_eta, self.m_k, self._read_values)
+            if "scale" in groups:
+                pc.check_reflectance(self.m_specular_reflectance)
+            for group, members in groups.items():
+                self.m_snapshots[group] = pc.Snapshot(members)
+
+        def _read_values(self, tex):
+            """``pc.values_of(tex)``, remembered until the texture changes (:meth:`_validate`
+            forgets the changed groups' values): eta and k are checked together, and an update of
+            one does not read the other again."""
+            if id(tex) not in self.m_read:
+                self.m_read[id(tex)] = pc.values_of(tex)
+            return self.m_read[id(tex)]
 
         def to_string(self):
             index = (f"material={self.m_material!r}" if self.m_material else
@@ -468,18 +514,21 @@ def _make_class():
         def _rough(self, si, active):
             """Roughness at the shading point: one texture lookup per call, shared by all terms.
 
-            Returns (alpha, rms_slope).  An ``alpha`` texture's value is used as the Beckmann
-            alpha unchanged (bit-identical to roughconductor's), rms_slope = alpha / sqrt(2).
+            Returns (alpha, rms_slope, u): an ``alpha`` texture's value is used as the Beckmann
+            alpha unchanged (bit-identical to roughconductor's), rms_slope = alpha / sqrt(2); u is
+            the DHR texture's slope coordinate (None without a diffuse term).
             """
             r = self.m_rough.eval_1(si, active)
             # values were range-checked at load/update where readable (mesh attributes are not);
             # values below the lower bound (alpha = 0: a mirror) are floored there, and NaN too
             # (the comparison is false for NaN)
-            lo, hi = ALPHA_RANGE if self.m_rough_key == "alpha" else RMS_RANGE
+            lo, hi = self.m_rough_range
             r = dr.minimum(dr.select(r >= lo, r, lo), hi)
             if self.m_rough_key == "alpha":
-                return r, r * (1.0 / SQRT2)
-            return SQRT2 * r, r
+                alpha, rms = r, r * (1.0 / SQRT2)
+            else:
+                alpha, rms = SQRT2 * r, r
+            return alpha, rms, (self.m_dhr.slope_coord(rms) if self.m_dhr is not None else None)
 
         def _scale(self, si, active):
             """specular_reflectance; values not readable at load are clamped to [0, 1] (NaN: 0)."""
@@ -516,6 +565,12 @@ def _make_class():
             """
             return po.safe_normalize(wi + wo, mi.Vector3f(0, 0, 1))
 
+        def _geometry(self, si, wo, active):
+            """(active, cos_i, cos_o, h) of a direction pair: shared by the value and the pdf."""
+            cos_i = mi.Frame3f.cos_theta(si.wi)
+            cos_o = mi.Frame3f.cos_theta(wo)
+            return active & (cos_i > 0) & (cos_o > 0), cos_i, cos_o, self._half_vector(si.wi, wo)
+
         def _shadowing(self, distr, wi, wo, h):
             if self.m_shadowing == "smith":
                 # directions within 1e-15 of the normal: see optics.snap_to_normal (Mitsuba's G is NaN there)
@@ -525,26 +580,26 @@ def _make_class():
             # "none": G = 1, but still only facets seen from the front by both directions
             return dr.select((dr.dot(wi, h) > 0) & (dr.dot(wo, h) > 0), 1.0, 0.0)
 
-        def _one_minus_rho(self, cos_theta, u):
-            return self.m_dhr.one_minus_rho(cos_theta, u)
-
-        def _diffuse_factor(self, ctx, si, wo, rough):
+        def _diffuse_factor(self, ctx, si, wo, u):
             """(1/pi)(1 - rho(theta_in)) [paper, Eq. 17] or its reciprocal form; no M00, no cos."""
             # rho > 1 is possible without shadowing (Priest-Germer); 1 - rho is clipped at 0
-            u = self.m_dhr.slope_coord(rough[1])
             if self.m_diffuse == "paper":
                 wo_hat_z = wo.z if ctx.mode == mi.TransportMode.Radiance else si.wi.z
-                return dr.maximum(self._one_minus_rho(wo_hat_z, u), 0.0) * dr.inv_pi
-            one_minus_i = dr.maximum(self._one_minus_rho(si.wi.z, u), 0.0)
-            one_minus_o = dr.maximum(self._one_minus_rho(wo.z, u), 0.0)
+                return dr.maximum(self.m_dhr.one_minus_rho(wo_hat_z, u), 0.0) * dr.inv_pi
+            one_minus_i = dr.maximum(self.m_dhr.one_minus_rho(si.wi.z, u), 0.0)
+            one_minus_o = dr.maximum(self.m_dhr.one_minus_rho(wo.z, u), 0.0)
             # without shadowing rho_avg can reach 1: keep the division finite
             one_minus_avg = dr.maximum(self.m_dhr.one_minus_rho_avg(u), 1e-30)
             return one_minus_i * one_minus_o * dr.inv_pi / one_minus_avg
 
+        def _lobes(self, ctx):
+            """(specular on, diffuse on) for this context (Python booleans)."""
+            return (ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0),
+                    self.m_diffuse != "none" and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1))
+
         def _p_spec(self, ctx, si, rough):
             """Probability of sampling the specular lobe (a Python constant or a Float)."""
-            spec_on = ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
-            diff_on = self.m_diffuse != "none" and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+            spec_on, diff_on = self._lobes(ctx)
             if spec_on and not diff_on:
                 return 1.0
             if diff_on and not spec_on:
@@ -552,29 +607,27 @@ def _make_class():
             if not (spec_on or diff_on):
                 return None
             # ratio of the lobe albedos rho F : (1 - rho) F (F common to both)
-            return dr.clip(1.0 - self._one_minus_rho(si.wi.z, self.m_dhr.slope_coord(rough[1])), 0.05, 0.95)
+            return dr.clip(1.0 - self.m_dhr.one_minus_rho(si.wi.z, rough[2]), 0.05, 0.95)
 
-        def _mueller(self, ctx, si, wo, h, n, k, spec, diff):
-            """Fresnel(h) * spec + M00(h) * diff as a Spectrum (Mueller matrix if polarized).
+        def _mueller(self, ctx, si, wo, h, n, k, spec, diff, scale, active):
+            """(Fresnel(h) spec + M00(h) diff) scale as a Spectrum (Mueller matrix if polarized), 0
+            where not ``active``.
 
-            ``spec`` multiplies the facet Fresnel Mueller matrix (paper Eq. 11) rotated
-            into Mitsuba's Stokes bases; ``diff`` multiplies only its unpolarized
-            M00 and goes into the [0, 0] element (the diffuse term of Eq. 17).
+            ``spec`` (a Float) multiplies the facet Fresnel Mueller matrix (paper Eq. 11) rotated
+            into Mitsuba's Stokes bases; ``diff`` (a Float or 0.0) multiplies only its unpolarized
+            M00 and goes into the [0, 0] element (the diffuse term of Eq. 17); ``scale`` is
+            specular_reflectance.  Inactive lanes are masked on Floats (the lobe factors, cos beta
+            and the basis rotations), not on the 16 spectral entries: the Fresnel terms are
+            evaluated at cos beta = 1 there (finite), times factors that are 0.
             """
-            cos_beta = mi.UnpolarizedSpectrum(dr.dot(si.wi, h))
+            spec = dr.select(active, spec, 0.0) * scale
+            if not (isinstance(diff, float) and diff == 0.0):
+                diff = dr.select(active, diff, 0.0) * scale
+            # a Float: broadcast to the index's spectrum where needed
+            cos_beta = dr.select(active, dr.dot(si.wi, h), 1.0)
             if not self.m_polarized:
                 return po.fresnel_average(cos_beta, n, k) * (spec + diff)
-            rs_re, rs_im, rp_re, rp_im = po.facet_fresnel(cos_beta, n, k)
-            a, b, c, s = po.fresnel_mueller_entries(rs_re, rs_im, rp_re, rp_im)
-            F = dr.zeros(mi.Spectrum)
-            F[0, 0] = a * spec
-            F[0, 1] = b * spec
-            F[1, 0] = b * spec
-            F[1, 1] = a * spec
-            F[2, 2] = c * spec
-            F[2, 3] = -s * spec
-            F[3, 2] = s * spec
-            F[3, 3] = c * spec
+            a, b, c, s = po.fresnel_mueller_entries(*po.facet_fresnel(cos_beta, n, k))
             # Light arrives along -wo_hat and leaves along +wi_hat (roughconductor's frames)
             if ctx.mode == mi.TransportMode.Radiance:
                 wo_hat, wi_hat = wo, si.wi
@@ -588,48 +641,43 @@ def _make_class():
             # then seen at normal incidence, where its Mueller matrix is invariant under a
             # rotation of the s axis, so any axis perpendicular to both directions is exact:
             # stokes_basis(-wo_hat) (which makes the input rotation the identity).
-            s_axis = po.safe_normalize(po.accurate_cross(wo_hat, wi_hat), mi.mueller.stokes_basis(-wo_hat))
-            s_in = s_out = s_axis
-            F = mi.mueller.rotate_mueller_basis(F, -wo_hat, s_in, mi.mueller.stokes_basis(-wo_hat),
-                                                wi_hat, s_out, mi.mueller.stokes_basis(wi_hat))
-            if not (isinstance(diff, float) and diff == 0.0):
-                # unpolarized diffuse term: only the [0, 0] element (Eq. 17)
-                F[0, 0] = F[0, 0] + a * diff
-            return F
+            basis_in = mi.mueller.stokes_basis(-wo_hat)
+            s_axis = po.safe_normalize(po.accurate_cross(wo_hat, wi_hat), basis_in)
+            # the facet matrix rotated from (s_axis, s_axis) into (stokes_basis(-wo_hat),
+            # stokes_basis(wi_hat)): mi.mueller.rotate_mueller_basis written out (stokes.py)
+            rot_in = ps.stokes_rotation(-wo_hat, s_axis, basis_in)
+            rot_out = ps.stokes_rotation(wi_hat, s_axis, mi.mueller.stokes_basis(wi_hat))
+            return ps.rotated_facet_mueller(a, b, c, s, [dr.select(active, x, 0.0) for x in rot_in],
+                                            [dr.select(active, x, 0.0) for x in rot_out], spec, diff)
 
-        def _value(self, ctx, si, wo, active, rough):
-            """f cos(theta_o) as a Spectrum (Mueller matrix in polarized variants)."""
-            spec_on = ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0)
-            diff_on = self.m_diffuse != "none" and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+        def _value(self, ctx, si, wo, geo, rough, distr, inv_pdf=None):
+            """f cos(theta_o) as a Spectrum (Mueller matrix in polarized variants); with ``inv_pdf``
+            (a Float, 0 where the sample failed) the sampling weight f cos(theta_o) / pdf."""
+            spec_on, diff_on = self._lobes(ctx)
             if not (spec_on or diff_on):
                 return dr.zeros(mi.Spectrum)
-            cos_i = mi.Frame3f.cos_theta(si.wi)
-            cos_o = mi.Frame3f.cos_theta(wo)
-            active = active & (cos_i > 0) & (cos_o > 0)
-            h = self._half_vector(si.wi, wo)
+            active, cos_i, cos_o, h = geo
             n, k = self._index(si, active)
             scale = self._scale(si, active)
             spec = 0.0
             if spec_on:
-                distr = self._distr(rough)
                 # D G / (4 cos_i) = (Eq. 13 without M) * cos_o
                 spec = dr.minimum(distr.eval(h) * self._shadowing(distr, si.wi, wo, h) / (4.0 * _pos(cos_i)),
-                                  MAX_LOBE) * scale
-            diff = self._diffuse_factor(ctx, si, wo, rough) * cos_o * scale if diff_on else 0.0
-            return dr.select(active, self._mueller(ctx, si, wo, h, n, k, spec, diff), 0.0)
+                                  MAX_LOBE)
+            diff = self._diffuse_factor(ctx, si, wo, rough[2]) * cos_o if diff_on else 0.0
+            if inv_pdf is not None:     # scaled here: a division of the whole Mueller matrix is slow to trace
+                spec, diff = spec * inv_pdf, (diff * inv_pdf if diff_on else 0.0)
+                active = active & (inv_pdf > 0)
+            return self._mueller(ctx, si, wo, h, n, k, spec, diff, scale, active)
 
-        def _pdf(self, ctx, si, wo, active, rough):
-            p_spec = self._p_spec(ctx, si, rough)
+        def _pdf(self, si, wo, geo, distr, p_spec):
+            """The mixture density of :meth:`sample` (``p_spec`` from :meth:`_p_spec`)."""
             if p_spec is None:
                 return mi.Float(0.0)
-            cos_i = mi.Frame3f.cos_theta(si.wi)
-            cos_o = mi.Frame3f.cos_theta(wo)
-            h = self._half_vector(si.wi, wo)
-            active = active & (cos_i > 0) & (cos_o > 0)
+            active, cos_i, cos_o, h = geo
             pdf_spec = 0.0
             if not (isinstance(p_spec, float) and p_spec == 0.0):
                 spec_ok = active & (dr.dot(si.wi, h) > 0) & (dr.dot(wo, h) > 0)
-                distr = self._distr(rough)
                 if self.m_sample_visible:
                     pdf_spec = distr.eval(h) * distr.smith_g1(po.snap_to_normal(si.wi), h) / (4.0 * _pos(cos_i))
                 else:
@@ -641,50 +689,58 @@ def _make_class():
             return dr.select(active, p_spec * pdf_spec + (1.0 - p_spec) * pdf_diff, 0.0)
 
         # ------------------------------------------------------------------
+        # eval, pdf, eval_pdf and sample share one roughness lookup, one geometry and one
+        # distribution per call (each is traced on the host at every render)
         def eval(self, ctx, si, wo, active=True):
-            return self._value(ctx, si, wo, active, self._rough(si, active))
+            rough = self._rough(si, active)
+            return self._value(ctx, si, wo, self._geometry(si, wo, active), rough, self._distr(rough))
 
         def pdf(self, ctx, si, wo, active=True):
-            return self._pdf(ctx, si, wo, active, self._rough(si, active))
+            rough = self._rough(si, active)
+            return self._pdf(si, wo, self._geometry(si, wo, active), self._distr(rough),
+                             self._p_spec(ctx, si, rough))
 
         def eval_pdf(self, ctx, si, wo, active=True):
             rough = self._rough(si, active)
-            return self._value(ctx, si, wo, active, rough), self._pdf(ctx, si, wo, active, rough)
+            geo, distr = self._geometry(si, wo, active), self._distr(rough)
+            return (self._value(ctx, si, wo, geo, rough, distr),
+                    self._pdf(si, wo, geo, distr, self._p_spec(ctx, si, rough)))
 
-        def sample(self, ctx, si, sample1, sample2, active=True):
+        def _sample_specular(self, ctx, si, sample2, active, distr):
+            """The specular lobe alone (p_spec = 1): exactly roughconductor's sampling routine."""
             bs = dr.zeros(mi.BSDFSample3f)
             cos_i = mi.Frame3f.cos_theta(si.wi)
-            active = active & (cos_i > 0)
+            m, pdf = distr.sample(po.snap_to_normal(si.wi), sample2)
+            bs.wo = mi.reflect(si.wi, m)
+            bs.eta = 1.0
+            bs.sampled_component = mi.UInt32(0)
+            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
+            active = active & (pdf != 0) & (mi.Frame3f.cos_theta(bs.wo) > 0)
+            bs.pdf = pdf / (4.0 * _pos(dr.dot(bs.wo, m)))
+            # weight = f cos_o / pdf, written with the sampled m like roughconductor
+            if self.m_shadowing == "smith" and self.m_sample_visible:
+                g_ratio = distr.smith_g1(po.snap_to_normal(bs.wo), m)
+            elif self.m_sample_visible:
+                g_ratio = self._shadowing(distr, si.wi, bs.wo, m) / _pos(distr.smith_g1(po.snap_to_normal(si.wi), m))
+            else:
+                g_ratio = (self._shadowing(distr, si.wi, bs.wo, m) * dr.dot(si.wi, m)
+                           / _pos(cos_i * mi.Frame3f.cos_theta(m)))
+            n, k = self._index(si, active)
+            bs.pdf = dr.select(active, bs.pdf, 0.0)
+            return bs, self._mueller(ctx, si, bs.wo, m, n, k, g_ratio, 0.0, self._scale(si, active), active)
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            active = active & (mi.Frame3f.cos_theta(si.wi) > 0)
             rough = self._rough(si, active)
             p_spec = self._p_spec(ctx, si, rough)
             if p_spec is None:
-                return bs, dr.zeros(mi.Spectrum)
+                return dr.zeros(mi.BSDFSample3f), dr.zeros(mi.Spectrum)
             distr = self._distr(rough)
-
             if isinstance(p_spec, float) and p_spec == 1.0:
-                # specular lobe only: exactly roughconductor's sampling routine
-                m, pdf = distr.sample(po.snap_to_normal(si.wi), sample2)
-                bs.wo = mi.reflect(si.wi, m)
-                bs.eta = 1.0
-                bs.sampled_component = mi.UInt32(0)
-                bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-                active = active & (pdf != 0) & (mi.Frame3f.cos_theta(bs.wo) > 0)
-                bs.pdf = pdf / (4.0 * _pos(dr.dot(bs.wo, m)))
-                # weight = f cos_o / pdf, written with the sampled m like roughconductor
-                if self.m_shadowing == "smith" and self.m_sample_visible:
-                    g_ratio = distr.smith_g1(po.snap_to_normal(bs.wo), m)
-                elif self.m_sample_visible:
-                    g_ratio = self._shadowing(distr, si.wi, bs.wo, m) / _pos(distr.smith_g1(po.snap_to_normal(si.wi), m))
-                else:
-                    g_ratio = (self._shadowing(distr, si.wi, bs.wo, m) * dr.dot(si.wi, m)
-                               / _pos(cos_i * mi.Frame3f.cos_theta(m)))
-                n, k = self._index(si, active)
-                g_ratio = g_ratio * self._scale(si, active)
-                weight = self._mueller(ctx, si, bs.wo, m, n, k, g_ratio, 0.0)
-                bs.pdf = dr.select(active, bs.pdf, 0.0)
-                return bs, dr.select(active, weight, 0.0)
+                return self._sample_specular(ctx, si, sample2, active, distr)
 
             # mixture of the specular (glossy) and diffuse lobes
+            bs = dr.zeros(mi.BSDFSample3f)
             choose_spec = sample1 < p_spec
             m, pdf_m = distr.sample(po.snap_to_normal(si.wi), sample2)
             # a back-facing normal (possible without visible-normal sampling) is a failed sample
@@ -698,13 +754,11 @@ def _make_class():
             bs.sampled_type = dr.select(choose_spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
                                         mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
             active = active & (mi.Frame3f.cos_theta(bs.wo) > 0)
-            value = self._value(ctx, si, bs.wo, active, rough)
-            bs.pdf = self._pdf(ctx, si, bs.wo, active, rough)
-            ok = active & (bs.pdf > 0)
-            bs.pdf = dr.select(ok, bs.pdf, 0.0)
-            weight = value / dr.select(ok, bs.pdf, 1.0)
-            return bs, dr.select(ok, weight, 0.0)
-
+            geo = self._geometry(si, bs.wo, active)
+            pdf = self._pdf(si, bs.wo, geo, distr, p_spec)
+            ok = active & (pdf > 0)
+            bs.pdf = dr.select(ok, pdf, 0.0)
+            return bs, self._value(ctx, si, bs.wo, geo, rough, distr, dr.select(ok, dr.rcp(dr.select(ok, pdf, 1.0)), 0.0))
     HydeBSDF.__name__ = "HydeBSDF"
     return HydeBSDF
 
