@@ -222,3 +222,43 @@ def test_refused_bitmap_update_restores_every_texel():
         params.update()
     assert np.array_equal(np.asarray(mi.traverse(b)["rms_slope.data"]), data)
     assert np.array_equal(_eval(mi, b, si), before)
+
+
+@pytest.mark.parametrize("raw", [True, False])
+def test_update_checks_read_an_8bit_png_through_eval_and_a_float_bitmap_from_its_data(raw, png):
+    """An update is checked on the values ``eval`` returns.  A float bitmap (eval = data) is read
+    from its data after the first check, with no kernel launched, and bad texels are still refused
+    naming the texel; an 8-bit PNG's data (0-255) is never taken for its values (texel 200 is
+    alpha 0.78 raw, 0.58 sRGB-decoded: accepted, although 200 is outside [0, 70.71])."""
+    import drjit as dr
+
+    mi = _setup("llvm_ad_mono_polarized")
+    png_tex = {"type": "bitmap", "filename": png, "raw": raw, "filter_type": "nearest"}
+    params = mi.traverse(mi.load_dict({"type": "hyde", "alpha": png_tex, "material": "Au"}))
+    for _ in range(2):
+        params["alpha.data"] = mi.TensorXf(np.array([[30, 83], [200, 201]], np.float32)[..., None])
+        params.update()                                # accepted: values 0.12 .. 0.79 (raw)
+    data = np.array([[0.1, 0.2], [0.3, 0.4]], np.float32)[..., None]
+    params = mi.traverse(mi.load_dict({"type": "hyde", "alpha": {"type": "bitmap", "raw": True,
+                                                                 "data": mi.TensorXf(data)}}))
+    params["alpha.data"] = mi.TensorXf(data * 2)
+    params.update()                                    # the first check: through eval, one kernel
+    new = mi.TensorXf(data * 3)
+    dr.eval(new)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()
+    params["alpha.data"] = new
+    params.update()
+    kernels = [h for h in dr.kernel_history() if str(h["type"]).endswith("JIT")]
+    dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert kernels == []
+    for texel, needle in ((80.0, "alpha.data texel value 80.0 (1 of 4 values read)"),
+                          (float("nan"), "(alpha.data) contains NaN")):
+        bad = data * 3
+        bad[1, 0, 0] = texel
+        params["alpha.data"] = mi.TensorXf(bad)
+        with pytest.raises(ValueError) as exc:
+            params.update()
+        assert needle in str(exc.value), str(exc.value)
+        # a refused update leaves the accepted values
+        np.testing.assert_allclose(np.asarray(params["alpha.data"]), data * 3, rtol=1e-7)

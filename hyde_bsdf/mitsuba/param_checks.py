@@ -31,7 +31,7 @@ from hyde_bsdf.mitsuba import optics as po
 from hyde_bsdf.model.parameters import ALPHA, ETA
 
 __all__ = ["RMS_RANGE", "ALPHA_RANGE", "INDEX_MAX", "probe", "texel_values", "readable",
-           "values_of", "check_roughness", "check_index", "check_reflectance", "Snapshot"]
+           "values_of", "Reader", "check_roughness", "check_index", "check_reflectance", "Snapshot"]
 
 SQRT2 = math.sqrt(2.0)
 #: accepted rms_slope (``hyde_bsdf.model.parameters.RMS_SLOPE``, the evaluator's too)
@@ -200,23 +200,77 @@ def _where(name, tex, arr, bad):
     return f"{key} = {float(arr[bad][0])!r}{counts}"
 
 
-def _raw_finite(name, tex, accepted=""):
-    """Non-finite data anywhere (including leaves of textures that cannot be evaluated at load)."""
-    for key, arr in texture_data(tex).items():
+class Reader:
+    """Reads the textures' data and values for the checks, remembering what did not change.
+
+    * Data and values are remembered until :meth:`forget` (the plugin forgets the textures an
+      update changed): eta and k are checked together, and an update of one does not read the
+      other again.
+    * A bitmap whose ``eval`` returns its stored data unchanged (float data stored ``raw``, one
+      value per texel, a non-spectral variant) is read from its data once that is shown: its values
+      read through ``eval`` equal its data, on data not all 0 or 1 (the only values the 8-bit /255
+      and sRGB conversions leave unchanged).  From then on a check reads the data once (a read-back
+      of an array :meth:`SceneParameters.update` has evaluated) and launches no kernel.
+    """
+
+    def __init__(self):
+        self.data, self.values, self.plain = {}, {}, {}
+
+    def forget(self, tex):
+        """Read ``tex`` again at its next check (its values changed)."""
+        self.data.pop(id(tex), None)
+        for one in (False, True):
+            self.values.pop((id(tex), one), None)
+
+    def clear(self):
+        self.data.clear()
+        self.values.clear()
+
+    def raw(self, tex):
+        """:func:`texture_data` of ``tex``, read once per change."""
+        if id(tex) not in self.data:
+            self.data[id(tex)] = texture_data(tex)
+        return self.data[id(tex)]
+
+    def __call__(self, tex, one=False):
+        """:func:`values_of` ``(tex, one)``, read once per change (None when not readable)."""
+        key = (id(tex), one)
+        if key not in self.values:
+            self.values[key] = self._read(tex, one)
+        return self.values[key]
+
+    def _read(self, tex, one):
+        key = (id(tex), one)
+        data = self.raw(tex).get("data")
+        if data is not None and self.plain.get(key) == data.size:
+            return data
+        values = values_of(tex, one)
+        if (values is not None and data is not None and not mi.is_spectral and values.size == data.size
+                and np.isfinite(data).all() and not np.isin(data, (0.0, 1.0)).all()
+                and np.allclose(values, data, rtol=1e-6, atol=0.0)):
+            self.plain[key] = data.size
+        return values
+
+
+def _raw_finite(name, tex, accepted="", reader=None):
+    """Non-finite data anywhere (including leaves of textures that cannot be evaluated at load).
+    ``reader``: a :class:`Reader` (reads each texture once per change)."""
+    for key, arr in (reader.raw(tex) if reader is not None else texture_data(tex)).items():
         if not np.isfinite(arr).all():
             raise ValueError(f"hyde: parameter '{name}' ({name}.{key}) contains NaN or infinite values"
                              + (f"; accepted range {accepted}" if accepted else ""))
 
 
-def check_roughness(name, tex, scale):
+def check_roughness(name, tex, scale, reader=None):
     """Roughness values finite, >= 0 and <= the upper bound; values in [0, lower bound) are
     floored there at evaluation (as a mesh of roughconductor with alpha = 0 renders a mirror),
-    with one warning.  ``scale``: 1 for rms_slope, 1/sqrt(2) for alpha.  Returns the values
-    read (None if not readable)."""
+    with one warning.  ``scale``: 1 for rms_slope, 1/sqrt(2) for alpha.  ``reader``: a
+    :class:`Reader`.  Returns the values read (None if not readable)."""
     lo, hi = (RMS_RANGE if scale == 1.0 else ALPHA_RANGE)
     rng = f"[{_fmt(lo)}, {_fmt(hi)}]" + ("" if scale == 1.0 else f" (rms_slope [{RMS_RANGE[0]:g}, {RMS_RANGE[1]:g}])")
-    _raw_finite(name, tex, rng)
-    values = values_of(tex, one=True)
+    reader = reader or Reader()
+    _raw_finite(name, tex, rng, reader)
+    values = reader(tex, one=True)
     if values is None:
         return None
     bad = ~np.isfinite(values) | (values < 0) | (values > hi * (1 + _SLACK))
@@ -233,13 +287,14 @@ def check_roughness(name, tex, scale):
 
 def check_index(eta, k, reader=None):
     """eta, k finite, in [0, INDEX_MAX] wherever they can be read, and not both 0 everywhere.
-    ``reader``: reads a texture's values in place of :func:`values_of` (the plugin's, which
-    does not read again a texture that did not change)."""
-    _raw_finite("eta", eta, f"[0, {INDEX_MAX:g}]")
-    _raw_finite("k", k, f"[0, {INDEX_MAX:g}]")
+    ``reader``: a :class:`Reader` (the plugin's, which does not read again a texture that did
+    not change)."""
+    reader = reader or Reader()
+    _raw_finite("eta", eta, f"[0, {INDEX_MAX:g}]", reader)
+    _raw_finite("k", k, f"[0, {INDEX_MAX:g}]", reader)
     read = {}
     for name, tex in (("eta", eta), ("k", k)):
-        values = (reader or values_of)(tex)
+        values = reader(tex)
         read[name] = values
         if values is None:
             continue
@@ -274,11 +329,12 @@ def _runs(wl):
     return ", ".join(runs)
 
 
-def check_reflectance(tex):
+def check_reflectance(tex, reader=None):
     """specular_reflectance finite and >= 0 wherever it can be read (values > 1 are the user's
-    choice, as in roughconductor: not physical)."""
-    _raw_finite("specular_reflectance", tex)
-    values = values_of(tex)
+    choice, as in roughconductor: not physical).  ``reader``: a :class:`Reader`."""
+    reader = reader or Reader()
+    _raw_finite("specular_reflectance", tex, reader=reader)
+    values = reader(tex)
     if values is None:
         return
     bad = ~np.isfinite(values) | (values < 0)

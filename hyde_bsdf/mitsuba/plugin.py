@@ -380,7 +380,7 @@ def _make_class():
                 self.m_k = _texture(props, "k", 1.0)
                 self.m_material = None
             self.m_specular_reflectance = props.get_texture("specular_reflectance", 1.0)
-            self.m_snapshots, self.m_read = {}, {}
+            self.m_snapshots, self.m_reader = {}, pc.Reader()
             self._validate()
             # textures whose values cannot be read at load: clamped at eval, one warning each
             lo, hi = ALPHA_RANGE if key == "alpha" else RMS_RANGE
@@ -457,7 +457,7 @@ def _make_class():
                 # atomic update: a refused value leaves the BSDF as it was before the call
                 for group in self._groups(names):
                     self.m_snapshots[group].restore()
-                self.m_read.clear()
+                self.m_reader.clear()
                 raise
 
         def _textures(self):
@@ -484,24 +484,16 @@ def _make_class():
             textures = self._textures()
             names = tuple(textures) if names is None else names
             for name in names:              # changed: read them again
-                self.m_read.pop(id(textures[name]), None)
+                self.m_reader.forget(textures[name])
             groups = self._groups(names)
             if "rough" in groups:
-                pc.check_roughness(self.m_rough_key, self.m_rough, self.m_rough_scale)
+                pc.check_roughness(self.m_rough_key, self.m_rough, self.m_rough_scale, self.m_reader)
             if "index" in groups:
-                pc.check_index(self.m_eta, self.m_k, self._read_values)
+                pc.check_index(self.m_eta, self.m_k, self.m_reader)
             if "scale" in groups:
-                pc.check_reflectance(self.m_specular_reflectance)
+                pc.check_reflectance(self.m_specular_reflectance, self.m_reader)
             for group, members in groups.items():
                 self.m_snapshots[group] = pc.Snapshot(members)
-
-        def _read_values(self, tex):
-            """``pc.values_of(tex)``, remembered until the texture changes (:meth:`_validate`
-            forgets the changed groups' values): eta and k are checked together, and an update of
-            one does not read the other again."""
-            if id(tex) not in self.m_read:
-                self.m_read[id(tex)] = pc.values_of(tex)
-            return self.m_read[id(tex)]
 
         def to_string(self):
             index = (f"material={self.m_material!r}" if self.m_material else
