@@ -103,6 +103,7 @@ class MapProblem:
     prefix: str | None
     components: str
     bilinear: tuple = ()              # fitted maps whose bitmap filters bilinearly (in any scene)
+    nearest: tuple = ()               # fitted maps switched from bilinear to nearest by build()
 
     @property
     def map_shape(self):
@@ -158,8 +159,9 @@ class MapProblem:
         if seen is None and problem.map_shape is not None:
             seen = sum(texel_coverage(o, problem.map_shape, prefix) for o in observations) > 0
         problem.seen = seen
-        problem.bilinear = tuple(n for n in fit if shapes[n] is not None and any(
-            filters_bilinearly(p, k[n], shapes[n], MAP_PARAMETERS[n][1]) for p, k in zip(all_params, keys)))
+        problem.bilinear = problem._bilinear_maps()
+        if problem.bilinear:
+            problem._to_nearest()
         for name in names:
             try:
                 value = problem.as_value(name, start[name])
@@ -168,6 +170,30 @@ class MapProblem:
                                  f"{shapes[name][:2]}") from None
             problem.write({name: value})
         return problem
+
+    def _bilinear_maps(self) -> tuple:
+        """The fitted maps whose bitmap filters bilinearly in some scene."""
+        return tuple(n for n in self.fit if self.shapes[n] is not None and any(
+            filters_bilinearly(p, k[n], self.shapes[n], MAP_PARAMETERS[n][1])
+            for p, k in zip(self.all_params, self.keys)))
+
+    def _to_nearest(self) -> None:
+        """Switch the bilinear fitted bitmaps to ``filter_type`` nearest in every scene
+        (:func:`~hyde_bsdf.render.texture_filter.bitmap_to_nearest`), traverse the scenes again, and
+        set ``nearest`` (switched) and ``bilinear`` (left bilinear: a BSDF that cannot take the swap)."""
+        import mitsuba as mi
+
+        from hyde_bsdf.render.texture_filter import bitmap_to_nearest
+
+        switched = set()
+        for i, scene in enumerate(self.scenes):
+            for name in self.bilinear:
+                if bitmap_to_nearest(scene, self.all_params[i], self.keys[i][name]):
+                    switched.add(name)
+                    self.all_params[i] = mi.traverse(scene)
+                    self.keys[i] = map_keys(self.all_params[i], self.names, self.prefix)
+        self.bilinear = self._bilinear_maps()
+        self.nearest = tuple(n for n in self.fit if n in switched and n not in self.bilinear)
 
     def as_value(self, name, v):
         """``v`` (a number or a (rows, cols) array) as the Dr.Jit value of parameter ``name``, clamped
@@ -485,9 +511,12 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     ``extra_polish`` more steps are taken (:func:`map_uncertainty`); where they still do the texel
     has not reached the minimum, its standard error is NaN, ``result.converged[name]`` is False there and a
     :class:`~hyde_bsdf.inverse.uncertainty.NotConvergedWarning` names the parameter and the
-    fraction of texels.  A fitted bitmap that filters bilinearly (Mitsuba's default) gives NaN
-    standard errors and one :class:`~hyde_bsdf.inverse.uncertainty.BilinearFilterWarning`: load
-    the maps with ``filter_type`` ``nearest``.  Each warning is issued once.
+    fraction of texels.  A fitted bitmap that filters bilinearly (Mitsuba's default) is switched to
+    ``filter_type`` ``nearest`` in the given scenes (they are changed in place:
+    :func:`~hyde_bsdf.render.texture_filter.bitmap_to_nearest`), with one
+    :class:`~hyde_bsdf.inverse.uncertainty.BilinearFilterWarning`; a BSDF that cannot take the swap
+    (only the ``hyde`` plugin can) keeps its bilinear bitmap and gets NaN standard errors and that
+    warning instead.  Each warning is issued once.
 
     The steps, each its own function: :meth:`MapProblem.build` (observation set-up: checks, losses,
     traverse keys, texel coverage), :func:`map_loss` (renders and the loss), :func:`map_step` (the
@@ -585,9 +614,19 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     res = MapInversionResult(fitted=fit, final=final, start=dict(start), components=components, seen=seen,
                              truth=truth, history=history, seconds_per_iteration=per_it,
                              first_iteration_seconds=t_first, adam_final=adam_final, uncertainty=unc)
+    messages = [(BilinearFilterWarning, _nearest_message(problem.nearest))] if problem.nearest else []
     if unc is not None:
         res.stderr, res.rel_stderr, res.converged = unc.stderr, unc.rel_stderr, unc.converged
-        res.warnings = [m for _, m in unc.messages]
-        for category, message in unc.messages:        # each once
-            warnings.warn(message, category, stacklevel=2)
+        messages += unc.messages
+    res.warnings = [m for _, m in messages]
+    for category, message in messages:        # each once
+        warnings.warn(message, category, stacklevel=2)
     return res
+
+
+def _nearest_message(names) -> str:
+    """The one warning for fitted bitmaps switched from bilinear to nearest."""
+    return (f"the bitmap(s) of {', '.join(names)} filtered bilinearly (Mitsuba's default): they were switched "
+            "to filter_type nearest in the given scenes and fitted so (a bilinear pixel blends 4 texels, which "
+            "the per-texel fit and its standard errors do not describe); write "
+            "<string name=\"filter_type\" value=\"nearest\"/> in the scene to render what was fitted")

@@ -94,7 +94,9 @@ class UnidentifiedParameterWarning(UserWarning):
 
 
 class BilinearFilterWarning(UserWarning):
-    """A fitted bitmap filters bilinearly: the per-texel standard errors do not hold (set to NaN)."""
+    """A fitted bitmap filters bilinearly: :func:`~hyde_bsdf.inverse.invert_maps` switches it to
+    nearest (or, for a BSDF that cannot take the swap, sets the standard errors to NaN: the per-texel
+    ones do not hold for a pixel that blends 4 texels)."""
 
 
 @dataclass
