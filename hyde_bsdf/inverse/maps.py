@@ -26,9 +26,9 @@ from hyde_bsdf.inverse.scalar import check_gradients
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, STDERR_THRESHOLD, BilinearFilterWarning,
                                            NotConvergedWarning, UnidentifiedParameterWarning, Uncertainty,
-                                           accumulate_blocks, convergence_test, convergence_warnings,
-                                           gauss_newton_step, identification_warnings, pixel_records,
-                                           standard_errors)
+                                           accumulate_blocks, at_bounds, convergence_test, convergence_warnings,
+                                           gauss_newton_step, identification_warnings, misfit_pvalues, pixel_records,
+                                           standard_errors, texel_convergence, texel_misfit)
 
 __all__ = ["MapInversionResult", "MapProblem", "filters_bilinearly", "map_loss", "map_step", "LogAdam", "map_uncertainty",
            "invert_maps"]
@@ -350,7 +350,12 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
     still does (or a step hit ``max_step``) the texel's standard error is NaN and
     ``Uncertainty.converged`` is False there (:func:`~hyde_bsdf.inverse.uncertainty.convergence_test`).
     Two steps, not one: Gauss-Newton from far away can take one small step and the next large
-    (measured: a texel 9-11 standard errors off after a last step of 1.9).
+    (measured: a texel 9-11 standard errors off after a last step of 1.9).  Small steps do not
+    show a texel the steps no longer move (a local minimum, a bound), so a texel whose value sits
+    at a bound of its range, or whose residuals stay above the noise (chi-square p-value <
+    :data:`~hyde_bsdf.inverse.uncertainty.MISFIT_P`), is not converged either, and a texel not
+    converged in one parameter is not converged in any
+    (:func:`~hyde_bsdf.inverse.uncertainty.texel_convergence`).
     A fitted bitmap that filters bilinearly couples neighbouring texels, which the per-texel blocks
     do not describe: every standard error is then NaN and ``Uncertainty.filter_valid`` False.
     Returns (final maps, :class:`Uncertainty`)."""
@@ -359,10 +364,11 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
         return final, None
     rows, cols = problem.map_shape
     seen = problem.seen if problem.seen is not None else np.ones((rows, cols), bool)
-    final, records, blocks, steps = _polish(problem, names, dict(final), spp=spp, seed=seed, noise=noise,
+    final, records, blocks, steps, applied = _polish(problem, names, dict(final), spp=spp, seed=seed, noise=noise,
                                             polish=polish, max_step=max_step, seen=seen, convergence=convergence,
                                             extra=extra_polish)
     A, B, g, noise_std, n_data = blocks
+    chi2, m_data = texel_misfit(records, (rows, cols), step=applied)
     problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
     rel = standard_errors(A, B, seen, dof=(n_data, len(names) * int(np.asarray(seen).sum())))
     # a texel no picture has a whole pixel inside got no information computed: unknown, not undetermined
@@ -371,10 +377,10 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
         if rec is not None:
             np.add.at(whole, rec["t"], 1)
     rel[whole == 0] = np.nan
-    clip = max_step if polish else None
-    (ok, ratio), (ok_prev, ratio_prev) = (convergence_test(d, rel, seen, convergence, clip=clip) for d in steps)
-    ok &= ok_prev
-    ratio = np.maximum(ratio, ratio_prev)
+    misfit_p = misfit_pvalues(chi2, m_data, len(names))
+    pinned = at_bounds(np.stack([np.ravel(final[n]) for n in names], axis=1), [MAP_PARAMETERS[n][1] for n in names])
+    ok, ratio = texel_convergence(steps, rel, seen, threshold=convergence, clip=max_step if polish else None,
+                                  misfit_p=misfit_p, pinned=pinned)
     shape = lambda a, i: a[:, i].reshape(rows, cols)
     rel_maps = {n: shape(rel, i) for i, n in enumerate(names)}
     found = identification_warnings(rel_maps, seen, threshold)
@@ -389,6 +395,8 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
                       step_se={n: shape(ratio, i) for i, n in enumerate(names)},
                       converged={n: shape(ok, i) for i, n in enumerate(names)}, filter_valid=filter_valid,
                       unchecked=unchecked)
+    unc.misfit_p = misfit_p.reshape(rows, cols)
+    unc.pinned = {n: shape(pinned, i) for i, n in enumerate(names)}
     unc.messages = _uncertainty_messages(problem, unc, found, seen, convergence, regularized)
     return final, unc
 
@@ -411,7 +419,7 @@ def _polish(problem, names, final, *, spp, seed, noise, polish, max_step, seen, 
         blocks = accumulate_blocks(records, (rows, cols), len(names), weighting=weighting)
         if not polish:
             d = gauss_newton_step(blocks[0], blocks[2], seen, max_step=np.inf)
-            return final, records, blocks, np.array([d, d])
+            return final, records, blocks, np.array([d, d]), None
         d = gauss_newton_step(blocks[0], blocks[2], seen, max_step=max_step)
         steps.append(d)
         applied = np.zeros_like(d)
@@ -425,7 +433,7 @@ def _polish(problem, names, final, *, spp, seed, noise, polish, max_step, seen, 
     # the blocks after the last step, linearised (no further render): its residuals r + J d give the
     # noise estimate without the misfit the step removed
     blocks = accumulate_blocks(records, (rows, cols), len(names), weighting=weighting, step=applied)
-    return final, records, blocks, np.array(steps[-2:] if len(steps) > 1 else [steps[-1]] * 2)
+    return final, records, blocks, np.array(steps[-2:] if len(steps) > 1 else [steps[-1]] * 2), applied
 
 
 def _steps_converged(steps, blocks, seen, convergence, max_step):
