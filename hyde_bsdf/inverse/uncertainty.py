@@ -455,9 +455,10 @@ def convergence_warnings(converged: dict, step_se: dict, seen, threshold: float 
         cause = ("the regulariser holds them away from the data's minimum, or the fit stopped early"
                  if regularized else "the fit stopped before the minimum: run more iterations (or polish steps)")
         out[name] = (float(bad.mean()), f"{name} has not converged in {_percent(bad.mean())} % of the {n} seen texels "
-                     f"(its last Gauss-Newton steps up to {worst:.3g} standard errors, > {threshold:g}, or at the step "
-                     f"limit; or the value at a bound, the texel's residuals above the noise (chi-square p < "
-                     f"{MISFIT_P:g}), or another parameter of the texel not converged): {cause}; "
+                     f"(a last Gauss-Newton step > {threshold:g} standard errors or at the step limit, the value "
+                     f"at a bound, the texel's residuals above the noise: chi-square p < {MISFIT_P:g}, or another "
+                     f"parameter of the texel not converged; its largest step there {worst:.3g} standard errors): "
+                     f"{cause}; "
                      f"their standard errors are set to NaN (result.converged marks them)")
     return out
 
