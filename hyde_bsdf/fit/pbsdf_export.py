@@ -446,20 +446,7 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
         meta = {"producer": "hyde-bsdf export", "model": "Hyde, Schmidt, Havrilla, Opt. Express 17(24) 2009, Eq. 17",
                 **params, "resolution": list(res), "wavelengths_nm": list(wavelengths),
                 "theta_h_grid": "(pi/2) u^2", "edge_deg": edge_deg(res[1])}
-        layout = {"theta_h": (np.dtype(np.float32), (1, res[2])), "theta_d": (np.dtype(np.float32), (1, res[1])),
-                  "phi_d": (np.dtype(np.float32), (1, res[0])), "wvls": (np.dtype(np.uint16), (len(wavelengths),)),
-                  "hyde_export": (np.dtype(np.uint8), (_JSON_BYTES,)), "M": (np.dtype(np.float32), (*res, len(wavelengths), 4, 4))}
-        head, offsets, total = _header(layout)
-        with open(tmp, "wb") as f:
-            f.write(head)
-            for name, arr in (("theta_h", th), ("theta_d", td), ("phi_d", pd)):
-                f.seek(offsets[name])
-                f.write(np.asarray(arr, np.float32).tobytes())
-            f.seek(offsets["wvls"])
-            f.write(np.asarray(wavelengths, np.uint16).tobytes())
-            f.seek(offsets["M"])
-            for slab in slabs():
-                f.write(slab.tobytes())
+        offsets = _write_arrays(tmp, res, wavelengths, (th, td, pd), slabs())
         table = read_pbsdf(tmp)
         errors = {}
         if error_samples:
@@ -468,15 +455,42 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
         if alpha_sample is None:
             say("choosing alpha_sample")
             alpha_sample, _ = suggest_alpha_sample(params)
-        meta.update(errors={k_: v for k_, v in errors.items()}, alpha_sample=float(alpha_sample))
-        text = json.dumps(meta, separators=(",", ":"))
-        if len(text.encode()) > _JSON_BYTES:
-            meta["errors"] = {k_: v for k_, v in errors.items() if k_ != "by_band"}
-            text = json.dumps(meta, separators=(",", ":"))
         del table
-        with open(tmp, "r+b") as f:
-            f.seek(offsets["hyde_export"])
-            f.write(text.encode().ljust(_JSON_BYTES, b" "))
+        _write_metadata(tmp, offsets["hyde_export"], meta, errors, alpha_sample)
     return ExportReport(path=Path(path), resolution=res, nbytes=os.path.getsize(path),
                         seconds=time.perf_counter() - t0, params=params, wavelengths=tuple(wavelengths),
                         alpha_sample=float(alpha_sample), errors=errors)
+
+
+def _write_arrays(tmp, res, wavelengths, axes, slabs) -> dict:
+    """The table's header, axes (theta_h, theta_d, phi_d), wavelengths and the Mueller slabs
+    into ``tmp``; the metadata field is left blank.  Returns each field's byte offset."""
+    th, td, pd = axes
+    layout = {"theta_h": (np.dtype(np.float32), (1, res[2])), "theta_d": (np.dtype(np.float32), (1, res[1])),
+              "phi_d": (np.dtype(np.float32), (1, res[0])), "wvls": (np.dtype(np.uint16), (len(wavelengths),)),
+              "hyde_export": (np.dtype(np.uint8), (_JSON_BYTES,)), "M": (np.dtype(np.float32), (*res, len(wavelengths), 4, 4))}
+    head, offsets, total = _header(layout)
+    with open(tmp, "wb") as f:
+        f.write(head)
+        for name, arr in (("theta_h", th), ("theta_d", td), ("phi_d", pd)):
+            f.seek(offsets[name])
+            f.write(np.asarray(arr, np.float32).tobytes())
+        f.seek(offsets["wvls"])
+        f.write(np.asarray(wavelengths, np.uint16).tobytes())
+        f.seek(offsets["M"])
+        for slab in slabs:
+            f.write(slab.tobytes())
+    return offsets
+
+
+def _write_metadata(tmp, offset, meta, errors, alpha_sample):
+    """The JSON metadata (with the measured errors and alpha_sample) into its fixed-size field;
+    the per-band errors are dropped when they do not fit."""
+    meta.update(errors={k_: v for k_, v in errors.items()}, alpha_sample=float(alpha_sample))
+    text = json.dumps(meta, separators=(",", ":"))
+    if len(text.encode()) > _JSON_BYTES:
+        meta["errors"] = {k_: v for k_, v in errors.items() if k_ != "by_band"}
+        text = json.dumps(meta, separators=(",", ":"))
+    with open(tmp, "r+b") as f:
+        f.seek(offset)
+        f.write(text.encode().ljust(_JSON_BYTES, b" "))
