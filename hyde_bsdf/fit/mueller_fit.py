@@ -72,7 +72,7 @@ import numpy as np
 
 from hyde_bsdf.errors import RejectedResult
 from hyde_bsdf.model.checks import real_array
-from hyde_bsdf.progress import Throttle, as_callback, check_progress
+from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
@@ -96,26 +96,6 @@ DEFAULT_STARTS = {"n": (0.3, 1.5), "k": (0.5, 3.0, 9.0)}
 #: above this many geometries the multi-start search runs on a random subset of this size
 #: (fixed seed) and only its best point is refined on all the data (see fit_mueller)
 SEARCH_ROWS = 4000
-#: seconds between progress reports
-PROGRESS_SECONDS = 3.0
-
-
-class _Progress:
-    """Counts model evaluations; reports them through ``callback`` at most every PROGRESS_SECONDS."""
-
-    def __init__(self, callback):
-        self.throttle = Throttle(callback, PROGRESS_SECONDS)
-        self.stage = ""
-        self.calls = 0
-
-    def tick(self, r):
-        self.calls += 1
-        self.throttle(lambda: f"fit: {self.stage}: {self.calls} model evaluations, "
-                              f"chi^2 = {float(np.einsum('i,i->', r, r)):.6g}, {self.throttle.elapsed:.0f} s")
-
-    def done(self):
-        if self.throttle.elapsed >= PROGRESS_SECONDS:
-            self.throttle(f"fit: done, {self.calls} model evaluations in {self.throttle.elapsed:.0f} s", force=True)
 
 
 class IllPosedFitWarning(UserWarning):
@@ -541,7 +521,8 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     fitted, mode, given = check_options(fit, rms_slope, n0, k0, shadowing, diffuse, corr_limit)
     check_progress(progress)
     data = _FitData.build(theta_i, theta_r, phi, measured, sigma, fitted)
-    report = _Progress(as_callback(data.large if progress is None else progress))
+    report = EvaluationCounter(as_callback(data.large if progress is None else progress),
+                               PROGRESS_SECONDS, unit="model evaluations")
     problem = _Objective(data, fitted, given, shadowing, mode, report)
     res, nfev = problem.minimize()
     report.done()

@@ -64,7 +64,7 @@ from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, rea
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N
 from hyde_bsdf.model.shadowing import SHADOWING
-from hyde_bsdf.progress import Throttle, as_callback
+from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
 
 __all__ = ["DEFAULT_RESOLUTION", "edge_deg", "ALPHA_CANDIDATES", "ExportReport", "grids",
            "band_index", "check_table_size", "interpolation_error", "suggest_alpha_sample",
@@ -82,7 +82,6 @@ MAX_ELEMENTS = 2 ** 32 - 1
 #: Mitsuba's loader: the mapped file plus its own copy of M
 LOADER_COPIES = 2
 _JSON_BYTES = 4096
-PROGRESS_SECONDS = 3.0
 RESOLUTION_RANGE = (2, 4097)
 
 

@@ -43,21 +43,21 @@ import numpy as np
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, Verdict, cluster_covariance, correlation, floor_verdict,
                                     geometry_clusters, half_angles, larger_errors)
+from hyde_bsdf.fit.mueller_fit import DEFAULT_STARTS, raise_or_warn
 from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
 from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.parameters import NATURAL_INDEX
 from hyde_bsdf.model.shadowing import SHADOWING
-from hyde_bsdf.progress import Throttle, as_callback, check_progress
+from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 
 __all__ = ["PbsdfFitResult", "fit_pbsdf"]
 
 #: elements fitted besides M00 (normalized by M00): all 15
 ELEMENTS = tuple((j, k) for j in range(4) for k in range(4) if (j, k) != (0, 0))
 BOUNDS = {"n": NATURAL_INDEX.bounds, "k": NATURAL_INDEX.bounds, "rms_slope": RMS_SLOPE_RANGE}
-STARTS = {"n": (0.3, 1.5), "k": (0.5, 3.0, 9.0)}
+STARTS = DEFAULT_STARTS      # the start points of the Mueller fit
 #: geometries used by the multi-start stage (the joint fit uses all)
 SEARCH_ROWS = 1000
-PROGRESS_SECONDS = 3.0
 
 
 @dataclass
@@ -258,8 +258,6 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     The result carries a :class:`~hyde_bsdf.fit.adequacy.Verdict` (``result.verdict``); an
     inadequate model also warns (:class:`~hyde_bsdf.fit.adequacy.InadequateModelWarning`).
     """
-    from hyde_bsdf.fit.mueller_fit import raise_or_warn
-
     fit = _check(fit, rms_slope, n0, k0, shadowing, diffuse)
     check_progress(progress)
     if not isinstance(data, PbsdfSamples):
@@ -275,7 +273,7 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     res, prob, free = stages.joint(rows_all)
     values, s00, sel = stages.values, stages.s00, stages.sel
     r00, rel = prob.parts(res.x)
-    stages.done()
+    stages.counter.done()
 
     cov, corr, err, diag, verdict = _uncertainty(res, prob, free, values, data)
     if not res.success:
@@ -291,7 +289,7 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         k=np.array([values[("k", b)] for b in range(K)]), wavelengths=data.wavelengths.copy(),
         stderr=stderr, fitted=tuple(fit), correlation=corr, names=names, sigma_m00=s00, sigma_elements=sel,
         chi2=float(r @ r), dof=r.size - len(free), success=bool(res.success), message=str(res.message),
-        nfev=stages.calls, n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
+        nfev=stages.counter.calls, n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
         rms_m00=np.sqrt(np.mean(r00 ** 2, axis=1)), rms_elements=np.sqrt(np.mean(rel ** 2, axis=(1, 2))),
         verdict=verdict)
     raise_or_warn(verdict, diag, strict, stacklevel=3)
@@ -314,26 +312,16 @@ class _StagedFit:
     def __init__(self, data, fit, shadowing, diffuse, progress):
         self.data, self.fit = data, fit
         self.shadowing, self.diffuse = shadowing, diffuse
-        self.report = Throttle(as_callback(True if progress is None else progress), PROGRESS_SECONDS)
-        self.calls, self.stage = 0, ""
+        self.counter = EvaluationCounter(as_callback(True if progress is None else progress), PROGRESS_SECONDS)
         self.values = {}
         self.s00, self.sel = 0.05, 0.01
-
-    def tick(self, r):
-        self.calls += 1
-        self.report(lambda: f"fit: {self.stage}: {self.calls} evaluations, chi^2 = {float(r @ r):.6g}, "
-                            f"{self.report.elapsed:.0f} s")
-
-    def done(self):
-        if self.report.elapsed >= PROGRESS_SECONDS:
-            self.report(f"fit: done, {self.calls} evaluations in {self.report.elapsed:.0f} s", force=True)
 
     def solve(self, bands, rows, free, x0, max_nfev):
         """Bounded least squares over ``free``, the other parameters held at their values."""
         from scipy.optimize import least_squares
         fixed = {p: v for p, v in self.values.items() if p not in free}
         prob = _Problem(self.data, bands, rows, free, fixed, self.shadowing, self.diffuse,
-                        self.s00, self.sel, self.tick)
+                        self.s00, self.sel, self.counter.tick)
         lo, hi = _bounds(free)
         x0 = np.clip(np.asarray(x0, float), lo + 1e-9, hi - 1e-9)
         res = least_squares(prob, x0, jac=lambda x: prob.jac(x, hi), bounds=(lo, hi), method="trf",
@@ -343,7 +331,7 @@ class _StagedFit:
     def middle_band(self, search, n0, k0, start):
         """1. Multi-start (or the warm ``start``) on the middle band, with rms_slope."""
         mid = self.data.wavelengths.size // 2
-        self.stage = f"multi-start at {self.data.wavelengths[mid]:g} nm"
+        self.counter.stage = f"multi-start at {self.data.wavelengths[mid]:g} nm"
         free_mid = [p for p in (("n", mid), ("k", mid)) if p[0] in self.fit] + \
                    (["rms_slope"] if "rms_slope" in self.fit else [])
         starts = [(n_, k_) for n_ in ((n0,) if n0 is not None else STARTS["n"])
@@ -370,7 +358,7 @@ class _StagedFit:
                 free_b = [p for p in (("n", b), ("k", b)) if p[0] in self.fit]
                 if not free_b:
                     continue
-                self.stage = f"band {self.data.wavelengths[b]:g} nm"
+                self.counter.stage = f"band {self.data.wavelengths[b]:g} nm"
                 x0 = [self.values[(p[0], nb)] for p in free_b]
                 res, _ = self.solve([b], search, free_b, x0, 60 * len(free_b))
                 self.values.update(zip(free_b, res.x))
@@ -382,7 +370,7 @@ class _StagedFit:
         free = (["rms_slope"] if "rms_slope" in self.fit else []) + \
                [(p, b) for b in range(K) for p in ("n", "k") if p in self.fit]
         bands = list(range(K))
-        self.stage = f"joint fit of {len(free)} parameters on {len(rows_all)} geometries x {K} bands"
+        self.counter.stage = f"joint fit of {len(free)} parameters on {len(rows_all)} geometries x {K} bands"
         res, prob = self.solve(bands, rows_all, free, [self.values[p] for p in free], 40 * len(free))
         self.values.update(zip(free, res.x))
         r00, rel = prob.parts(res.x)

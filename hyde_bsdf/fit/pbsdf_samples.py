@@ -30,7 +30,6 @@ __all__ = ["CellCounts", "PbsdfSamples", "paper_angles", "table_to_paper", "pape
            "classify_cells", "pbsdf_samples"]
 
 
-PROGRESS_SECONDS = 3.0
 
 
 def paper_angles(om_i, om_r):

@@ -188,6 +188,14 @@ def _decode(name, raw: bytes) -> str:
         raise MeasurementFileError(f"{name}: cannot be read as UTF-8 text ({exc})") from None
 
 
+def _skipped(line: str, comments: list) -> bool:
+    """Whether ``line`` is blank or a comment (a comment's text is added to ``comments``)."""
+    stripped = line.strip()
+    if stripped and stripped[0] == "#":
+        comments.append(stripped[1:].strip())
+    return not stripped or stripped[0] == "#"
+
+
 def _split_header(name, raw: bytes):
     """((line number, column names), the bytes after the header line, comments before it)."""
     comments = []
@@ -198,11 +206,7 @@ def _split_header(name, raw: bytes):
         line = _decode(name, raw[pos:end])     # line ends are LF only here (_normalise)
         lineno += 1
         pos = end + 1
-        stripped = line.strip()
-        if not stripped:
-            continue
-        if stripped[0] == "#":
-            comments.append(stripped[1:].strip())
+        if _skipped(line, comments):
             continue
         return (lineno, [c.strip() for c in _cells(name, lineno, line)]), raw[pos:], comments
     raise MeasurementFileError(f"{name}: no header line (expected columns "
@@ -215,11 +219,7 @@ def _data_lines(name, raw: bytes, hline: int, comments: list):
     for lineno, line in enumerate(_decode(name, raw).split("\n"), start=1):
         if lineno <= hline:
             continue
-        stripped = line.strip()
-        if not stripped:
-            continue
-        if stripped[0] == "#":
-            comments.append(stripped[1:].strip())
+        if _skipped(line, comments):
             continue
         linenos.append(lineno)
         lines.append(line)
