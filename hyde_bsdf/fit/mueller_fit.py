@@ -70,7 +70,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.errors import RejectedResult
+from hyde_bsdf.errors import RejectedResult, UsageError
 from hyde_bsdf.model.checks import real_array
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 from hyde_bsdf.model.evaluator import pbrdf
@@ -213,7 +213,7 @@ def _diffuse_mode(diffuse):
         return "none"
     if diffuse in ("paper", "reciprocal", "none"):
         return diffuse
-    raise ValueError(f"diffuse must be True, False, 'paper', 'reciprocal' or 'none', got {diffuse!r}")
+    raise UsageError(f"diffuse must be True, False, 'paper', 'reciprocal' or 'none', got {diffuse!r}")
 
 
 def mueller_elements(theta_i, theta_r, phi, names, *, rms_slope, n, k,
@@ -236,7 +236,7 @@ def _elements(theta_i, theta_r, phi, names, *, rms_slope, n, k, shadowing, diffu
     F00 = F[..., 0, 0]
     if np.any(F00 <= 0.0):
         if strict:
-            raise ValueError("theta_i and theta_r must be below 90 deg (pi/2): F_00 = 0 there and "
+            raise UsageError("theta_i and theta_r must be below 90 deg (pi/2): F_00 = 0 there and "
                              "normalized Mueller elements are undefined")
         F00 = np.where(F00 > 0.0, F00, np.inf)
     return {name: F[(...,) + element_index(name)] / F00 for name in names}
@@ -369,7 +369,7 @@ class FitResult:
 
 def _as_arrays(theta_i, theta_r, phi, measured, sigma):
     if not isinstance(measured, dict) or not measured:
-        raise ValueError(f"measured must be a non-empty dict of element name -> array "
+        raise UsageError(f"measured must be a non-empty dict of element name -> array "
                          f"(names {', '.join(ELEMENT_NAMES)}), got {measured!r}")
     if sigma is not None and not isinstance(sigma, dict):
         raise TypeError(f"sigma must be None or a dict of element name -> standard deviations, "
@@ -379,12 +379,12 @@ def _as_arrays(theta_i, theta_r, phi, measured, sigma):
                         ("phi", phi, None)):
         a = real_array(name, a, "radians")
         if hi is not None and np.any((a < 0) | (a >= hi)):
-            raise ValueError(f"{name} must be in [0, pi/2) radians (the detector and source above the surface)")
+            raise UsageError(f"{name} must be in [0, pi/2) radians (the detector and source above the surface)")
         angles.append(a)
     try:
         shape = np.broadcast_shapes(*(a.shape for a in angles))
     except ValueError:
-        raise ValueError(f"theta_i, theta_r, phi must broadcast to one shape, got "
+        raise UsageError(f"theta_i, theta_r, phi must broadcast to one shape, got "
                          f"{', '.join(str(a.shape) for a in angles)}") from None
     values, sig = {}, {}
     for name, v in measured.items():
@@ -393,33 +393,33 @@ def _as_arrays(theta_i, theta_r, phi, measured, sigma):
         try:
             shape = np.broadcast_shapes(shape, v.shape)
         except ValueError:
-            raise ValueError(f"measured[{name!r}] has shape {v.shape}, which does not broadcast with "
+            raise UsageError(f"measured[{name!r}] has shape {v.shape}, which does not broadcast with "
                              f"the angles' shape {shape}") from None
         if np.any(np.abs(v) > ELEMENT_LIMIT):
             worst = float(v.flat[np.argmax(np.abs(v))])
-            raise ValueError(f"measured[{name!r}] must be normalized by M00 (|M_jk/M_00| <= {ELEMENT_LIMIT:g}; "
+            raise UsageError(f"measured[{name!r}] must be normalized by M00 (|M_jk/M_00| <= {ELEMENT_LIMIT:g}; "
                              f"<= 1 for a physical Mueller matrix), got {worst:g}: divide the elements by M00")
         values[name] = v
         if sigma is not None:
             if name not in sigma:
-                raise ValueError(f"sigma has no entry for measured element {name!r}")
+                raise UsageError(f"sigma has no entry for measured element {name!r}")
             s = real_array(f"sigma[{name!r}]", sigma[name], "standard deviations")
             if np.any(s <= 0):
-                raise ValueError(f"sigma[{name!r}] must be finite and > 0")
+                raise UsageError(f"sigma[{name!r}] must be finite and > 0")
             if np.any((s < SIGMA_RANGE[0]) | (s > SIGMA_RANGE[1])):
-                raise ValueError(f"sigma[{name!r}] must be in [{SIGMA_RANGE[0]:g}, {SIGMA_RANGE[1]:g}] "
+                raise UsageError(f"sigma[{name!r}] must be in [{SIGMA_RANGE[0]:g}, {SIGMA_RANGE[1]:g}] "
                                  f"(standard deviations of normalized elements), got values from "
                                  f"{s.min():g} to {s.max():g}")
             try:
                 np.broadcast_shapes(shape, s.shape)
             except ValueError:
-                raise ValueError(f"sigma[{name!r}] has shape {s.shape}, which does not broadcast with "
+                raise UsageError(f"sigma[{name!r}] has shape {s.shape}, which does not broadcast with "
                                  f"the data's shape {shape}") from None
             sig[name] = s
     if sigma is not None:
         extra = set(sigma) - set(measured)
         if extra:
-            raise ValueError(f"sigma has entries {sorted(extra)} with no measured values")
+            raise UsageError(f"sigma has entries {sorted(extra)} with no measured values")
     ti, tr, ph = (np.broadcast_to(a, shape).ravel() for a in angles)
     y = {n: np.broadcast_to(v, shape).ravel() for n, v in values.items()}
     w = {n: np.broadcast_to(sig[n], shape).ravel() if sigma is not None else np.ones(ti.size)
@@ -433,7 +433,7 @@ def _check_fit_names(fit):
     fit = tuple(fit)
     bad = [p for p in fit if p not in PARAMETERS]
     if bad or not fit or len(set(fit)) != len(fit):
-        raise ValueError(f"fit must be a non-empty subset of {PARAMETERS} without repeats, got {fit!r}")
+        raise UsageError(f"fit must be a non-empty subset of {PARAMETERS} without repeats, got {fit!r}")
     return tuple(p for p in PARAMETERS if p in fit)   # canonical order
 
 
@@ -442,7 +442,7 @@ def _start_value(name, value, fitted):
     if value is None:
         if name in fitted:
             return None
-        raise ValueError(f"{label} must be given when {name} is not fitted (it is then held at that value)")
+        raise UsageError(f"{label} must be given when {name} is not fitted (it is then held at that value)")
     if isinstance(value, (bool, np.bool_, str, bytes, complex, np.complexfloating)):
         raise TypeError(f"{label} must be a real number, got {value!r}")
     try:
@@ -451,7 +451,7 @@ def _start_value(name, value, fitted):
         raise TypeError(f"{label} must be a real number, got {value!r}") from None
     lo, hi = BOUNDS[name]
     if not math.isfinite(v) or not lo <= v <= hi:
-        raise ValueError(f"{label} must be in [{lo:g}, {hi:g}], got {value!r}")
+        raise UsageError(f"{label} must be in [{lo:g}, {hi:g}], got {value!r}")
     return v
 
 
@@ -462,15 +462,15 @@ def check_options(fit=("n", "k"), rms_slope=0.3, n0=None, k0=None, shadowing="vg
     fitted = _check_fit_names(fit)
     mode = _diffuse_mode(diffuse)
     if isinstance(corr_limit, bool) or not (isinstance(corr_limit, (int, float)) and 0 < corr_limit <= 1):
-        raise ValueError(f"corr_limit must be in (0, 1], got {corr_limit!r}")
+        raise UsageError(f"corr_limit must be in (0, 1], got {corr_limit!r}")
     given = {"n": _start_value("n", n0, fitted), "k": _start_value("k", k0, fitted),
              "rms_slope": _start_value("rms_slope", rms_slope, fitted)}
     if given["rms_slope"] is None:
-        raise ValueError("rms_slope must be given (start value when fitted)")
+        raise UsageError("rms_slope must be given (start value when fitted)")
     if not isinstance(shadowing, str) or shadowing not in ("vgroove", "smith", "none"):
-        raise ValueError(f"shadowing must be 'vgroove', 'smith' or 'none', got {shadowing!r}")
+        raise UsageError(f"shadowing must be 'vgroove', 'smith' or 'none', got {shadowing!r}")
     if mode == "reciprocal" and shadowing == "none":
-        raise ValueError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
+        raise UsageError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
     return fitted, mode, given
 
 
@@ -596,7 +596,7 @@ class _FitData:
         if m < p:
             merged = (f" ({rows_in} rows, but only {ti.size} distinct geometries: rows that repeat a geometry "
                       "count once)") if repeats is not None else ""
-            raise ValueError(f"too few data to fit {', '.join(fitted)}: {m} measured value(s){merged} for {p} "
+            raise UsageError(f"too few data to fit {', '.join(fitted)}: {m} measured value(s){merged} for {p} "
                              f"parameters -- measure more angles or elements, or fix parameters "
                              f"(fit=...) at known values")
         return cls(ti, tr, ph, y, w, names, ydat, wdat, rows_in, repeats, sigma is not None)
@@ -832,9 +832,9 @@ def synthetic_measurements(theta_i, theta_r, phi, names=("M01", "M11", "M22", "M
     Angles in radians; eta = n - jk.
     """
     if not (isinstance(n_samples, (int, np.integer)) and n_samples >= 2):
-        raise ValueError(f"n_samples must be an integer >= 2, got {n_samples!r}")
+        raise UsageError(f"n_samples must be an integer >= 2, got {n_samples!r}")
     if not (math.isfinite(noise) and noise > 0):
-        raise ValueError(f"noise must be > 0, got {noise!r}")
+        raise UsageError(f"noise must be > 0, got {noise!r}")
     rng = np.random.default_rng(rng)
     ti, tr, ph = (np.asarray(a, float).ravel() for a in np.broadcast_arrays(theta_i, theta_r, phi))
     truth = mueller_elements(ti, tr, ph, names, rms_slope=rms_slope, n=n, k=k,

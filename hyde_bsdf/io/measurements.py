@@ -87,7 +87,7 @@ def _cells(name, lineno, line: str) -> list:
 def element_index(name: str) -> tuple[int, int]:
     """(row, column) of an element name such as ``"M23"``; ValueError for anything else."""
     if name not in ELEMENT_NAMES:
-        raise ValueError(f"Mueller element name must be one of {', '.join(ELEMENT_NAMES)} "
+        raise UsageError(f"Mueller element name must be one of {', '.join(ELEMENT_NAMES)} "
                          f"(normalized by M00), got {name!r}")
     return int(name[1]), int(name[2])
 
