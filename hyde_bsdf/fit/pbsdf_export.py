@@ -55,15 +55,14 @@ import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
+from hyde_bsdf.fit.pbsdf_samples import check_model_terms, paper_angles, paper_to_table, table_to_paper
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.io.memory import check_memory, format_bytes
 from hyde_bsdf.io.output_gate import OutputLock, check_free_space
 from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, read_pbsdf,
                                      rusinkiewicz_to_directions, table_frame_x, table_nbytes)
-from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N
-from hyde_bsdf.model.shadowing import SHADOWING
 from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
 
 __all__ = ["DEFAULT_RESOLUTION", "edge_deg", "ALPHA_CANDIDATES", "ExportReport", "grids",
@@ -396,10 +395,7 @@ def _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths):
             (RMS_SLOPE_RANGE[0] <= float(rms_slope) <= RMS_SLOPE_RANGE[1]):
         raise UsageError(f"rms_slope must be a number in [{RMS_SLOPE_RANGE[0]:g}, {RMS_SLOPE_RANGE[1]:g}], "
                          f"got {rms_slope!r}")
-    if shadowing not in SHADOWING:
-        raise UsageError(f"shadowing must be one of {', '.join(SHADOWING)}, got {shadowing!r}")
-    if diffuse not in DIFFUSE:
-        raise UsageError(f"diffuse must be one of {', '.join(DIFFUSE)}, got {diffuse!r}")
+    check_model_terms(shadowing, diffuse)
     if diffuse == "reciprocal" and shadowing == "none":
         raise UsageError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
     nb, kb = band_index(wavelengths, n, k, material)

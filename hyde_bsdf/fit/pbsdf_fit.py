@@ -44,10 +44,9 @@ from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, Verdict, cluster_covariance, correlation, floor_verdict,
                                     geometry_clusters, half_angles, larger_errors)
 from hyde_bsdf.fit.mueller_fit import DEFAULT_STARTS, raise_or_warn
-from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
-from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.fit.pbsdf_samples import check_model_terms, PbsdfSamples, pbsdf_samples
+from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.parameters import NATURAL_INDEX
-from hyde_bsdf.model.shadowing import SHADOWING
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 
 __all__ = ["PbsdfFitResult", "fit_pbsdf"]
@@ -158,10 +157,7 @@ def _check(fit, rms_slope, n0, k0, shadowing, diffuse):
             raise UsageError(f"{name} must be in [0, {BOUNDS[name[0]][1]:g}], got {v!r}")
     if ("n" not in fit and n0 is None) or ("k" not in fit and k0 is None):
         raise UsageError("a parameter held fixed needs its value: --n0 for n, --k0 for k")
-    if shadowing not in SHADOWING:
-        raise UsageError(f"shadowing must be one of {', '.join(SHADOWING)}, got {shadowing!r}")
-    if diffuse not in DIFFUSE:
-        raise UsageError(f"diffuse must be one of {', '.join(DIFFUSE)}, got {diffuse!r}")
+    check_model_terms(shadowing, diffuse)
     return fit
 
 
