@@ -512,7 +512,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
 
     Raises
     ------
-    ValueError (TypeError for a value of the wrong kind) for bad input, naming the
+    UsageError (a ValueError; TypeError for a value of the wrong kind) for bad input, naming the
     parameter, and when there are fewer measured values than fitted parameters (the fit is
     then undetermined: refused, not attempted).
     """
