@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path
-from hyde_bsdf.errors import UsageError, InputFileError
+from hyde_bsdf.errors import InputFileError, UsageError
 from hyde_bsdf.io.input_gate import check_input
 
 __all__ = [
@@ -183,7 +183,7 @@ def read_stokes_exr(path) -> dict:
     missing = [n for n in need if n not in chans]
     if missing:
         raise InputFileError(f"{path} is not a Stokes EXR: channels {missing} are missing "
-                         f"(found {sorted(chans)})")
+                             f"(found {sorted(chans)})")
     out: dict = {}
     for s in STOKES_NAMES:
         out[s] = np.stack([chans[f"{s}.{c}"] for c in COLOURS], axis=-1).astype(np.float32)
