@@ -425,7 +425,7 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     if alpha_sample is not None and not (isinstance(alpha_sample, (int, float)) and ALPHA_SAMPLE.contains(alpha_sample)):
         raise UsageError(f"alpha_sample must be in {ALPHA_SAMPLE.text()}, got {alpha_sample!r}")
     path = check_output_path(path, "pBSDF file")
-    nbytes = check_table_size(path, res, len(wavelengths))
+    check_table_size(path, res, len(wavelengths))
     pd, td, th = grids(res)
     callback = as_callback(progress)
     say = (lambda text: callback(f"export: {text}")) if callback else (lambda text: None)
