@@ -242,13 +242,15 @@ class Reader:
     def _read(self, tex, one):
         key = (id(tex), one)
         data = self.raw(tex).get("data")
-        if data is not None and self.plain.get(key) == data.size:
+        # the texture itself is kept with the proof: its id cannot be reused by another texture
+        proved, size = self.plain.get(key, (None, 0))
+        if data is not None and proved is tex and size == data.size:
             return data
         values = values_of(tex, one)
         if (values is not None and data is not None and not mi.is_spectral and values.size == data.size
                 and np.isfinite(data).all() and not np.isin(data, (0.0, 1.0)).all()
                 and np.allclose(values, data, rtol=1e-6, atol=0.0)):
-            self.plain[key] = data.size
+            self.plain[key] = (tex, data.size)
         return values
 
 
