@@ -192,9 +192,11 @@ clipped at 0 (rho > 1 happens without shadowing near grazing).
 
 Sampling.  With probability p_spec the specular lobe is sampled from the
 (visible) Beckmann normals (``mi.MicrofacetDistribution``), otherwise a cosine
-hemisphere.  p_spec = clamp(rho(theta(si.wi)), 0.05, 0.95): the ratio of the
-specular albedo rho F to rho F + (1 - rho) F, the Fresnel factor F being common
-to both lobes; p_spec = 1 when ``diffuse="none"`` (then ``sample`` equals
+hemisphere.  p_spec = clamp(rho_avg, 0.05, 0.95), rho_avg = 2 int rho cos sin dtheta
+(the 1-D texture of the reciprocal term): the ratio of the specular albedo rho F to
+rho F + (1 - rho) F (F common to both lobes) averaged over the incidence angle; one
+1-D lookup in place of a second 2-D one into the DHR texture (any p_spec in (0, 1)
+that the pdf also uses is unbiased); p_spec = 1 when ``diffuse="none"`` (then ``sample`` equals
 roughconductor's).  ``pdf`` and ``eval_pdf`` return the mixture density.
 
 Components: 0 = glossy reflection (specular lobe), 1 = diffuse reflection.
