@@ -206,8 +206,10 @@ class Reader:
     * Data and values are remembered until :meth:`forget` (the plugin forgets the textures an
       update changed): eta and k are checked together, and an update of one does not read the
       other again.
-    * A bitmap whose ``eval`` returns its stored data unchanged (float data stored ``raw``, one
-      value per texel, a non-spectral variant) is read from its data once that is shown: its values
+    * A bitmap whose ``eval`` (``eval_1``) returns its stored data unchanged (float data stored
+      ``raw``, one value per texel; in spectral variants ``eval`` returns one value per texel and
+      wavelength, so only ``eval_1``, the roughness, can qualify there) is read from its data once
+      that is shown: its values
       read through ``eval`` equal its data, on data not all 0 or 1 (the only values the 8-bit /255
       and sRGB conversions leave unchanged).  From then on a check reads the data once (a read-back
       of an array :meth:`SceneParameters.update` has evaluated) and launches no kernel.
@@ -247,7 +249,7 @@ class Reader:
         if data is not None and proved is tex and size == data.size:
             return data
         values = values_of(tex, one)
-        if (values is not None and data is not None and not mi.is_spectral and values.size == data.size
+        if (values is not None and data is not None and values.size == data.size
                 and np.isfinite(data).all() and not np.isin(data, (0.0, 1.0)).all()
                 and np.allclose(values, data, rtol=1e-6, atol=0.0)):
             self.plain[key] = (tex, data.size)
