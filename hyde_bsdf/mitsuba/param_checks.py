@@ -245,15 +245,26 @@ class Reader:
         key = (id(tex), one)
         data = self.raw(tex).get("data")
         # the texture itself is kept with the proof: its id cannot be reused by another texture
-        proved, size = self.plain.get(key, (None, 0))
+        proved, size, n_values = self.plain.get(key, (None, 0, 0))
         if data is not None and proved is tex and size == data.size:
-            return data
+            return _as_values(data, 1 if one else len(_wavelength_sets()), n_values)
         values = values_of(tex, one)
-        if (values is not None and data is not None and values.size == data.size
-                and np.isfinite(data).all() and not np.isin(data, (0.0, 1.0)).all()
-                and np.allclose(values, data, rtol=1e-6, atol=0.0)):
-            self.plain[key] = (tex, data.size)
+        if (values is not None and data is not None and np.isfinite(data).all()
+                and not np.isin(data, (0.0, 1.0)).all()):
+            expected = _as_values(data, 1 if one else len(_wavelength_sets()), values.size)
+            if expected is not None and np.allclose(values, expected, rtol=1e-6, atol=0.0):
+                self.plain[key] = (tex, data.size, values.size)
         return values
+
+
+def _as_values(data, n_sets, size):
+    """A one-value-per-texel bitmap's data in the order :func:`_eval_at` reads its ``size`` values
+    ([wavelength set][texel][wavelength or channel]: the same value at every wavelength); None
+    when ``size`` does not fit that layout."""
+    per = size // (n_sets * data.size)
+    if per < 1 or n_sets * data.size * per != size:
+        return None
+    return np.broadcast_to(data.reshape(1, -1, 1), (n_sets, data.size, per)).ravel()
 
 
 def _raw_finite(name, tex, accepted="", reader=None):
