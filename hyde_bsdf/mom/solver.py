@@ -201,6 +201,7 @@ from hyde_bsdf.progress import Throttle, as_callback
 from hyde_bsdf.mom.beam import gaussian_beam, window_bias
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, NEAR_WL, FastSolverUnsuitable, block_length_wl, plan_blocks, solve_fast
+from hyde_bsdf.mom.floor import FLOOR_MARGIN, floor_reason, partition_floor
 from hyde_bsdf.mom.gather import ExecutorError, check_executor, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
 from hyde_bsdf.mom.runtime import limit_blas_threads, memory_available, restore_blas_threads, worker_init
@@ -630,6 +631,12 @@ class MoMResult:
         "factor", "solve", "far_field") and the wall time of the call ("wall").
     params : dict of the run's parameters (taper width w, dx, N per partition, index, ...).
     warnings : list of str, the MoM failure reasons found for this run.
+    floor_s, floor_p : ndarray [n_ti, n_tr], the estimated floor of sigma_s / sigma_p set by the truncated
+        partition, the windowed current's surface waves (s) and the solver's tolerance
+        (:func:`hyde_bsdf.mom.floor.partition_floor`; None where not solved).
+    valid_s, valid_p : bool ndarray [n_ti, n_tr], sigma >= FLOOR_MARGIN (20) x the floor: within about 2.5 dB
+        of what an untruncated partition gives; ``valid`` the same for the first polarisation.
+    floor_reason : str, why a sigma flagged invalid is not the surface's (for legends and summaries).
     """
 
     theta_i: np.ndarray
@@ -664,6 +671,12 @@ class MoMResult:
     mueller_std_error: dict = None
     mueller_normalised: dict = None
     mueller_normalised_std_error: dict = None
+    floor_s: np.ndarray = None
+    floor_p: np.ndarray = None
+    valid_s: np.ndarray = None
+    valid_p: np.ndarray = None
+    valid: np.ndarray = None
+    floor_reason: str = ""
 
     @property
     def theta_i_deg(self):
@@ -1225,4 +1238,20 @@ def _result(cfg, surf, results, stats, reasons, wall):
         energy_s=get("s", "energy"), energy_p=get("p", "energy"),
         mueller=stats["mueller"], mueller_std_error=stats["mueller_se"],
         mueller_normalised=stats["mueller_n"], mueller_normalised_std_error=stats["mueller_n_se"],
+        **_floors(cfg, per),
     )
+
+
+def _floors(cfg, per):
+    """Stage 6: the floor of each polarisation's sigma and where sigma stands clear of it (MoMResult fields)."""
+    out = {}
+    for pol in ("s", "p"):
+        if pol not in per:
+            out[f"floor_{pol}"] = out[f"valid_{pol}"] = None
+            continue
+        fl = partition_floor(cfg["theta_i"], cfg["theta_r"], cfg["w"], cfg["part_len"], cfg["beam"], pol,
+                             cfg["tol"] or FAST_TOL)
+        out[f"floor_{pol}"], out[f"valid_{pol}"] = fl, per[pol]["sigma"] >= FLOOR_MARGIN * fl
+    out["valid"] = out[f"valid_{cfg['pols'][0]}"]
+    out["floor_reason"] = floor_reason(cfg["w"], cfg["part_len"])
+    return out
