@@ -82,5 +82,7 @@ def floor_reason(w, partition_length):
     """One line: why a sigma below the floor is not the surface's."""
     return (f"below {FLOOR_MARGIN:g} x the estimated floor of the truncated partition (L = "
             f"{partition_length / w:.3g} w: the field at its ends is exp(-(L/2w)^2) = "
-            f"{math.exp(-(partition_length / (2.0 * w)) ** 2):.2g} of the centre's, and a windowed current in s adds "
-            "the surface waves its lit ends launch); use incidence='beam' and partitions of 6 w or more")
+            f"{math.exp(-(partition_length / (2.0 * w)) ** 2):.2g} of the centre's; a windowed current in s adds the "
+            "surface waves its lit ends launch, a beam the part of its spectrum clipped at grazing), or within "
+            f"{GRAZING_ZONE:g} / (k w cos theta_i) rad of grazing (the partition's shadow boundary); "
+            "use incidence='beam' and partitions of 6 w or more")
