@@ -16,7 +16,8 @@ from __future__ import annotations
 import sys
 import time
 
-__all__ = ["PROGRESS_SECONDS", "as_callback", "check_progress", "stderr_lines", "set_quiet", "Throttle"]
+__all__ = ["PROGRESS_SECONDS", "as_callback", "check_progress", "stderr_lines", "set_quiet", "Throttle",
+           "EvaluationCounter"]
 
 #: seconds between two progress lines of one task
 PROGRESS_SECONDS = 3.0
@@ -86,3 +87,24 @@ class Throttle:
         if force or now - self.last >= self.seconds:
             self.last = now
             self.callback(message() if callable(message) else message)
+
+
+class EvaluationCounter:
+    """A fit's progress: counts its model evaluations (:meth:`tick`, with the residual vector) and
+    reports the stage, the count and chi^2 through ``callback`` at most every ``seconds``;
+    :meth:`done` says the total when the fit took that long.  ``unit`` names what is counted."""
+
+    def __init__(self, callback, seconds: float = PROGRESS_SECONDS, unit: str = "evaluations"):
+        self.throttle = Throttle(callback, seconds)
+        self.stage = ""
+        self.calls = 0
+        self.unit = unit
+
+    def tick(self, r) -> None:
+        self.calls += 1
+        self.throttle(lambda: f"fit: {self.stage}: {self.calls} {self.unit}, "
+                              f"chi^2 = {float(r @ r):.6g}, {self.throttle.elapsed:.0f} s")
+
+    def done(self) -> None:
+        if self.throttle.elapsed >= self.throttle.seconds:
+            self.throttle(f"fit: done, {self.calls} {self.unit} in {self.throttle.elapsed:.0f} s", force=True)

@@ -168,3 +168,21 @@ def test_exceptions_become_messages_in_one_place():
                        or isinstance(n, ast.Call) and ast.unparse(n.func) == "print" for n in ast.walk(body)):
                     bad.append(f"{path.relative_to(root)}:{node.lineno}: turns a UsageError into an exit code")
     assert not bad, bad
+
+
+def test_library_usage_errors_reach_the_command_line_as_one_prefixed_line(tmp_path, capsys):
+    """The library raises UsageError for a user's mistake (here: 1 measured value for 3 fitted
+    parameters); app/ converts it in one place: exit status 2, one line, no traceback, and the
+    fit's data errors still name the data file."""
+    from hyde_bsdf.errors import UsageError
+    from hyde_bsdf.fit.mueller_fit import fit_mueller
+
+    a = np.radians([45.0])
+    with pytest.raises(UsageError, match="too few data"):
+        fit_mueller(a, a, np.array([np.pi]), {"M01": np.array([-0.1])}, fit="n,k,rms_slope", n0=1.5, k0=3.0)
+    csv = tmp_path / "one.csv"
+    csv.write_text("theta_i_deg,theta_r_deg,phi_deg,M01\n45,45,180,-0.1\n", encoding="utf-8")
+    assert main(["fit", str(csv), "--fit", "n,k,rms_slope", "--n0", "1.5", "--k0", "3"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0]
+    assert f"data file {str(csv)!r}: too few data to fit n, k, rms_slope" in err[0]

@@ -49,7 +49,8 @@ The honesty cases (issue 22, :func:`honesty_cases`): one dielectric sample (alph
 known) fitted four ways -- ``converged`` (to the end), ``stopped early`` (an eighth of the iterations,
 no extra Gauss-Newton steps: the fit of before the convergence test), ``stopped early, extra polish``
 (the same with the default up to 3 extra steps while some texel is still moving) and ``bilinear``
-(its bitmaps filtering bilinearly, Mitsuba's default) -- each with the pull std over
+(the fit's scenes' bitmaps filtering bilinearly, Mitsuba's default, which invert_maps switches to
+nearest with a warning; the sample itself changes from texel to texel) -- each with the pull std over
 the texels with a valid standard error, the pull std the unchecked standard errors would give, and
 the warnings.  Every case must have a pull std of 0.8-1.25 or a warning naming the cause
 (:class:`~hyde_bsdf.inverse.NotConvergedWarning`, :class:`~hyde_bsdf.inverse.BilinearFilterWarning`).
@@ -260,7 +261,7 @@ def validate(outdir="out/validation", quick=False):
 #: the honesty cases (issue 22): one dielectric sample, scale known, fitted three ways -- to the end
 #: (``converged``), stopped at a third of the iterations (``stopped early``: the polish cannot make up
 #: the distance, and without the convergence test its standard errors were 5-8x too small), and with
-#: the maps' bitmaps filtering bilinearly (Mitsuba's default; the per-texel errors assume nearest)
+#: the fit scenes' bitmaps filtering bilinearly (Mitsuba's default; invert_maps switches them to nearest)
 #: (case, fraction of the iterations, bitmap filter, extra Gauss-Newton steps allowed for convergence):
 #: ``stopped early`` without extra steps is the fit of before the convergence test (its polish steps
 #: alone cannot make up the distance); ``stopped early, extra polish`` is the default
@@ -290,8 +291,11 @@ def honesty_cases(out, quick: bool) -> tuple:
     rows, checks, results, obs = [], [], {}, {}
     for case, fraction, filter_type, extra in HONESTY_CASES:
         if filter_type not in obs:
+            # the sample's material changes from texel to texel (a nearest reference); the fit's scenes
+            # carry the case's filter (bilinear: Mitsuba's default, which invert_maps switches to nearest)
             obs[filter_type] = synthetic_observations(acq, truth, start, res=cfg["res"], spp=4, spp_ref=cfg["spp_ref"],
-                                                      noise=NOISE, seed=0, filter_type=filter_type)
+                                                      noise=NOISE, seed=0, filter_type="nearest",
+                                                      fit_filter_type=filter_type)
         iterations = (QUICK_HONESTY_ITERATIONS[case] if quick else max(2, int(round(cfg["iterations"] * fraction))))
         _log(f"[svbrdf_index] honesty case {case!r}: {iterations} iterations, {filter_type} maps")
         t0 = time.perf_counter()

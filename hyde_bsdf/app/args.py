@@ -38,14 +38,20 @@ def positive_int(text: str) -> int:
 
 
 @contextlib.contextmanager
-def user_input(what: str = ""):
+def user_input(what: str = "", library: bool = False):
     """Inside a command, around a library call whose arguments and data come straight from the
     user: the library's own checks raise ``ValueError`` / ``TypeError`` (a Python caller's
     mistake), which here is the user's, so they leave as :class:`~hyde_bsdf.errors.UsageError`
-    (``what`` prefixes the message).  The package's own exceptions pass unchanged, and
-    :func:`hyde_bsdf.app.cli.main` alone turns them into a line and an exit status."""
+    (``what`` prefixes the message; with ``library`` also the UsageErrors of the library's own
+    argument checks, for a block that calls only the library).  The package's other exceptions
+    pass unchanged, and :func:`hyde_bsdf.app.cli.main` alone turns them into a line and an exit
+    status."""
     try:
         yield
+    except UsageError as exc:
+        if what and library:       # the library's checks raise UsageError: prefixed like ValueError
+            raise type(exc)(f"{what}: {one_line(exc)}") from exc
+        raise
     except HydeError:
         raise
     except (ValueError, TypeError) as exc:

@@ -33,9 +33,9 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.app.args import Parser, positive_int, quiet_option
-from hyde_bsdf.app.pictures import polarization_png_paths, save_polarization_pngs, save_rgb_png
+from hyde_bsdf.app.pictures import polarization_png_paths, save_png, save_polarization_pngs, save_rgb_png
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.io.atomic import atomic_group, atomic_path, check_output_dir, check_output_path
+from hyde_bsdf.io.atomic import atomic_group, check_output_dir, check_output_path
 from hyde_bsdf.io.input_gate import check_input
 from hyde_bsdf.io.output_gate import OutputLock
 from hyde_bsdf.io.stokes_exr import write_stokes_exr
@@ -160,11 +160,7 @@ def _overview(stokes: dict, path: Path, title: str) -> Path:
         ax.set_yticks([])
     fig.suptitle(title)
     fig.tight_layout()
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png")
-    finally:
-        plt.close(fig)
+    save_png(fig, path)
     return path
 
 

@@ -204,7 +204,7 @@ def _csv_run(args) -> int:
     if args.output:
         check_plot_path(args.output)
     meas = read_measurements(args.data, progress=_progress(args))
-    with user_input(f"data file {args.data!r}"):
+    with user_input(f"data file {args.data!r}", library=True):
         if auto:
             sel = _quiet_fit(select_model, meas.theta_i, meas.theta_r, meas.phi, meas.values,
                              sigma=meas.uncertainty(), fit=args.fit, rms_slope=args.rms_slope, n0=args.n0,

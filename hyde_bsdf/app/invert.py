@@ -546,9 +546,23 @@ def _map_range(res, n) -> str:
 
 
 def _write_map_outputs(res, paths, args):
-    import mitsuba as mi
+    _write_history(res, paths["history"])
+    for n in res.fitted:
+        v = np.asarray(res.final[n], np.float32)
+        if v.ndim == 2 and res.seen is not None:      # an unseen texel keeps no start value: NaN
+            v = np.where(res.seen, v, np.nan).astype(np.float32)
+        seen = (np.asarray(res.seen, np.float32) if res.seen is not None and v.ndim == 2
+                else np.ones(np.shape(v) or (1, 1), np.float32))
+        _save_map(paths, n + "_seen", seen)
+        _save_map(paths, n, v if v.ndim == 2 else np.full((1, 1), v, np.float32), npy=v)
+        if n + "_stderr.npy" in paths and n in res.stderr:
+            _save_map(paths, n + "_stderr", np.asarray(res.stderr[n], np.float32))
+    _plot_maps(res, paths["png"], args.loss)
 
-    with atomic_open(paths["history"], "w", newline="") as fh:
+
+def _write_history(res, path):
+    """The optimizer's history, one CSV row per iteration (loss terms, time, map errors)."""
+    with atomic_open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         cols = ["iteration", "loss", "data_loss", "regularizer", "seconds"]
         extra = [k for k in res.history[0] if k.endswith("_error")]
@@ -556,29 +570,21 @@ def _write_map_outputs(res, paths, args):
         for h in res.history:
             w.writerow([h["iteration"]] + [f"{h[c]:.6e}" for c in cols[1:4]] + [f"{h['seconds']:.3f}"]
                        + [f"{h[c]:.5f}" for c in extra])
-    for n in res.fitted:
-        v = np.asarray(res.final[n], np.float32)
-        if v.ndim == 2 and res.seen is not None:      # an unseen texel keeps no start value: NaN
-            v = np.where(res.seen, v, np.nan).astype(np.float32)
-        seen = (np.asarray(res.seen, np.float32) if res.seen is not None and v.ndim == 2
-                else np.ones(np.shape(v) or (1, 1), np.float32))
-        with atomic_path(paths[n + "_seen.npy"]) as tmp:
-            with open(tmp, "wb") as fh:
-                np.save(fh, seen)
-        with atomic_path(paths[n + "_seen.exr"]) as tmp:
-            mi.Bitmap(seen[..., None]).write(str(tmp))
-        with atomic_path(paths[n + ".npy"]) as tmp:
-            with open(tmp, "wb") as fh:
-                np.save(fh, v)
-        with atomic_path(paths[n + ".exr"]) as tmp:
-            mi.Bitmap(v[..., None] if v.ndim == 2 else np.full((1, 1, 1), v, np.float32)).write(str(tmp))
-        if n + "_stderr.npy" in paths and n in res.stderr:
-            se = np.asarray(res.stderr[n], np.float32)
-            with atomic_path(paths[n + "_stderr.npy"]) as tmp:
-                with open(tmp, "wb") as fh:
-                    np.save(fh, se)
-            with atomic_path(paths[n + "_stderr.exr"]) as tmp:
-                mi.Bitmap(se[..., None]).write(str(tmp))
+
+
+def _save_map(paths, key, image, npy=None):
+    """One map as ``KEY.npy`` (``npy`` if given, else ``image``) and a one-channel ``KEY.exr``."""
+    import mitsuba as mi
+
+    with atomic_path(paths[key + ".npy"]) as tmp:
+        with open(tmp, "wb") as fh:
+            np.save(fh, image if npy is None else npy)
+    with atomic_path(paths[key + ".exr"]) as tmp:
+        mi.Bitmap(image[..., None]).write(str(tmp))
+
+
+def _plot_maps(res, path, loss):
+    """The recovered maps (and their error against the truth, where known) and the loss curve."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -603,7 +609,7 @@ def _write_map_outputs(res, paths, args):
             c += 1
     axes[c].semilogy([h["iteration"] for h in res.history], [h["loss"] for h in res.history])
     axes[c].set_xlabel("iteration")
-    axes[c].set_title(f"loss ({args.loss})")
-    with atomic_path(paths["png"]) as tmp:
+    axes[c].set_title(f"loss ({loss})")
+    with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=100, format="png")
     plt.close(fig)

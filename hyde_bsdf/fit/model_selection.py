@@ -127,7 +127,7 @@ def _choose(rows):
         bigger = [rows[j].label for j in ok if rows[j].size > rows[i].size]
         return i, (f"the smallest adequate model (size {rows[i].size}" +
                    (f"; also adequate but larger: {', '.join(bigger)}" if bigger else "") +
-                   f"; among equal sizes the lowest BIC)")
+                   "; among equal sizes the lowest BIC)")
     live = [i for i, r in enumerate(rows) if r.stage != "undefined"]
     i = min(live, key=lambda j: rows[j].bic)
     return i, "NO model is adequate; this one has the lowest BIC, and its errors are lower bounds"

@@ -70,9 +70,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.errors import RejectedResult
+from hyde_bsdf.errors import RejectedResult, UsageError
 from hyde_bsdf.model.checks import real_array
-from hyde_bsdf.progress import Throttle, as_callback, check_progress
+from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
@@ -96,26 +96,6 @@ DEFAULT_STARTS = {"n": (0.3, 1.5), "k": (0.5, 3.0, 9.0)}
 #: above this many geometries the multi-start search runs on a random subset of this size
 #: (fixed seed) and only its best point is refined on all the data (see fit_mueller)
 SEARCH_ROWS = 4000
-#: seconds between progress reports
-PROGRESS_SECONDS = 3.0
-
-
-class _Progress:
-    """Counts model evaluations; reports them through ``callback`` at most every PROGRESS_SECONDS."""
-
-    def __init__(self, callback):
-        self.throttle = Throttle(callback, PROGRESS_SECONDS)
-        self.stage = ""
-        self.calls = 0
-
-    def tick(self, r):
-        self.calls += 1
-        self.throttle(lambda: f"fit: {self.stage}: {self.calls} model evaluations, "
-                              f"chi^2 = {float(np.einsum('i,i->', r, r)):.6g}, {self.throttle.elapsed:.0f} s")
-
-    def done(self):
-        if self.throttle.elapsed >= PROGRESS_SECONDS:
-            self.throttle(f"fit: done, {self.calls} model evaluations in {self.throttle.elapsed:.0f} s", force=True)
 
 
 class IllPosedFitWarning(UserWarning):
@@ -233,7 +213,7 @@ def _diffuse_mode(diffuse):
         return "none"
     if diffuse in ("paper", "reciprocal", "none"):
         return diffuse
-    raise ValueError(f"diffuse must be True, False, 'paper', 'reciprocal' or 'none', got {diffuse!r}")
+    raise UsageError(f"diffuse must be True, False, 'paper', 'reciprocal' or 'none', got {diffuse!r}")
 
 
 def mueller_elements(theta_i, theta_r, phi, names, *, rms_slope, n, k,
@@ -256,7 +236,7 @@ def _elements(theta_i, theta_r, phi, names, *, rms_slope, n, k, shadowing, diffu
     F00 = F[..., 0, 0]
     if np.any(F00 <= 0.0):
         if strict:
-            raise ValueError("theta_i and theta_r must be below 90 deg (pi/2): F_00 = 0 there and "
+            raise UsageError("theta_i and theta_r must be below 90 deg (pi/2): F_00 = 0 there and "
                              "normalized Mueller elements are undefined")
         F00 = np.where(F00 > 0.0, F00, np.inf)
     return {name: F[(...,) + element_index(name)] / F00 for name in names}
@@ -389,7 +369,7 @@ class FitResult:
 
 def _as_arrays(theta_i, theta_r, phi, measured, sigma):
     if not isinstance(measured, dict) or not measured:
-        raise ValueError(f"measured must be a non-empty dict of element name -> array "
+        raise UsageError(f"measured must be a non-empty dict of element name -> array "
                          f"(names {', '.join(ELEMENT_NAMES)}), got {measured!r}")
     if sigma is not None and not isinstance(sigma, dict):
         raise TypeError(f"sigma must be None or a dict of element name -> standard deviations, "
@@ -399,12 +379,12 @@ def _as_arrays(theta_i, theta_r, phi, measured, sigma):
                         ("phi", phi, None)):
         a = real_array(name, a, "radians")
         if hi is not None and np.any((a < 0) | (a >= hi)):
-            raise ValueError(f"{name} must be in [0, pi/2) radians (the detector and source above the surface)")
+            raise UsageError(f"{name} must be in [0, pi/2) radians (the detector and source above the surface)")
         angles.append(a)
     try:
         shape = np.broadcast_shapes(*(a.shape for a in angles))
     except ValueError:
-        raise ValueError(f"theta_i, theta_r, phi must broadcast to one shape, got "
+        raise UsageError(f"theta_i, theta_r, phi must broadcast to one shape, got "
                          f"{', '.join(str(a.shape) for a in angles)}") from None
     values, sig = {}, {}
     for name, v in measured.items():
@@ -413,33 +393,33 @@ def _as_arrays(theta_i, theta_r, phi, measured, sigma):
         try:
             shape = np.broadcast_shapes(shape, v.shape)
         except ValueError:
-            raise ValueError(f"measured[{name!r}] has shape {v.shape}, which does not broadcast with "
+            raise UsageError(f"measured[{name!r}] has shape {v.shape}, which does not broadcast with "
                              f"the angles' shape {shape}") from None
         if np.any(np.abs(v) > ELEMENT_LIMIT):
             worst = float(v.flat[np.argmax(np.abs(v))])
-            raise ValueError(f"measured[{name!r}] must be normalized by M00 (|M_jk/M_00| <= {ELEMENT_LIMIT:g}; "
+            raise UsageError(f"measured[{name!r}] must be normalized by M00 (|M_jk/M_00| <= {ELEMENT_LIMIT:g}; "
                              f"<= 1 for a physical Mueller matrix), got {worst:g}: divide the elements by M00")
         values[name] = v
         if sigma is not None:
             if name not in sigma:
-                raise ValueError(f"sigma has no entry for measured element {name!r}")
+                raise UsageError(f"sigma has no entry for measured element {name!r}")
             s = real_array(f"sigma[{name!r}]", sigma[name], "standard deviations")
             if np.any(s <= 0):
-                raise ValueError(f"sigma[{name!r}] must be finite and > 0")
+                raise UsageError(f"sigma[{name!r}] must be finite and > 0")
             if np.any((s < SIGMA_RANGE[0]) | (s > SIGMA_RANGE[1])):
-                raise ValueError(f"sigma[{name!r}] must be in [{SIGMA_RANGE[0]:g}, {SIGMA_RANGE[1]:g}] "
+                raise UsageError(f"sigma[{name!r}] must be in [{SIGMA_RANGE[0]:g}, {SIGMA_RANGE[1]:g}] "
                                  f"(standard deviations of normalized elements), got values from "
                                  f"{s.min():g} to {s.max():g}")
             try:
                 np.broadcast_shapes(shape, s.shape)
             except ValueError:
-                raise ValueError(f"sigma[{name!r}] has shape {s.shape}, which does not broadcast with "
+                raise UsageError(f"sigma[{name!r}] has shape {s.shape}, which does not broadcast with "
                                  f"the data's shape {shape}") from None
             sig[name] = s
     if sigma is not None:
         extra = set(sigma) - set(measured)
         if extra:
-            raise ValueError(f"sigma has entries {sorted(extra)} with no measured values")
+            raise UsageError(f"sigma has entries {sorted(extra)} with no measured values")
     ti, tr, ph = (np.broadcast_to(a, shape).ravel() for a in angles)
     y = {n: np.broadcast_to(v, shape).ravel() for n, v in values.items()}
     w = {n: np.broadcast_to(sig[n], shape).ravel() if sigma is not None else np.ones(ti.size)
@@ -453,7 +433,7 @@ def _check_fit_names(fit):
     fit = tuple(fit)
     bad = [p for p in fit if p not in PARAMETERS]
     if bad or not fit or len(set(fit)) != len(fit):
-        raise ValueError(f"fit must be a non-empty subset of {PARAMETERS} without repeats, got {fit!r}")
+        raise UsageError(f"fit must be a non-empty subset of {PARAMETERS} without repeats, got {fit!r}")
     return tuple(p for p in PARAMETERS if p in fit)   # canonical order
 
 
@@ -462,7 +442,7 @@ def _start_value(name, value, fitted):
     if value is None:
         if name in fitted:
             return None
-        raise ValueError(f"{label} must be given when {name} is not fitted (it is then held at that value)")
+        raise UsageError(f"{label} must be given when {name} is not fitted (it is then held at that value)")
     if isinstance(value, (bool, np.bool_, str, bytes, complex, np.complexfloating)):
         raise TypeError(f"{label} must be a real number, got {value!r}")
     try:
@@ -471,7 +451,7 @@ def _start_value(name, value, fitted):
         raise TypeError(f"{label} must be a real number, got {value!r}") from None
     lo, hi = BOUNDS[name]
     if not math.isfinite(v) or not lo <= v <= hi:
-        raise ValueError(f"{label} must be in [{lo:g}, {hi:g}], got {value!r}")
+        raise UsageError(f"{label} must be in [{lo:g}, {hi:g}], got {value!r}")
     return v
 
 
@@ -482,15 +462,15 @@ def check_options(fit=("n", "k"), rms_slope=0.3, n0=None, k0=None, shadowing="vg
     fitted = _check_fit_names(fit)
     mode = _diffuse_mode(diffuse)
     if isinstance(corr_limit, bool) or not (isinstance(corr_limit, (int, float)) and 0 < corr_limit <= 1):
-        raise ValueError(f"corr_limit must be in (0, 1], got {corr_limit!r}")
+        raise UsageError(f"corr_limit must be in (0, 1], got {corr_limit!r}")
     given = {"n": _start_value("n", n0, fitted), "k": _start_value("k", k0, fitted),
              "rms_slope": _start_value("rms_slope", rms_slope, fitted)}
     if given["rms_slope"] is None:
-        raise ValueError("rms_slope must be given (start value when fitted)")
+        raise UsageError("rms_slope must be given (start value when fitted)")
     if not isinstance(shadowing, str) or shadowing not in ("vgroove", "smith", "none"):
-        raise ValueError(f"shadowing must be 'vgroove', 'smith' or 'none', got {shadowing!r}")
+        raise UsageError(f"shadowing must be 'vgroove', 'smith' or 'none', got {shadowing!r}")
     if mode == "reciprocal" and shadowing == "none":
-        raise ValueError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
+        raise UsageError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
     return fitted, mode, given
 
 
@@ -532,104 +512,192 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
 
     Raises
     ------
-    ValueError (TypeError for a value of the wrong kind) for bad input, naming the
+    UsageError (a ValueError; TypeError for a value of the wrong kind) for bad input, naming the
     parameter, and when there are fewer measured values than fitted parameters (the fit is
     then undetermined: refused, not attempted).
     """
-    from scipy.optimize import least_squares
     from scipy.stats import chi2 as chi2_dist
 
     fitted, mode, given = check_options(fit, rms_slope, n0, k0, shadowing, diffuse, corr_limit)
     check_progress(progress)
-    ti, tr, ph, y, w, _ = _as_arrays(theta_i, theta_r, phi, measured, sigma)
-    rows_in = ti.size
-    ti, tr, ph, y, w_merged, repeats = merge_repeated_geometries(ti, tr, ph, y, w if sigma is not None else None)
-    if repeats is not None:
-        w = w_merged if sigma is not None else {n_: np.ones(ti.size) for n_ in y}
-    names = tuple(y)
-    ydat = np.concatenate([y[n] for n in names])
-    wdat = np.concatenate([w[n] for n in names])
-    m, p = ydat.size, len(fitted)
-    if m < p:
-        merged = (f" ({rows_in} rows, but only {ti.size} distinct geometries: rows that repeat a geometry "
-                  "count once)") if repeats is not None else ""
-        raise ValueError(f"too few data to fit {', '.join(fitted)}: {m} measured value(s){merged} for {p} "
-                         f"parameters -- measure more angles or elements, or fix parameters "
-                         f"(fit=...) at known values")
-    rows = ti.size
-    large = rows > SEARCH_ROWS
-    report = _Progress(as_callback(large if progress is None else progress))
+    data = _FitData.build(theta_i, theta_r, phi, measured, sigma, fitted)
+    report = EvaluationCounter(as_callback(data.large if progress is None else progress),
+                               PROGRESS_SECONDS, unit="model evaluations")
+    problem = _Objective(data, fitted, given, shadowing, mode, report)
+    res, nfev = problem.minimize()
+    report.done()
+    r = res.fun
+    chi2 = float(r @ r)
+    m, p = data.ydat.size, len(fitted)
+    dof = m - p
+    J = np.asarray(res.jac, dtype=float)
+    cov, corr, cond, diag = _linear_covariance(J, fitted, data.sigma_given, chi2, dof)
+    data_diag = [] if data.repeats is None else [_repeats_note(data.repeats)]
+    scale = 1.0
+    if data.sigma_given and dof > 0 and math.isfinite(cond) and cond <= 1e10:
+        scale, cov = _birge_scaling(chi2, dof, cov, data_diag)
+    data_diag += _impossible_notes(data, chi2, dof)
+    classic = np.sqrt(np.diag(cov))
+    verdict, cov = _adequacy(r, J, cov, data.ti, data.tr, data.ph, len(data.names), chi2, dof,
+                             data.sigma_given)
+    verdict.figures["stderr_classic"] = dict(zip(fitted, classic.tolist()))
+    if verdict.errors == "robust" or (not verdict.adequate and np.all(np.isfinite(cov))):
+        corr = correlation(cov)
+    stderr = {q: float(math.sqrt(cov[i, i])) if math.isfinite(cov[i, i]) else float("inf")
+              for i, q in enumerate(fitted)}
+    vals = problem.unpack(res.x)
+    diag += _parameter_notes(vals, stderr, corr, fitted, corr_limit, m, dof)
+    if not res.success:
+        diag.append(f"the optimizer did not converge: {res.message}")
+    result = FitResult(
+        params=vals, fitted=fitted, stderr=stderr, covariance=cov, correlation=corr,
+        chi2=chi2, dof=dof, reduced_chi2=chi2 / dof if dof > 0 else float("nan"),
+        p_value=float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan"),
+        residuals=data.split(r), success=bool(res.success), message=str(res.message), nfev=int(nfev),
+        n_data=m, sigma_given=data.sigma_given, shadowing=shadowing, diffuse=mode,
+        warnings=diag, condition_number=cond, rows=data.rows_in, repeats=data.repeats, stderr_scale=scale,
+        data_warnings=data_diag, verdict=verdict)
+    for text in data_diag:
+        warnings.warn(text, FitDataWarning, stacklevel=2)
+    raise_or_warn(verdict, diag, strict, stacklevel=3)
+    return result
 
-    def unpack(x):
-        vals = dict(given)
-        vals.update(zip(fitted, (float(v) for v in x)))
+
+@dataclass
+class _FitData:
+    """The measured values as fitted: one row per distinct geometry (repeats merged), the
+    elements stacked in ``names`` order into ``ydat`` with weights ``wdat``."""
+
+    ti: np.ndarray
+    tr: np.ndarray
+    ph: np.ndarray
+    y: dict
+    w: dict
+    names: tuple
+    ydat: np.ndarray
+    wdat: np.ndarray
+    rows_in: int
+    repeats: dict | None
+    sigma_given: bool
+
+    @classmethod
+    def build(cls, theta_i, theta_r, phi, measured, sigma, fitted):
+        """Checked, flattened, merged data; refuses fewer values than fitted parameters."""
+        ti, tr, ph, y, w, _ = _as_arrays(theta_i, theta_r, phi, measured, sigma)
+        rows_in = ti.size
+        ti, tr, ph, y, w_merged, repeats = merge_repeated_geometries(ti, tr, ph, y,
+                                                                     w if sigma is not None else None)
+        if repeats is not None:
+            w = w_merged if sigma is not None else {n_: np.ones(ti.size) for n_ in y}
+        names = tuple(y)
+        ydat = np.concatenate([y[n] for n in names])
+        wdat = np.concatenate([w[n] for n in names])
+        m, p = ydat.size, len(fitted)
+        if m < p:
+            merged = (f" ({rows_in} rows, but only {ti.size} distinct geometries: rows that repeat a geometry "
+                      "count once)") if repeats is not None else ""
+            raise UsageError(f"too few data to fit {', '.join(fitted)}: {m} measured value(s){merged} for {p} "
+                             f"parameters -- measure more angles or elements, or fix parameters "
+                             f"(fit=...) at known values")
+        return cls(ti, tr, ph, y, w, names, ydat, wdat, rows_in, repeats, sigma is not None)
+
+    @property
+    def rows(self) -> int:
+        return self.ti.size
+
+    @property
+    def large(self) -> bool:
+        return self.rows > SEARCH_ROWS
+
+    def split(self, r) -> dict:
+        """The stacked residual vector back into one array per element."""
+        residuals, off = {}, 0
+        for n_ in self.names:
+            size = self.y[n_].size
+            residuals[n_] = r[off:off + size].copy()
+            off += size
+        return residuals
+
+
+class _Objective:
+    """The weighted residuals of the fitted parameters and their bounded minimization."""
+
+    def __init__(self, data, fitted, given, shadowing, mode, report):
+        self.data, self.fitted, self.given = data, fitted, given
+        self.shadowing, self.mode, self.report = shadowing, mode, report
+        self.lo = np.array([BOUNDS[q][0] for q in fitted])
+        self.hi = np.array([BOUNDS[q][1] for q in fitted])
+
+    def unpack(self, x) -> dict:
+        vals = dict(self.given)
+        vals.update(zip(self.fitted, (float(v) for v in x)))
         # eta = 0 exactly is not a material (the evaluator refuses |eta| < 1e-6)
         if math.hypot(vals["n"], vals["k"]) < 1e-6:
             vals["n"] = 1e-6
         return vals
 
-    def make_residual(sel):
+    def residual(self, sel):
         """Weighted residuals on the geometries ``sel`` (None: all)."""
-        a, b, c = (ti, tr, ph) if sel is None else (ti[sel], tr[sel], ph[sel])
+        d = self.data
+        a, b, c = (d.ti, d.tr, d.ph) if sel is None else (d.ti[sel], d.tr[sel], d.ph[sel])
         if sel is None:
-            yd, wd = ydat, wdat
+            yd, wd = d.ydat, d.wdat
         else:
-            yd = np.concatenate([y[n][sel] for n in names])
-            wd = np.concatenate([w[n][sel] for n in names])
+            yd = np.concatenate([d.y[n][sel] for n in d.names])
+            wd = np.concatenate([d.w[n][sel] for n in d.names])
 
         def residual(x):
-            model = _elements(a, b, c, names, **unpack(x), shadowing=shadowing, diffuse=mode, strict=False)
-            r = (np.concatenate([model[n] for n in names]) - yd) / wd
-            report.tick(r)
+            model = _elements(a, b, c, d.names, **self.unpack(x), shadowing=self.shadowing,
+                              diffuse=self.mode, strict=False)
+            r = (np.concatenate([model[n] for n in d.names]) - yd) / wd
+            self.report.tick(r)
             return r
         return residual
 
-    lo = np.array([BOUNDS[q][0] for q in fitted])
-    hi = np.array([BOUNDS[q][1] for q in fitted])
-    # every combination of start values (several only for fitted n/k given no start)
-    grids = [DEFAULT_STARTS[q] if given[q] is None else (given[q],) for q in fitted]
-    starts = np.array(np.meshgrid(*grids, indexing="ij")).reshape(p, -1).T
-    nfev = 0
+    def starts(self) -> np.ndarray:
+        """Every combination of start values (several only for fitted n/k given no start)."""
+        grids = [DEFAULT_STARTS[q] if self.given[q] is None else (self.given[q],) for q in self.fitted]
+        return np.array(np.meshgrid(*grids, indexing="ij")).reshape(len(self.fitted), -1).T
 
-    def solve(fun, x0, jac, max_nfev, tol=1e-12):
+    def solve(self, fun, x0, jac, max_nfev, tol=1e-12):
+        from scipy.optimize import least_squares
+        lo, hi = self.lo, self.hi
         x0 = np.clip(x0, lo + 1e-9 * np.maximum(1, np.abs(lo)), hi)   # strictly inside for TRF
         return least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale="jac",
                              xtol=tol, ftol=tol, gtol=tol, max_nfev=max_nfev)
 
-    if large:
-        # search on a fixed random subset, then refine the best point on everything
-        sel = np.sort(np.random.default_rng(0).choice(rows, SEARCH_ROWS, replace=False))
-        sub = make_residual(sel)
-        report.stage = f"searching {len(starts)} start point(s) on {SEARCH_ROWS} of {rows} geometries"
-        best = None
+    def best_start(self, fun, starts):
+        """The lowest-cost solution from every start point, and the evaluations spent."""
+        best, nfev = None, 0
         for x0 in starts:
-            res = solve(sub, x0, "3-point", 100 * p)
+            res = self.solve(fun, x0, "3-point", 100 * len(self.fitted))
             nfev += res.nfev
             if best is None or res.cost < best.cost:
                 best = res
-        report.stage = f"refining on all {rows} geometries"
+        return best, nfev
+
+    def minimize(self):
+        """The multi-start fit; with many geometries the search runs on a fixed random subset
+        and its best point is refined on everything.  Returns (result, evaluations)."""
+        rows, starts = self.data.rows, self.starts()
+        if not self.data.large:
+            self.report.stage = f"fitting {rows} geometries"
+            return self.best_start(self.residual(None), starts)
+        sel = np.sort(np.random.default_rng(0).choice(rows, SEARCH_ROWS, replace=False))
+        self.report.stage = f"searching {len(starts)} start point(s) on {SEARCH_ROWS} of {rows} geometries"
+        best, nfev = self.best_start(self.residual(sel), starts)
+        self.report.stage = f"refining on all {rows} geometries"
         # tolerance 1e-9: steps far below the standard errors of 10^4+ geometries (each
         # full-data step costs 4 evaluations of the whole set; 1e-12 only adds steps of ~0)
-        res = solve(make_residual(None), best.x, "2-point", 30 * p, tol=1e-9)
-        nfev += res.nfev
-    else:
-        residual = make_residual(None)
-        report.stage = f"fitting {rows} geometries"
-        best = None
-        for x0 in starts:
-            res = solve(residual, x0, "3-point", 100 * p)
-            nfev += res.nfev
-            if best is None or res.cost < best.cost:
-                best = res
-        res = best
-    report.done()
-    r = res.fun
-    chi2 = float(r @ r)
-    dof = m - p
-    J = np.asarray(res.jac, dtype=float)
+        res = self.solve(self.residual(None), best.x, "2-point", 30 * len(self.fitted), tol=1e-9)
+        return res, nfev + res.nfev
 
+
+def _linear_covariance(J, fitted, sigma_given, chi2, dof):
+    """The linearized covariance (J^T J)^-1 of the weighted residuals (scaled by chi^2 / dof
+    without sigmas), its correlation, the condition number, and a note when J is singular."""
+    p = len(fitted)
     diag = []
-    # ---- linearized covariance from the Jacobian of the weighted residuals
     sv = np.linalg.svd(J, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
     if not math.isfinite(cond) or cond > 1e10:
@@ -638,59 +706,68 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
         np.fill_diagonal(corr, 1.0)
         diag.append(f"the Jacobian is singular (condition number {cond:.3g}): the data do not "
                     f"constrain {', '.join(fitted)} separately; standard errors are infinite")
-    else:
-        cov = np.linalg.inv(J.T @ J)
-        if sigma is None and dof > 0:
-            cov *= chi2 / dof      # noise level estimated from the residual scatter
-        se = np.sqrt(np.diag(cov))
-        corr = cov / np.outer(se, se)
-    # ---- what the data can say: repeats, chi^2 far from 1, impossible values
-    data_diag = []
-    if repeats is not None:
-        t_i, t_r, f_ = (math.degrees(x) for x in repeats["most"])
-        data_diag.append(
-            f"{repeats['repeated_rows']} of {repeats['rows']} rows repeat another row's geometry "
+        return cov, corr, cond, diag
+    cov = np.linalg.inv(J.T @ J)
+    if not sigma_given and dof > 0:
+        cov *= chi2 / dof      # noise level estimated from the residual scatter
+    se = np.sqrt(np.diag(cov))
+    return cov, cov / np.outer(se, se), cond, diag
+
+
+def _repeats_note(repeats) -> str:
+    """What the merge of repeated geometries did, in one line."""
+    t_i, t_r, f_ = (math.degrees(x) for x in repeats["most"])
+    return (f"{repeats['repeated_rows']} of {repeats['rows']} rows repeat another row's geometry "
             f"({repeats['geometries']} distinct; the most repeated, theta_i={t_i:.6g}, theta_r={t_r:.6g}, "
             f"phi={f_:.6g} deg, {repeats['most_count']} times); they were merged into one value per "
             "geometry (inverse-variance mean)" +
             (f", and {repeats['copy_geometries']} of the geometries hold only identical copies, which count "
              "once: the standard errors do not shrink with copied rows" if repeats['copy_geometries'] else
              ", its sigma that of the mean of the repeats"))
-    scale = 1.0
-    if sigma is not None and dof > 0 and math.isfinite(cond) and cond <= 1e10:
-        red = chi2 / dof
-        if chi2_dist.sf(chi2, dof) < CHI2_TAIL:
-            scale = math.sqrt(red)      # the Birge ratio: errors as large as the scatter says
-            cov *= red
-            if red > 2.0:
-                data_diag.append(
-                    f"reduced chi^2 = {red:.4g} is far above 1 (dof = {dof}): the sigmas underestimate the "
-                    "scatter, or the model does not describe the data; the standard errors are scaled by "
-                    f"sqrt(chi^2_red) = {scale:.3g}")
-        elif chi2_dist.cdf(chi2, dof) < CHI2_TAIL and red < 0.5:
-            # never scaled down: noiseless or over-cautious sigmas must not shrink the errors to 0
-            data_diag.append(
-                f"reduced chi^2 = {red:.4g} is far below 1 (dof = {dof}): the sigmas overestimate the "
-                "scatter, or the rows are not independent measurements; the standard errors follow the "
-                "given sigmas and may be too large")
-    noise = w if sigma is not None else {n_: np.full(ti.size, math.sqrt(chi2 / dof) if dof > 0 else 0.0)
-                                         for n_ in names}
-    if sigma is not None or dof > 0:
-        bad = impossible_values(y, {n_: np.maximum(noise[n_], 1e-12) for n_ in names})
-        for what, i, v, e in bad:
-            data_diag.append(
-                f"impossible data: {what} beyond {IMPOSSIBLE_SIGMAS:g} sigma (worst {v:.4g} +- {e:.2g} at "
-                f"theta_i={math.degrees(ti[i]):.4g}, theta_r={math.degrees(tr[i]):.4g}, "
-                f"phi={math.degrees(ph[i]):.4g} deg): no Mueller matrix has it -- unnormalized data or a "
-                "calibration error; the fit cannot describe these values")
-    classic = np.sqrt(np.diag(cov))
-    verdict, cov = _adequacy(r, J, cov, ti, tr, ph, len(names), chi2, dof, sigma is not None)
-    verdict.figures["stderr_classic"] = dict(zip(fitted, classic.tolist()))
-    if verdict.errors == "robust" or (not verdict.adequate and np.all(np.isfinite(cov))):
-        corr = correlation(cov)
-    stderr = {q: float(math.sqrt(cov[i, i])) if math.isfinite(cov[i, i]) else float("inf")
-              for i, q in enumerate(fitted)}
-    vals = unpack(res.x)
+
+
+def _birge_scaling(chi2, dof, cov, notes):
+    """With sigmas: a reduced chi^2 far above 1 scales the errors up by the Birge ratio (never
+    down); far from 1 either way adds a note.  Returns (scale, covariance)."""
+    from scipy.stats import chi2 as chi2_dist
+    red = chi2 / dof
+    if chi2_dist.sf(chi2, dof) < CHI2_TAIL:
+        scale = math.sqrt(red)      # the Birge ratio: errors as large as the scatter says
+        if red > 2.0:
+            notes.append(
+                f"reduced chi^2 = {red:.4g} is far above 1 (dof = {dof}): the sigmas underestimate the "
+                "scatter, or the model does not describe the data; the standard errors are scaled by "
+                f"sqrt(chi^2_red) = {scale:.3g}")
+        return scale, cov * red
+    if chi2_dist.cdf(chi2, dof) < CHI2_TAIL and red < 0.5:
+        # never scaled down: noiseless or over-cautious sigmas must not shrink the errors to 0
+        notes.append(
+            f"reduced chi^2 = {red:.4g} is far below 1 (dof = {dof}): the sigmas overestimate the "
+            "scatter, or the rows are not independent measurements; the standard errors follow the "
+            "given sigmas and may be too large")
+    return 1.0, cov
+
+
+def _impossible_notes(data, chi2, dof) -> list:
+    """Notes on values no Mueller matrix has, beyond IMPOSSIBLE_SIGMAS of the noise (the given
+    sigmas, or the fit's residual scatter without)."""
+    if not data.sigma_given and dof <= 0:
+        return []
+    noise = data.w if data.sigma_given else {
+        n_: np.full(data.rows, math.sqrt(chi2 / dof)) for n_ in data.names}
+    bad = impossible_values(data.y, {n_: np.maximum(noise[n_], 1e-12) for n_ in data.names})
+    return [f"impossible data: {what} beyond {IMPOSSIBLE_SIGMAS:g} sigma (worst {v:.4g} +- {e:.2g} at "
+            f"theta_i={math.degrees(data.ti[i]):.4g}, theta_r={math.degrees(data.tr[i]):.4g}, "
+            f"phi={math.degrees(data.ph[i]):.4g} deg): no Mueller matrix has it -- unnormalized data or a "
+            "calibration error; the fit cannot describe these values"
+            for what, i, v, e in bad]
+
+
+def _parameter_notes(vals, stderr, corr, fitted, corr_limit, m, dof) -> list:
+    """Ill-posedness notes: no degrees of freedom, strong correlations, large relative errors,
+    values on their bounds."""
+    p = len(fitted)
+    diag = []
     if dof == 0:
         diag.append(f"{m} values for {p} parameters: no degrees of freedom, the fit cannot be "
                     f"checked (chi^2 has no distribution); measure more angles")
@@ -709,27 +786,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
         if v <= blo + 1e-6 * max(1.0, abs(blo)) or v >= bhi * (1 - 1e-9):
             diag.append(f"{q} = {v:.4g} sits on its bound [{blo:g}, {bhi:g}]: its standard error "
                         f"does not describe the uncertainty")
-    if not res.success:
-        diag.append(f"the optimizer did not converge: {res.message}")
-
-    residuals = {}
-    off = 0
-    for n_ in names:
-        size = y[n_].size
-        residuals[n_] = r[off:off + size].copy()
-        off += size
-    result = FitResult(
-        params=vals, fitted=fitted, stderr=stderr, covariance=cov, correlation=corr,
-        chi2=chi2, dof=dof, reduced_chi2=chi2 / dof if dof > 0 else float("nan"),
-        p_value=float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan"),
-        residuals=residuals, success=bool(res.success), message=str(res.message), nfev=int(nfev),
-        n_data=m, sigma_given=sigma is not None, shadowing=shadowing, diffuse=mode,
-        warnings=diag, condition_number=cond, rows=rows_in, repeats=repeats, stderr_scale=scale,
-        data_warnings=data_diag, verdict=verdict)
-    for text in data_diag:
-        warnings.warn(text, FitDataWarning, stacklevel=2)
-    raise_or_warn(verdict, diag, strict, stacklevel=3)
-    return result
+    return diag
 
 
 def raise_or_warn(verdict, diag, strict, stacklevel=3):
@@ -775,9 +832,9 @@ def synthetic_measurements(theta_i, theta_r, phi, names=("M01", "M11", "M22", "M
     Angles in radians; eta = n - jk.
     """
     if not (isinstance(n_samples, (int, np.integer)) and n_samples >= 2):
-        raise ValueError(f"n_samples must be an integer >= 2, got {n_samples!r}")
+        raise UsageError(f"n_samples must be an integer >= 2, got {n_samples!r}")
     if not (math.isfinite(noise) and noise > 0):
-        raise ValueError(f"noise must be > 0, got {noise!r}")
+        raise UsageError(f"noise must be > 0, got {noise!r}")
     rng = np.random.default_rng(rng)
     ti, tr, ph = (np.asarray(a, float).ravel() for a in np.broadcast_arrays(theta_i, theta_r, phi))
     truth = mueller_elements(ti, tr, ph, names, rms_slope=rms_slope, n=n, k=k,

@@ -55,16 +55,15 @@ import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
+from hyde_bsdf.fit.pbsdf_samples import check_model_terms, paper_angles, paper_to_table, table_to_paper
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.io.memory import check_memory, format_bytes
 from hyde_bsdf.io.output_gate import OutputLock, check_free_space
 from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, read_pbsdf,
                                      rusinkiewicz_to_directions, table_frame_x, table_nbytes)
-from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N
-from hyde_bsdf.model.shadowing import SHADOWING
-from hyde_bsdf.progress import Throttle, as_callback
+from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
 
 __all__ = ["DEFAULT_RESOLUTION", "edge_deg", "ALPHA_CANDIDATES", "ExportReport", "grids",
            "band_index", "check_table_size", "interpolation_error", "suggest_alpha_sample",
@@ -82,7 +81,6 @@ MAX_ELEMENTS = 2 ** 32 - 1
 #: Mitsuba's loader: the mapped file plus its own copy of M
 LOADER_COPIES = 2
 _JSON_BYTES = 4096
-PROGRESS_SECONDS = 3.0
 RESOLUTION_RANGE = (2, 4097)
 
 
@@ -397,10 +395,7 @@ def _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths):
             (RMS_SLOPE_RANGE[0] <= float(rms_slope) <= RMS_SLOPE_RANGE[1]):
         raise UsageError(f"rms_slope must be a number in [{RMS_SLOPE_RANGE[0]:g}, {RMS_SLOPE_RANGE[1]:g}], "
                          f"got {rms_slope!r}")
-    if shadowing not in SHADOWING:
-        raise UsageError(f"shadowing must be one of {', '.join(SHADOWING)}, got {shadowing!r}")
-    if diffuse not in DIFFUSE:
-        raise UsageError(f"diffuse must be one of {', '.join(DIFFUSE)}, got {diffuse!r}")
+    check_model_terms(shadowing, diffuse)
     if diffuse == "reciprocal" and shadowing == "none":
         raise UsageError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
     nb, kb = band_index(wavelengths, n, k, material)
@@ -430,7 +425,7 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     if alpha_sample is not None and not (isinstance(alpha_sample, (int, float)) and ALPHA_SAMPLE.contains(alpha_sample)):
         raise UsageError(f"alpha_sample must be in {ALPHA_SAMPLE.text()}, got {alpha_sample!r}")
     path = check_output_path(path, "pBSDF file")
-    nbytes = check_table_size(path, res, len(wavelengths))
+    check_table_size(path, res, len(wavelengths))
     pd, td, th = grids(res)
     callback = as_callback(progress)
     say = (lambda text: callback(f"export: {text}")) if callback else (lambda text: None)
@@ -446,20 +441,7 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
         meta = {"producer": "hyde-bsdf export", "model": "Hyde, Schmidt, Havrilla, Opt. Express 17(24) 2009, Eq. 17",
                 **params, "resolution": list(res), "wavelengths_nm": list(wavelengths),
                 "theta_h_grid": "(pi/2) u^2", "edge_deg": edge_deg(res[1])}
-        layout = {"theta_h": (np.dtype(np.float32), (1, res[2])), "theta_d": (np.dtype(np.float32), (1, res[1])),
-                  "phi_d": (np.dtype(np.float32), (1, res[0])), "wvls": (np.dtype(np.uint16), (len(wavelengths),)),
-                  "hyde_export": (np.dtype(np.uint8), (_JSON_BYTES,)), "M": (np.dtype(np.float32), (*res, len(wavelengths), 4, 4))}
-        head, offsets, total = _header(layout)
-        with open(tmp, "wb") as f:
-            f.write(head)
-            for name, arr in (("theta_h", th), ("theta_d", td), ("phi_d", pd)):
-                f.seek(offsets[name])
-                f.write(np.asarray(arr, np.float32).tobytes())
-            f.seek(offsets["wvls"])
-            f.write(np.asarray(wavelengths, np.uint16).tobytes())
-            f.seek(offsets["M"])
-            for slab in slabs():
-                f.write(slab.tobytes())
+        offsets = _write_arrays(tmp, res, wavelengths, (th, td, pd), slabs())
         table = read_pbsdf(tmp)
         errors = {}
         if error_samples:
@@ -468,15 +450,42 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
         if alpha_sample is None:
             say("choosing alpha_sample")
             alpha_sample, _ = suggest_alpha_sample(params)
-        meta.update(errors={k_: v for k_, v in errors.items()}, alpha_sample=float(alpha_sample))
-        text = json.dumps(meta, separators=(",", ":"))
-        if len(text.encode()) > _JSON_BYTES:
-            meta["errors"] = {k_: v for k_, v in errors.items() if k_ != "by_band"}
-            text = json.dumps(meta, separators=(",", ":"))
         del table
-        with open(tmp, "r+b") as f:
-            f.seek(offsets["hyde_export"])
-            f.write(text.encode().ljust(_JSON_BYTES, b" "))
+        _write_metadata(tmp, offsets["hyde_export"], meta, errors, alpha_sample)
     return ExportReport(path=Path(path), resolution=res, nbytes=os.path.getsize(path),
                         seconds=time.perf_counter() - t0, params=params, wavelengths=tuple(wavelengths),
                         alpha_sample=float(alpha_sample), errors=errors)
+
+
+def _write_arrays(tmp, res, wavelengths, axes, slabs) -> dict:
+    """The table's header, axes (theta_h, theta_d, phi_d), wavelengths and the Mueller slabs
+    into ``tmp``; the metadata field is left blank.  Returns each field's byte offset."""
+    th, td, pd = axes
+    layout = {"theta_h": (np.dtype(np.float32), (1, res[2])), "theta_d": (np.dtype(np.float32), (1, res[1])),
+              "phi_d": (np.dtype(np.float32), (1, res[0])), "wvls": (np.dtype(np.uint16), (len(wavelengths),)),
+              "hyde_export": (np.dtype(np.uint8), (_JSON_BYTES,)), "M": (np.dtype(np.float32), (*res, len(wavelengths), 4, 4))}
+    head, offsets, total = _header(layout)
+    with open(tmp, "wb") as f:
+        f.write(head)
+        for name, arr in (("theta_h", th), ("theta_d", td), ("phi_d", pd)):
+            f.seek(offsets[name])
+            f.write(np.asarray(arr, np.float32).tobytes())
+        f.seek(offsets["wvls"])
+        f.write(np.asarray(wavelengths, np.uint16).tobytes())
+        f.seek(offsets["M"])
+        for slab in slabs:
+            f.write(slab.tobytes())
+    return offsets
+
+
+def _write_metadata(tmp, offset, meta, errors, alpha_sample):
+    """The JSON metadata (with the measured errors and alpha_sample) into its fixed-size field;
+    the per-band errors are dropped when they do not fit."""
+    meta.update(errors={k_: v for k_, v in errors.items()}, alpha_sample=float(alpha_sample))
+    text = json.dumps(meta, separators=(",", ":"))
+    if len(text.encode()) > _JSON_BYTES:
+        meta["errors"] = {k_: v for k_, v in errors.items() if k_ != "by_band"}
+        text = json.dumps(meta, separators=(",", ":"))
+    with open(tmp, "r+b") as f:
+        f.seek(offset)
+        f.write(text.encode().ljust(_JSON_BYTES, b" "))

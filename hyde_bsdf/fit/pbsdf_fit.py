@@ -43,21 +43,20 @@ import numpy as np
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, Verdict, cluster_covariance, correlation, floor_verdict,
                                     geometry_clusters, half_angles, larger_errors)
-from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
-from hyde_bsdf.model.evaluator import DIFFUSE, RMS_SLOPE_RANGE, pbrdf
+from hyde_bsdf.fit.mueller_fit import DEFAULT_STARTS, raise_or_warn
+from hyde_bsdf.fit.pbsdf_samples import check_model_terms, PbsdfSamples, pbsdf_samples
+from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
 from hyde_bsdf.model.parameters import NATURAL_INDEX
-from hyde_bsdf.model.shadowing import SHADOWING
-from hyde_bsdf.progress import Throttle, as_callback, check_progress
+from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 
 __all__ = ["PbsdfFitResult", "fit_pbsdf"]
 
 #: elements fitted besides M00 (normalized by M00): all 15
 ELEMENTS = tuple((j, k) for j in range(4) for k in range(4) if (j, k) != (0, 0))
 BOUNDS = {"n": NATURAL_INDEX.bounds, "k": NATURAL_INDEX.bounds, "rms_slope": RMS_SLOPE_RANGE}
-STARTS = {"n": (0.3, 1.5), "k": (0.5, 3.0, 9.0)}
+STARTS = DEFAULT_STARTS      # the start points of the Mueller fit
 #: geometries used by the multi-start stage (the joint fit uses all)
 SEARCH_ROWS = 1000
-PROGRESS_SECONDS = 3.0
 
 
 @dataclass
@@ -158,10 +157,7 @@ def _check(fit, rms_slope, n0, k0, shadowing, diffuse):
             raise UsageError(f"{name} must be in [0, {BOUNDS[name[0]][1]:g}], got {v!r}")
     if ("n" not in fit and n0 is None) or ("k" not in fit and k0 is None):
         raise UsageError("a parameter held fixed needs its value: --n0 for n, --k0 for k")
-    if shadowing not in SHADOWING:
-        raise UsageError(f"shadowing must be one of {', '.join(SHADOWING)}, got {shadowing!r}")
-    if diffuse not in DIFFUSE:
-        raise UsageError(f"diffuse must be one of {', '.join(DIFFUSE)}, got {diffuse!r}")
+    check_model_terms(shadowing, diffuse)
     return fit
 
 
@@ -258,86 +254,22 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     The result carries a :class:`~hyde_bsdf.fit.adequacy.Verdict` (``result.verdict``); an
     inadequate model also warns (:class:`~hyde_bsdf.fit.adequacy.InadequateModelWarning`).
     """
-    from scipy.optimize import least_squares
-
-    from hyde_bsdf.fit.mueller_fit import raise_or_warn
-
     fit = _check(fit, rms_slope, n0, k0, shadowing, diffuse)
     check_progress(progress)
     if not isinstance(data, PbsdfSamples):
         data = pbsdf_samples(data, progress=progress or False, **sample_options)
     K = data.wavelengths.size
+    stages = _StagedFit(data, fit, shadowing, diffuse, progress)
+    stages.values = _initial_values(K, rms_slope, n0, k0)
     rows_all = np.arange(len(data))
-    report = Throttle(as_callback(True if progress is None else progress), PROGRESS_SECONDS)
-    state = {"calls": 0, "stage": ""}
-
-    def tick(r):
-        state["calls"] += 1
-        report(lambda: f"fit: {state['stage']}: {state['calls']} evaluations, chi^2 = {float(r @ r):.6g}, "
-                       f"{report.elapsed:.0f} s")
-
-    values = {"rms_slope": float(rms_slope)}
-    for b in range(K):
-        values[("n", b)] = float(n0) if n0 is not None else 1.0
-        values[("k", b)] = float(k0) if k0 is not None else 1.0
-    s00, sel = 0.05, 0.01
-    nfev = 0
-
-    def solve(bands, rows, free, x0, max_nfev, s00_, sel_):
-        nonlocal nfev
-        fixed = {p: v for p, v in values.items() if p not in free}
-        prob = _Problem(data, bands, rows, free, fixed, shadowing, diffuse, s00_, sel_, tick)
-        lo, hi = _bounds(free)
-        x0 = np.clip(np.asarray(x0, float), lo + 1e-9, hi - 1e-9)
-        res = least_squares(prob, x0, jac=lambda x: prob.jac(x, hi), bounds=(lo, hi), method="trf",
-                            x_scale="jac", max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
-        nfev += int(res.nfev)
-        return res, prob
-
-    rng = np.random.default_rng(0)
-    search = rows_all if len(rows_all) <= SEARCH_ROWS else np.sort(rng.choice(rows_all, SEARCH_ROWS, replace=False))
-    mid = K // 2
-    # ---- 1. multi-start on the middle band
-    state["stage"] = f"multi-start at {data.wavelengths[mid]:g} nm"
-    free_mid = [p for p in (("n", mid), ("k", mid)) if p[0] in fit] + (["rms_slope"] if "rms_slope" in fit else [])
-    starts = [(n_, k_) for n_ in ((n0,) if n0 is not None else STARTS["n"])
-              for k_ in ((k0,) if k0 is not None else STARTS["k"])]
-    if start is not None:
-        values["rms_slope"] = float(start["rms_slope"]) if "rms_slope" in fit else values["rms_slope"]
-        starts = [(float(start["n"]) if n0 is None else n0, float(start["k"]) if k0 is None else k0)]
-    best = None
-    for n_, k_ in starts:
-        trial = {("n", mid): n_, ("k", mid): k_, "rms_slope": values["rms_slope"]}
-        res, _ = solve([mid], search, free_mid, [trial[p] for p in free_mid], 60 * len(free_mid), s00, sel)
-        if best is None or res.cost < best.cost:
-            best = res
-    values.update(zip(free_mid, best.x))
-    # ---- 2. the other bands, outwards from the middle, starting at the neighbour's index
-    for order in (range(mid + 1, K), range(mid - 1, -1, -1)):
-        for b in order:
-            nb = b - 1 if b > mid else b + 1
-            free_b = [p for p in (("n", b), ("k", b)) if p[0] in fit]
-            if not free_b:
-                continue
-            state["stage"] = f"band {data.wavelengths[b]:g} nm"
-            x0 = [values[(p[0], nb)] for p in free_b]
-            res, _ = solve([b], search, free_b, x0, 60 * len(free_b), s00, sel)
-            values.update(zip(free_b, res.x))
-    # ---- 3. joint fit, weights from its scatter, final joint fit
-    free = (["rms_slope"] if "rms_slope" in fit else []) + \
-           [(p, b) for b in range(K) for p in ("n", "k") if p in fit]
-    bands = list(range(K))
-    state["stage"] = f"joint fit of {len(free)} parameters on {len(rows_all)} geometries x {K} bands"
-    res, prob = solve(bands, rows_all, free, [values[p] for p in free], 40 * len(free), s00, sel)
-    values.update(zip(free, res.x))
+    search = rows_all if len(rows_all) <= SEARCH_ROWS else np.sort(
+        np.random.default_rng(0).choice(rows_all, SEARCH_ROWS, replace=False))
+    stages.middle_band(search, n0, k0, start)
+    stages.other_bands(search)
+    res, prob, free = stages.joint(rows_all)
+    values, s00, sel = stages.values, stages.s00, stages.sel
     r00, rel = prob.parts(res.x)
-    s00 = max(float(np.sqrt(np.mean(r00 ** 2))), 1e-7)
-    sel = max(float(np.sqrt(np.mean(rel ** 2))), 1e-7)
-    res, prob = solve(bands, rows_all, free, res.x, 20 * len(free), s00, sel)
-    values.update(zip(free, res.x))
-    r00, rel = prob.parts(res.x)
-    if report.elapsed >= PROGRESS_SECONDS:
-        report(f"fit: done, {state['calls']} evaluations in {report.elapsed:.0f} s", force=True)
+    stages.counter.done()
 
     cov, corr, err, diag, verdict = _uncertainty(res, prob, free, values, data)
     if not res.success:
@@ -353,11 +285,96 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         k=np.array([values[("k", b)] for b in range(K)]), wavelengths=data.wavelengths.copy(),
         stderr=stderr, fitted=tuple(fit), correlation=corr, names=names, sigma_m00=s00, sigma_elements=sel,
         chi2=float(r @ r), dof=r.size - len(free), success=bool(res.success), message=str(res.message),
-        nfev=state["calls"], n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
+        nfev=stages.counter.calls, n_geometries=len(data), shadowing=shadowing, diffuse=diffuse, warnings=diag,
         rms_m00=np.sqrt(np.mean(r00 ** 2, axis=1)), rms_elements=np.sqrt(np.mean(rel ** 2, axis=(1, 2))),
         verdict=verdict)
     raise_or_warn(verdict, diag, strict, stacklevel=3)
     return result
+
+
+def _initial_values(K, rms_slope, n0, k0) -> dict:
+    """Every parameter's value before the fit: rms_slope, and (n, band), (k, band) for each band."""
+    values = {"rms_slope": float(rms_slope)}
+    for b in range(K):
+        values[("n", b)] = float(n0) if n0 is not None else 1.0
+        values[("k", b)] = float(k0) if k0 is not None else 1.0
+    return values
+
+
+class _StagedFit:
+    """The fit's three stages on one table, sharing the current values, the residual weights
+    (sigma of M00's log and of the normalized elements) and the progress count."""
+
+    def __init__(self, data, fit, shadowing, diffuse, progress):
+        self.data, self.fit = data, fit
+        self.shadowing, self.diffuse = shadowing, diffuse
+        self.counter = EvaluationCounter(as_callback(True if progress is None else progress), PROGRESS_SECONDS)
+        self.values = {}
+        self.s00, self.sel = 0.05, 0.01
+
+    def solve(self, bands, rows, free, x0, max_nfev):
+        """Bounded least squares over ``free``, the other parameters held at their values."""
+        from scipy.optimize import least_squares
+        fixed = {p: v for p, v in self.values.items() if p not in free}
+        prob = _Problem(self.data, bands, rows, free, fixed, self.shadowing, self.diffuse,
+                        self.s00, self.sel, self.counter.tick)
+        lo, hi = _bounds(free)
+        x0 = np.clip(np.asarray(x0, float), lo + 1e-9, hi - 1e-9)
+        res = least_squares(prob, x0, jac=lambda x: prob.jac(x, hi), bounds=(lo, hi), method="trf",
+                            x_scale="jac", max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, gtol=1e-12)
+        return res, prob
+
+    def middle_band(self, search, n0, k0, start):
+        """1. Multi-start (or the warm ``start``) on the middle band, with rms_slope."""
+        mid = self.data.wavelengths.size // 2
+        self.counter.stage = f"multi-start at {self.data.wavelengths[mid]:g} nm"
+        free_mid = [p for p in (("n", mid), ("k", mid)) if p[0] in self.fit] + \
+                   (["rms_slope"] if "rms_slope" in self.fit else [])
+        starts = [(n_, k_) for n_ in ((n0,) if n0 is not None else STARTS["n"])
+                  for k_ in ((k0,) if k0 is not None else STARTS["k"])]
+        if start is not None:
+            if "rms_slope" in self.fit:
+                self.values["rms_slope"] = float(start["rms_slope"])
+            starts = [(float(start["n"]) if n0 is None else n0, float(start["k"]) if k0 is None else k0)]
+        best = None
+        for n_, k_ in starts:
+            trial = {("n", mid): n_, ("k", mid): k_, "rms_slope": self.values["rms_slope"]}
+            res, _ = self.solve([mid], search, free_mid, [trial[p] for p in free_mid], 60 * len(free_mid))
+            if best is None or res.cost < best.cost:
+                best = res
+        self.values.update(zip(free_mid, best.x))
+
+    def other_bands(self, search):
+        """2. The other bands, outwards from the middle, each started at its neighbour's index."""
+        K = self.data.wavelengths.size
+        mid = K // 2
+        for order in (range(mid + 1, K), range(mid - 1, -1, -1)):
+            for b in order:
+                nb = b - 1 if b > mid else b + 1
+                free_b = [p for p in (("n", b), ("k", b)) if p[0] in self.fit]
+                if not free_b:
+                    continue
+                self.counter.stage = f"band {self.data.wavelengths[b]:g} nm"
+                x0 = [self.values[(p[0], nb)] for p in free_b]
+                res, _ = self.solve([b], search, free_b, x0, 60 * len(free_b))
+                self.values.update(zip(free_b, res.x))
+
+    def joint(self, rows_all):
+        """3. Joint fit of all bands, weights from its scatter, final joint fit.
+        Returns (least-squares result, its problem, the free parameters)."""
+        K = self.data.wavelengths.size
+        free = (["rms_slope"] if "rms_slope" in self.fit else []) + \
+               [(p, b) for b in range(K) for p in ("n", "k") if p in self.fit]
+        bands = list(range(K))
+        self.counter.stage = f"joint fit of {len(free)} parameters on {len(rows_all)} geometries x {K} bands"
+        res, prob = self.solve(bands, rows_all, free, [self.values[p] for p in free], 40 * len(free))
+        self.values.update(zip(free, res.x))
+        r00, rel = prob.parts(res.x)
+        self.s00 = max(float(np.sqrt(np.mean(r00 ** 2))), 1e-7)
+        self.sel = max(float(np.sqrt(np.mean(rel ** 2))), 1e-7)
+        res, prob = self.solve(bands, rows_all, free, res.x, 20 * len(free))
+        self.values.update(zip(free, res.x))
+        return res, prob, free
 
 
 def _names(free, wavelengths):

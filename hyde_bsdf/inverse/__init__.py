@@ -65,7 +65,7 @@ from hyde_bsdf.inverse.acquisition import (Acquisition, Configuration, acquisiti
                                            predicted_stderr, synthetic_observations)
 from hyde_bsdf.inverse.maps import (LogAdam, MapInversionResult, MapProblem, filters_bilinearly, invert_maps, map_loss,
                                     map_step, map_uncertainty)
-from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, STDERR_THRESHOLD, BilinearFilterWarning, Uncertainty,
+from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, MISFIT_P, STDERR_THRESHOLD, BilinearFilterWarning, Uncertainty,
                                            UnidentifiedParameterWarning)
 from hyde_bsdf.inverse.observations import _obs_mask  # noqa: F401
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, VIEW_AZIMUTHS, Observation,
@@ -93,6 +93,6 @@ __all__ = ["CameraNoise", "StokesEstimate", "analysis_matrix", "retarder_mueller
            "render_stokes", "render_stokes_np", "Observation", "texel_coverage", "smoothness",
            "MapInversionResult", "invert_maps", "MapProblem", "map_loss", "map_step", "LogAdam", "map_uncertainty",
            "Uncertainty", "UnidentifiedParameterWarning", "STDERR_THRESHOLD", "NotConvergedWarning",
-           "BilinearFilterWarning", "CONVERGENCE_THRESHOLD", "trajectory_converged", "filters_bilinearly", "pixel_texels", "Configuration",
+           "BilinearFilterWarning", "CONVERGENCE_THRESHOLD", "MISFIT_P", "trajectory_converged", "filters_bilinearly", "pixel_texels", "Configuration",
            "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition", "predicted_stderr", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",
            "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "Y_WEIGHTS"]

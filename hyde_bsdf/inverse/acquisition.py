@@ -374,7 +374,7 @@ def acquisition_scene_dict(config: Configuration, material: dict, *, bsdf: str =
     ``bsdf="roughconductor"`` (Beckmann, the same alpha, eta, k, specular_reflectance) for
     comparisons; ``shadowing`` is passed to ``hyde`` when given.  ``filter_type``: the maps' bitmap
     lookup, ``"nearest"`` (what the per-texel standard errors assume) or ``"bilinear"`` (Mitsuba's
-    default; :func:`~hyde_bsdf.inverse.invert_maps` then gives NaN standard errors and a warning).
+    default; :func:`~hyde_bsdf.inverse.invert_maps` switches a fitted one to nearest, with a warning).
     """
     import mitsuba as mi
 
@@ -424,7 +424,8 @@ def acquisition_scene_dict(config: Configuration, material: dict, *, bsdf: str =
 
 def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *, res: int = 48, spp: int = 4,
                            spp_ref: int = 256, noise: float = 0.0, seed: int = 0, bsdf: str = "hyde",
-                           camera_noise=None, signal: float = 1000.0, **scene_kwargs) -> list:
+                           camera_noise=None, signal: float = 1000.0, fit_filter_type: str | None = None,
+                           **scene_kwargs) -> list:
     """The observation set of ``acquisition`` for a synthetic sample: per configuration, a scene
     whose material holds ``start`` (the fit's start values; parameters absent there take
     ``truth``'s) and a reference rendered from ``truth`` at ``spp_ref`` samples, plus Gaussian
@@ -438,6 +439,10 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
     S0) with that noise, a DoFP mosaic for a ``"linear"`` camera or six analyzer frames for a
     ``"stokes"`` one, and the least-squares Stokes step (:func:`~hyde_bsdf.inverse.analyzer.simulate_capture`);
     the observation then carries the step's sigma maps and the measured components.
+
+    ``fit_filter_type``: the bitmap filter of the fit's scenes when it differs from the reference's
+    (``filter_type`` in ``scene_kwargs``, default nearest): a sample whose material changes from texel
+    to texel (a nearest reference) fitted from a user's scene with Mitsuba's default bilinear maps.
     """
     import mitsuba as mi
 
@@ -462,7 +467,8 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
         # a parameter that is a map in the truth is a map (texture) in the fit's scene too
         material = {n: (np.full(np.shape(truth[n]), float(start[n])) if n in start and np.ndim(start[n]) == 0
                         and np.ndim(truth[n]) == 2 else start.get(n, truth[n])) for n in truth}
-        scene = mi.load_dict(acquisition_scene_dict(config, material, bsdf=bsdf, res=res, spp=spp, **scene_kwargs))
+        fit_kwargs = scene_kwargs if fit_filter_type is None else {**scene_kwargs, "filter_type": fit_filter_type}
+        scene = mi.load_dict(acquisition_scene_dict(config, material, bsdf=bsdf, res=res, spp=spp, **fit_kwargs))
         o = Observation(scene, ref, measured=acquisition.measured, sigma=sig_maps)
         o.noise_std = sigma
         observations.append(o)

@@ -26,9 +26,9 @@ from hyde_bsdf.inverse.scalar import check_gradients
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, STDERR_THRESHOLD, BilinearFilterWarning,
                                            NotConvergedWarning, UnidentifiedParameterWarning, Uncertainty,
-                                           accumulate_blocks, convergence_test, convergence_warnings,
-                                           gauss_newton_step, identification_warnings, pixel_records,
-                                           standard_errors)
+                                           accumulate_blocks, at_bounds, convergence_test, convergence_warnings,
+                                           gauss_newton_step, identification_warnings, misfit_pvalues, pixel_records,
+                                           standard_errors, texel_convergence, texel_misfit)
 
 __all__ = ["MapInversionResult", "MapProblem", "filters_bilinearly", "map_loss", "map_step", "LogAdam", "map_uncertainty",
            "invert_maps"]
@@ -103,6 +103,7 @@ class MapProblem:
     prefix: str | None
     components: str
     bilinear: tuple = ()              # fitted maps whose bitmap filters bilinearly (in any scene)
+    nearest: tuple = ()               # fitted maps switched from bilinear to nearest by build()
 
     @property
     def map_shape(self):
@@ -158,8 +159,9 @@ class MapProblem:
         if seen is None and problem.map_shape is not None:
             seen = sum(texel_coverage(o, problem.map_shape, prefix) for o in observations) > 0
         problem.seen = seen
-        problem.bilinear = tuple(n for n in fit if shapes[n] is not None and any(
-            filters_bilinearly(p, k[n], shapes[n], MAP_PARAMETERS[n][1]) for p, k in zip(all_params, keys)))
+        problem.bilinear = problem._bilinear_maps()
+        if problem.bilinear:
+            problem._to_nearest()
         for name in names:
             try:
                 value = problem.as_value(name, start[name])
@@ -168,6 +170,30 @@ class MapProblem:
                                  f"{shapes[name][:2]}") from None
             problem.write({name: value})
         return problem
+
+    def _bilinear_maps(self) -> tuple:
+        """The fitted maps whose bitmap filters bilinearly in some scene."""
+        return tuple(n for n in self.fit if self.shapes[n] is not None and any(
+            filters_bilinearly(p, k[n], self.shapes[n], MAP_PARAMETERS[n][1])
+            for p, k in zip(self.all_params, self.keys)))
+
+    def _to_nearest(self) -> None:
+        """Switch the bilinear fitted bitmaps to ``filter_type`` nearest in every scene
+        (:func:`~hyde_bsdf.render.texture_filter.bitmap_to_nearest`), traverse the scenes again, and
+        set ``nearest`` (switched) and ``bilinear`` (left bilinear: a BSDF that cannot take the swap)."""
+        import mitsuba as mi
+
+        from hyde_bsdf.render.texture_filter import bitmap_to_nearest
+
+        switched = set()
+        for i, scene in enumerate(self.scenes):
+            for name in self.bilinear:
+                if bitmap_to_nearest(scene, self.all_params[i], self.keys[i][name]):
+                    switched.add(name)
+                    self.all_params[i] = mi.traverse(scene)
+                    self.keys[i] = map_keys(self.all_params[i], self.names, self.prefix)
+        self.bilinear = self._bilinear_maps()
+        self.nearest = tuple(n for n in self.fit if n in switched and n not in self.bilinear)
 
     def as_value(self, name, v):
         """``v`` (a number or a (rows, cols) array) as the Dr.Jit value of parameter ``name``, clamped
@@ -324,7 +350,12 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
     still does (or a step hit ``max_step``) the texel's standard error is NaN and
     ``Uncertainty.converged`` is False there (:func:`~hyde_bsdf.inverse.uncertainty.convergence_test`).
     Two steps, not one: Gauss-Newton from far away can take one small step and the next large
-    (measured: a texel 9-11 standard errors off after a last step of 1.9).
+    (measured: a texel 9-11 standard errors off after a last step of 1.9).  Small steps do not
+    show a texel the steps no longer move (a local minimum, a bound), so a texel whose value sits
+    at a bound of its range, or whose residuals stay above the noise (chi-square p-value <
+    :data:`~hyde_bsdf.inverse.uncertainty.MISFIT_P`), is not converged either, and a texel not
+    converged in one parameter is not converged in any
+    (:func:`~hyde_bsdf.inverse.uncertainty.texel_convergence`).
     A fitted bitmap that filters bilinearly couples neighbouring texels, which the per-texel blocks
     do not describe: every standard error is then NaN and ``Uncertainty.filter_valid`` False.
     Returns (final maps, :class:`Uncertainty`)."""
@@ -333,10 +364,11 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
         return final, None
     rows, cols = problem.map_shape
     seen = problem.seen if problem.seen is not None else np.ones((rows, cols), bool)
-    final, records, blocks, steps = _polish(problem, names, dict(final), spp=spp, seed=seed, noise=noise,
+    final, records, blocks, steps, applied = _polish(problem, names, dict(final), spp=spp, seed=seed, noise=noise,
                                             polish=polish, max_step=max_step, seen=seen, convergence=convergence,
                                             extra=extra_polish)
     A, B, g, noise_std, n_data = blocks
+    chi2, m_data = texel_misfit(records, (rows, cols), step=applied)
     problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
     rel = standard_errors(A, B, seen, dof=(n_data, len(names) * int(np.asarray(seen).sum())))
     # a texel no picture has a whole pixel inside got no information computed: unknown, not undetermined
@@ -345,10 +377,10 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
         if rec is not None:
             np.add.at(whole, rec["t"], 1)
     rel[whole == 0] = np.nan
-    clip = max_step if polish else None
-    (ok, ratio), (ok_prev, ratio_prev) = (convergence_test(d, rel, seen, convergence, clip=clip) for d in steps)
-    ok &= ok_prev
-    ratio = np.maximum(ratio, ratio_prev)
+    misfit_p = misfit_pvalues(chi2, m_data, len(names))
+    pinned = at_bounds(np.stack([np.ravel(final[n]) for n in names], axis=1), [MAP_PARAMETERS[n][1] for n in names])
+    ok, ratio = texel_convergence(steps, rel, seen, threshold=convergence, clip=max_step if polish else None,
+                                  misfit_p=misfit_p, pinned=pinned)
     shape = lambda a, i: a[:, i].reshape(rows, cols)
     rel_maps = {n: shape(rel, i) for i, n in enumerate(names)}
     found = identification_warnings(rel_maps, seen, threshold)
@@ -363,6 +395,8 @@ def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: in
                       step_se={n: shape(ratio, i) for i, n in enumerate(names)},
                       converged={n: shape(ok, i) for i, n in enumerate(names)}, filter_valid=filter_valid,
                       unchecked=unchecked)
+    unc.misfit_p = misfit_p.reshape(rows, cols)
+    unc.pinned = {n: shape(pinned, i) for i, n in enumerate(names)}
     unc.messages = _uncertainty_messages(problem, unc, found, seen, convergence, regularized)
     return final, unc
 
@@ -385,7 +419,7 @@ def _polish(problem, names, final, *, spp, seed, noise, polish, max_step, seen, 
         blocks = accumulate_blocks(records, (rows, cols), len(names), weighting=weighting)
         if not polish:
             d = gauss_newton_step(blocks[0], blocks[2], seen, max_step=np.inf)
-            return final, records, blocks, np.array([d, d])
+            return final, records, blocks, np.array([d, d]), None
         d = gauss_newton_step(blocks[0], blocks[2], seen, max_step=max_step)
         steps.append(d)
         applied = np.zeros_like(d)
@@ -399,7 +433,7 @@ def _polish(problem, names, final, *, spp, seed, noise, polish, max_step, seen, 
     # the blocks after the last step, linearised (no further render): its residuals r + J d give the
     # noise estimate without the misfit the step removed
     blocks = accumulate_blocks(records, (rows, cols), len(names), weighting=weighting, step=applied)
-    return final, records, blocks, np.array(steps[-2:] if len(steps) > 1 else [steps[-1]] * 2)
+    return final, records, blocks, np.array(steps[-2:] if len(steps) > 1 else [steps[-1]] * 2), applied
 
 
 def _steps_converged(steps, blocks, seen, convergence, max_step):
@@ -485,9 +519,12 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     ``extra_polish`` more steps are taken (:func:`map_uncertainty`); where they still do the texel
     has not reached the minimum, its standard error is NaN, ``result.converged[name]`` is False there and a
     :class:`~hyde_bsdf.inverse.uncertainty.NotConvergedWarning` names the parameter and the
-    fraction of texels.  A fitted bitmap that filters bilinearly (Mitsuba's default) gives NaN
-    standard errors and one :class:`~hyde_bsdf.inverse.uncertainty.BilinearFilterWarning`: load
-    the maps with ``filter_type`` ``nearest``.  Each warning is issued once.
+    fraction of texels.  A fitted bitmap that filters bilinearly (Mitsuba's default) is switched to
+    ``filter_type`` ``nearest`` in the given scenes (they are changed in place:
+    :func:`~hyde_bsdf.render.texture_filter.bitmap_to_nearest`), with one
+    :class:`~hyde_bsdf.inverse.uncertainty.BilinearFilterWarning`; a BSDF that cannot take the swap
+    (only the ``hyde`` plugin can) keeps its bilinear bitmap and gets NaN standard errors and that
+    warning instead.  Each warning is issued once.
 
     The steps, each its own function: :meth:`MapProblem.build` (observation set-up: checks, losses,
     traverse keys, texel coverage), :func:`map_loss` (renders and the loss), :func:`map_step` (the
@@ -585,9 +622,19 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     res = MapInversionResult(fitted=fit, final=final, start=dict(start), components=components, seen=seen,
                              truth=truth, history=history, seconds_per_iteration=per_it,
                              first_iteration_seconds=t_first, adam_final=adam_final, uncertainty=unc)
+    messages = [(BilinearFilterWarning, _nearest_message(problem.nearest))] if problem.nearest else []
     if unc is not None:
         res.stderr, res.rel_stderr, res.converged = unc.stderr, unc.rel_stderr, unc.converged
-        res.warnings = [m for _, m in unc.messages]
-        for category, message in unc.messages:        # each once
-            warnings.warn(message, category, stacklevel=2)
+        messages += unc.messages
+    res.warnings = [m for _, m in messages]
+    for category, message in messages:        # each once
+        warnings.warn(message, category, stacklevel=2)
     return res
+
+
+def _nearest_message(names) -> str:
+    """The one warning for fitted bitmaps switched from bilinear to nearest."""
+    return (f"the bitmap(s) of {', '.join(names)} filtered bilinearly (Mitsuba's default): they were switched "
+            "to filter_type nearest in the given scenes and fitted so (a bilinear pixel blends 4 texels, which "
+            "the per-texel fit and its standard errors do not describe); write "
+            "<string name=\"filter_type\" value=\"nearest\"/> in the scene to render what was fitted")

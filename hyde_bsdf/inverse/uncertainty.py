@@ -60,7 +60,13 @@ last applied; without: the step the blocks predict at the result, -A^-1 g, that 
 against the noise scale).  Newton's method converges quadratically, so a minimum reached leaves a
 last step of the order of the step's own sampling jitter (< 1 standard error); a larger one means
 the texel was still moving.  Where it exceeds :data:`CONVERGENCE_THRESHOLD` standard errors, or the
-step hit its clip, the texel's parameter is *not converged*: its standard error is set to NaN (never
+step hit its clip, the texel's parameter is *not converged*.  Small steps cannot show a texel that
+the steps no longer move (stuck in a local minimum or at a bound: in the quick stopped-early run an
+eta texel 10 standard errors off kept its standard error), so the gradient is also measured against
+the noise the other way, by what it leaves: a texel whose residuals stay above the noise (chi-square
+p-value < :data:`MISFIT_P`, :func:`texel_misfit`) or whose value sits at a bound of its range is not
+converged, and neither is any parameter of a texel not converged in one
+(:func:`texel_convergence`).  A not-converged texel's standard error is set to NaN (never
 left as a small number), ``Uncertainty.converged`` marks it False, and
 :func:`convergence_warnings` names the parameter, the fraction of texels and the largest step
 (:class:`NotConvergedWarning`).
@@ -78,13 +84,16 @@ from hyde_bsdf.inverse.observations import pixel_texels, render_stokes
 
 __all__ = ["STDERR_THRESHOLD", "CONVERGENCE_THRESHOLD", "UnidentifiedParameterWarning", "NotConvergedWarning",
            "BilinearFilterWarning",
-           "Uncertainty", "convergence_test", "convergence_warnings", "stokes_tangents",
+           "Uncertainty", "convergence_test", "convergence_warnings", "MISFIT_P", "misfit_pvalues",
+           "texel_convergence", "at_bounds", "texel_misfit", "stokes_tangents",
            "information_blocks", "pixel_records", "accumulate_blocks", "standard_errors", "gauss_newton_step", "identification_warnings"]
 
 #: relative standard error above which a parameter counts as not determined in a texel
 STDERR_THRESHOLD = 0.10
 #: the last Gauss-Newton step, in standard errors, above which a texel's parameter counts as not converged
 CONVERGENCE_THRESHOLD = 3.0
+#: a texel whose residuals noise alone would leave this rarely (chi-square p-value) counts as not converged
+MISFIT_P = 1e-3
 #: camera sub-samples per pixel side of the pixel -> texel shares
 SUB = 4
 
@@ -94,7 +103,9 @@ class UnidentifiedParameterWarning(UserWarning):
 
 
 class BilinearFilterWarning(UserWarning):
-    """A fitted bitmap filters bilinearly: the per-texel standard errors do not hold (set to NaN)."""
+    """A fitted bitmap filters bilinearly: :func:`~hyde_bsdf.inverse.invert_maps` switches it to
+    nearest (or, for a BSDF that cannot take the swap, sets the standard errors to NaN: the per-texel
+    ones do not hold for a pixel that blends 4 texels)."""
 
 
 @dataclass
@@ -115,6 +126,8 @@ class Uncertainty:
     filter_valid: bool = True                         # False: a bilinear bitmap; every stderr set to NaN
     messages: list = field(default_factory=list)      # (warning category, message), each once
     unchecked: dict = field(default_factory=dict)     # name -> rel_stderr before the convergence/filter checks
+    misfit_p: np.ndarray | None = None                # (rows, cols) chi-square p-value of the texel's residuals
+    pinned: dict = field(default_factory=dict)        # name -> (rows, cols) bool: the value sits at a bound
 
 
 def stokes_tangents(scene, params, keys: dict, names, sensor: int, spp: int, seed: int, channels=None):
@@ -227,25 +240,12 @@ def accumulate_blocks(records, map_shape, P: int, *, weighting: str = "fisher", 
         if rec is None:
             noise_out.append(np.full(4, np.nan))
             continue
-        t_i, Jf, rf = rec["t"], rec["J"], rec["r"]
-        if step is not None:
-            rf = rf + np.einsum("pcn,np->cn", Jf, np.asarray(step)[t_i])
-        n_pix, comps, mc_var = t_i.size, rec["comps"], rec["mc_var"]
-        if rec["ref_var"] is not None:
-            ref_var = rec["ref_var"]           # (4,) per component, or (4, pixels) from sigma maps
-        else:
-            ref_var = np.maximum(np.mean(rf ** 2, axis=1) - mc_var, 0.0)
+        t_i, Jf = rec["t"], rec["J"]
+        rf, ref_var, total_var = _residual_variance(rec, step)
+        n_pix, comps = t_i.size, rec["comps"]
         noise_out.append(np.sqrt(ref_var if np.ndim(ref_var) == 1 else np.mean(ref_var, axis=1)))
-        # the polishing render's own noise enters the estimate; (4, pixels)
-        total_var = np.broadcast_to(np.reshape(ref_var, (4, -1)), (4, n_pix)) + np.asarray(mc_var)[:, None]
         n_data += n_pix * len(comps)
-        if weighting == "fisher":
-            # 1 / variance per component (floored far below any camera's noise: a noiseless synthetic
-            # component must not divide by zero)
-            floor = 1e-12 * max(rec["s0_power"], 1e-30)
-            wf = (1.0 if rec["obs_weight"] > 0 else 0.0) / np.maximum(total_var, floor)
-        else:
-            wf = rec["w"]
+        wf = _fisher_weights(rec, total_var) if weighting == "fisher" else rec["w"]
         for c in comps:
             jc = Jf[:, c, :]                              # (P, pixels): d S_i / d log theta_t
             outer = np.einsum("ak,bk->kab", jc, jc)
@@ -253,6 +253,49 @@ def accumulate_blocks(records, map_shape, P: int, *, weighting: str = "fisher", 
             np.add.at(B, t_i, (wf[c] ** 2 * total_var[c])[:, None, None] * outer)
             np.add.at(g, t_i, (wf[c] * rf[c])[:, None] * jc.T)
     return A, B, g, noise_out, n_data
+
+
+def _residual_variance(rec, step=None):
+    """(r, ref_var, total_var) of one :func:`pixel_records` record: the residuals (4, pixels), linearised
+    after ``step`` (texels, P) when given; the reference's variance ((4,) or (4, pixels); estimated from
+    the residuals less the render's sampling variance when not known); the total variance (4, pixels)
+    = the reference's + the render's own (the polishing render's noise enters the residual)."""
+    rf = rec["r"]
+    if step is not None:
+        rf = rf + np.einsum("pcn,np->cn", rec["J"], np.asarray(step)[rec["t"]])
+    mc_var = np.asarray(rec["mc_var"])
+    if rec["ref_var"] is not None:
+        ref_var = rec["ref_var"]           # (4,) per component, or (4, pixels) from sigma maps
+    else:
+        ref_var = np.maximum(np.mean(rf ** 2, axis=1) - mc_var, 0.0)
+    total_var = np.broadcast_to(np.reshape(ref_var, (4, -1)), (4, rec["t"].size)) + mc_var[:, None]
+    return rf, ref_var, total_var
+
+
+def _fisher_weights(rec, total_var):
+    """1 / variance per component and pixel (floored far below any camera's noise: a noiseless
+    synthetic component must not divide by zero; 0 for an observation of weight 0)."""
+    floor = 1e-12 * max(rec["s0_power"], 1e-30)
+    return (1.0 if rec["obs_weight"] > 0 else 0.0) / np.maximum(total_var, floor)
+
+
+def texel_misfit(records, map_shape, step=None):
+    """Per texel (texels,): chi2 = sum of (r / sigma)^2 over its whole pixels and the loss's components
+    (the residuals linearised after ``step``, sigma^2 the total variance of :func:`_residual_variance`),
+    and the number of data values m.  At the least-squares minimum chi2 scatters like a chi-square of
+    about m degrees of freedom; a texel held away from it (at a bound, in a local minimum, or where
+    the model cannot describe its pixels) keeps residuals above the noise."""
+    T = int(map_shape[0]) * int(map_shape[1])
+    chi2, m = np.zeros(T), np.zeros(T)
+    for rec in records:
+        if rec is None or not rec["obs_weight"] > 0:
+            continue
+        rf, _, total_var = _residual_variance(rec, step)
+        w = _fisher_weights(rec, total_var)
+        for c in rec["comps"]:
+            np.add.at(chi2, rec["t"], w[c] * rf[c] ** 2)
+            np.add.at(m, rec["t"], 1.0)
+    return chi2, m
 
 
 def standard_errors(A, B, seen=None, dof=None):
@@ -344,6 +387,60 @@ def convergence_test(step, rel, seen=None, threshold: float = CONVERGENCE_THRESH
     return ~bad, ratio
 
 
+def misfit_pvalues(chi2, m, P: int):
+    """Per texel, the chance that noise alone leaves a chi2 (:func:`texel_misfit`) this large: the
+    chi-square survival function at m - P degrees of freedom (NaN where m <= P)."""
+    from scipy import stats
+
+    chi2, m = np.asarray(chi2, np.float64), np.asarray(m, np.float64)
+    dof = m - P
+    with np.errstate(invalid="ignore"):
+        return np.where(dof > 0, stats.chi2.sf(chi2, np.maximum(dof, 1.0)), np.nan)
+
+
+def texel_convergence(steps, rel, seen, *, threshold: float = CONVERGENCE_THRESHOLD, clip=None,
+                      misfit_p=None, pinned=None, p_min: float = MISFIT_P):
+    """(texels, P) bool converged, and the largest |step| / rel, from four tests per texel:
+
+    - each of ``steps`` (the last Gauss-Newton steps, log parameters) within ``threshold`` standard
+      errors and below ``clip`` (:func:`convergence_test`);
+    - ``pinned`` (texels, P): the value sits at a bound of its range (the least-squares minimum the
+      covariance describes is an interior one);
+    - ``misfit_p`` (texels,): the texel's residuals are not above the noise (p >= ``p_min``,
+      :func:`misfit_pvalues`) -- a texel the steps no longer move, stuck in a local minimum or held
+      by a bound, keeps residuals above the noise where small steps cannot tell it from converged
+      (measured: an eta texel 10 standard errors off after steps < 3 standard errors had p = 8e-4,
+      the converged fit's texels p >= 2.5e-3 on the quick 4 x 4 map);
+    - jointly: a texel not converged in one parameter is not converged in any (far from the
+      minimum in one parameter, the linearisation does not vouch for the others' small steps: that
+      eta texel's alpha was 20 % off).
+
+    Texels outside ``seen`` or without a standard error (NaN) count as converged (reported apart)."""
+    ok, ratio = np.ones(np.shape(rel), bool), np.zeros(np.shape(rel))
+    for d in steps:
+        ok_d, r_d = convergence_test(d, rel, seen, threshold, clip=clip)
+        ok &= ok_d
+        ratio = np.maximum(ratio, r_d)
+    if pinned is not None:
+        ok &= ~np.asarray(pinned, bool)
+    bad = ~ok.all(axis=1)
+    if misfit_p is not None:
+        bad |= np.asarray(misfit_p) < p_min
+    judged = np.isfinite(np.asarray(rel, np.float64))
+    if seen is not None:
+        judged &= np.asarray(seen, bool).reshape(-1, 1)
+    return ~(bad[:, None] & judged), ratio
+
+
+def at_bounds(values, bounds, rtol: float = 1e-6):
+    """(texels, P) bool: ``values`` (texels, P) at the lower or upper bound of ``bounds`` (per column
+    (lo, hi)), to ``rtol``."""
+    values = np.asarray(values, np.float64)
+    lo = np.array([b[0] for b in bounds])
+    hi = np.array([b[1] for b in bounds])
+    return (values <= lo * (1 + rtol)) | (values >= hi * (1 - rtol))
+
+
 def convergence_warnings(converged: dict, step_se: dict, seen, threshold: float = CONVERGENCE_THRESHOLD,
                          regularized: bool = False) -> dict:
     """{name: (fraction of seen texels not converged, message)} for every parameter with some."""
@@ -358,8 +455,10 @@ def convergence_warnings(converged: dict, step_se: dict, seen, threshold: float 
         cause = ("the regulariser holds them away from the data's minimum, or the fit stopped early"
                  if regularized else "the fit stopped before the minimum: run more iterations (or polish steps)")
         out[name] = (float(bad.mean()), f"{name} has not converged in {_percent(bad.mean())} % of the {n} seen texels "
-                     f"(its last Gauss-Newton steps up to {worst:.3g} standard errors, > {threshold:g}, or at the step "
-                     f"limit): {cause}; "
+                     f"(a last Gauss-Newton step > {threshold:g} standard errors or at the step limit, the value "
+                     f"at a bound, the texel's residuals above the noise: chi-square p < {MISFIT_P:g}, or another "
+                     f"parameter of the texel not converged; its largest step there {worst:.3g} standard errors): "
+                     f"{cause}; "
                      f"their standard errors are set to NaN (result.converged marks them)")
     return out
 

@@ -61,6 +61,7 @@ from hyde_bsdf.errors import OutputError, UsageError
 from hyde_bsdf.io.output_gate import OutputLock, check_folder, check_target
 
 __all__ = ["atomic_path", "atomic_open", "atomic_group", "atomic_dir", "check_output_path", "check_output_dir",
+           "folder_target",
            "check_name_fits", "OutputWriteError", "Terminated", "install_signal_cleanup",
            "remove_stale_temporaries", "remove_live_temporaries", "read_manifest", "foreign_files",
            "check_dir_owned", "write_manifest", "write_error", "MANIFEST_NAME", "TEMP_NAME_RE", "LEGACY_TEMP_RE"]
@@ -590,12 +591,7 @@ def atomic_dir(path, manifest: str = MANIFEST_NAME, force: bool = False, on_kept
       ``force`` the files of the old manifest are removed, the new ones moved in, every other file
       kept -- one whose name a new file takes is renamed ``NAME.orig`` and passed to ``on_kept(list)``.
     """
-    path = Path(path)
-    check_name_fits(path, "output folder")
-    if path.is_symlink():
-        path = path.resolve()
-    if path.exists() and not path.is_dir():
-        raise UsageError(f"output folder {str(path)!r} is a regular file, not a folder")
+    path = folder_target(path, "output folder", follow_link=True)
     check_folder(path, "output folder")         # the output gate: a mount point, a sticky folder
     lock = OutputLock([path], "output folder").__enter__()    # one writer of the folder at a time
     try:
@@ -754,15 +750,24 @@ def check_output_path(path, what: str = "output file", create_parent: bool = Tru
     return path
 
 
+def folder_target(path, what: str = "output folder", follow_link: bool = False) -> Path:
+    """``path`` as an output folder before any check of its contents: its name fits, a link
+    followed to its target (``follow_link``), an existing non-folder refused (UsageError)."""
+    path = Path(path)
+    check_name_fits(path, what)
+    if follow_link and path.is_symlink():
+        path = path.resolve()
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"{what} {str(path)!r} is a regular file, not a folder")
+    return path
+
+
 def check_output_dir(path, what: str = "output folder", create: bool = True) -> Path:
     """Check, before any long work, that files can be written in the folder ``path``.
 
     Same errors as :func:`check_output_path`; a missing folder is created when ``create``.
     """
-    path = Path(path)
-    check_name_fits(path, what)
-    if path.exists() and not path.is_dir():
-        raise UsageError(f"{what} {str(path)!r} is a regular file, not a folder")
+    path = folder_target(path, what)
     if not path.exists():
         if not create:
             raise UsageError(f"{what} {str(path)!r} does not exist")

@@ -87,7 +87,7 @@ def _cells(name, lineno, line: str) -> list:
 def element_index(name: str) -> tuple[int, int]:
     """(row, column) of an element name such as ``"M23"``; ValueError for anything else."""
     if name not in ELEMENT_NAMES:
-        raise ValueError(f"Mueller element name must be one of {', '.join(ELEMENT_NAMES)} "
+        raise UsageError(f"Mueller element name must be one of {', '.join(ELEMENT_NAMES)} "
                          f"(normalized by M00), got {name!r}")
     return int(name[1]), int(name[2])
 
@@ -188,6 +188,14 @@ def _decode(name, raw: bytes) -> str:
         raise MeasurementFileError(f"{name}: cannot be read as UTF-8 text ({exc})") from None
 
 
+def _skipped(line: str, comments: list) -> bool:
+    """Whether ``line`` is blank or a comment (a comment's text is added to ``comments``)."""
+    stripped = line.strip()
+    if stripped and stripped[0] == "#":
+        comments.append(stripped[1:].strip())
+    return not stripped or stripped[0] == "#"
+
+
 def _split_header(name, raw: bytes):
     """((line number, column names), the bytes after the header line, comments before it)."""
     comments = []
@@ -198,11 +206,7 @@ def _split_header(name, raw: bytes):
         line = _decode(name, raw[pos:end])     # line ends are LF only here (_normalise)
         lineno += 1
         pos = end + 1
-        stripped = line.strip()
-        if not stripped:
-            continue
-        if stripped[0] == "#":
-            comments.append(stripped[1:].strip())
+        if _skipped(line, comments):
             continue
         return (lineno, [c.strip() for c in _cells(name, lineno, line)]), raw[pos:], comments
     raise MeasurementFileError(f"{name}: no header line (expected columns "
@@ -215,11 +219,7 @@ def _data_lines(name, raw: bytes, hline: int, comments: list):
     for lineno, line in enumerate(_decode(name, raw).split("\n"), start=1):
         if lineno <= hline:
             continue
-        stripped = line.strip()
-        if not stripped:
-            continue
-        if stripped[0] == "#":
-            comments.append(stripped[1:].strip())
+        if _skipped(line, comments):
             continue
         linenos.append(lineno)
         lines.append(line)
@@ -318,15 +318,7 @@ def read_measurements(path, progress=None) -> Measurements:
     report = as_callback(progress)
     path = Path(path)
     name = str(path)
-    try:       # the input gate: a regular file or stdin, size-limited, read once (no FIFO, no device)
-        checked = check_input(path, "measurement file")
-        size = 0 if checked == STDIN else checked.stat().st_size
-        if report and size > 10e6:
-            report(f"reading {name} ({size / 1e6:.0f} MB)")
-        raw = read_input(path, "measurement file")
-    except UsageError as exc:
-        raise MeasurementFileError(str(exc)) from None
-
+    raw, size = _read_gated(path, name, report)
     raw = _normalise(name, raw)
     header, body, comments = _split_header(name, raw)
     hline, columns = header
@@ -341,7 +333,48 @@ def read_measurements(path, progress=None) -> Measurements:
             linenos = np.arange(hline + 1, hline + 1 + rows)
     if table is None:
         linenos, lines = _data_lines(name, raw, hline, comments)
-    # ---- header: known names, no duplicates, the required ones present
+    elements, sigmas = _check_columns(name, hline, columns)
+    if table is None:
+        if not lines:
+            raise MeasurementFileError(f"{name}: header but no data rows")
+        table = _parse(name, columns, linenos, lines)
+        del lines
+        linenos = np.asarray(linenos)
+    del raw, body
+    _check_values(name, columns, linenos, table)
+    table = np.ascontiguousarray(table.T)          # one copy: each column contiguous
+    data = dict(zip(columns, table))
+    if report and size > 10e6:
+        report(f"read {len(linenos)} rows in {time.perf_counter() - t0:.1f} s")
+
+    return Measurements(
+        theta_i=np.radians(data["theta_i_deg"]),
+        theta_r=np.radians(data["theta_r_deg"]),
+        phi=np.radians(data["phi_deg"]),
+        values={e: data[e] for e in elements},
+        sigma={e: data[f"{e}_sigma"] for e in elements} if sigmas else None,
+        n_samples=data.get("n_samples"),
+        source=name,
+        comments=comments,
+    )
+
+
+def _read_gated(path, name, report):
+    """The file's bytes through the input gate (a regular file or stdin, size-limited, read once;
+    no FIFO, no device), and its size (0 for stdin)."""
+    try:
+        checked = check_input(path, "measurement file")
+        size = 0 if checked == STDIN else checked.stat().st_size
+        if report and size > 10e6:
+            report(f"reading {name} ({size / 1e6:.0f} MB)")
+        return read_input(path, "measurement file"), size
+    except UsageError as exc:
+        raise MeasurementFileError(str(exc)) from None
+
+
+def _check_columns(name, hline, columns):
+    """The header: known names, no duplicates, the required ones present, a sigma column for
+    every element or for none.  Returns (element columns, sigma columns)."""
     known = set(ANGLE_COLUMNS) | set(ELEMENT_NAMES) | {f"{e}_sigma" for e in ELEMENT_NAMES} | {"n_samples"}
     seen = set()
     for col in columns:
@@ -371,29 +404,7 @@ def read_measurements(path, progress=None) -> Measurements:
             if f"{e}_sigma" not in seen:
                 raise _error(name, hline, None, f"missing column {e + '_sigma'!r}: give a sigma "
                              f"column for every element, or for none")
-    if table is None:
-        if not lines:
-            raise MeasurementFileError(f"{name}: header but no data rows")
-        table = _parse(name, columns, linenos, lines)
-        del lines
-        linenos = np.asarray(linenos)
-    del raw, body
-    _check_values(name, columns, linenos, table)
-    table = np.ascontiguousarray(table.T)          # one copy: each column contiguous
-    data = dict(zip(columns, table))
-    if report and size > 10e6:
-        report(f"read {len(linenos)} rows in {time.perf_counter() - t0:.1f} s")
-
-    return Measurements(
-        theta_i=np.radians(data["theta_i_deg"]),
-        theta_r=np.radians(data["theta_r_deg"]),
-        phi=np.radians(data["phi_deg"]),
-        values={e: data[e] for e in elements},
-        sigma={e: data[f"{e}_sigma"] for e in elements} if sigmas else None,
-        n_samples=data.get("n_samples"),
-        source=name,
-        comments=comments,
-    )
+    return elements, sigmas
 
 
 def write_measurements(path, meas: Measurements, comments=()) -> Path:

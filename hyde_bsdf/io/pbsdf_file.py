@@ -177,7 +177,7 @@ def write_pbsdf(path, theta_h, theta_d, phi_d, wavelengths, M, extra: dict | Non
     extras = {}
     for name, value in (extra or {}).items():
         if name in _FIELDS:
-            raise ValueError(f"extra field {name!r} clashes with a table field")
+            raise UsageError(f"extra field {name!r} clashes with a table field")
         extras[name] = (np.frombuffer(value.encode("utf-8"), np.uint8) if isinstance(value, str)
                         else np.ascontiguousarray(value))
     small = {**grids, **extras}
@@ -186,7 +186,7 @@ def write_pbsdf(path, theta_h, theta_d, phi_d, wavelengths, M, extra: dict | Non
     head, offsets, total = _header(layout)
     slabs = [M] if isinstance(M, np.ndarray) else M
     if isinstance(M, np.ndarray) and M.shape != shape:
-        raise ValueError(f"M has shape {M.shape}; the grids need {shape}")
+        raise UsageError(f"M has shape {M.shape}; the grids need {shape}")
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         f.write(head)
         for name, a in small.items():

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import InputFileError, UsageError
 from hyde_bsdf.io.input_gate import check_input
 
 __all__ = [
@@ -62,16 +62,16 @@ def exr_channel_names() -> list[str]:
 def _check_stokes(stokes: dict) -> tuple[int, int]:
     """Validate a Stokes image dict; returns its (H, W)."""
     if not isinstance(stokes, dict):
-        raise ValueError(f"stokes must be a dict with keys {STOKES_NAMES}, got {type(stokes).__name__}")
+        raise UsageError(f"stokes must be a dict with keys {STOKES_NAMES}, got {type(stokes).__name__}")
     missing = [s for s in STOKES_NAMES if s not in stokes]
     if missing:
-        raise ValueError(f"stokes is missing the component(s) {missing}; it needs {list(STOKES_NAMES)}")
+        raise UsageError(f"stokes is missing the component(s) {missing}; it needs {list(STOKES_NAMES)}")
     shape = np.shape(stokes["S0"])
     if len(shape) != 3 or shape[2] != 3 or shape[0] < 1 or shape[1] < 1:
-        raise ValueError(f"stokes['S0'] must have shape (H, W, 3), got {shape}")
+        raise UsageError(f"stokes['S0'] must have shape (H, W, 3), got {shape}")
     for name in STOKES_NAMES[1:] + (("RGB",) if "RGB" in stokes else ()):
         if np.shape(stokes[name]) != shape:
-            raise ValueError(f"stokes[{name!r}] has shape {np.shape(stokes[name])}, expected {shape}")
+            raise UsageError(f"stokes[{name!r}] has shape {np.shape(stokes[name])}, expected {shape}")
     return shape[0], shape[1]
 
 
@@ -100,7 +100,7 @@ def write_stokes_exr(path, stokes: dict, metadata: dict | None = None) -> Path:
     if colour_only:
         shape = np.shape(stokes["RGB"])
         if len(shape) != 3 or shape[2] != 3 or shape[0] < 1 or shape[1] < 1:
-            raise ValueError(f"stokes['RGB'] must have shape (H, W, 3), got {shape}")
+            raise UsageError(f"stokes['RGB'] must have shape (H, W, 3), got {shape}")
     else:
         _check_stokes(stokes)
     rgb = np.asarray(stokes.get("RGB", stokes.get("S0")), dtype=np.float32)
@@ -113,7 +113,7 @@ def write_stokes_exr(path, stokes: dict, metadata: dict | None = None) -> Path:
             channels[f"{s}.{c}"] = np.ascontiguousarray(arr[..., j])
     bad = [name for name, a in channels.items() if not np.all(np.isfinite(a))]
     if bad:
-        raise ValueError(f"stokes has non-finite values in channel(s) {bad}; refusing to write {path}")
+        raise UsageError(f"stokes has non-finite values in channel(s) {bad}; refusing to write {path}")
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     if not colour_only:
         header["hyde_bsdf.stokes_basis"] = (
@@ -182,8 +182,8 @@ def read_stokes_exr(path) -> dict:
     need = [f"{s}.{c}" for s in STOKES_NAMES for c in COLOURS]
     missing = [n for n in need if n not in chans]
     if missing:
-        raise ValueError(f"{path} is not a Stokes EXR: channels {missing} are missing "
-                         f"(found {sorted(chans)})")
+        raise InputFileError(f"{path} is not a Stokes EXR: channels {missing} are missing "
+                             f"(found {sorted(chans)})")
     out: dict = {}
     for s in STOKES_NAMES:
         out[s] = np.stack([chans[f"{s}.{c}"] for c in COLOURS], axis=-1).astype(np.float32)

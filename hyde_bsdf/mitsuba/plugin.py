@@ -460,6 +460,25 @@ def _make_class():
                 self.m_read.clear()
                 raise
 
+        def replace_texture(self, name, texture):
+            """Put ``texture`` in place of the texture of traverse name ``name`` (``alpha`` or
+            ``rms_slope``, ``eta``, ``k``, ``specular_reflectance``) and check it as an update would
+            (a refused one is not kept).  Used to swap a bitmap for one with another ``filter_type``
+            (:func:`hyde_bsdf.render.texture_filter.bitmap_to_nearest`); call ``mi.traverse`` again
+            afterwards (the old texture's parameters no longer reach the BSDF)."""
+            attrs = {self.m_rough_key: "m_rough", "eta": "m_eta", "k": "m_k",
+                     "specular_reflectance": "m_specular_reflectance"}
+            if name not in attrs:
+                raise ValueError(f"hyde: replace_texture: unknown parameter {name!r}; use {', '.join(attrs)}")
+            old = getattr(self, attrs[name])
+            setattr(self, attrs[name], texture)
+            try:
+                self._validate((name,))
+            except ValueError:
+                setattr(self, attrs[name], old)
+                self._validate((name,))
+                raise
+
         def _textures(self):
             """{traverse name: texture} of the checked parameters."""
             return {self.m_rough_key: self.m_rough, "eta": self.m_eta, "k": self.m_k,

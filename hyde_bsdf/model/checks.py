@@ -14,6 +14,8 @@ import numbers
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError
+
 __all__ = ["real_array", "real_scalar", "check_bool", "broadcast_named"]
 
 
@@ -39,7 +41,7 @@ def real_array(name: str, value, accepted: str) -> np.ndarray:
     try:
         a = np.asarray(value)
     except (ValueError, TypeError) as exc:           # ragged nested lists
-        raise ValueError(f"{name} must be an array of real numbers ({accepted}): {exc}") from None
+        raise UsageError(f"{name} must be an array of real numbers ({accepted}): {exc}") from None
     if a.dtype.kind == "O":                          # e.g. a list mixing numbers and None
         if not all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)) for v in a.flat):
             raise TypeError(f"{name} must be real numbers ({accepted}), got non-numeric values")
@@ -50,7 +52,7 @@ def real_array(name: str, value, accepted: str) -> np.ndarray:
                            if a.dtype.kind == "c" else ""))
     a = a.astype(float, copy=False)
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"{name} must be finite ({accepted}), got non-finite values")
+        raise UsageError(f"{name} must be finite ({accepted}), got non-finite values")
     return a
 
 
@@ -68,7 +70,7 @@ def real_scalar(name: str, value, lo: float, hi: float) -> float:
         raise TypeError(f"{name} must be a real number in {rng}, got {type(value).__name__} {value!r}")
     v = float(value)
     if not math.isfinite(v) or not lo <= v <= hi:
-        raise ValueError(f"{name} must be a finite number in {rng}, got {value!r}")
+        raise UsageError(f"{name} must be a finite number in {rng}, got {value!r}")
     return v
 
 
@@ -85,4 +87,4 @@ def broadcast_named(**arrays) -> tuple:
         return np.broadcast_shapes(*(a.shape for a in arrays.values()))
     except ValueError:
         shapes = ", ".join(f"{k} {v.shape}" for k, v in arrays.items())
-        raise ValueError(f"{', '.join(arrays)} must broadcast to one shape, got {shapes}") from None
+        raise UsageError(f"{', '.join(arrays)} must broadcast to one shape, got {shapes}") from None

@@ -78,6 +78,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError
+
 from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf.io.trust import UntrustedFileError, make_private_dir, open_trusted, user_secret
 from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
@@ -215,7 +217,7 @@ def dhr_quadrature(theta_i, rms_slope, shadowing="vgroove", n_outer=16, n_inner=
     ValueError, each naming the parameter.
     """
     if not isinstance(shadowing, str) or shadowing not in SHADOWING:
-        raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+        raise UsageError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
     t = real_array("theta_i", theta_i, "radians in [0, pi/2]")
     s = real_array("rms_slope", rms_slope, f"in [{TABLE_SLOPE_RANGE[0]:g}, {TABLE_SLOPE_RANGE[1]:g}]")
     broadcast_named(theta_i=t, rms_slope=s)
@@ -223,15 +225,15 @@ def dhr_quadrature(theta_i, rms_slope, shadowing="vgroove", n_outer=16, n_inner=
     shape = t.shape
     t, s = t.ravel(), s.ravel()
     if np.any((t < 0) | (t > 0.5 * math.pi)):
-        raise ValueError("theta_i must be in [0, pi/2] radians")
+        raise UsageError("theta_i must be in [0, pi/2] radians")
     lo, hi = TABLE_SLOPE_RANGE[0] * (1 - 1e-12), TABLE_SLOPE_RANGE[1] * (1 + 1e-12)  # exp(log(100))
     if np.any((s < lo) | (s > hi)):
         # the evaluator's range; far below it the clipped Gaussian misses the disk (rho -> 0
         # instead of 1 at rms_slope 1e-30), far above it g underflows and overflows
-        raise ValueError(f"rms_slope must be in [{TABLE_SLOPE_RANGE[0]:g}, {TABLE_SLOPE_RANGE[1]:g}]")
+        raise UsageError(f"rms_slope must be in [{TABLE_SLOPE_RANGE[0]:g}, {TABLE_SLOPE_RANGE[1]:g}]")
     for name, v in (("n_outer", n_outer), ("n_inner", n_inner)):
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or not 1 <= v <= 512:
-            raise ValueError(f"{name} must be an integer in [1, 512], got {v!r}")
+            raise UsageError(f"{name} must be an integer in [1, 512], got {v!r}")
     check_bool("error_estimate", error_estimate)
     rho = np.empty_like(t)
     err = np.empty_like(t) if error_estimate else None
@@ -500,7 +502,7 @@ def load_table(shadowing="vgroove") -> DHRTable:
     :class:`DHRCacheWarning` naming it and rebuilt; the new file replaces it atomically.
     """
     if not isinstance(shadowing, str) or shadowing not in SHADOWING:
-        raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+        raise UsageError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
     if shadowing in _TABLES:
         return _TABLES[shadowing]
     path = cache_path(shadowing)

@@ -42,6 +42,8 @@ import math
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError
+
 from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
 from hyde_bsdf.model.dhr import load_table, x_of_theta
 from hyde_bsdf.model.facet_geometry import angle_trig, cos_alpha_beta, rotation_terms
@@ -62,26 +64,26 @@ INDEX_MAX = N.hi
 def _check_angles(name, value, hi):
     a = real_array(name, value, "radians")
     if hi is not None and np.any((a < 0.0) | (a > hi)):
-        raise ValueError(f"{name} must be in [0, pi] radians (polar angle; > pi/2 is below the horizon)")
+        raise UsageError(f"{name} must be in [0, pi] radians (polar angle; > pi/2 is below the horizon)")
     return a
 
 
 def _check_index(n, k, pec):
     if check_bool("pec", pec):
         if n is not None:
-            raise ValueError("give either n (and k) or pec=True, not both")
+            raise UsageError("give either n (and k) or pec=True, not both")
         return None, None
     if n is None:
-        raise ValueError("n is required (eta = n - jk) unless pec=True")
+        raise UsageError("n is required (eta = n - jk) unless pec=True")
     out = [rng.check(v) for rng, v in ((N, n), (K, k))]
     if math.hypot(*out) < INDEX_MIN:       # eta^2 would underflow in the Fresnel terms
-        raise ValueError(f"n and k: |eta| = sqrt(n^2 + k^2) must be >= {INDEX_MIN:g}, got n={out[0]!r}, k={out[1]!r}")
+        raise UsageError(f"n and k: |eta| = sqrt(n^2 + k^2) must be >= {INDEX_MIN:g}, got n={out[0]!r}, k={out[1]!r}")
     return out
 
 
 def _check_shadowing(shadowing):
     if not isinstance(shadowing, str) or shadowing not in SHADOWING:
-        raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+        raise UsageError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
     return shadowing
 
 
@@ -101,7 +103,7 @@ def _check_diffuse(diffuse):
         return "none"
     if isinstance(diffuse, str) and diffuse in DIFFUSE:
         return diffuse
-    raise ValueError(f"diffuse must be True, False or one of {DIFFUSE}, got {diffuse!r}")
+    raise UsageError(f"diffuse must be True, False or one of {DIFFUSE}, got {diffuse!r}")
 
 
 def specular_pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
@@ -216,7 +218,7 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
     if mode == "reciprocal" and shadowing == "none":
         # without shadowing rho^{s,PEC} exceeds 1 at grazing incidence, so the reciprocal
         # normalisation 1 - rho_avg is not positive (the plugin refuses the same pair)
-        raise ValueError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'; with shadowing='none' "
+        raise UsageError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'; with shadowing='none' "
                          "the specular DHR exceeds 1 and (1 - rho_avg) is not positive")
     theta_i, theta_r, phi = _check_all_angles(theta_i, theta_r, phi)
     out, A, above = _specular(theta_i, theta_r, phi, s, nk, pec, shadowing)

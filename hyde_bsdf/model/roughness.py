@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError
+
 from hyde_bsdf.model.parameters import RMS_SLOPE, SQRT2, alpha_from_rms_slope, rms_slope_from_alpha
 
 __all__ = ["rms_slope_from", "alpha_from_rms_slope", "rms_slope_from_alpha", "check_rms_slope"]
@@ -20,9 +22,9 @@ def rms_slope_from(sigma_h, ell):
     sigma_h = np.asarray(sigma_h, dtype=float)
     ell = np.asarray(ell, dtype=float)
     if not np.all(np.isfinite(sigma_h)) or np.any(sigma_h <= 0):
-        raise ValueError(f"sigma_h must be finite and > 0, got {sigma_h}")
+        raise UsageError(f"sigma_h must be finite and > 0, got {sigma_h}")
     if not np.all(np.isfinite(ell)) or np.any(ell <= 0):
-        raise ValueError(f"ell must be finite and > 0, got {ell}")
+        raise UsageError(f"ell must be finite and > 0, got {ell}")
     out = SQRT2 * sigma_h / ell
     return float(out) if out.ndim == 0 else out
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from hyde_bsdf.errors import UsageError
 from scipy.special import erf
 
 __all__ = ["SHADOWING", "g_vgroove", "g1_smith_beckmann", "g_smith", "g_none", "visibility"]
@@ -56,4 +58,4 @@ def visibility(name, cos_alpha, cos_beta, cos_i, cos_r, rms_slope):
         return g_smith(cos_i, cos_r, rms_slope)
     if name == "none":
         return g_none(cos_i)
-    raise ValueError(f"shadowing must be one of {SHADOWING}, got {name!r}")
+    raise UsageError(f"shadowing must be one of {SHADOWING}, got {name!r}")

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError
+
 from hyde_bsdf.io.stokes_exr import COLOURS, STOKES_NAMES, _check_stokes
 
 __all__ = ["LUMINANCE_WEIGHTS", "luminance", "polarization_quantities", "tonemap"]
@@ -38,12 +40,12 @@ def luminance(image, channel: str = "Y") -> np.ndarray:
     """
     image = np.asarray(image, dtype=np.float64)
     if image.ndim != 3 or image.shape[2] != 3:
-        raise ValueError(f"image must have shape (H, W, 3), got {image.shape}")
+        raise UsageError(f"image must have shape (H, W, 3), got {image.shape}")
     if channel == "Y":
         return image @ LUMINANCE_WEIGHTS
     if channel in COLOURS:
         return image[..., COLOURS.index(channel)]
-    raise ValueError(f"channel must be one of 'Y', 'R', 'G', 'B', got {channel!r}")
+    raise UsageError(f"channel must be one of 'Y', 'R', 'G', 'B', got {channel!r}")
 
 
 def polarization_quantities(stokes: dict, channel: str = "Y") -> dict:
@@ -60,7 +62,7 @@ def polarization_quantities(stokes: dict, channel: str = "Y") -> dict:
     s0, s1, s2, s3 = (luminance(stokes[s], channel) for s in STOKES_NAMES)
     for name, arr in zip(STOKES_NAMES, (s0, s1, s2, s3)):
         if not np.all(np.isfinite(arr)):
-            raise ValueError(f"stokes[{name!r}] has non-finite values")
+            raise UsageError(f"stokes[{name!r}] has non-finite values")
     valid = s0 > S0_FLOOR
     safe_s0 = np.where(valid, s0, 1.0)  # placeholder divisor where undefined; masked below
     dolp = np.where(valid, np.minimum(np.hypot(s1, s2) / safe_s0, 1.0), 0.0)

@@ -591,16 +591,16 @@ def sensor_to_paper_rotation(ray_d, up, normal=(0.0, 0.0, 1.0), phi_r=None):
     k = -ray_d / np.linalg.norm(ray_d)
     x_m = np.cross(ray_d, up)
     if np.linalg.norm(x_m) < 1e-9:
-        raise ValueError("up must not be parallel to ray_d (the sensor basis is undefined)")
+        raise UsageError("up must not be parallel to ray_d (the sensor basis is undefined)")
     x_m /= np.linalg.norm(x_m)
     s_r = np.cross(k, z)
     if np.linalg.norm(s_r) < 1e-7:
         # Normal viewing: the paper takes the limit at fixed azimuth phi_r, where
         # k x z -> (sin phi_r, -cos phi_r, 0) for z = (0, 0, 1).
         if phi_r is None:
-            raise ValueError("phi_r is needed when the view direction is along the normal")
+            raise UsageError("phi_r is needed when the view direction is along the normal")
         if not np.allclose(z, (0.0, 0.0, 1.0)):
-            raise ValueError("phi_r is only supported for normal = (0, 0, 1)")
+            raise UsageError("phi_r is only supported for normal = (0, 0, 1)")
         s_r = np.array([math.sin(phi_r), -math.cos(phi_r), 0.0])
     s_r = s_r / np.linalg.norm(s_r)
     # Signed angle from x_m to s_r about k (both are perpendicular to k).

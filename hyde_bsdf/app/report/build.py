@@ -39,7 +39,7 @@ import traceback
 import warnings
 from pathlib import Path
 
-from hyde_bsdf.io.atomic import (TEMP_NAME_RE, atomic_dir, atomic_open, check_dir_owned, check_name_fits,
+from hyde_bsdf.io.atomic import (TEMP_NAME_RE, atomic_dir, atomic_open, check_dir_owned, folder_target,
                                  check_output_dir, read_manifest)
 from hyde_bsdf.app.args import Parser, quiet_option
 from hyde_bsdf.errors import UsageError
@@ -86,12 +86,7 @@ def check_report_dir(outdir, force: bool = False) -> Path:
     Refused: a regular file, the current folder or one above it, and -- unless ``force`` -- a
     folder holding files that no earlier report wrote (see the module docstring).
     """
-    out = Path(outdir)
-    check_name_fits(out, "--outdir")
-    if out.is_symlink():
-        out = out.resolve()
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"--outdir {str(out)!r} is a regular file, not a folder")
+    out = folder_target(outdir, "--outdir", follow_link=True)
     here = Path.cwd().resolve()
     if out.resolve() == here or out.resolve() in here.parents:
         raise UsageError(f"--outdir {str(outdir)!r} is the current folder or one above it: give the report "
