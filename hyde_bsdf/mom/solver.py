@@ -1123,6 +1123,20 @@ def _solver_reasons(results):
     return [f"{len(v)} of {len(results)} partitions: {v[0][1]} (first: partition {v[0][0]})" for v in seen.values()]
 
 
+def _mean_se(stack, M):
+    """Partition mean and its standard error (spread between partitions)."""
+    mean = stack.mean(axis=0)
+    se = stack.std(axis=0, ddof=1) / math.sqrt(M) if M > 1 else np.zeros_like(mean)
+    return mean, se
+
+
+def _coherent(F, P, M, norm):
+    """|<F>|^2 without the 1/M bias of |mean F|^2: (M |mean F|^2 - mean |F|^2) / (M - 1)."""
+    if M == 1:
+        return norm * np.abs(F[0]) ** 2
+    return norm * (np.abs(F.mean(axis=0)) ** 2 * M - P.mean(axis=0)) / (M - 1)
+
+
 def _statistics(results, cfg, surf):
     """Stage 4: Eq. 23's partition average, standard errors, coherent part, power balance, Mueller elements."""
     M, w, pols, theta_i, fine = cfg["partitions"], cfg["w"], cfg["pols"], cfg["theta_i"], surf["fine"]
@@ -1133,62 +1147,53 @@ def _statistics(results, cfg, surf):
     sum_flux = sum(r["flux"] for r in results)
     cos_i = np.cos(theta_i)
     nominal_flux = M * length * cos_i
-
-    def mean_se(stack):
-        """Partition mean and its standard error (spread between partitions)."""
-        mean = stack.mean(axis=0)
-        se = stack.std(axis=0, ddof=1) / math.sqrt(M) if M > 1 else np.zeros_like(mean)
-        return mean, se
-
-    def coherent(F, P):
-        """|<F>|^2 without the 1/M bias of |mean F|^2: (M |mean F|^2 - mean |F|^2) / (M - 1)."""
-        if M == 1:
-            return norm * np.abs(F[0]) ** 2
-        return norm * (np.abs(F.mean(axis=0)) ** 2 * M - P.mean(axis=0)) / (M - 1)
-
     per = {}
     for pol in pols:
         F = np.stack([r["F_" + pol] for r in results])
         Ff = np.stack([r["Ffine_" + pol] for r in results])
         P = np.abs(F) ** 2
         Pf = np.abs(Ff) ** 2
-        sig, se = mean_se(norm * P)
+        sig, se = _mean_se(norm * P, M)
         fine_sig = norm * Pf.mean(axis=0)
         nominal = np.trapezoid(fine_sig, fine, axis=1) / (2.0 * math.pi * cos_i)
         power = nominal * nominal_flux / sum_flux
         absorbed = sum(r["absorbed_" + pol] for r in results) / sum_flux
         per[pol] = dict(F=F, sigma=sig, se=se, fine=fine_sig, nominal=nominal, power=power, absorbed=absorbed,
-                        energy=power + absorbed, coherent=coherent(F, P),
-                        power_coherent=np.trapezoid(coherent(Ff, Pf), fine, axis=1) / (2.0 * math.pi * cos_i))
+                        energy=power + absorbed, coherent=_coherent(F, P, M, norm),
+                        power_coherent=np.trapezoid(_coherent(Ff, Pf, M, norm), fine, axis=1) / (2.0 * math.pi * cos_i))
     for name, d in per.items():
         for key in ("sigma", "power", "absorbed"):
             if not np.all(np.isfinite(d[key])):
                 raise FloatingPointError("MoM produced non-finite values (singular moment matrix?)")
-
     out = dict(per=per, mueller=None, mueller_se=None, mueller_n=None, mueller_n_se=None, sigma_sp=None)
     if len(pols) == 2:
-        Fs, Fp = per["s"]["F"], per["p"]["F"]
-        X = norm * Fs * np.conj(Fp)
-        Ps, Pp = norm * np.abs(Fs) ** 2, norm * np.abs(Fp) ** 2
-        stacks = {"M00": 0.5 * (Ps + Pp), "M01": 0.5 * (Ps - Pp), "M22": X.real, "M23": X.imag}
-        mueller, mueller_se = {}, {}
-        for key, st in stacks.items():
-            mueller[key], mueller_se[key] = mean_se(st)
-        mueller_n, mueller_n_se = {}, {}
-        den_sum = stacks["M00"].sum(axis=0)
-        for key in ("M01", "M22", "M23"):
-            num_sum = stacks[key].sum(axis=0)
-            with np.errstate(invalid="ignore", divide="ignore"):  # M00 = 0 only where nothing is scattered
-                ratio = num_sum / den_sum
-                if M > 1:  # jackknife over partitions
-                    jack = (num_sum - stacks[key]) / (den_sum - stacks["M00"])
-                    se = np.sqrt((M - 1) / M * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
-                else:
-                    se = np.zeros_like(ratio)
-            mueller_n[key + "/M00"], mueller_n_se[key + "/M00"] = ratio, se
-        out.update(mueller=mueller, mueller_se=mueller_se, mueller_n=mueller_n, mueller_n_se=mueller_n_se,
-                   sigma_sp=X.mean(axis=0))
+        out.update(_mueller_stats(per["s"]["F"], per["p"]["F"], norm, M))
     return out
+
+
+def _mueller_stats(Fs, Fp, norm, M):
+    """The in-plane Mueller elements of the partitions' far fields: means, standard errors, ratios to M00 (of the
+    partition sums, jackknife standard errors) and the cross term sigma_sp."""
+    X = norm * Fs * np.conj(Fp)
+    Ps, Pp = norm * np.abs(Fs) ** 2, norm * np.abs(Fp) ** 2
+    stacks = {"M00": 0.5 * (Ps + Pp), "M01": 0.5 * (Ps - Pp), "M22": X.real, "M23": X.imag}
+    mueller, mueller_se = {}, {}
+    for key, st in stacks.items():
+        mueller[key], mueller_se[key] = _mean_se(st, M)
+    mueller_n, mueller_n_se = {}, {}
+    den_sum = stacks["M00"].sum(axis=0)
+    for key in ("M01", "M22", "M23"):
+        num_sum = stacks[key].sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):  # M00 = 0 only where nothing is scattered
+            ratio = num_sum / den_sum
+            if M > 1:  # jackknife over partitions
+                jack = (num_sum - stacks[key]) / (den_sum - stacks["M00"])
+                se = np.sqrt((M - 1) / M * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
+            else:
+                se = np.zeros_like(ratio)
+        mueller_n[key + "/M00"], mueller_n_se[key + "/M00"] = ratio, se
+    return dict(mueller=mueller, mueller_se=mueller_se, mueller_n=mueller_n, mueller_n_se=mueller_n_se,
+                sigma_sp=X.mean(axis=0))
 
 
 def _energy_check(per, cfg):
