@@ -1063,25 +1063,33 @@ def _realise_surface(cfg, workers):
             dx = part_len / n_part
             x_all, f_all, s_all, c_all = surface(n_part)
     if eta is not None:
-        n_in = max(1.0, eta.real)
-        ppw_in = 1.0 / (dx * n_in)
-        if ppw_in < 2.0:
-            raise UsageError(f"pts_per_wl={pts_per_wl:g} gives {ppw_in:.2g} points per interior wavelength "
-                             f"(lambda / n, n={eta.real:g}): must be >= 2; raise pts_per_wl")
-        if ppw_in < 5.0:
-            reasons.append(f"only {ppw_in:.2g} points per interior wavelength (lambda / n, n={eta.real:g}): "
-                           "the field inside the material is not resolved")
-        panels = math.ceil(-eta.imag * K0 * dx * float(np.max(np.hypot(1.0, s_all))))
-        if panels > MAX_PANELS:
-            raise UsageError(f"k={-eta.imag:g} gives a skin depth of {1 / (-eta.imag * K0):.2g} wavelengths, "
-                             f"{panels} quadrature panels per cell (> {MAX_PANELS}): use k <= "
-                             f"{MAX_PANELS / (K0 * dx):.3g} at this sampling, or the PEC (n=None)")
+        reasons += _check_interior(eta, dx, s_all, pts_per_wl)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MoMAccuracyWarning)
         reasons += check_taper(cfg["theta_i"], cfg["w"], part_len, cfg["pols"], cfg.get("beam"), eta)
         reasons += check_partition(part_len, corr_length_wl, rough)
     return dict(x=x_all, f=f_all, s=s_all, c=c_all, n_part=n_part, dx=dx, method=method, dense_ok=dense_ok,
                 reasons=reasons, fine=power_grid(cfg["w"]))
+
+
+def _check_interior(eta, dx, slope, pts_per_wl):
+    """A finite index: the interior wavelength's sampling (refused below 2 points, a reason below 5) and the skin
+    depth's quadrature panels per cell (refused above MAX_PANELS); returns the reasons."""
+    reasons = []
+    n_in = max(1.0, eta.real)
+    ppw_in = 1.0 / (dx * n_in)
+    if ppw_in < 2.0:
+        raise UsageError(f"pts_per_wl={pts_per_wl:g} gives {ppw_in:.2g} points per interior wavelength "
+                         f"(lambda / n, n={eta.real:g}): must be >= 2; raise pts_per_wl")
+    if ppw_in < 5.0:
+        reasons.append(f"only {ppw_in:.2g} points per interior wavelength (lambda / n, n={eta.real:g}): "
+                       "the field inside the material is not resolved")
+    panels = math.ceil(-eta.imag * K0 * dx * float(np.max(np.hypot(1.0, slope))))
+    if panels > MAX_PANELS:
+        raise UsageError(f"k={-eta.imag:g} gives a skin depth of {1 / (-eta.imag * K0):.2g} wavelengths, "
+                         f"{panels} quadrature panels per cell (> {MAX_PANELS}): use k <= "
+                         f"{MAX_PANELS / (K0 * dx):.3g} at this sampling, or the PEC (n=None)")
+    return reasons
 
 
 def _partition_tasks(cfg, surf):
