@@ -123,3 +123,37 @@ def test_glass_and_infragold_plates_window_against_beam(n, k, factor):
         lit = mom.scatter(factor * w, 1, 0.0, 1.0, [80.0], [80.0], **kw)
     assert lit.params["incidence"] == ["beam"]
     assert abs(lit.energy_s[0] - 1) < 0.004 and abs(lit.energy_p[0] - 1) < 0.004
+
+
+def test_partition_floor_flags_forward_grazing_of_the_truncated_partition():
+    """Flat PEC plate, beam (issue 25, item 2): every sigma reported valid (sigma >= FLOOR_MARGIN x the estimated
+    floor of the truncated partition) is within 3 dB of the analytic reflected beam -- w = 75 lambda at 80 deg on
+    partitions of 4 w and 6 w (the truncation floor at 86-89 deg, -54 to -59 dB below the peak at 4 w where the
+    analytic result is -82 to -126 dB, flagged), w = 37.5 at 83 deg on 6 w (86-89 deg valid: measured within
+    1.5 dB), w = 20 at 85 deg on 4 w (a spectrum clipped at grazing: its backward-side floor, 25 dB below the peak,
+    flagged) -- with a reason naming the partition."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "validation"))
+    from mom_forward_grazing import beam_reference
+
+    theta_r = np.arange(20.0, 89.76, 0.25)
+    for f, w, ti, at_grazing in ((4, 75.0, 80.0, 0), (6, 75.0, 80.0, 0), (6, 37.5, 83.0, 4), (4, 20.0, 85.0, 0)):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", mom.MoMAccuracyWarning)
+            res = mom.scatter(f * w, 1, 0.0, 5.0, [ti], theta_r, pts_per_wl=10, executor=mom.SerialExecutor(),
+                              taper_width_wl=w, polarization=("s", "p"), solver="fast", incidence="beam",
+                              progress=False)
+        ref = beam_reference(ti, w, theta_r)
+        for pol in ("s", "p"):
+            valid = getattr(res, "valid_" + pol)[0]
+            sigma = getattr(res, "sigma_" + pol)[0]
+            assert valid.sum() >= 15  # the lobe
+            err = np.abs(10.0 * np.log10(sigma[valid] / ref[valid]))
+            assert err.max() <= 3.0, (f, w, ti, pol, err.max())
+            assert valid[theta_r >= 86.0].sum() >= at_grazing, (f, w, ti, pol)
+            if at_grazing == 0:
+                assert not valid[theta_r >= 86.0].any()
+        assert np.array_equal(res.valid, res.valid_s)
+        assert "truncated partition" in res.floor_reason and f"L = {f:g} w" in res.floor_reason

@@ -210,7 +210,18 @@ def verdict(runs):
     return rows
 
 
-def figure(runs, path):
+def annotate_verdicts(row, ti, elements, colours):
+    """Each panel of one theta_i row carries the per-element verdict of every material (element_verdict's rows):
+    "holds" or the lobe-mean difference MoM - model (V-groove) where it fails."""
+    for ax, key in zip(row, ("M00",) + tuple(e + "/M00" for e in ELEMENTS)):
+        lines = [(r[0], "holds" if r[9] == "holds" else f"fails {r[5]:+.2f}") for r in elements
+                 if r[1] == ti and r[2] == key]
+        for n, (stem, text) in enumerate(lines):
+            ax.text(0.02, 0.04 + 0.09 * n, f"{stem}: {text}", transform=ax.transAxes, fontsize=6,
+                    color=colours[stem], va="bottom", bbox=dict(facecolor="white", alpha=0.75, lw=0, pad=0.5))
+
+
+def figure(runs, path, elements=()):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -238,6 +249,7 @@ def figure(runs, path):
             seen = mb["M00"] >= 1e-3 * mb["M00"].max()    # ratios of the MoM where it scatters (> -30 dB of its peak)
             for ax, key in zip(row[1:], ELEMENTS):
                 ax.plot(c, np.where(seen, mb["M22" if key == "M33" else key] / mb["M00"], np.nan), color=col, lw=1.2)
+        annotate_verdicts(row, ti, elements, colours)
         row[0].set(ylim=(-35, 20), ylabel=f"theta_i = {ti:g} deg\nM00 (dB, sigma units)")
         for ax, key in zip(row[1:], ELEMENTS):
             ax.set(ylim=(-1.05, 1.05), title=(f"{key}/M00" + (" (= M22/M00 in 1-D)" if key == "M33" else ""))
@@ -248,7 +260,9 @@ def figure(runs, path):
     for ax in axes[-1]:
         ax.set_xlabel("theta_r (deg, + = specular side)")
     fig.suptitle(f"Grazing incidence: fast MoM against the 1-D model, rms slope {SLOPE}, ell = {ELL:g} lambda "
-                 "(blue PEC, red Infragold, green flame-sprayed Al, orange glass; 1-deg bins)", fontsize=9)
+                 "(blue PEC, red Infragold, green flame-sprayed Al, orange glass; 1-deg bins); per panel the verdict "
+                 "of the V-groove model per material (holds, or the lobe-mean difference MoM - model where it fails)",
+                 fontsize=9)
     fig.tight_layout()
     save_figure(fig, path)
 
@@ -280,7 +294,8 @@ def validate(outdir="out/validation", quick=False):
                "absorbed_s", "absorbed_p", "wall_s"], energy)
     energy_figure(energy, out / "mom_grazing_energy.png")
     runs = rough_runs(quick)
-    figure(runs, out / "mom_grazing.png")
+    elements = element_verdict(runs)
+    figure(runs, out / "mom_grazing.png", elements)
     curves = []
     for (stem, ti), (res, _) in sorted(runs.items(), key=lambda kv: (kv[0][0], kv[0][1])):
         c, mb = binned(res)
@@ -300,7 +315,6 @@ def validate(outdir="out/validation", quick=False):
               ["material", "theta_i_deg", "shadowing", "M00_rms_dB_lobe", "M00_mean_dB_lobe", "M00_mean_dB_tr_80_89",
                "M01/M00_rms", "M22/M00_rms", "M23/M00_rms", "model_rho_s", "model_min_M00", "mom_energy_s",
                "mom_energy_p", "coherent_share_exp(-(2k sigma_h cos ti)^2)"], table)
-    elements = element_verdict(runs)
     write_csv(out / "mom_grazing_elements.csv",
               ["material", "theta_i_deg", "element", "mom_lobe_mean", "model_vgroove_lobe_mean", "mean_difference",
                "mean_difference_speckle", "rms_difference", "mom_speckle_per_bin", "verdict"], elements)

@@ -201,6 +201,7 @@ from hyde_bsdf.progress import Throttle, as_callback
 from hyde_bsdf.mom.beam import gaussian_beam, window_bias
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, NEAR_WL, FastSolverUnsuitable, block_length_wl, plan_blocks, solve_fast
+from hyde_bsdf.mom.floor import FLOOR_MARGIN, floor_reason, partition_floor
 from hyde_bsdf.mom.gather import ExecutorError, check_executor, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
 from hyde_bsdf.mom.runtime import limit_blas_threads, memory_available, restore_blas_threads, worker_init
@@ -630,6 +631,12 @@ class MoMResult:
         "factor", "solve", "far_field") and the wall time of the call ("wall").
     params : dict of the run's parameters (taper width w, dx, N per partition, index, ...).
     warnings : list of str, the MoM failure reasons found for this run.
+    floor_s, floor_p : ndarray [n_ti, n_tr], the estimated floor of sigma_s / sigma_p set by the truncated
+        partition, the windowed current's surface waves (s) and the solver's tolerance
+        (:func:`hyde_bsdf.mom.floor.partition_floor`; None where not solved).
+    valid_s, valid_p : bool ndarray [n_ti, n_tr], sigma >= FLOOR_MARGIN (20) x the floor: within about 2.5 dB
+        of what an untruncated partition gives; ``valid`` the same for the first polarisation.
+    floor_reason : str, why a sigma flagged invalid is not the surface's (for legends and summaries).
     """
 
     theta_i: np.ndarray
@@ -664,6 +671,12 @@ class MoMResult:
     mueller_std_error: dict = None
     mueller_normalised: dict = None
     mueller_normalised_std_error: dict = None
+    floor_s: np.ndarray = None
+    floor_p: np.ndarray = None
+    valid_s: np.ndarray = None
+    valid_p: np.ndarray = None
+    valid: np.ndarray = None
+    floor_reason: str = ""
 
     @property
     def theta_i_deg(self):
@@ -1050,25 +1063,33 @@ def _realise_surface(cfg, workers):
             dx = part_len / n_part
             x_all, f_all, s_all, c_all = surface(n_part)
     if eta is not None:
-        n_in = max(1.0, eta.real)
-        ppw_in = 1.0 / (dx * n_in)
-        if ppw_in < 2.0:
-            raise UsageError(f"pts_per_wl={pts_per_wl:g} gives {ppw_in:.2g} points per interior wavelength "
-                             f"(lambda / n, n={eta.real:g}): must be >= 2; raise pts_per_wl")
-        if ppw_in < 5.0:
-            reasons.append(f"only {ppw_in:.2g} points per interior wavelength (lambda / n, n={eta.real:g}): "
-                           "the field inside the material is not resolved")
-        panels = math.ceil(-eta.imag * K0 * dx * float(np.max(np.hypot(1.0, s_all))))
-        if panels > MAX_PANELS:
-            raise UsageError(f"k={-eta.imag:g} gives a skin depth of {1 / (-eta.imag * K0):.2g} wavelengths, "
-                             f"{panels} quadrature panels per cell (> {MAX_PANELS}): use k <= "
-                             f"{MAX_PANELS / (K0 * dx):.3g} at this sampling, or the PEC (n=None)")
+        reasons += _check_interior(eta, dx, s_all, pts_per_wl)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MoMAccuracyWarning)
         reasons += check_taper(cfg["theta_i"], cfg["w"], part_len, cfg["pols"], cfg.get("beam"), eta)
         reasons += check_partition(part_len, corr_length_wl, rough)
     return dict(x=x_all, f=f_all, s=s_all, c=c_all, n_part=n_part, dx=dx, method=method, dense_ok=dense_ok,
                 reasons=reasons, fine=power_grid(cfg["w"]))
+
+
+def _check_interior(eta, dx, slope, pts_per_wl):
+    """A finite index: the interior wavelength's sampling (refused below 2 points, a reason below 5) and the skin
+    depth's quadrature panels per cell (refused above MAX_PANELS); returns the reasons."""
+    reasons = []
+    n_in = max(1.0, eta.real)
+    ppw_in = 1.0 / (dx * n_in)
+    if ppw_in < 2.0:
+        raise UsageError(f"pts_per_wl={pts_per_wl:g} gives {ppw_in:.2g} points per interior wavelength "
+                         f"(lambda / n, n={eta.real:g}): must be >= 2; raise pts_per_wl")
+    if ppw_in < 5.0:
+        reasons.append(f"only {ppw_in:.2g} points per interior wavelength (lambda / n, n={eta.real:g}): "
+                       "the field inside the material is not resolved")
+    panels = math.ceil(-eta.imag * K0 * dx * float(np.max(np.hypot(1.0, slope))))
+    if panels > MAX_PANELS:
+        raise UsageError(f"k={-eta.imag:g} gives a skin depth of {1 / (-eta.imag * K0):.2g} wavelengths, "
+                         f"{panels} quadrature panels per cell (> {MAX_PANELS}): use k <= "
+                         f"{MAX_PANELS / (K0 * dx):.3g} at this sampling, or the PEC (n=None)")
+    return reasons
 
 
 def _partition_tasks(cfg, surf):
@@ -1110,6 +1131,20 @@ def _solver_reasons(results):
     return [f"{len(v)} of {len(results)} partitions: {v[0][1]} (first: partition {v[0][0]})" for v in seen.values()]
 
 
+def _mean_se(stack, M):
+    """Partition mean and its standard error (spread between partitions)."""
+    mean = stack.mean(axis=0)
+    se = stack.std(axis=0, ddof=1) / math.sqrt(M) if M > 1 else np.zeros_like(mean)
+    return mean, se
+
+
+def _coherent(F, P, M, norm):
+    """|<F>|^2 without the 1/M bias of |mean F|^2: (M |mean F|^2 - mean |F|^2) / (M - 1)."""
+    if M == 1:
+        return norm * np.abs(F[0]) ** 2
+    return norm * (np.abs(F.mean(axis=0)) ** 2 * M - P.mean(axis=0)) / (M - 1)
+
+
 def _statistics(results, cfg, surf):
     """Stage 4: Eq. 23's partition average, standard errors, coherent part, power balance, Mueller elements."""
     M, w, pols, theta_i, fine = cfg["partitions"], cfg["w"], cfg["pols"], cfg["theta_i"], surf["fine"]
@@ -1120,62 +1155,53 @@ def _statistics(results, cfg, surf):
     sum_flux = sum(r["flux"] for r in results)
     cos_i = np.cos(theta_i)
     nominal_flux = M * length * cos_i
-
-    def mean_se(stack):
-        """Partition mean and its standard error (spread between partitions)."""
-        mean = stack.mean(axis=0)
-        se = stack.std(axis=0, ddof=1) / math.sqrt(M) if M > 1 else np.zeros_like(mean)
-        return mean, se
-
-    def coherent(F, P):
-        """|<F>|^2 without the 1/M bias of |mean F|^2: (M |mean F|^2 - mean |F|^2) / (M - 1)."""
-        if M == 1:
-            return norm * np.abs(F[0]) ** 2
-        return norm * (np.abs(F.mean(axis=0)) ** 2 * M - P.mean(axis=0)) / (M - 1)
-
     per = {}
     for pol in pols:
         F = np.stack([r["F_" + pol] for r in results])
         Ff = np.stack([r["Ffine_" + pol] for r in results])
         P = np.abs(F) ** 2
         Pf = np.abs(Ff) ** 2
-        sig, se = mean_se(norm * P)
+        sig, se = _mean_se(norm * P, M)
         fine_sig = norm * Pf.mean(axis=0)
         nominal = np.trapezoid(fine_sig, fine, axis=1) / (2.0 * math.pi * cos_i)
         power = nominal * nominal_flux / sum_flux
         absorbed = sum(r["absorbed_" + pol] for r in results) / sum_flux
         per[pol] = dict(F=F, sigma=sig, se=se, fine=fine_sig, nominal=nominal, power=power, absorbed=absorbed,
-                        energy=power + absorbed, coherent=coherent(F, P),
-                        power_coherent=np.trapezoid(coherent(Ff, Pf), fine, axis=1) / (2.0 * math.pi * cos_i))
+                        energy=power + absorbed, coherent=_coherent(F, P, M, norm),
+                        power_coherent=np.trapezoid(_coherent(Ff, Pf, M, norm), fine, axis=1) / (2.0 * math.pi * cos_i))
     for name, d in per.items():
         for key in ("sigma", "power", "absorbed"):
             if not np.all(np.isfinite(d[key])):
                 raise FloatingPointError("MoM produced non-finite values (singular moment matrix?)")
-
     out = dict(per=per, mueller=None, mueller_se=None, mueller_n=None, mueller_n_se=None, sigma_sp=None)
     if len(pols) == 2:
-        Fs, Fp = per["s"]["F"], per["p"]["F"]
-        X = norm * Fs * np.conj(Fp)
-        Ps, Pp = norm * np.abs(Fs) ** 2, norm * np.abs(Fp) ** 2
-        stacks = {"M00": 0.5 * (Ps + Pp), "M01": 0.5 * (Ps - Pp), "M22": X.real, "M23": X.imag}
-        mueller, mueller_se = {}, {}
-        for key, st in stacks.items():
-            mueller[key], mueller_se[key] = mean_se(st)
-        mueller_n, mueller_n_se = {}, {}
-        den_sum = stacks["M00"].sum(axis=0)
-        for key in ("M01", "M22", "M23"):
-            num_sum = stacks[key].sum(axis=0)
-            with np.errstate(invalid="ignore", divide="ignore"):  # M00 = 0 only where nothing is scattered
-                ratio = num_sum / den_sum
-                if M > 1:  # jackknife over partitions
-                    jack = (num_sum - stacks[key]) / (den_sum - stacks["M00"])
-                    se = np.sqrt((M - 1) / M * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
-                else:
-                    se = np.zeros_like(ratio)
-            mueller_n[key + "/M00"], mueller_n_se[key + "/M00"] = ratio, se
-        out.update(mueller=mueller, mueller_se=mueller_se, mueller_n=mueller_n, mueller_n_se=mueller_n_se,
-                   sigma_sp=X.mean(axis=0))
+        out.update(_mueller_stats(per["s"]["F"], per["p"]["F"], norm, M))
     return out
+
+
+def _mueller_stats(Fs, Fp, norm, M):
+    """The in-plane Mueller elements of the partitions' far fields: means, standard errors, ratios to M00 (of the
+    partition sums, jackknife standard errors) and the cross term sigma_sp."""
+    X = norm * Fs * np.conj(Fp)
+    Ps, Pp = norm * np.abs(Fs) ** 2, norm * np.abs(Fp) ** 2
+    stacks = {"M00": 0.5 * (Ps + Pp), "M01": 0.5 * (Ps - Pp), "M22": X.real, "M23": X.imag}
+    mueller, mueller_se = {}, {}
+    for key, st in stacks.items():
+        mueller[key], mueller_se[key] = _mean_se(st, M)
+    mueller_n, mueller_n_se = {}, {}
+    den_sum = stacks["M00"].sum(axis=0)
+    for key in ("M01", "M22", "M23"):
+        num_sum = stacks[key].sum(axis=0)
+        with np.errstate(invalid="ignore", divide="ignore"):  # M00 = 0 only where nothing is scattered
+            ratio = num_sum / den_sum
+            if M > 1:  # jackknife over partitions
+                jack = (num_sum - stacks[key]) / (den_sum - stacks["M00"])
+                se = np.sqrt((M - 1) / M * ((jack - jack.mean(axis=0)) ** 2).sum(axis=0))
+            else:
+                se = np.zeros_like(ratio)
+        mueller_n[key + "/M00"], mueller_n_se[key + "/M00"] = ratio, se
+    return dict(mueller=mueller, mueller_se=mueller_se, mueller_n=mueller_n, mueller_n_se=mueller_n_se,
+                sigma_sp=X.mean(axis=0))
 
 
 def _energy_check(per, cfg):
@@ -1225,4 +1251,20 @@ def _result(cfg, surf, results, stats, reasons, wall):
         energy_s=get("s", "energy"), energy_p=get("p", "energy"),
         mueller=stats["mueller"], mueller_std_error=stats["mueller_se"],
         mueller_normalised=stats["mueller_n"], mueller_normalised_std_error=stats["mueller_n_se"],
+        **_floors(cfg, per),
     )
+
+
+def _floors(cfg, per):
+    """Stage 6: the floor of each polarisation's sigma and where sigma stands clear of it (MoMResult fields)."""
+    out = {}
+    for pol in ("s", "p"):
+        if pol not in per:
+            out[f"floor_{pol}"] = out[f"valid_{pol}"] = None
+            continue
+        fl = partition_floor(cfg["theta_i"], cfg["theta_r"], cfg["w"], cfg["part_len"], cfg["beam"], pol,
+                             cfg["tol"] or FAST_TOL)
+        out[f"floor_{pol}"], out[f"valid_{pol}"] = fl, per[pol]["sigma"] >= FLOOR_MARGIN * fl
+    out["valid"] = out[f"valid_{cfg['pols'][0]}"]
+    out["floor_reason"] = floor_reason(cfg["w"], cfg["part_len"])
+    return out
