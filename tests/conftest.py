@@ -21,6 +21,7 @@ import tempfile
 os.environ.setdefault("HYDE_BSDF_CACHE", os.path.join(tempfile.gettempdir(), "hyde-bsdf-test-cache"))
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+import pytest  # noqa: E402
 from hypothesis import HealthCheck, settings  # noqa: E402
 
 #: multiplier of each test's example count under the ``thorough`` profile
@@ -98,3 +99,17 @@ def scaled(seconds: float) -> float:
 
 def pytest_report_header(config):
     return f"hang guards scaled by SLOWDOWN = {SLOWDOWN:.2f} (load and a calibration workload)"
+
+
+@pytest.fixture(scope="module")
+def map_variant():
+    """The per-texel maps' Mitsuba variant for a test module, the previous variant restored after it."""
+    import mitsuba as mi
+
+    from hyde_bsdf import inverse as inv
+
+    previous = mi.variant()
+    inv.prepare(inv.MAP_VARIANT)
+    yield
+    if previous is not None and previous != mi.variant():
+        mi.set_variant(previous)

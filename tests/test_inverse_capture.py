@@ -26,13 +26,7 @@ from hyde_bsdf.inverse import acquisition as acqm
 from hyde_bsdf.inverse.uncertainty import information_blocks, stokes_tangents
 
 
-@pytest.fixture(scope="module", autouse=True)
-def variant():
-    previous = mi.variant()
-    inv.prepare(inv.MAP_VARIANT)
-    yield
-    if previous is not None and previous != mi.variant():
-        mi.set_variant(previous)
+pytestmark = pytest.mark.usefixtures("map_variant")     # tests/conftest.py
 
 
 def test_presets_cover_facet_angles_and_polarizer_states():

@@ -22,13 +22,7 @@ from hyde_bsdf.inverse import acquisition as acqm
 from hyde_bsdf.inverse.uncertainty import convergence_test, convergence_warnings
 
 
-@pytest.fixture(scope="module", autouse=True)
-def variant():
-    previous = mi.variant()
-    inv.prepare(inv.MAP_VARIANT)
-    yield
-    if previous is not None and previous != mi.variant():
-        mi.set_variant(previous)
+pytestmark = pytest.mark.usefixtures("map_variant")     # tests/conftest.py
 
 
 def _observations(filter_type="nearest", n=2, res=12):
