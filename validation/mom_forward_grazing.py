@@ -177,6 +177,18 @@ def plot_flagged(ax, x, y, valid, **kw):
     ax.plot(x, np.where(valid, np.nan, y), alpha=0.25, **kw)
 
 
+def sigma_panel(ax, results, scale, colours, flagged_label, **axis):
+    """sigma_s (solid) and sigma_p (dashed) of each run over theta_r in dB of ``scale``, flagged angles
+    faint, the 86-89 deg band shaded."""
+    for (name, res), col in zip(results.items(), colours):
+        plot_flagged(ax, THETA_R, db(res.sigma_s[0] / scale), res.valid_s[0], color=col, label=f"{name} s")
+        plot_flagged(ax, THETA_R, db(res.sigma_p[0] / scale), res.valid_p[0], ls="--", color=col, label=f"{name} p")
+    ax.plot([], [], color="0.6", alpha=0.25, label=flagged_label)
+    ax.set(xlabel="theta_r (deg)", **axis)
+    ax.axvspan(85.5, 89.5, color="0.92", zorder=0)
+    ax.legend(fontsize=6)
+
+
 def cost_rows(flat, ref):
     """Error against cost of each choice on the flat plate: worker CPU seconds, |energy - 1| per polarisation and
     the s level at 88 deg relative to the specular peak (analytic: -113 dB)."""
@@ -194,25 +206,12 @@ def figure(flat, rough, ref, path):
 
     fig, axes = plt.subplots(1, 3, figsize=(16, 4))
     peak = float(ref.max())
-    ax = axes[0]
-    ax.plot(THETA_R, db(ref / peak), "k-", lw=2, label="analytic beam reflection")
-    for (name, res), col in zip(flat.items(), ("C3", "C0", "C1", "C2")):
-        plot_flagged(ax, THETA_R, db(res.sigma_s[0] / peak), res.valid_s[0], color=col, label=f"{name} s")
-        plot_flagged(ax, THETA_R, db(res.sigma_p[0] / peak), res.valid_p[0], ls="--", color=col, label=f"{name} p")
-    ax.plot([], [], color="0.6", alpha=0.25, label="faint: flagged, sigma < 20 x the truncated partition's floor")
-    ax.set(ylim=(-90, 5), xlabel="theta_r (deg)", ylabel="sigma / specular peak (dB)",
-           title="Flat PEC plate, theta_i = 80 deg, w = 75 lambda")
-    ax.axvspan(85.5, 89.5, color="0.92", zorder=0)
-    ax.legend(fontsize=6)
-    ax = axes[1]
-    for (name, res), col in zip(rough.items(), ("C3", "C0", "C2")):
-        plot_flagged(ax, THETA_R, db(res.sigma_s[0]), res.valid_s[0], color=col, label=f"{name} s")
-        plot_flagged(ax, THETA_R, db(res.sigma_p[0]), res.valid_p[0], ls="--", color=col, label=f"{name} p")
-    ax.plot([], [], color="0.6", alpha=0.25, label="faint: flagged (below the partition's floor)")
-    ax.set(ylim=(-45, 15), xlabel="theta_r (deg)", ylabel="sigma (dB)",
-           title="Rough PEC (slope 0.3, ell 5), theta_i 80 deg, w 150 lambda")
-    ax.axvspan(85.5, 89.5, color="0.92", zorder=0)
-    ax.legend(fontsize=6)
+    axes[0].plot(THETA_R, db(ref / peak), "k-", lw=2, label="analytic beam reflection")
+    sigma_panel(axes[0], flat, peak, ("C3", "C0", "C1", "C2"),
+                "faint: flagged, sigma < 20 x the truncated partition's floor",
+                ylim=(-90, 5), ylabel="sigma / specular peak (dB)", title="Flat PEC plate, theta_i = 80 deg, w = 75 lambda")
+    sigma_panel(axes[1], rough, 1.0, ("C3", "C0", "C2"), "faint: flagged (below the partition's floor)",
+                ylim=(-45, 15), ylabel="sigma (dB)", title="Rough PEC (slope 0.3, ell 5), theta_i 80 deg, w 150 lambda")
     ax = axes[2]
     for (name, cpu, _, es, ep, floor), col in zip(cost_rows(flat, ref), ("C3", "C0", "C1", "C2")):
         ax.semilogy(cpu, max(es, 1e-5), "o", color=col, label=f"{name}: |E_s - 1|")
