@@ -162,3 +162,20 @@ def test_cli_chooses_the_model_unless_one_is_named(smith_table, tmp_path, capsys
     assert (tmp_path / "fit.png").is_file() and (tmp_path / "fit_models.png").is_file()
     assert main(["fit", str(smith_table.source), "--model", "auto", "--diffuse", "none"]) == 2
     assert "--model auto chooses" in capsys.readouterr().err
+
+
+def test_cli_refuses_a_fifo_at_the_models_plot_before_fitting(smith_table, tmp_path, capsys):
+    """--model auto writes NAME_models.EXT beside -o NAME.EXT: that file passes the output gate too
+    (a FIFO there is refused with one line, exit 2, before any fit, and is left as it was)."""
+    import os
+    import stat
+
+    from hyde_bsdf.app.cli import main
+
+    fifo = tmp_path / "plot_models.png"
+    os.mkfifo(fifo)
+    code = main(["fit", str(smith_table.source), "--max-points", "60", "-o", str(tmp_path / "plot.png"), "-q"])
+    out, err = capsys.readouterr()
+    assert code == 2 and err.count("\n") == 1 and "plot_models.png" in err and "FIFO" in err, err
+    assert stat.S_ISFIFO(os.lstat(fifo).st_mode) and not (tmp_path / "plot.png").exists()
+    assert "rms_slope" not in out                     # refused before the fit

@@ -187,11 +187,14 @@ def csv_main(argv=None) -> int:
 
 
 def _output_gate(args):
-    """The output gate on ``-o`` for the whole run: not the data file, one writer at a time."""
+    """The output gate on ``-o`` (and, when the model is chosen, its ``_models`` plot) for the whole
+    run: not the data file, one writer at a time."""
     if not args.output:
         return contextlib.nullcontext()
     check_plot_path(args.output)
-    return output_gate([args.output], inputs=[args.data], what="-o plot")
+    with user_input():
+        plots = [args.output] + ([_models_path(args.output)] if _auto(args) else [])
+    return output_gate(plots, inputs=[args.data], what="-o plot")
 
 
 def _csv_run(args) -> int:
