@@ -9,12 +9,14 @@ calls :func:`set_quiet`, which silences every stderr line of this module -- also
 deep inside the library that no command passes a callback to (the DHR table's build) -- but
 no warning or error.
 
-May import: the standard library only (every module may import this one, like ``errors.py``).
+May import: the standard library and ``hyde_bsdf.errors`` only (every module may import this one).
 """
 from __future__ import annotations
 
 import sys
 import time
+
+from hyde_bsdf.errors import UsageTypeError, shorten
 
 __all__ = ["PROGRESS_SECONDS", "as_callback", "check_progress", "stderr_lines", "set_quiet", "Throttle",
            "EvaluationCounter"]
@@ -46,12 +48,12 @@ def stderr_lines(prefix: str = "[hyde-bsdf]"):
 
 
 def check_progress(progress, allow_none: bool = True) -> None:
-    """TypeError unless ``progress`` is None, a bool or a callable."""
+    """UsageTypeError (a TypeError) unless ``progress`` is None, a bool or a callable."""
     if progress is None and allow_none:
         return
     if not (isinstance(progress, bool) or callable(progress) or type(progress).__name__ == "bool_"):
-        raise TypeError(f"progress must be True, False{', None' if allow_none else ''} or a callable "
-                        f"progress(message), got {progress!r}")
+        raise UsageTypeError(f"progress must be True, False{', None' if allow_none else ''} or a callable "
+                             f"progress(message), got {shorten(progress)}")
 
 
 def as_callback(progress, prefix: str = "[hyde-bsdf]"):

@@ -14,6 +14,7 @@ import drjit as dr
 import mitsuba as mi
 
 from hyde_bsdf import inverse as inv
+from hyde_bsdf.inverse.observations import _obs_mask
 
 N, RES = 8, 32
 BSDF = "hyde"     # alpha texture: Beckmann alpha, key alpha.data (as roughconductor)
@@ -62,7 +63,7 @@ def test_coverage_matches_gradient_support(problem):
     dr.enable_grad(x)
     params["plane.bsdf.alpha.data"] = x
     params.update()
-    loss = inv.StokesLoss(o.reference, mask=inv._obs_mask(o))(inv.render_stokes(scene, 0, 4, 3, params=params))
+    loss = inv.StokesLoss(o.reference, mask=_obs_mask(o))(inv.render_stokes(scene, 0, 4, 3, params=params))
     dr.backward(loss)
     g = np.asarray(dr.grad(x))[..., 0]
     # rows along v, columns along u: the nearest-neighbour lookup and the coverage bin alike

@@ -70,10 +70,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.errors import RejectedResult, UsageError
+from hyde_bsdf.errors import RejectedResult, UsageError, UsageTypeError, shorten
 from hyde_bsdf.model.checks import real_array
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
-from hyde_bsdf.model.evaluator import pbrdf
+from hyde_bsdf.model.evaluator import check_diffuse, pbrdf
+from hyde_bsdf.model.shadowing import check_shadowing
 from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
                                     chi2_verdict, cluster_covariance, correlation, floor_verdict,
@@ -206,23 +207,13 @@ def impossible_values(values, noise) -> list:
     return found
 
 
-def _diffuse_mode(diffuse):
-    if diffuse is True:
-        return "paper"
-    if diffuse is False or diffuse is None:
-        return "none"
-    if diffuse in ("paper", "reciprocal", "none"):
-        return diffuse
-    raise UsageError(f"diffuse must be True, False, 'paper', 'reciprocal' or 'none', got {diffuse!r}")
-
-
 def mueller_elements(theta_i, theta_r, phi, names, *, rms_slope, n, k,
                      shadowing="vgroove", diffuse=True) -> dict:
     """Normalized pBRDF elements F_jk / F_00 (paper Eq. 17) for element names like ``"M23"``.
 
     Angles in radians (broadcast together), eta = n - jk.  Returns a dict name ->
     ndarray of the broadcast shape.  Geometries with F_00 = 0 (at or below the
-    horizon) raise ValueError: a normalized element is undefined there.
+    horizon) raise UsageError (a ValueError): a normalized element is undefined there.
     """
     return _elements(theta_i, theta_r, phi, names, rms_slope=rms_slope, n=n, k=k, shadowing=shadowing,
                      diffuse=diffuse, strict=True)
@@ -370,10 +361,10 @@ class FitResult:
 def _as_arrays(theta_i, theta_r, phi, measured, sigma):
     if not isinstance(measured, dict) or not measured:
         raise UsageError(f"measured must be a non-empty dict of element name -> array "
-                         f"(names {', '.join(ELEMENT_NAMES)}), got {measured!r}")
+                         f"(names {', '.join(ELEMENT_NAMES)}), got {shorten(measured)}")
     if sigma is not None and not isinstance(sigma, dict):
-        raise TypeError(f"sigma must be None or a dict of element name -> standard deviations, "
-                        f"got {type(sigma).__name__}")
+        raise UsageTypeError(f"sigma must be None or a dict of element name -> standard deviations, "
+                             f"got {type(sigma).__name__}")
     angles = []
     for name, a, hi in (("theta_i", theta_i, math.pi / 2), ("theta_r", theta_r, math.pi / 2),
                         ("phi", phi, None)):
@@ -444,14 +435,14 @@ def _start_value(name, value, fitted):
             return None
         raise UsageError(f"{label} must be given when {name} is not fitted (it is then held at that value)")
     if isinstance(value, (bool, np.bool_, str, bytes, complex, np.complexfloating)):
-        raise TypeError(f"{label} must be a real number, got {value!r}")
+        raise UsageTypeError(f"{label} must be a real number, got {shorten(value)}")
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise TypeError(f"{label} must be a real number, got {value!r}") from None
+        raise UsageTypeError(f"{label} must be a real number, got {shorten(value)}") from None
     lo, hi = BOUNDS[name]
     if not math.isfinite(v) or not lo <= v <= hi:
-        raise UsageError(f"{label} must be in [{lo:g}, {hi:g}], got {value!r}")
+        raise UsageError(f"{label} must be in [{lo:g}, {hi:g}], got {shorten(value)}")
     return v
 
 
@@ -460,15 +451,14 @@ def check_options(fit=("n", "k"), rms_slope=0.3, n0=None, k0=None, shadowing="vg
     """Check :func:`fit_mueller`'s options without data (the command line does so before it
     reads a large file); returns (fitted names, diffuse mode, start/fixed values)."""
     fitted = _check_fit_names(fit)
-    mode = _diffuse_mode(diffuse)
+    mode = check_diffuse(diffuse)
     if isinstance(corr_limit, bool) or not (isinstance(corr_limit, (int, float)) and 0 < corr_limit <= 1):
         raise UsageError(f"corr_limit must be in (0, 1], got {corr_limit!r}")
     given = {"n": _start_value("n", n0, fitted), "k": _start_value("k", k0, fitted),
              "rms_slope": _start_value("rms_slope", rms_slope, fitted)}
     if given["rms_slope"] is None:
         raise UsageError("rms_slope must be given (start value when fitted)")
-    if not isinstance(shadowing, str) or shadowing not in ("vgroove", "smith", "none"):
-        raise UsageError(f"shadowing must be 'vgroove', 'smith' or 'none', got {shadowing!r}")
+    check_shadowing(shadowing)
     if mode == "reciprocal" and shadowing == "none":
         raise UsageError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
     return fitted, mode, given

@@ -67,7 +67,6 @@ from hyde_bsdf.inverse.maps import (LogAdam, MapInversionResult, MapProblem, fil
                                     map_step, map_uncertainty)
 from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, MISFIT_P, STDERR_THRESHOLD, BilinearFilterWarning, Uncertainty,
                                            UnidentifiedParameterWarning)
-from hyde_bsdf.inverse.observations import _obs_mask  # noqa: F401
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, VIEW_AZIMUTHS, Observation,
                                             example_maps, film_channels, map_keys, plane_scene_dict,
                                             pixel_texels, render_stokes, render_stokes_np,

@@ -86,6 +86,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.inverse.analyzer import retarder_mueller, simulate_capture
 
 __all__ = ["Configuration", "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition",
@@ -213,22 +214,22 @@ def design_acquisition(preset: str = "dielectric", *, facet_angles=MIRROR_FACET_
     polarizer.
     """
     if preset not in PRESETS:
-        raise ValueError(f"preset must be one of {PRESETS}, got {preset!r}")
+        raise UsageError(f"preset must be one of {PRESETS}, got {shorten(preset)}")
     if camera not in CAMERAS:
-        raise ValueError(f"camera must be one of {CAMERAS}, got {camera!r}")
+        raise UsageError(f"camera must be one of {CAMERAS}, got {shorten(camera)}")
     betas = [float(b) for b in facet_angles]
     if not betas or not all(0.0 < b < 89.0 for b in betas):
-        raise ValueError(f"facet_angles must be angles in (0, 89) deg, got {tuple(facet_angles)}")
+        raise UsageError(f"facet_angles must be angles in (0, 89) deg, got {shorten(tuple(facet_angles))}")
     if polarizer_angles is None:
         polarizer_angles = (None,) if preset == "dielectric" else (45.0,)
     for a in polarizer_angles:
         if a is not None and not math.isfinite(float(a)):
-            raise ValueError(f"polarizer_angles must be finite angles in deg or None, got {polarizer_angles}")
+            raise UsageError(f"polarizer_angles must be finite angles in deg or None, got {shorten(polarizer_angles)}")
     if retarder is None:
         retarder = () if preset == "dielectric" else (True if camera == "linear" else METAL_RETARDER_FACET_ANGLES)
     circular = list(betas) if retarder is True else [] if retarder is False else [float(b) for b in retarder]
     if not all(0.0 < b < 89.0 for b in circular):
-        raise ValueError(f"retarder facet angles must be angles in (0, 89) deg, got {tuple(circular)}")
+        raise UsageError(f"retarder facet angles must be angles in (0, 89) deg, got {shorten(tuple(circular))}")
     configs = []
     for b in betas:
         for a in polarizer_angles:
@@ -237,7 +238,7 @@ def design_acquisition(preset: str = "dielectric", *, facet_angles=MIRROR_FACET_
         configs.append(Configuration((b, 0.0), (b, 180.0), 0.0, 45.0))
     for tv, tl in off_specular:
         if not (0.0 <= tv < 89.0 and 0.0 <= tl < 89.0):
-            raise ValueError(f"off_specular polar angles must be in [0, 89) deg, got {(tv, tl)}")
+            raise UsageError(f"off_specular polar angles must be in [0, 89) deg, got {(tv, tl)}")
         configs.append(Configuration((float(tv), 0.0), (float(tl), 180.0)))
     return Acquisition(configs, preset, camera)
 
@@ -252,17 +253,17 @@ def fixed_rig_acquisition(preset: str = "dielectric", *, facet_angle: float = 50
     every picture), while the Stokes ratios B/A (and, behind the 45 deg polarizer of ``"metal"``,
     C/A and S/A) still determine it: the validation's unknown-scale runs use this design."""
     if preset not in PRESETS:
-        raise ValueError(f"preset must be one of {PRESETS}, got {preset!r}")
+        raise UsageError(f"preset must be one of {PRESETS}, got {shorten(preset)}")
     b = float(facet_angle)
     if not 0.0 < b < 80.0:
-        raise ValueError(f"facet_angle must be in (0, 80) deg, got {facet_angle}")
+        raise UsageError(f"facet_angle must be in (0, 80) deg, got {shorten(facet_angle)}")
     if polarizer_angles is None:
         polarizer_angles = (None,) if preset == "dielectric" else (45.0,)
     configs = []
     for tau in tilts:
         tv, tl = float(tau) + b, float(tau) - b           # signed polar angles in the x-z plane
         if not (abs(tv) < 89.0 and abs(tl) < 89.0):
-            raise ValueError(f"tilt {tau} deg with facet angle {b} deg puts the camera or the light below "
+            raise UsageError(f"tilt {shorten(tau)} deg with facet angle {b} deg puts the camera or the light below "
                              f"the horizon")
         view = (abs(tv), 0.0 if tv >= 0 else 180.0)
         light = (abs(tl), 0.0 if tl >= 0 else 180.0)
@@ -308,16 +309,17 @@ def predicted_stderr(acquisition: Acquisition, values: dict, *, fit=("alpha", "e
     names = ("alpha", "eta", "k", "specular_reflectance")
     for n in fit:
         if n not in names:
-            raise ValueError(f"fit names must be from {names}, got {n!r}")
+            raise UsageError(f"fit names must be from {names}, got {shorten(n)}")
     camera = acquisition.camera if camera is None else camera
     if camera not in CAMERAS:
-        raise ValueError(f"camera must be one of {CAMERAS}, got {camera!r}")
+        raise UsageError(f"camera must be one of {CAMERAS}, got {shorten(camera)}")
     rows = list(CAMERA_COMPONENTS[camera])
     noise_c = np.broadcast_to(np.asarray(noise, np.float64), (4,)) if np.size(noise) in (1, 4) else None
     if noise_c is None or not (np.all(noise_c > 0) and pixels_per_texel > 0):
-        raise ValueError(f"noise (a number or 4, S0..S3) and pixels_per_texel must be > 0, got {noise}, {pixels_per_texel}")
+        raise UsageError(f"noise (a number or 4, S0..S3) and pixels_per_texel must be > 0, got "
+                         f"{shorten(noise)}, {shorten(pixels_per_texel)}")
     if "alpha" not in values or "eta" not in values:
-        raise ValueError(f"values must give alpha and eta, got {sorted(values)}")
+        raise UsageError(f"values must give alpha and eta, got {shorten(sorted(values))}")
     v = {n: np.asarray(values.get(n, {"k": 0.0, "specular_reflectance": 1.0}.get(n)), np.float64) for n in names}
     shape = np.broadcast_shapes(*(x.shape for x in v.values()))
     v = {n: np.broadcast_to(x, shape).ravel() for n, x in v.items()}
@@ -379,7 +381,7 @@ def acquisition_scene_dict(config: Configuration, material: dict, *, bsdf: str =
     import mitsuba as mi
 
     if filter_type not in ("nearest", "bilinear"):
-        raise ValueError(f"filter_type must be 'nearest' or 'bilinear', got {filter_type!r}")
+        raise UsageError(f"filter_type must be 'nearest' or 'bilinear', got {shorten(filter_type)}")
     T = mi.ScalarTransform4f
     mat = {name: _texture(v, filter_type) for name, v in material.items()}
     if bsdf == "hyde":
@@ -389,7 +391,7 @@ def acquisition_scene_dict(config: Configuration, material: dict, *, bsdf: str =
     elif bsdf == "roughconductor":
         bsdf_dict = {"type": "roughconductor", "distribution": "beckmann", **mat}
     else:
-        raise ValueError(f"bsdf must be 'hyde' or 'roughconductor', got {bsdf!r}")
+        raise UsageError(f"bsdf must be 'hyde' or 'roughconductor', got {shorten(bsdf)}")
     v, ldir = _direction(*config.view), _direction(*config.light)
     up = [0.0, 0.0, 1.0] if abs(v[2]) < 0.999 else [0.0, 1.0, 0.0]
     sheets = config.polarizer is not None
@@ -486,7 +488,7 @@ def example_material(case: str = "dielectric", n: int = 32) -> dict:
     ``specular_reflectance`` map 0.6-1.4 (the unknown scale of the validation's third run).
     """
     if case not in PRESETS:
-        raise ValueError(f"case must be one of {PRESETS}, got {case!r}")
+        raise UsageError(f"case must be one of {PRESETS}, got {shorten(case)}")
     u = (np.arange(int(n)) + 0.5) / int(n)
     U, V = np.meshgrid(u, u)
     patch = (U >= 0.55) & (U < 0.85) & (V >= 0.2) & (V < 0.5)

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
 
 __all__ = ["stokes_images", "channel_names", "interior_mask", "StokesLoss", "smoothness", "REFERENCE_RANGE",
@@ -50,12 +51,12 @@ def check_reference_scale(ref, what: str = "the reference") -> float:
     ref = np.asarray(ref, dtype=np.float64)
     if not np.isfinite(ref).all():
         bad = int((~np.isfinite(ref)).any(axis=0).sum())
-        raise ValueError(f"{what} has {bad} pixel(s) with NaN or infinite Stokes values; the loss needs "
+        raise UsageError(f"{what} has {bad} pixel(s) with NaN or infinite Stokes values; the loss needs "
                          f"finite references")
     peak = float(np.abs(ref[0]).max()) if ref.size else 0.0
     lo, hi = REFERENCE_RANGE
     if not (lo <= peak <= hi):
-        raise ValueError(f"{what} has peak |S0| = {peak:.3g}, outside the accepted range [{lo:g}, {hi:g}] "
+        raise UsageError(f"{what} has peak |S0| = {peak:.3g}, outside the accepted range [{lo:g}, {hi:g}] "
                          f"(radiance in the scene's units: a reference {'scaled up' if peak > hi else 'black or scaled down'}"
                          f" beyond what a rendering can match); rescale it or fix its units")
     return peak
@@ -97,7 +98,7 @@ def _measured_indices(measured) -> tuple:
     names = tuple(measured)
     bad = [m for m in names if m not in STOKES]
     if bad or "S0" not in names:
-        raise ValueError(f"measured must name S0 and any of S1, S2, S3; got {list(names)}")
+        raise UsageError(f"measured must name S0 and any of S1, S2, S3; got {shorten(list(names))}")
     return tuple(i for i, n in enumerate(STOKES) if n in names)
 
 
@@ -107,9 +108,9 @@ def _sigma_maps(sigma, shape) -> np.ndarray:
     if sig.shape == (4,):
         sig = np.broadcast_to(sig[:, None, None], (4,) + tuple(shape))
     if sig.shape != (4,) + tuple(shape):
-        raise ValueError(f"sigma must have shape (4,) or (4, {shape[0]}, {shape[1]}), got {sig.shape}")
+        raise UsageError(f"sigma must have shape (4,) or (4, {shape[0]}, {shape[1]}), got {sig.shape}")
     if (sig < 0).any():
-        raise ValueError("sigma has negative values; it is a standard deviation (>= 0)")
+        raise UsageError("sigma has negative values; it is a standard deviation (>= 0)")
     return sig
 
 
@@ -123,7 +124,7 @@ class StokesLoss:
         import mitsuba as mi
 
         if components not in ("stokes", "s0"):
-            raise ValueError(f"components must be 'stokes' or 's0', got {components!r}")
+            raise UsageError(f"components must be 'stokes' or 's0', got {shorten(components)}")
         ref = np.asarray(ref, dtype=np.float64)
         check_reference_scale(ref)
         if mask is None:
@@ -135,14 +136,14 @@ class StokesLoss:
             ok = np.isfinite(sig) & (sig > 0)
             mask = mask & np.all(ok[list(active)], axis=0)
         if not mask.any():
-            raise ValueError("the reference image has no lit interior pixel: nothing to fit")
+            raise UsageError("the reference image has no lit interior pixel: nothing to fit")
         self.components, self.measured, self.active = components, tuple(STOKES[i] for i in active), active
         self.mask_np = mask
         m = mask.astype(np.float64)
         self.norm0 = float((m * ref[0] ** 2).mean())
         self.normp = float((m * (ref[list(active[1:])] ** 2).sum(0)).mean()) if len(active) > 1 else 0.0
         if self.normp <= 0 and components == "stokes" and len(active) > 1:
-            raise ValueError("the reference has no polarization (S1 = S2 = S3 = 0): use components='s0'")
+            raise UsageError("the reference has no polarization (S1 = S2 = S3 = 0): use components='s0'")
         w = np.zeros((4,) + ref.shape[1:])
         if sigma is None:
             w[0] = m / self.norm0
@@ -203,7 +204,7 @@ def smoothness(x, kind: str = "tv", eps: float = 1e-3):
     if H > 1:
         terms.append((x[1:, :, :] - x[:-1, :, :], (H - 1) * W))
     if kind not in ("tv", "l2"):
-        raise ValueError(f"regularizer must be 'tv' or 'l2', got {kind!r}")
+        raise UsageError(f"regularizer must be 'tv' or 'l2', got {shorten(kind)}")
     total, n = 0.0, 0
     for d, count in terms:
         pen = dr.sqrt(dr.square(d) + eps * eps) - eps if kind == "tv" else dr.square(d)

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.inverse.loss import interior_mask, stokes_images
 from hyde_bsdf.inverse.scalar import RANGES, _unique_key
 from hyde_bsdf.model.parameters import ALPHA, INVERSE_K_LOG_FLOOR, INVERSE_SCALE
@@ -46,7 +47,7 @@ def map_keys(params, names=("alpha",), prefix: str | None = None) -> dict:
     out = {}
     for name in names:
         if name not in MAP_PARAMETERS:
-            raise ValueError(f"parameter names must be from {tuple(MAP_PARAMETERS)}, got {name!r}")
+            raise UsageError(f"parameter names must be from {tuple(MAP_PARAMETERS)}, got {shorten(name)}")
         # suffixes tried in order: the texture's data first, then a constant's value
         out[name] = _unique_key(params, name, [(s,) for s in MAP_PARAMETERS[name][0]], prefix)
     return out
@@ -168,9 +169,9 @@ def _target_shape(scene, prefix):
         owners = {k.split(".")[0] for k in params.keys() if k.endswith(".data") and ".bsdf." in k}
         found = [s for s in shapes if s.id() in owners]
     if len(found) != 1:
-        raise ValueError(f"need exactly one shape carrying the textured BSDF"
-                         f"{'' if prefix is None else ' ' + repr(prefix)}; found "
-                         f"{[s.id() for s in found]} (name it with prefix='ID.bsdf')")
+        raise UsageError(f"need exactly one shape carrying the textured BSDF"
+                         f"{'' if prefix is None else ' ' + shorten(prefix)}; found "
+                         f"{shorten([s.id() for s in found])} (name it with prefix='ID.bsdf')")
     return found[0]
 
 
@@ -178,7 +179,7 @@ def _obs_mask(obs: Observation) -> np.ndarray:
     ref = np.asarray(obs.reference, dtype=np.float64)
     mask = interior_mask(ref[0]) if obs.mask is None else np.asarray(obs.mask, bool)
     if mask.shape != ref.shape[1:]:
-        raise ValueError(f"mask shape {mask.shape} differs from the reference's {ref.shape[1:]}")
+        raise UsageError(f"mask shape {mask.shape} differs from the reference's {ref.shape[1:]}")
     return mask
 
 
@@ -226,7 +227,7 @@ def plane_scene_dict(alpha, *, bsdf: str = "hyde", eta: float = 1.5, k: float = 
         material = {"type": "roughconductor", "distribution": "beckmann", "alpha": tex,
                     "eta": float(eta), "k": float(k)}
     else:
-        raise ValueError(f"bsdf must be 'hyde' or 'roughconductor', got {bsdf!r}")
+        raise UsageError(f"bsdf must be 'hyde' or 'roughconductor', got {shorten(bsdf)}")
     # mono variants store luminance (saying so avoids Mitsuba's warning that it switched the format)
     fmt = {"pixel_format": "luminance"} if mi.is_monochromatic else {}
     film = lambda w: {"type": "hdrfilm", "width": int(w), "height": int(res), "rfilter": {"type": "box"}, **fmt}

@@ -79,6 +79,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.inverse._common import NotConvergedWarning
 from hyde_bsdf.inverse.observations import pixel_texels, render_stokes
 
@@ -175,7 +176,7 @@ def information_blocks(problem, names, *, spp: int = 16, seed: int = 0, noise=No
 
     Returns (A, B, g, noise_std per observation, number of data values n)."""
     if weighting not in ("fisher", "loss"):
-        raise ValueError(f"weighting must be 'fisher' or 'loss', got {weighting!r}")
+        raise UsageError(f"weighting must be 'fisher' or 'loss', got {shorten(weighting)}")
     records = pixel_records(problem, names, spp=spp, seed=seed, noise=noise)
     return accumulate_blocks(records, problem.map_shape, len(names), weighting=weighting)
 

@@ -57,7 +57,7 @@ import threading
 import time
 from pathlib import Path
 
-from hyde_bsdf.errors import OutputError, UsageError
+from hyde_bsdf.errors import OutputError, UsageError, shorten
 from hyde_bsdf.io.output_gate import OutputLock, check_folder, check_target
 
 __all__ = ["atomic_path", "atomic_open", "atomic_group", "atomic_dir", "check_output_path", "check_output_dir",
@@ -440,7 +440,7 @@ def atomic_open(path, mode: str = "w", *, permissions: int | None = None, **kwar
     """``open(path, mode)`` that becomes visible under ``path`` only once the block completes
     (``permissions``: the new file's mode bits, see :func:`atomic_path`)."""
     if not mode.startswith("w"):
-        raise ValueError(f"atomic_open: mode must be a write mode ('w', 'wb'), got {mode!r}")
+        raise UsageError(f"atomic_open: mode must be a write mode ('w', 'wb'), got {shorten(mode)}")
     with atomic_path(path, permissions) as tmp:
         with open(tmp, mode, **kwargs) as f:
             yield f
@@ -487,12 +487,12 @@ def _manifest(folder, manifest: str):
     try:
         data = json.loads((Path(folder) / manifest).read_text(encoding="utf-8"))
         files, hashes, dirs = data["files"], data.get("sha256", {}), data.get("dirs", [])
-        if not isinstance(files, list) or not isinstance(hashes, dict) or not isinstance(dirs, list):
-            raise ValueError
     except FileNotFoundError:
         return None
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
-        return {"files": {}, "dirs": set()}
+        files = hashes = dirs = None
+    if not isinstance(files, list) or not isinstance(hashes, dict) or not isinstance(dirs, list):
+        return {"files": {}, "dirs": set()}      # unreadable or malformed: it vouches for nothing
     return {"files": {f: hashes.get(f) for f in files if _safe_rel(f)}, "dirs": {d for d in dirs if _safe_rel(d)}}
 
 

@@ -57,7 +57,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
-from hyde_bsdf.errors import InputFileError, UsageError
+from hyde_bsdf.errors import InputFileError, UsageError, shorten
 from hyde_bsdf.io.input_gate import check_dimensions, check_input
 
 __all__ = ["PbsdfFileError", "PbsdfTable", "KAIST_WAVELENGTHS", "MITSUBA_BANDS", "read_pbsdf", "write_pbsdf",
@@ -177,7 +177,7 @@ def write_pbsdf(path, theta_h, theta_d, phi_d, wavelengths, M, extra: dict | Non
     extras = {}
     for name, value in (extra or {}).items():
         if name in _FIELDS:
-            raise UsageError(f"extra field {name!r} clashes with a table field")
+            raise UsageError(f"extra field {shorten(name)} clashes with a table field")
         extras[name] = (np.frombuffer(value.encode("utf-8"), np.uint8) if isinstance(value, str)
                         else np.ascontiguousarray(value))
     small = {**grids, **extras}
@@ -201,7 +201,7 @@ def write_pbsdf(path, theta_h, theta_d, phi_d, wavelengths, M, extra: dict | Non
             if progress is not None:
                 progress(i + 1, shape[0])
         if written != int(np.prod(shape)):
-            raise ValueError(f"M: {written} values written, the grids need {int(np.prod(shape))}")
+            raise UsageError(f"M: {written} values written, the grids need {int(np.prod(shape))}")
         f.flush()
     return path
 

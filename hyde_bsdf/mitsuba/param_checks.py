@@ -14,9 +14,9 @@ the texture's own ``eval`` / ``eval_1``:
 * anything else (a ``mesh_attribute``, a procedural texture): its values cannot be read at
   load.  :func:`readable` says so; the plugin then clamps them at evaluation and warns once.
 
-The checks raise ``ValueError("hyde: ...")`` naming the parameter, the texture key, the
-offending value and the accepted range.  :class:`Snapshot` keeps the last accepted values so
-that a refused ``params.update()`` leaves the BSDF as it was.
+The checks raise ``UsageError("hyde: ...")`` (a ``ValueError``) naming the parameter, the
+texture key, the offending value and the accepted range.  :class:`Snapshot` keeps the last
+accepted values so that a refused ``params.update()`` leaves the BSDF as it was.
 """
 from __future__ import annotations
 
@@ -27,6 +27,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from hyde_bsdf.errors import UsageError
 from hyde_bsdf.mitsuba import optics as po
 from hyde_bsdf.model.parameters import ALPHA, ETA
 
@@ -272,7 +273,7 @@ def _raw_finite(name, tex, accepted="", reader=None):
     ``reader``: a :class:`Reader` (reads each texture once per change)."""
     for key, arr in (reader.raw(tex) if reader is not None else texture_data(tex)).items():
         if not np.isfinite(arr).all():
-            raise ValueError(f"hyde: parameter '{name}' ({name}.{key}) contains NaN or infinite values"
+            raise UsageError(f"hyde: parameter '{name}' ({name}.{key}) contains NaN or infinite values"
                              + (f"; accepted range {accepted}" if accepted else ""))
 
 
@@ -290,7 +291,7 @@ def check_roughness(name, tex, scale, reader=None):
         return None
     bad = ~np.isfinite(values) | (values < 0) | (values > hi * (1 + _SLACK))
     if bad.any():
-        raise ValueError(f"hyde: {name} must be a finite number in the accepted range {rng}, "
+        raise UsageError(f"hyde: {name} must be a finite number in the accepted range {rng}, "
                          f"got {_where(name, tex, values, bad)}")
     low = values < lo * (1 - _SLACK)
     if low.any():
@@ -315,13 +316,13 @@ def check_index(eta, k, reader=None):
             continue
         bad = ~np.isfinite(values) | (values < 0) | (values > INDEX_MAX)
         if bad.any():
-            raise ValueError(f"hyde: parameter '{name}' must be finite and in [0, {INDEX_MAX:g}] "
+            raise UsageError(f"hyde: parameter '{name}' must be finite and in [0, {INDEX_MAX:g}] "
                              f"(index n + i k with k >= 0), got {_where(name, tex, values, bad)}")
     pe, pk = read["eta"], read["k"]
     if pe is not None and pk is not None and not eta.is_spatially_varying() and not k.is_spatially_varying():
         zero = (pe == 0) & (pk == 0)
         if zero.all():
-            raise ValueError("hyde: eta and k cannot both be 0 (no material has index 0); "
+            raise UsageError("hyde: eta and k cannot both be 0 (no material has index 0); "
                              "a dielectric has k = 0 and eta > 0")
         if zero.any() and mi.is_spectral and pe.size == pk.size == _WAVELENGTHS.size:
             order = np.concatenate(_wavelength_sets())
@@ -354,7 +355,7 @@ def check_reflectance(tex, reader=None):
         return
     bad = ~np.isfinite(values) | (values < 0)
     if bad.any():
-        raise ValueError("hyde: parameter 'specular_reflectance' must be finite and >= 0, got "
+        raise UsageError("hyde: parameter 'specular_reflectance' must be finite and >= 0, got "
                          + _where("specular_reflectance", tex, values, bad))
 
 

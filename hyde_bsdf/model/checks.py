@@ -3,9 +3,9 @@
 NumPy's own conversions are too forgiving for a physics API: ``np.asarray(1+2j, float)``
 drops the imaginary part with a warning, ``float("0.3")`` parses a string, ``float(True)``
 is 1, and a shape mismatch surfaces as "operands could not be broadcast" without the
-name of the argument.  These helpers refuse each of those with a one-line ``TypeError``
-(wrong kind of value) or ``ValueError`` (right kind, wrong value or shape) naming the
-parameter and what it accepts.
+name of the argument.  These helpers refuse each of those with a one-line ``UsageTypeError``
+(a ``TypeError``: wrong kind of value) or ``UsageError`` (a ``ValueError``: right kind, wrong
+value or shape) naming the parameter and what it accepts.
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numbers
 
 import numpy as np
 
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, UsageTypeError, shorten
 
 __all__ = ["real_array", "real_scalar", "check_bool", "broadcast_named"]
 
@@ -37,17 +37,17 @@ def real_array(name: str, value, accepted: str) -> np.ndarray:
     strings or booleans), ValueError if any is NaN or infinite.  ``accepted`` completes
     the message ("radians in [0, pi]")."""
     if isinstance(value, (str, bytes)):
-        raise TypeError(f"{name} must be real numbers ({accepted}), got a string {value!r}")
+        raise UsageTypeError(f"{name} must be real numbers ({accepted}), got a string {shorten(value)}")
     try:
         a = np.asarray(value)
     except (ValueError, TypeError) as exc:           # ragged nested lists
         raise UsageError(f"{name} must be an array of real numbers ({accepted}): {exc}") from None
     if a.dtype.kind == "O":                          # e.g. a list mixing numbers and None
         if not all(isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_)) for v in a.flat):
-            raise TypeError(f"{name} must be real numbers ({accepted}), got non-numeric values")
+            raise UsageTypeError(f"{name} must be real numbers ({accepted}), got non-numeric values")
         a = a.astype(float)
     if a.dtype.kind not in "iuf":
-        raise TypeError(f"{name} must be real numbers ({accepted}), got {_kind_name(value)} values"
+        raise UsageTypeError(f"{name} must be real numbers ({accepted}), got {_kind_name(value)} values"
                         + (" (give the real and imaginary parts as separate parameters)"
                            if a.dtype.kind == "c" else ""))
     a = a.astype(float, copy=False)
@@ -61,16 +61,16 @@ def real_scalar(name: str, value, lo: float, hi: float) -> float:
     values, ValueError for NaN, infinity or a value outside the range."""
     rng = f"[{lo:g}, {hi:g}]"
     if isinstance(value, (bool, np.bool_)) or isinstance(value, (str, bytes)):
-        raise TypeError(f"{name} must be a real number in {rng}, got {_kind_name(value)} {value!r}")
+        raise UsageTypeError(f"{name} must be a real number in {rng}, got {_kind_name(value)} {shorten(value)}")
     if isinstance(value, np.ndarray) and value.ndim == 0:
         value = value[()]
     if isinstance(value, numbers.Complex) and not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number in {rng}, got complex {value!r}")
+        raise UsageTypeError(f"{name} must be a real number in {rng}, got complex {shorten(value)}")
     if not isinstance(value, numbers.Real):
-        raise TypeError(f"{name} must be a real number in {rng}, got {type(value).__name__} {value!r}")
+        raise UsageTypeError(f"{name} must be a real number in {rng}, got {type(value).__name__} {shorten(value)}")
     v = float(value)
     if not math.isfinite(v) or not lo <= v <= hi:
-        raise UsageError(f"{name} must be a finite number in {rng}, got {value!r}")
+        raise UsageError(f"{name} must be a finite number in {rng}, got {shorten(value)}")
     return v
 
 
@@ -78,7 +78,7 @@ def check_bool(name: str, value) -> bool:
     """A real boolean (True/False or NumPy's); TypeError for anything else, e.g. ``"no"``."""
     if isinstance(value, (bool, np.bool_)):
         return bool(value)
-    raise TypeError(f"{name} must be True or False, got {value!r}")
+    raise UsageTypeError(f"{name} must be True or False, got {shorten(value)}")
 
 
 def broadcast_named(**arrays) -> tuple:

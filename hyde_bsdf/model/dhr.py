@@ -78,14 +78,14 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import InputFileError, UsageError
 
 from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf.io.trust import UntrustedFileError, make_private_dir, open_trusted, user_secret
 from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
 from hyde_bsdf.model.parameters import DHR_TABLE_RMS_SLOPE
 from hyde_bsdf.model import shadowing as _shadowing_module
-from hyde_bsdf.model.shadowing import SHADOWING, g1_smith_beckmann
+from hyde_bsdf.model.shadowing import SHADOWING, check_shadowing, g1_smith_beckmann
 from hyde_bsdf.progress import Throttle, as_callback
 
 __all__ = ["dhr_specular_pec", "dhr_quadrature", "DHRTable", "load_table", "build_table",
@@ -216,8 +216,7 @@ def dhr_quadrature(theta_i, rms_slope, shadowing="vgroove", n_outer=16, n_inner=
     boolean argument raises TypeError, a non-finite, out-of-range or non-broadcastable one
     ValueError, each naming the parameter.
     """
-    if not isinstance(shadowing, str) or shadowing not in SHADOWING:
-        raise UsageError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+    check_shadowing(shadowing)
     t = real_array("theta_i", theta_i, "radians in [0, pi/2]")
     s = real_array("rms_slope", rms_slope, f"in [{TABLE_SLOPE_RANGE[0]:g}, {TABLE_SLOPE_RANGE[1]:g}]")
     broadcast_named(theta_i=t, rms_slope=s)
@@ -436,26 +435,27 @@ def _save_table(path: Path, table: DHRTable) -> None:
 
 
 def _read_table(path: Path, shadowing) -> DHRTable:
-    """Load and verify a cache file; ValueError (the reason) if it must not be used."""
+    """Load and verify a cache file; InputFileError (the reason, a phrase that completes
+    "DHR table cache PATH ...") if it must not be used."""
     try:
         with open_trusted(path) as fh, np.load(fh, allow_pickle=False) as z:
             stored = {name: np.array(z[name]) for name in z.files}
     except UntrustedFileError as exc:   # a FIFO, device, symlink, directory; another owner; mode
-        raise ValueError(f"is refused: {exc}") from None
+        raise InputFileError(f"is refused: {exc}") from None
     except Exception as exc:         # not an .npz, truncated, unreadable
-        raise ValueError(f"cannot be read as a table ({type(exc).__name__}: {exc})") from None
+        raise InputFileError(f"cannot be read as a table ({type(exc).__name__}: {exc})") from None
     missing = [n for n in ("meta", "checksum", "build_seconds", *_ARRAYS) if n not in stored]
     if missing:
-        raise ValueError(f"lacks {', '.join(missing)} (written by an older version)")
+        raise InputFileError(f"lacks {', '.join(missing)} (written by an older version)")
     try:
         meta_json = str(stored["meta"][()])
         meta = json.loads(meta_json)
     except (ValueError, TypeError):
-        raise ValueError("its build parameters are not readable") from None
+        raise InputFileError("its build parameters are not readable") from None
     want = json.loads(json.dumps(_build_params(shadowing)))
     if meta != want:
         diff = sorted(k for k in set(meta) | set(want) if meta.get(k) != want.get(k))
-        raise ValueError(f"was built with other parameters or code ({', '.join(diff)} differ)")
+        raise InputFileError(f"was built with other parameters or code ({', '.join(diff)} differ)")
     arrays = {name: stored[name] for name in _ARRAYS}
     x, log_slope = _grid()
     shapes = {"x": x.shape, "theta": x.shape, "log_slope": log_slope.shape,
@@ -463,18 +463,18 @@ def _read_table(path: Path, shadowing) -> DHRTable:
     for name, shape in shapes.items():
         a = arrays[name]
         if a.shape != shape or a.dtype.kind != "f":
-            raise ValueError(f"{name} has shape {a.shape} and dtype {a.dtype}, expected {shape} float")
+            raise InputFileError(f"{name} has shape {a.shape} and dtype {a.dtype}, expected {shape} float")
         if not np.all(np.isfinite(a)):
-            raise ValueError(f"{name} has non-finite values")
+            raise InputFileError(f"{name} has non-finite values")
     if str(stored["checksum"][()]) != _checksum(meta_json, arrays):
-        raise ValueError("its checksum (sealed with your key) does not match its contents "
+        raise InputFileError("its checksum (sealed with your key) does not match its contents "
                          "(modified, corrupt, or written by someone else)")
     if not (np.array_equal(arrays["x"], x) and np.array_equal(arrays["log_slope"], log_slope)
             and np.array_equal(arrays["theta"], theta_of_x(x))):
-        raise ValueError("its grid is not the table's grid")
+        raise InputFileError("its grid is not the table's grid")
     rho = arrays["rho"]
     if not np.allclose(arrays["rho_avg"], _rho_average(x, rho), rtol=0.0, atol=1e-12):
-        raise ValueError("rho_avg is not the average of rho")
+        raise InputFileError("rho_avg is not the average of rho")
     # a few nodes re-integrated now, the fixed ones and some drawn at random
     drawn = _spot_rng().choice(rho.size, _SPOT_RANDOM, replace=False)
     ix = np.concatenate([[i % x.size for i, _ in _SPOT_NODES], drawn // log_slope.size])
@@ -483,7 +483,7 @@ def _read_table(path: Path, shadowing) -> DHRTable:
     bad = np.abs(fresh - rho[ix, js]) > _SPOT_TOL
     if bad.any():
         i = int(np.argmax(bad))
-        raise ValueError(f"rho at theta_i = {math.degrees(theta_of_x(x[ix[i]])):.4g} deg, rms_slope = "
+        raise InputFileError(f"rho at theta_i = {math.degrees(theta_of_x(x[ix[i]])):.4g} deg, rms_slope = "
                          f"{math.exp(log_slope[js[i]]):.4g} is {rho[ix[i], js[i]]:.10g}, re-integrated "
                          f"{fresh[i]:.10g}")
     return DHRTable(arrays["x"], arrays["theta"], arrays["log_slope"], rho, arrays["rho_avg"], shadowing,
@@ -501,8 +501,7 @@ def load_table(shadowing="vgroove") -> DHRTable:
     A cache file that fails any check (module docstring, "The disk cache") is reported with a
     :class:`DHRCacheWarning` naming it and rebuilt; the new file replaces it atomically.
     """
-    if not isinstance(shadowing, str) or shadowing not in SHADOWING:
-        raise UsageError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+    check_shadowing(shadowing)
     if shadowing in _TABLES:
         return _TABLES[shadowing]
     path = cache_path(shadowing)
@@ -542,7 +541,7 @@ def _cached_table(path: Path, shadowing):
         return None, False
     try:
         return _read_table(path, shadowing), True
-    except ValueError as exc:
+    except ValueError as exc:        # InputFileError, or NumPy's on a file corrupt in a way not foreseen
         warnings.warn(f"DHR table cache {str(path)!r} {exc}; rebuilding it", DHRCacheWarning, stacklevel=3)
         return None, True
 

@@ -42,7 +42,7 @@ import math
 
 import numpy as np
 
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, shorten
 
 from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
 from hyde_bsdf.model.dhr import load_table, x_of_theta
@@ -51,10 +51,10 @@ from hyde_bsdf.model.fresnel import fresnel_mueller_terms
 from hyde_bsdf.model.jones_mueller import rotated_fresnel_mueller
 from hyde_bsdf.model.parameters import INDEX_MIN, K, N, RMS_SLOPE
 from hyde_bsdf.model.roughness import check_rms_slope
-from hyde_bsdf.model.shadowing import SHADOWING, visibility
+from hyde_bsdf.model.shadowing import check_shadowing, visibility
 from hyde_bsdf.model.slope_distribution import beckmann_P
 
-__all__ = ["pbrdf", "specular_pbrdf", "diffuse_pbrdf", "DIFFUSE"]
+__all__ = ["pbrdf", "specular_pbrdf", "diffuse_pbrdf", "DIFFUSE", "check_diffuse"]
 
 DIFFUSE = ("paper", "reciprocal", "none")
 RMS_SLOPE_RANGE = RMS_SLOPE.bounds      # hyde_bsdf.model.parameters, the one definition
@@ -81,12 +81,6 @@ def _check_index(n, k, pec):
     return out
 
 
-def _check_shadowing(shadowing):
-    if not isinstance(shadowing, str) or shadowing not in SHADOWING:
-        raise UsageError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
-    return shadowing
-
-
 def _check_all_angles(theta_i, theta_r, phi):
     """The three angles checked (real, finite, polar angles in [0, pi]) and broadcastable."""
     theta_i = _check_angles("theta_i", theta_i, math.pi)
@@ -96,14 +90,16 @@ def _check_all_angles(theta_i, theta_r, phi):
     return theta_i, theta_r, phi
 
 
-def _check_diffuse(diffuse):
+def check_diffuse(diffuse) -> str:
+    """The diffuse mode, one of :data:`DIFFUSE`, of ``pbrdf``'s ``diffuse`` argument (True is
+    "paper", False or None "none"); UsageError otherwise (the fit checks its option with it too)."""
     if diffuse is True:
         return "paper"
     if diffuse is False or diffuse is None:
         return "none"
     if isinstance(diffuse, str) and diffuse in DIFFUSE:
         return diffuse
-    raise UsageError(f"diffuse must be True, False or one of {DIFFUSE}, got {diffuse!r}")
+    raise UsageError(f"diffuse must be True, False or one of {DIFFUSE}, got {shorten(diffuse)}")
 
 
 def specular_pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
@@ -114,7 +110,7 @@ def specular_pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False
     """
     s = check_rms_slope(rms_slope)
     nk = _check_index(n, k, pec)
-    _check_shadowing(shadowing)
+    check_shadowing(shadowing)
     theta_i, theta_r, phi = _check_all_angles(theta_i, theta_r, phi)
     return _specular(theta_i, theta_r, phi, s, nk, pec, shadowing)[0]
 
@@ -213,8 +209,8 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
     """
     s = check_rms_slope(rms_slope)
     nk = _check_index(n, k, pec)
-    mode = _check_diffuse(diffuse)
-    _check_shadowing(shadowing)
+    mode = check_diffuse(diffuse)
+    check_shadowing(shadowing)
     if mode == "reciprocal" and shadowing == "none":
         # without shadowing rho^{s,PEC} exceeds 1 at grazing incidence, so the reciprocal
         # normalisation 1 - rho_avg is not positive (the plugin refuses the same pair)

@@ -12,13 +12,21 @@ import math
 
 import numpy as np
 
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, shorten
 from scipy.special import erf
 
-__all__ = ["SHADOWING", "g_vgroove", "g1_smith_beckmann", "g_smith", "g_none", "visibility"]
+__all__ = ["SHADOWING", "check_shadowing", "g_vgroove", "g1_smith_beckmann", "g_smith", "g_none", "visibility"]
 
 SHADOWING = ("vgroove", "smith", "none")
 _SQRT_PI = math.sqrt(math.pi)
+
+
+def check_shadowing(name) -> str:
+    """``name`` if it names a shadowing model (one of :data:`SHADOWING`); UsageError otherwise
+    (the one check every interface that takes ``shadowing`` uses)."""
+    if not isinstance(name, str) or name not in SHADOWING:
+        raise UsageError(f"shadowing must be one of {SHADOWING}, got {shorten(name)}")
+    return name
 
 
 def g_vgroove(cos_alpha, cos_beta, cos_i, cos_r):
@@ -58,4 +66,4 @@ def visibility(name, cos_alpha, cos_beta, cos_i, cos_r, rms_slope):
         return g_smith(cos_i, cos_r, rms_slope)
     if name == "none":
         return g_none(cos_i)
-    raise UsageError(f"shadowing must be one of {SHADOWING}, got {name!r}")
+    raise UsageError(f"shadowing must be one of {SHADOWING}, got {shorten(name)}")

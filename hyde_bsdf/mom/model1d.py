@@ -77,6 +77,7 @@ import math
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.model.parameters import RMS_SLOPE
 
 __all__ = [
@@ -100,9 +101,9 @@ def _check(theta_i, theta_r, rms_slope):
     theta_i = np.asarray(theta_i, dtype=float)
     theta_r = np.asarray(theta_r, dtype=float)
     if not np.all(np.isfinite(theta_i)) or np.any(theta_i < 0) or np.any(theta_i >= _HALF_PI):
-        raise ValueError("theta_i must be finite and in [0, pi/2) radians")
+        raise UsageError("theta_i must be finite and in [0, pi/2) radians")
     if not np.all(np.isfinite(theta_r)) or np.any(np.abs(theta_r) > _HALF_PI):
-        raise ValueError("theta_r must be finite signed angles in [-pi/2, pi/2] radians")
+        raise UsageError("theta_r must be finite signed angles in [-pi/2, pi/2] radians")
     rms_slope = RMS_SLOPE.check(rms_slope)
     return theta_i, theta_r, rms_slope
 
@@ -173,7 +174,7 @@ def _shadowing(theta_i, theta_r, rms_slope, shadowing):
         return smith_shadowing(theta_i, theta_r, rms_slope)
     if shadowing is False or shadowing == "none":
         return (np.cos(facet_angles(theta_i, theta_r)[1]) > 0).astype(float)
-    raise ValueError(f"shadowing must be True/'vgroove', 'smith' or False/'none', got {shadowing!r}")
+    raise UsageError(f"shadowing must be True/'vgroove', 'smith' or False/'none', got {shorten(shadowing)}")
 
 
 def brdf_specular(theta_i, theta_r, rms_slope, shadowing=True):
