@@ -14,7 +14,9 @@ before the output paths and the scene have been checked.
   with ``MemAvailable`` read as 2 GiB; ``"nocheckout"`` is ``"in"`` with the validation scripts'
   folder missing; ``"sigint"`` sends Ctrl-C once the render's progress line appears;
   ``"pipe"`` closes the reader of stdout at once (``hyde-bsdf fit ... | head -0``);
-  ``"cuda"`` is ``"in"``, run only on a machine without a CUDA GPU (hardware-dependent).
+  ``"cuda"`` is ``"in"``, run only on a machine without a CUDA GPU (hardware-dependent);
+  ``"diskfull"`` is ``"in"`` with every file system reporting 50 KB free and a render pass failing
+  the test (so a refusal proves the free space was checked before the first pass).
 
 Append a row for each new mistake; ``API_ROWS`` does the same for Python calls
 ``(id, call(paths), exception type, needle)``.
@@ -22,6 +24,7 @@ Append a row for each new mistake; ``API_ROWS`` does the same for Python calls
 import contextlib
 import errno
 import os
+import shutil
 import signal
 import stat
 import subprocess
@@ -230,6 +233,25 @@ CLI_ROWS = [
      "--quick"], 2, "is being written by another run (pid", "locked"),
     ("fit --seed 2^64 on a table (new)", ["fit", "{tmp}/small.pbsdf", "--seed", str(2**64)], 2,
      "--seed must be an integer in [0, 2^32)", "in"),
+    # --- issue 24: the free space for the outputs checked before the work (the disk reads 50 KB free) ---
+    ("render: no room for the EXR and PNGs (refused before the first pass, not after the render)",
+     ["render", "{tiny}", "-o", "{tmp}/dfull.exr"], 2,
+     "dfull.exr' (12x8 film): about 6.63 MiB needed, but", "diskfull"),
+    ("render --no-png: no room for the EXR alone (the estimate counts only what is written)",
+     ["render", "{tiny}", "-o", "{tmp}/dfull.exr", "--no-png"], 2,
+     "dfull.exr' (12x8 film): about 69.6 KiB needed, but", "diskfull"),
+    ("demo: no room for the pictures (refused before the first pass)",
+     ["demo", "-o", "{tmp}/dfull", "--width", "16", "--height", "10", "--spp", "1"], 2,
+     "dfull' (16x10 film): about 10.4 MiB needed, but", "diskfull"),
+    ("fit: no room for the plot and its _models plot (refused before the data file is read)", ["fit", "{csv}", "-o", "{tmp}/dfull.png"],
+     2, "dfull.png' and 1 more: about 128 MiB needed, but", "diskfull"),
+    ("export: no room for the table (refused before the tabulation)", ["export", "{tmp}/dfull.pbsdf", "--rms-slope",
+     "0.3", "--n", "1.5"], 2, "dfull.pbsdf' (resolution 37x55x55): about", "diskfull"),
+    ("invert: no room for the history and the plot (refused before the inversion)",
+     ["invert", "-o", "{tmp}/dfull_inv"], 2, "invert_history.csv' and 1 more: about 64", "diskfull"),
+    ("invert --maps: no room for the maps (refused before the inversion)",
+     ["invert", "--maps", "--map-size", "8", "-o", "{tmp}/dfull_maps"], 2,
+     "invert_maps_history.csv' and 7 more: about 64", "diskfull"),
 ]
 
 
@@ -587,6 +609,13 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     else:
         if how == "lowmem":
             monkeypatch.setattr("hyde_bsdf.render.renderer.mem_available", lambda: 2 * 2**30)
+        if how == "diskfull":
+            usage = shutil.disk_usage(paths["tmp"])
+            monkeypatch.setattr(shutil, "disk_usage", lambda path: usage._replace(free=50_000))
+
+            def no_pass(*args, **kwargs):
+                raise AssertionError("a render pass ran before the free space was checked")
+            monkeypatch.setattr("hyde_bsdf.render.renderer._render_pass", no_pass)
         if how == "nocheckout":
             monkeypatch.setattr("hyde_bsdf.app.report.build.VALIDATION_DIR", paths["tmp"] / "no_validation")
         monkeypatch.chdir(paths["tmp"])

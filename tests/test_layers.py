@@ -4,7 +4,7 @@
 
 A module may import from its own folder and from folders to its left; ``mitsuba``, ``mom`` and
 ``fit`` are independent of one another; ``errors`` and ``progress`` may be imported from anywhere
-and import nothing of the package.  Every ``import`` statement counts, the lazy ones inside
+and import nothing of the package (``progress`` only ``errors``).  Every ``import`` statement counts, the lazy ones inside
 functions too (they are parsed, not run).  The bottom layer, ``io``, imports only the standard
 library, NumPy and (lazily) the file-format packages; the library below ``app`` does no argparse
 and no plotting.  This test reads the source only: it checks the rule of docs/index.md's

@@ -52,6 +52,23 @@ def test_stokes_bad_input_is_one_line(args, message, raw, tmp_path, capsys):
     assert not (tmp_path / "x.exr").exists()
 
 
+def test_stokes_without_room_is_refused_before_writing(raw, tmp_path, capsys, monkeypatch):
+    """A disk with 50 KB free: the EXR (S0..S2, their sigma and the mask: 7 float32 channels of 8x6)
+    and the three charts (704 x 515 px each, bounded as uncompressed RGBA) need about 4.41 MiB; one
+    line naming -o and both sizes, exit 2, and the earlier EXR is left as it was."""
+    import shutil
+
+    out = tmp_path / "x.exr"
+    out.write_bytes(b"an earlier run's EXR")
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage._replace(free=50_000))
+    assert main(["stokes", "--mosaic", str(raw), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert "-o/--output" in err and "x.exr' (8x6 px): about 4.41 MiB needed, but" in err and "48.8 KiB free" in err
+    assert out.read_bytes() == b"an earlier run's EXR" and not (tmp_path / "x_intensity.png").exists()
+
+
 def test_invert_camera_options_are_checked_first(tmp_path, capsys):
     (tmp_path / "cam.json").write_text(json.dumps({"width": 4, "height": 4}))
     assert main(["invert", "--maps", "--camera", str(tmp_path / "cam.json"), "-o", str(tmp_path / "o")]) == 2

@@ -18,7 +18,8 @@ With an unpolarized ``--variant`` (``llvm_ad_rgb``, ...) only ``demo.exr`` (R, G
 ``demo_rgb.png`` are written.  The output folder and every file in it are checked before the
 render starts; the files are written as one set (:func:`hyde_bsdf.io.atomic.atomic_group`): the
 old pictures are replaced only once every new file is written, so a full disk leaves them as
-they were.
+they were.  Once the picture's size is known, before the first pass, the folder's free space is
+checked against an upper bound of the set's size (:func:`demo_bytes`).
 
 The default (448 x 280 pixels, 96 spp) takes ~15-20 s on 2 cores with the LLVM
 variant; ``--width/--height/--spp`` raise it.  On the scalar fallback (one
@@ -33,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.app.args import Parser, positive_int, quiet_option
-from hyde_bsdf.app.pictures import polarization_png_paths, save_png, save_polarization_pngs, save_rgb_png
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.app.pictures import png_bytes, polarization_png_paths, save_png, save_polarization_pngs, save_rgb_png
+from hyde_bsdf.app.render import output_bytes, room_for
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_group, check_output_dir, check_output_path
 from hyde_bsdf.io.input_gate import check_input
 from hyde_bsdf.io.output_gate import OutputLock
@@ -43,7 +45,7 @@ from hyde_bsdf.progress import stderr_lines
 from hyde_bsdf.render.polarization import polarization_quantities, tonemap
 from hyde_bsdf.render.renderer import DEFAULT_VARIANT, prepare_variant, render_stokes
 
-__all__ = ["DEMO_SCENE", "cli_main", "render_demo"]
+__all__ = ["DEMO_SCENE", "cli_main", "render_demo", "demo_bytes"]
 
 #: The demo scene, in the repository's scenes/ folder.
 DEMO_SCENE = Path(__file__).resolve().parents[2] / "scenes" / "demo.xml"
@@ -97,7 +99,10 @@ def _render_demo(outdir, width, height, spp, variant, seed, bsdf, scene) -> dict
          f"variant {chosen}")
     params = {"width": width, "height": height, "spp": spp, "conductor": bsdf, "floor": bsdf}
     result = render_stokes(scene, variant=chosen, spp=spp, seed=seed, params=params,
-                           progress=stderr_lines("[render]"))
+                           progress=stderr_lines("[render]"),
+                           before_passes=room_for(outdir, f"-o {shorten(str(outdir))}", demo_bytes,
+                                                  "free some space, choose another folder (-o) or "
+                                                  "lower --width/--height"))
     meta = dict(result["meta"], bsdf=bsdf, scene=scene.name)
     with atomic_group():      # the EXR and PNGs replace the old set together, or not at all
         paths = {"exr": write_stokes_exr(outdir / "demo.exr", result, metadata=meta)}
@@ -127,6 +132,22 @@ def _registered_plugins(mi) -> set:
     return {"hyde"}
 
 
+#: the overview's resolution (dots per inch)
+OVERVIEW_DPI = 100
+
+
+def _overview_inches(height: int, width: int) -> tuple[float, float]:
+    """(width, height) in inches of the overview of a ``height`` x ``width`` picture (2 x 2 panels)."""
+    return 12, 12 * height / width + 1.2
+
+
+def demo_bytes(width: int, height: int, polarized: bool = True) -> int:
+    """Upper bound of the bytes the demo writes for a ``width`` x ``height`` picture: ``render``'s
+    set (:func:`~hyde_bsdf.app.render.output_bytes`) and, polarized, the overview PNG."""
+    overview = png_bytes(*_overview_inches(height, width), OVERVIEW_DPI) if polarized else 0
+    return output_bytes(width, height, polarized) + overview
+
+
 def _overview(stokes: dict, path: Path, title: str) -> Path:
     """One PNG with the colour picture, DoLP, AoLP and DoCP side by side (with colour bars)."""
     import matplotlib
@@ -137,7 +158,7 @@ def _overview(stokes: dict, path: Path, title: str) -> Path:
     q = polarization_quantities(stokes)
     valid = q["valid"]
     h, w = valid.shape
-    fig, axes = plt.subplots(2, 2, figsize=(12, 12 * h / w + 1.2), dpi=100)
+    fig, axes = plt.subplots(2, 2, figsize=_overview_inches(h, w), dpi=OVERVIEW_DPI)
     ax = axes[0, 0]
     ax.imshow(tonemap(stokes["RGB"]))
     ax.set_title("colour (sRGB)")

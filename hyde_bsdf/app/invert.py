@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
-from hyde_bsdf.app.plots import plot_history
+from hyde_bsdf.app.plots import PLOT_BYTES, plot_history
 from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
 from hyde_bsdf.inverse.memory import check_memory
@@ -27,7 +27,8 @@ from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, invert, 
 from hyde_bsdf.io.atomic import atomic_group, atomic_open, atomic_path, check_output_path
 from hyde_bsdf.io.memory import check_memory as memory_check
 from hyde_bsdf.io.input_gate import check_input
-from hyde_bsdf.io.output_gate import output_gate
+from hyde_bsdf.io.output_gate import check_free_space, output_gate
+from hyde_bsdf.io.stokes_exr import exr_bytes
 from hyde_bsdf.render.renderer import scene_inputs
 from hyde_bsdf.progress import stderr_lines
 
@@ -184,6 +185,34 @@ def _check_map_memory(args, fit):
                  f"({per_texel} B per texel)", "lower --map-size")
 
 
+#: upper bound of one row of a history CSV (iteration, loss terms, seconds, an error per map), bytes
+HISTORY_ROW_BYTES = 256
+
+
+def _history_bytes(args) -> int:
+    """Upper bound of a history CSV: a header and a row per iteration."""
+    return HISTORY_ROW_BYTES * (args.iterations + 1)
+
+
+def _maps_bytes(args, fit, shape) -> int:
+    """Upper bound of what ``--maps`` writes for maps of ``shape`` (rows, columns): for each fitted
+    name its map, its seen map and (without --no-uncertainty) its standard-error map, each a
+    float32 ``.npy`` (128-byte header) and a one-channel ``.exr``; the history CSV; the plot."""
+    rows, cols = shape
+    per_map = 4 * rows * cols + 128 + exr_bytes(cols, rows, 1)
+    return len(fit) * (2 if args.no_uncertainty else 3) * per_map + _history_bytes(args) + PLOT_BYTES
+
+
+def _scene_map_shape(observations, fit, args) -> tuple[int, int]:
+    """The largest (rows, columns) of the fitted textures of the first --scene (1 x 1 for a constant)."""
+    import mitsuba as mi
+
+    params = mi.traverse(observations[0].scene)
+    shapes = [tuple(params[k].shape[:2]) if k.endswith(".data") else (1, 1)
+              for k in map_keys(params, fit, args.target).values()]
+    return max(shapes, key=lambda s: s[0] * s[1])
+
+
 def _run_inputs(args) -> list:
     """Every file this run reads -- each --scene and the files it names, --reference, --mask --
     which no output may overwrite (``invert --maps -o .`` beside a scene's alpha.exr)."""
@@ -306,7 +335,8 @@ def _cli(argv):
         raise UsageError(f"--fit must list parameters from {', '.join(PARAMETERS)}, got {args.fit!r}")
     out = Path(args.output)
     paths = [_check_out(out / name) for name in ("invert_history.csv", "invert.png")]
-    with output_gate(paths, inputs=_run_inputs(args), what="-o/--output file"):
+    with output_gate(paths, inputs=_run_inputs(args), need_bytes=_history_bytes(args) + PLOT_BYTES,
+                     what="-o/--output file"):
         return _scalar_run(args, truth, start, fit, paths)
 
 
@@ -480,7 +510,9 @@ def _cli_maps(args):
     fit, start = _maps_fit_and_start(args)
     paths = _maps_outputs(args, fit)
     _check_map_memory(args, fit)
-    with output_gate(list(paths.values()), inputs=_run_inputs(args), what="-o/--output file"):
+    # the maps' size: --map-size's, or (--scene) the scene's textures', checked once they are loaded
+    need = 0 if args.scene else _maps_bytes(args, fit, (args.map_size, args.map_size))
+    with output_gate(list(paths.values()), inputs=_run_inputs(args), need_bytes=need, what="-o/--output file"):
         return _maps_run(args, fit, start, paths)
 
 
@@ -494,6 +526,10 @@ def _maps_run(args, fit, start, paths):
         observations, truth = _preset_observations(args, fit, start)
     else:
         observations, truth = _scene_observations(args, fit)
+    if args.scene:       # the free space for the scene's maps, before the inversion
+        shape = _scene_map_shape(observations, fit, args)
+        check_free_space(Path(args.output), _maps_bytes(args, fit, shape),
+                         f"-o/--output {shorten(args.output)} ({shape[0]}x{shape[1]} maps)")
     # the library's warnings are recorded and printed once each in the summary (as WARNING: lines),
     # not also by Python's warning display; the inputs (masks, start shapes) found inconsistent: UsageError
     with user_input(), warnings.catch_warnings(record=True) as caught:

@@ -6,6 +6,7 @@ validation scripts.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +14,34 @@ import numpy as np
 from hyde_bsdf.io.atomic import atomic_path
 from hyde_bsdf.render.polarization import polarization_quantities, tonemap
 
-__all__ = ["save_polarization_pngs", "save_rgb_png", "polarization_png_paths", "save_png"]
+__all__ = ["save_polarization_pngs", "save_rgb_png", "polarization_png_paths", "save_png", "png_bytes",
+           "chart_bytes", "CHART_DPI"]
+
+#: the charts' resolution (dots per inch) and width (inches); the height follows the image's aspect
+CHART_DPI = 110
+CHART_WIDTH = 6.4
+
+
+def _chart_inches(height: int, width: int) -> tuple[float, float]:
+    """(width, height) in inches of the chart of a ``height`` x ``width`` image."""
+    return CHART_WIDTH, max(2.4, CHART_WIDTH * height / width * 0.85 + 0.6)
+
+
+def png_bytes(width_in: float, height_in: float, dpi: float) -> int:
+    """Upper bound of the size of a matplotlib figure of ``width_in`` x ``height_in`` inches saved
+    as PNG at ``dpi``: its pixels as uncompressed RGBA, one filter byte per row, zlib's worst case
+    (0.1 %) and 64 KiB for the chunks and the text.  What the output gate's free-space check is
+    given (a chart of a smooth image compresses 10-50 times)."""
+    w, h = math.ceil(width_in * dpi), math.ceil(height_in * dpi)
+    raw = h * (4 * w + 1)
+    return raw + raw // 1000 + (1 << 16)
+
+
+def chart_bytes(width: int, height: int) -> int:
+    """Upper bound of the size of one chart (:func:`save_polarization_pngs`, :func:`save_rgb_png`)
+    of a ``width`` x ``height`` image (:func:`png_bytes`)."""
+    return png_bytes(*_chart_inches(height, width), CHART_DPI)
+
 
 def save_polarization_pngs(stokes: dict, stem, title: str = "", channel: str = "Y",
                            dolp_mask: float = 0.01, charts=None) -> dict[str, Path]:
@@ -72,8 +100,7 @@ def _chart(path: Path, data, cmap, vmin, vmax, cbar_label, heading, gamma=None) 
     import matplotlib.pyplot as plt
 
     h, w = data.shape
-    fig_w = 6.4
-    fig, ax = plt.subplots(figsize=(fig_w, max(2.4, fig_w * h / w * 0.85 + 0.6)), dpi=110)
+    fig, ax = plt.subplots(figsize=_chart_inches(h, w), dpi=CHART_DPI)
     cm = matplotlib.colormaps[cmap].with_extremes(bad="0.5")
     if gamma is None:
         im = ax.imshow(data, cmap=cm, vmin=vmin, vmax=vmax, interpolation="nearest")
@@ -118,7 +145,7 @@ def save_rgb_png(rgb, path, title: str = "") -> Path:
     rgb = np.asarray(rgb)
     h, w = rgb.shape[:2]
     prefix = f"{title}: " if title else ""
-    fig, ax = plt.subplots(figsize=(6.4, max(2.4, 6.4 * h / w * 0.85 + 0.6)), dpi=110)
+    fig, ax = plt.subplots(figsize=_chart_inches(h, w), dpi=CHART_DPI)
     ax.imshow(tonemap(rgb), interpolation="nearest")
     ax.set_title(prefix + "colour image (sRGB, clipped at 1)", fontsize=10)
     ax.set_xticks([])

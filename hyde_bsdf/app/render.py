@@ -9,7 +9,9 @@ writes ``OUT.exr`` (channels R, G, B, S0.R ... S3.B, float32) and
 ``OUT_intensity.png``, ``OUT_dolp.png``, ``OUT_aolp.png``, ``OUT_docp.png``,
 ``OUT_rgb.png``; with an unpolarized variant ``OUT.exr`` (R, G, B) and ``OUT_rgb.png``.
 Every output path is checked before the render starts (a name too long for the file system
-included).  The files are written as one set (:func:`hyde_bsdf.io.atomic.atomic_group`): each to a
+included), and once the scene is loaded, before the first pass, the folder's free space against
+an upper bound of what the set takes (:func:`output_bytes`): a full disk is refused with one line
+naming -o and the bytes needed and free, not after the render.  The files are written as one set (:func:`hyde_bsdf.io.atomic.atomic_group`): each to a
 hidden temporary, renamed only when every write has succeeded, so a full disk or a failed write
 leaves the previous EXR and PNGs complete and consistent and ends in one line naming the file
 (exit 2).
@@ -20,16 +22,16 @@ import argparse
 from pathlib import Path
 
 from hyde_bsdf.app.args import Parser, positive_int, quiet_option
-from hyde_bsdf.app.pictures import polarization_png_paths, save_polarization_pngs, save_rgb_png
+from hyde_bsdf.app.pictures import chart_bytes, polarization_png_paths, save_polarization_pngs, save_rgb_png
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_group, check_output_path
 from hyde_bsdf.io.input_gate import check_input
-from hyde_bsdf.io.output_gate import output_gate
-from hyde_bsdf.io.stokes_exr import write_stokes_exr
+from hyde_bsdf.io.output_gate import check_free_space, output_gate
+from hyde_bsdf.io.stokes_exr import COLOURS, exr_bytes, exr_channel_names, write_stokes_exr
 from hyde_bsdf.progress import stderr_lines
 from hyde_bsdf.render.renderer import DEFAULT_VARIANT, MAX_SEED, render_stokes, scene_inputs
 
-__all__ = ["build_parser", "check_outputs", "cli_main"]
+__all__ = ["build_parser", "check_outputs", "output_bytes", "room_for", "cli_main"]
 
 _log = stderr_lines("[render]")
 
@@ -78,6 +80,25 @@ def check_outputs(out, polarized: bool, png: bool = True) -> list[Path]:
     return paths
 
 
+def output_bytes(width: int, height: int, polarized: bool, png: bool = True) -> int:
+    """Upper bound of the bytes ``render`` writes for a ``width`` x ``height`` film: the EXR
+    (float32 channels, :func:`~hyde_bsdf.io.stokes_exr.exr_bytes`) and, with ``png``, each chart
+    (:func:`~hyde_bsdf.app.pictures.chart_bytes`).  The new set is complete beside the old one
+    before the renames, so this is what the folder must have free."""
+    channels = len(exr_channel_names()) if polarized else len(COLOURS)
+    charts = len(polarization_png_paths("out", polarized)) if png else 0
+    return exr_bytes(width, height, channels) + charts * chart_bytes(width, height)
+
+
+def room_for(folder, what: str, bytes_of, option: str = "free some space or choose another folder (-o)"):
+    """A ``before_passes`` for :func:`~hyde_bsdf.render.renderer.render_stokes`: the output gate's
+    free-space check of ``folder`` for ``bytes_of(width, height, polarized)`` bytes, run once the
+    film size is known and before the first pass; its refusal names ``what`` and the film."""
+    def check(width: int, height: int, polarized: bool) -> None:
+        check_free_space(folder, bytes_of(width, height, polarized), f"{what} ({width}x{height} film)", option)
+    return check
+
+
 def _run(args) -> int:
     out = Path(args.output)
     polarized = str(args.variant).endswith("_polarized")
@@ -91,7 +112,9 @@ def _run(args) -> int:
 
 def _render_and_write(args, out: Path) -> int:
     result = render_stokes(args.scene, variant=args.variant, spp=args.spp, seed=args.seed,
-                           chunks=args.chunks, params=dict(args.define), progress=_log)
+                           chunks=args.chunks, params=dict(args.define), progress=_log,
+                           before_passes=room_for(out.parent, f"-o {shorten(str(out))}",
+                                                  lambda w, h, pol: output_bytes(w, h, pol, not args.no_png)))
     meta = result["meta"]
     with atomic_group():      # the EXR and its PNGs replace the old set together, or not at all
         write_stokes_exr(out, result, metadata=meta)

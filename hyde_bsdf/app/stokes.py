@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.app.args import Parser, quiet_option
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, shorten
 
 __all__ = ["build_parser", "cli_main", "read_frame"]
 
@@ -84,19 +84,58 @@ def read_frame(path) -> np.ndarray:
                          f"PNG or TIFF") from None
 
 
+#: the charts ``stokes`` writes beside its EXR
+CHARTS = ("intensity", "dolp", "aolp")
+
+
 def cli_main(argv=None) -> int:
-    from hyde_bsdf.app.pictures import save_polarization_pngs
-    from hyde_bsdf.inverse.analyzer import (CameraNoise, analysis_matrix, chart_stokes, stokes_from_frames,
-                                            stokes_from_mosaic, write_stokes_estimate)
-    from hyde_bsdf.io.atomic import atomic_group, check_output_path
+    from hyde_bsdf.io.output_gate import output_gate
 
     args = build_parser().parse_args(sys.argv[1:] if argv is None else argv)
+    out, stem = _outputs(args)
+    charts = [Path(f"{stem}_{name}.png") for name in CHARTS]
+    inputs = [p for p in [args.mosaic, args.analysis, *(args.frames or [])] if p]
+    # the output gate: no output is an input, one writer at a time; the free space once the size is known
+    with output_gate([out, *charts], inputs=inputs, what="-o/--output file"):
+        est = _estimate(args)
+        _check_room(est, out, charts)
+        paths = _write(est, out, stem, args.dn_per_unit)
+    _report(est, paths)
+    return 0
+
+
+def _outputs(args) -> tuple[Path, Path]:
+    """(-o, the charts' stem), every output path checked before any frame is read."""
+    from hyde_bsdf.io.atomic import check_output_path
+
     out = check_output_path(args.output, "-o/--output file")
     if out.suffix.lower() != ".exr":
-        raise UsageError(f"-o/--output must end in .exr, got {args.output!r}")
+        raise UsageError(f"-o/--output must end in .exr, got {shorten(args.output)}")
     stem = Path(args.png) if args.png else out.with_suffix("")
-    for name in ("intensity", "dolp", "aolp"):
+    for name in CHARTS:
         check_output_path(Path(f"{stem}_{name}.png"), "--png chart")
+    return out, stem
+
+
+def _check_room(est, out: Path, charts) -> None:
+    """The output gate's free-space check of each output folder for the EXR (every Stokes, sigma
+    and mask value as float32, :func:`~hyde_bsdf.io.stokes_exr.exr_bytes`) and the charts, before
+    anything is written (the Stokes step itself takes seconds)."""
+    from hyde_bsdf.app.pictures import chart_bytes
+    from hyde_bsdf.io.output_gate import check_free_space
+    from hyde_bsdf.io.stokes_exr import exr_bytes
+
+    h, w = est.shape
+    values = sum(np.size(a) for a in (*est.stokes.values(), *est.sigma.values())) + h * w
+    need = exr_bytes(w, h, -(-values // (h * w))) + len(charts) * chart_bytes(w, h)
+    for folder in sorted({str(p.parent) for p in (out, *charts)}):
+        check_free_space(folder, need, f"-o/--output {shorten(str(out))} ({w}x{h} px)")
+
+
+def _estimate(args):
+    """The Stokes estimate of --mosaic or --frames, in the units of --dn-per-unit."""
+    from hyde_bsdf.inverse.analyzer import CameraNoise, analysis_matrix, stokes_from_frames, stokes_from_mosaic
+
     noise = CameraNoise(args.gain, args.read_noise, args.full_well, args.black_level)
     A = None
     if args.analysis:
@@ -120,10 +159,22 @@ def cli_main(argv=None) -> int:
             A = analysis_matrix(angles, retarder=tuple(ret))
         est = stokes_from_frames([read_frame(f) for f in args.frames], angles if A is None else None, analysis=A,
                                  noise=noise, saturated=args.saturated, names=args.frames)
-    est = est.in_units(args.dn_per_unit)
+    return est.in_units(args.dn_per_unit)
+
+
+def _write(est, out: Path, stem: Path, dn_per_unit: float) -> dict:
+    """The EXR and its charts, as one set (the old set stays if any write fails)."""
+    from hyde_bsdf.app.pictures import save_polarization_pngs
+    from hyde_bsdf.inverse.analyzer import chart_stokes, write_stokes_estimate
+    from hyde_bsdf.io.atomic import atomic_group
+
     with atomic_group():          # the EXR and its charts replace the old set together, or not at all
-        paths = {"exr": write_stokes_estimate(est, out, metadata={"dn_per_unit": f"{args.dn_per_unit:g}"})}
-        paths.update(save_polarization_pngs(chart_stokes(est), stem, out.stem, charts=("intensity", "dolp", "aolp")))
+        paths = {"exr": write_stokes_estimate(est, out, metadata={"dn_per_unit": f"{dn_per_unit:g}"})}
+        paths.update(save_polarization_pngs(chart_stokes(est), stem, out.stem, charts=CHARTS))
+    return paths
+
+
+def _report(est, paths) -> None:
     h, w = est.shape
     lit = est.mask[..., None] & (est.stokes["S0"].reshape(h, w, -1) > 10 * est.sigma["S0"].reshape(h, w, -1))
     rel = ", ".join(f"{c} {np.median(est.sigma[c].reshape(h, w, -1)[lit] / est.stokes['S0'].reshape(h, w, -1)[lit]):.3g}"
@@ -131,4 +182,3 @@ def cli_main(argv=None) -> int:
     print(f"{'+'.join(est.measured)} at {w}x{h} px ({est.method}; analysis matrix condition {est.condition:.3g}); "
           f"median sigma/S0 where S0 > 10 sigma: {rel}; {int((~est.mask).sum())} pixel(s) masked")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
-    return 0

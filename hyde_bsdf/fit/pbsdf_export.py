@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.pbsdf_samples import check_model_terms, paper_angles, paper_to_table, table_to_paper
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.io.memory import check_memory, format_bytes
@@ -163,8 +163,8 @@ def check_table_size(path, resolution, bands: int = len(KAIST_WAVELENGTHS), free
         raise UsageError(f"resolution {res}: {elements} table values exceed Mitsuba's 32-bit index "
                          f"limit ({MAX_ELEMENTS}); choose a smaller resolution")
     folder = Path(path).parent if str(Path(path).parent) else Path(".")
-    check_free_space(folder, nbytes, f"resolution {res}: the file", "choose a smaller resolution or another folder",
-                     free=free_disk)
+    check_free_space(folder, nbytes, f"pBSDF file {shorten(str(path))} (resolution {res})",
+                     "choose a smaller resolution or another folder", free=free_disk)
     check_memory(LOADER_COPIES * nbytes, f"loading the {res} table ({format_bytes(nbytes)}) in Mitsuba",
                  "choose a smaller resolution", available=free_memory)
     return nbytes

@@ -216,11 +216,14 @@ class OutputLock:
 def output_gate(outputs, *, inputs=(), need_bytes: int = 0, what: str = "output file"):
     """Check every output (:func:`check_target`, :func:`check_not_input`, :func:`check_free_space`)
     and hold :class:`OutputLock` on them for the block; yields the paths to write (symlinks inside
-    their folder resolved)."""
+    their folder resolved).  ``need_bytes``: an upper bound of what the outputs take, which each
+    of their folders must have free (the command estimates it from its options before the work)."""
     targets = [check_target(p, what) for p in outputs]
     check_not_input(targets, inputs, what)
     folders = {str(Path(p).parent) if str(Path(p).parent) else "." for p in targets}
+    named = f"{what} {shorten(targets[0])}" + (f" and {len(targets) - 1} more" if len(targets) > 1 else "") \
+        if targets else what
     for folder in sorted(folders):
-        check_free_space(folder, need_bytes)
+        check_free_space(folder, need_bytes, named)
     with OutputLock(targets, what):
         yield targets

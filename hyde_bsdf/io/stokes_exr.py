@@ -45,6 +45,7 @@ __all__ = [
     "STOKES_NAMES",
     "COLOURS",
     "exr_channel_names",
+    "exr_bytes",
     "write_stokes_exr",
     "read_stokes_exr",
     "camera_channel_names",
@@ -57,6 +58,19 @@ COLOURS = ("R", "G", "B")
 def exr_channel_names() -> list[str]:
     """The channel names written by :func:`write_stokes_exr`, in order."""
     return list(COLOURS) + [f"{s}.{c}" for s in STOKES_NAMES for c in COLOURS]
+
+
+#: bytes an EXR file may hold besides its pixels: the header (channel list, attributes, metadata)
+EXR_HEADER_BYTES = 1 << 16
+
+
+def exr_bytes(width: int, height: int, channels: int) -> int:
+    """Upper bound of the size of a ``width`` x ``height`` EXR of ``channels`` float32 channels as
+    the writers here make it (ZIP compression, 16 scanlines a chunk): the pixels uncompressed
+    (zlib never grows data by more than 0.1 %, counted), 16 bytes of offset and chunk header per
+    chunk, and :data:`EXR_HEADER_BYTES`.  What the output gate's free-space check is given."""
+    pixels = int(width) * int(height) * int(channels) * 4
+    return pixels + pixels // 1000 + 16 * (-(-int(height) // 16)) + EXR_HEADER_BYTES
 
 
 def _check_stokes(stokes: dict) -> tuple[int, int]:

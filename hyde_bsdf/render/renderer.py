@@ -407,7 +407,7 @@ def _render_pass(mi, scene, n, seed, integrator):
 
 def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None = None,
                   seed: int = 0, chunks: int | None = None, params: dict | None = None,
-                  progress=True, fallback: bool = True) -> dict:
+                  progress=True, fallback: bool = True, before_passes=None) -> dict:
     """Render a scene with the ``stokes`` integrator; return its Stokes image.
 
     Parameters
@@ -426,6 +426,9 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
     params : ``$name`` values for the XML scene.
     progress : a callback ``progress(message)`` called after each chunk; True (the default) for
         ``[render] ...`` lines on stderr, False for none (:mod:`hyde_bsdf.progress`).
+    before_passes : None, or ``before_passes(width, height, polarized)``, called once the scene is
+        loaded and its film checked, before the first pass; what it raises ends the render there
+        (the command line checks with it that the outputs' folder has room for that film).
 
     Returns
     -------
@@ -442,7 +445,7 @@ def render_stokes(scene_or_path, variant: str = DEFAULT_VARIANT, spp: int | None
     with _ctrl_c_flag() as interrupted:
         return _render_stokes(scene_or_path, variant, spp, seed, chunks, params,
                               as_callback(progress, "[render]"), fallback,
-                              interrupted)
+                              interrupted, before_passes)
 
 
 def _scene_of(mi, scene_or_path, variant, params, fallback, interrupted):
@@ -526,7 +529,8 @@ def _split_channels(mean, sem, names, polarized) -> dict:
     return out
 
 
-def _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, fallback, interrupted):
+def _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, fallback, interrupted,
+                   before_passes=None):
     import mitsuba as mi
 
     scene, info, variant = _scene_of(mi, scene_or_path, variant, params, fallback, interrupted)
@@ -544,6 +548,8 @@ def _render_stokes(scene_or_path, variant, spp, seed, chunks, params, progress, 
     seed = _check_int("seed", seed, 0, MAX_SEED)
     width, height = _check_film(scene, polarized, info)
     sizes = plan_passes(width, height, spp, chunks)
+    if before_passes is not None:
+        before_passes(width, height, polarized)
     integrator = _stokes_integrator(scene) if polarized else scene.integrator()
     acc, acc2, names, seconds = _accumulate(mi, scene, integrator, sizes, seed, progress, interrupted)
     mean, sem = _mean_and_sem(acc, acc2, spp, len(sizes))
