@@ -66,9 +66,9 @@ CLI_ROWS = [
      "pngdir_dolp.png' is a directory", "in"),
     # --- render: scene sanity ---
     ("render: no sensor", ["render", "{nosensor}", "-o", "{tmp}/a.exr"], 2, "has no <sensor>", "in"),
-    # Mitsuba re-raises the plugin's ValueError with its traceback inside the message: one line is left
+    # Mitsuba re-raises the plugin's UsageError (a ValueError) with its traceback inside the message: one line is left
     ("render: bad hyde parameter in the scene", ["render", "{badhyde}", "-o", "{tmp}/a.exr"], 2,
-     "ValueError: hyde: rms_slope must be a finite number in the accepted range [0.0001, 50]", "in"),
+     "UsageError: hyde: rms_slope must be a finite number in the accepted range [0.0001, 50]", "in"),
     ("render: ptracer integrator", ["render", "{ptracer}", "-o", "{tmp}/a.exr"], 2, "integrator 'ptracer'", "in"),
     ("render: sample_count 0 (was SIGFPE)", ["render", "{inverse}", "-o", "{tmp}/a.exr", "-D", "spp=0"], 2,
      "sample_count is 0; it must be an integer >= 1 (the scene's $spp; set it with -D spp=N)", "sub"),

@@ -34,7 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.app.args import Parser, positive_int, quiet_option
-from hyde_bsdf.app.pictures import png_bytes, polarization_png_paths, save_png, save_polarization_pngs, save_rgb_png
+from hyde_bsdf.app.pictures import (png_bytes, polarization_png_paths, save_png, save_polarization_pngs,
+                                    save_rgb_png)
 from hyde_bsdf.app.render import output_bytes, room_for
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_group, check_output_dir, check_output_path

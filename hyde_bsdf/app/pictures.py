@@ -17,8 +17,9 @@ from hyde_bsdf.render.polarization import polarization_quantities, tonemap
 __all__ = ["save_polarization_pngs", "save_rgb_png", "polarization_png_paths", "save_png", "png_bytes",
            "chart_bytes", "CHART_DPI"]
 
-#: the charts' resolution (dots per inch) and width (inches); the height follows the image's aspect
+#: the charts' resolution, dots per inch
 CHART_DPI = 110
+#: the charts' width, inches (the height follows the image's aspect)
 CHART_WIDTH = 6.4
 
 

@@ -21,8 +21,8 @@ from hyde_bsdf.inverse.scalar import PARAMETERS
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
 from hyde_bsdf.io.measurements import Measurements
 
-__all__ = ["PLOT_FORMATS", "PLOT_POINTS", "PLOT_BYTES", "check_plot_path", "plot_fit", "plot_pbsdf_fit", "plot_history",
-           "plot_selection"]
+__all__ = ["PLOT_FORMATS", "PLOT_POINTS", "PLOT_BYTES", "check_plot_path", "plot_fit", "plot_pbsdf_fit",
+           "plot_history", "plot_selection"]
 
 
 #: at most this many geometries are plotted (a random subset of larger data sets)

@@ -11,10 +11,10 @@ writes ``OUT.exr`` (channels R, G, B, S0.R ... S3.B, float32) and
 Every output path is checked before the render starts (a name too long for the file system
 included), and once the scene is loaded, before the first pass, the folder's free space against
 an upper bound of what the set takes (:func:`output_bytes`): a full disk is refused with one line
-naming -o and the bytes needed and free, not after the render.  The files are written as one set (:func:`hyde_bsdf.io.atomic.atomic_group`): each to a
-hidden temporary, renamed only when every write has succeeded, so a full disk or a failed write
-leaves the previous EXR and PNGs complete and consistent and ends in one line naming the file
-(exit 2).
+naming -o and the bytes needed and free, not after the render.  The files are written as one set
+(:func:`hyde_bsdf.io.atomic.atomic_group`): each to a hidden temporary, renamed only when every
+write has succeeded, so a full disk or a failed write leaves the previous EXR and PNGs complete
+and consistent and ends in one line naming the file (exit 2).
 """
 from __future__ import annotations
 

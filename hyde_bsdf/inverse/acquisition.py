@@ -224,7 +224,8 @@ def design_acquisition(preset: str = "dielectric", *, facet_angles=MIRROR_FACET_
         polarizer_angles = (None,) if preset == "dielectric" else (45.0,)
     for a in polarizer_angles:
         if a is not None and not math.isfinite(float(a)):
-            raise UsageError(f"polarizer_angles must be finite angles in deg or None, got {shorten(polarizer_angles)}")
+            raise UsageError(f"polarizer_angles must be finite angles in deg or None, "
+                             f"got {shorten(polarizer_angles)}")
     if retarder is None:
         retarder = () if preset == "dielectric" else (True if camera == "linear" else METAL_RETARDER_FACET_ANGLES)
     circular = list(betas) if retarder is True else [] if retarder is False else [float(b) for b in retarder]
