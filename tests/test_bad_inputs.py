@@ -252,6 +252,9 @@ CLI_ROWS = [
     ("invert --maps: no room for the maps (refused before the inversion)",
      ["invert", "--maps", "--map-size", "8", "-o", "{tmp}/dfull_maps"], 2,
      "invert_maps_history.csv' and 7 more: about 64", "diskfull"),
+    ("invert --maps --scene: no room for maps of the scene's texture size (refused before the inversion)",
+     ["invert", "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--reference", "{tmp}/invscene16/ref.exr", "-o",
+      "{tmp}/dfull_scene"], 2, "dfull_scene' (6x6 maps): about 64", "diskfull"),
 ]
 
 
@@ -501,6 +504,15 @@ def _gate_files(tmp):
     _stokes_exr(inv / "ref.exr", 16, 1.0)
     (inv / "scene.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', '<bsdf type="hyde"><texture '
                                    'type="bitmap" name="alpha"><string name="filename" value="alpha.exr"/></texture></bsdf>'))
+    big = tmp / "invscene16"                      # the same at 16x16 px with a 6x6 alpha map and its reference
+    big.mkdir()
+    import numpy as np
+    import OpenEXR
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                 {"Y": np.full((6, 6), 0.3, np.float32)}).write(str(big / "alpha.exr"))
+    _stokes_exr(big / "ref.exr", 16, 1.0)
+    (big / "scene.xml").write_text((inv / "scene.xml").read_text().replace('"res" value="12"', '"res" value="16"')
+                                   .replace('"height" value="8"', '"height" value="16"'))
     for name in ("treereport", "editedreport"):      # earlier reports (manifest with hashes), then the user's
         (tmp / name).mkdir()
         (tmp / name / "index.html").write_text("report")
