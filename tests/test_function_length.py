@@ -17,8 +17,6 @@ MAX_LINES = 60
 #: (hyde_bsdf/mitsuba/, mom/, inverse/ only).  Each entry is "path:function"; remove it when
 #: that function is split.  Every other folder has none, and none may be added here.
 PENDING = {
-    "mitsuba/plugin.py:__init__",
-    "mom/gather.py:gather",
     "inverse/maps.py:invert_maps",
     "inverse/scalar.py:invert",
 }
