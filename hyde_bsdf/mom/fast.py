@@ -463,7 +463,7 @@ class _Far:
         self.prop = np.exp((-1j * k * dx) * lens[:, None] * self.cphi[None, :])   # across block j (either way)
         self.i_left = loc                      # table[i_left] = exp(-j k (x - left edge) cos phi)
         self.i_right = lens[of] - 1 - loc      # table[i_right] = exp(-j k (right edge - x) cos phi)
-        self.half = -0.5 * k * dx
+        self.half = -0.5 * k * dx              # the cell moments' a = half (cos phi +- f' sin phi)
         self.ac = self.half * self.cphi[None, :]
         self.ec, self.eci = _exp_pair(1j * self.ac)
         self.kinds = [name for name, need in (("S", need_S), ("D", need_D)) if need]

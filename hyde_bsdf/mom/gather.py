@@ -121,9 +121,9 @@ class _Run:
     """The tasks of one :func:`gather` call: their futures, results and count done, and the one-line
     ExecutorError that names the executor (its pending tasks cancelled)."""
 
-    def __init__(self, executor, items, what, label):
+    def __init__(self, executor, total, what, label):
         self.executor, self.what, self.label = executor, what, label
-        self.total = len(items)
+        self.total = total
         self.results = [None] * self.total
         self.futures = {}
         self.pending = set()
@@ -206,7 +206,7 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, w
         raise UsageError(f"timeout must be > 0 seconds or None, got {shorten(timeout)}")
     beat = as_callback(heartbeat, prefix="")
     items = list(items)
-    run = _Run(executor, items, what, label)
+    run = _Run(executor, len(items), what, label)
     run.submit(fn, items)
     last_done = last_beat = time.monotonic()
     while run.pending:
