@@ -155,7 +155,7 @@ def _unique_key(params, name, suffix_groups, prefix):
         suffixes = [s for group in suffix_groups for s in group]
         raise UsageError(f"need exactly one BSDF parameter for {name!r} "
                          f"(keys ending in {' or '.join(suffixes)}"
-                         f"{'' if prefix is None else ' under ' + repr(prefix)}); found {found}"
+                         f"{'' if prefix is None else ' under ' + shorten(prefix)}); found {found}"
                          f"{'; name the BSDF with prefix= (CLI: --target)' if len(found) > 1 else ''}")
     return found[0]
 
