@@ -221,8 +221,8 @@ def output_gate(outputs, *, inputs=(), need_bytes: int = 0, what: str = "output 
     targets = [check_target(p, what) for p in outputs]
     check_not_input(targets, inputs, what)
     folders = {str(Path(p).parent) if str(Path(p).parent) else "." for p in targets}
-    named = f"{what} {shorten(targets[0])}" + (f" and {len(targets) - 1} more" if len(targets) > 1 else "") \
-        if targets else what
+    more = f" and {len(targets) - 1} more" if len(targets) > 1 else ""
+    named = f"{what} {shorten(targets[0])}{more}" if targets else what
     for folder in sorted(folders):
         check_free_space(folder, need_bytes, named)
     with OutputLock(targets, what):
