@@ -200,4 +200,5 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from _common import cli
+    cli(validate, __doc__, main)
