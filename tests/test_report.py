@@ -219,6 +219,17 @@ def test_a_crashed_scripts_detail_is_the_tail_of_its_stderr(tmp_path):
     assert "line 4999" in checks[0]["detail"] and "line 4000" not in checks[0]["detail"]
 
 
+def test_a_script_without_the_protocol_is_a_failed_check_that_says_why(tmp_path):
+    """A script whose ``__main__`` block does not go through ``_common.cli`` (or that has none) ends
+    with status 0 and no checks: one failed check saying so, not a silent pass."""
+    from hyde_bsdf.app.report.build import _run_script
+
+    (tmp_path / "bare.py").write_text('"""No __main__ block."""\ndef validate(outdir, quick=False):\n    return []\n')
+    checks, _, _ = _run_script(tmp_path / "bare.py", tmp_path, quick=True)
+    assert [(c["name"], c["passed"]) for c in checks] == [("bare: ran", False)]
+    assert checks[0]["value"].startswith("exit status 0 (no output on stderr), and no checks came back")
+
+
 def test_ctrl_c_terminates_the_running_script(tmp_path):
     """Ctrl-C (SIGINT to the report's process only: here the script itself sends it to its parent,
     then sleeps) interrupts the report with KeyboardInterrupt, and the child is terminated and

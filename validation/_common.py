@@ -25,8 +25,8 @@ COLOURS = {"accurate": "#2ca02c", "degrades": "#ff7f0e", "refuses": "#7f7f7f", "
 def cli(validate, doc, main=None):
     """``python SCRIPT.py [-o OUTDIR] [--quick] [--checks-json FILE]``: run ``validate`` and print
     each check, or (``--checks-json``) answer the report's protocol (see the module docstring).
-    ``main``: the script's own command line, run (and its status returned) when the call is not
-    the report's."""
+    ``main``: the script's own command line, run (its return value the exit status) when the call
+    is not the report's."""
     if main is not None and "--checks-json" not in sys.argv[1:]:
         sys.exit(main())
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -208,9 +208,9 @@ def _read_checks(path: Path):
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
         checks = [dict(c) for c in data["checks"]]
-        if not all("name" in c and isinstance(c.get("passed"), bool) for c in checks):
+        if not all("name" in c and "passed" in c for c in checks):
             return None
-        return checks, str(data.get("doc") or "")
+        return [dict(c, passed=bool(c["passed"])) for c in checks], str(data.get("doc") or "")
     except (OSError, ValueError, KeyError, TypeError):
         return None
 
@@ -235,6 +235,8 @@ def _run_script(path: Path, outdir: Path, quick: bool):
     last = (detail.splitlines() or [""])[-1].strip()
     last = last if len(last) <= 300 else last[:297] + "..."
     value = f"exit status {status}" + (f": {last}" if last else " (no output on stderr)")
+    if status == 0:
+        value += ", and no checks came back (does its __main__ block call validation/_common.py's cli?)"
     return [dict(name=f"{path.stem}: ran", value=value, tolerance="no error", passed=False,
                  detail=detail)], seconds, ""
 
