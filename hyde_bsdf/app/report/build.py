@@ -20,8 +20,8 @@ caches, registered plugins) and its memory cannot leak into the next, so a check
 fail because of the scripts that ran before it (an order-dependent failure class the in-process
 report had); and **layering** -- the package imports nothing outside itself: the scripts are
 files it runs, not modules it loads, so ``hyde_bsdf`` installs and imports without a checkout.
-The price is one interpreter start and its imports per script (about 1-2 s each; measured in
-docs/validation.md).
+The price is one interpreter start and its imports per script (1.2-1.3 CPU s each: +22 % CPU
+on the quick report, its wall time within the machine's load noise; docs/validation.md).
 
 Nothing but an earlier report's own files is ever deleted.  The report is built in a fresh hidden
 folder beside ``DIR`` and moved in at the end (:func:`hyde_bsdf.io.atomic.atomic_dir`), with a
