@@ -205,6 +205,26 @@ def test_runner_reports_pass_fail_crash_kill_missing_and_chatty_scripts(tmp_path
         assert [r["passed"] for r in csv.DictReader(fh)] == ["True", "False", "False", "False", "True", "False"]
 
 
+def test_no_state_passes_from_one_script_to_the_next(tmp_path, monkeypatch):
+    """Isolation: a script that changes shared state (a global of the shared ``_common`` module, an
+    environment variable, NumPy's error settings) leaves nothing for the script after it -- in
+    the one-process report it did (the next script met the first one's module and settings)."""
+    from hyde_bsdf.app.report import build
+
+    vdir = tmp_path / "scripts"
+    _write_fakes(vdir, {
+        "dirty": "import _common\n    _common.LEAK = 1\n    os.environ['HYDE_LEAK'] = '1'\n"
+                 "    np.seterr(all='raise')\n    return [dict(name='dirtied', value=1, tolerance='-', passed=True)]",
+        "clean": "import _common\n    seen = [hasattr(_common, 'LEAK'), 'HYDE_LEAK' in os.environ, "
+                 "np.geterr()['divide'] == 'raise']\n"
+                 "    return [dict(name='nothing leaked', value=str(seen), tolerance='[False, False, False]', "
+                 "passed=not any(seen))]"})
+    monkeypatch.setattr(build, "SECTIONS", [("Fake", ["dirty", "clean"])])
+    monkeypatch.setattr(build, "machine_info", lambda: {"CPU": "test"})
+    ok, rows, _ = build_report(tmp_path / "report", quick=True, progress=False, scripts=vdir)
+    assert ok and rows[1]["value"] == "[False, False, False]", rows
+
+
 def test_a_crashed_scripts_detail_is_the_tail_of_its_stderr(tmp_path):
     """A crash after 5000 lines on stderr: the detail is the last TAIL_LINES lines (the traceback's
     end), not the whole 5000."""
