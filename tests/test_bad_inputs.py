@@ -108,6 +108,8 @@ CLI_ROWS = [
     ("validate: outdir is a user's folder", ["validate", "-o", "{notreport}"], 2, "is not a validation report", "in"),
     ("validate: outdir is the current folder", ["validate", "-o", "."], 2, "is the current folder", "in"),
     ("validate: outside a source checkout", ["validate", "-o", "{tmp}/r"], 2, "source checkout", "nocheckout"),
+    ("validate: --scripts names a folder without the scripts (new)", ["validate", "-o", "{tmp}/r", "--scripts",
+     "{tmp}"], 2, "holds none of the validation scripts", "in"),
     # --- fit (output path checked before the fit) ---
     ("fit: -o is a directory", ["fit", "{csv}", "-o", "{tmp}"], 2, "is a directory", "in"),
     ("fit: -o under a regular file", ["fit", "{csv}", "-o", "{file}/plot.png"], 2, "is not a directory", "in"),

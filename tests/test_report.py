@@ -64,6 +64,11 @@ def validate(outdir, quick=False):
     open(os.path.join(outdir, "fake.png"), "wb").write(b"\\x89PNG fake")
     write_csv(os.path.join(outdir, "fake.csv"), ["x"], [[1]])
     return [dict(name="fake check", value=1.0, tolerance="== 1", passed=True)]
+
+
+if __name__ == "__main__":
+    from _common import cli
+    cli(validate, __doc__)
 '''
 
 
@@ -142,3 +147,175 @@ def test_report_never_deletes_a_users_files(tmp_path, monkeypatch, capsys):
     assert cli_main(["-o", str(report), "--quick", "--force"]) == 0
     assert (report / "my_figure.png").read_bytes() == b"mine" and (report / "index.html.orig").exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report", "site", "validation"]
+
+
+# --- the report runs each script as a child process (issue 24: the package imports nothing outside itself) ---
+
+#: fake scripts of the runner tests: STEM -> body of ``validate`` (each file gets the docstring
+#: "STEM's docstring" and the protocol's ``__main__`` block)
+FAKES = {
+    "passing": "return [dict(name='np value', value=np.float64(0.25), tolerance='<= 1', passed=np.bool_(True))]",
+    "failing": "return [dict(name='too big', value=3, tolerance='<= 1', passed=False)]",
+    "crashing": "print('noise ' * 50, file=sys.stderr)\n    raise ValueError('boom: the fake crashed')",
+    "killed": "os.kill(os.getpid(), signal.SIGKILL)",
+    "chatty": ("for i in range(40000):\n        print('out', i, 'x' * 100)\n        print('err', i, 'y' * 100, "
+               "file=sys.stderr)\n    return [dict(name='said a lot', value=40000, tolerance='any', passed=True)]"),
+}
+
+
+def _write_fakes(vdir, fakes):
+    import shutil
+    from pathlib import Path
+
+    vdir.mkdir(exist_ok=True)
+    shutil.copy(Path(__file__).resolve().parent.parent / "validation" / "_common.py", vdir / "_common.py")
+    for stem, body in fakes.items():
+        (vdir / f"{stem}.py").write_text(
+            f'"""{stem}\'s docstring."""\nimport os\nimport signal\nimport sys\n\nimport numpy as np\n\n\n'
+            f"def validate(outdir, quick=False):\n    {body}\n\n\n"
+            'if __name__ == "__main__":\n    from _common import cli\n    cli(validate, __doc__)\n')
+
+
+def test_runner_reports_pass_fail_crash_kill_missing_and_chatty_scripts(tmp_path, monkeypatch):
+    """Each script runs as a child process: its checks come back through ``--checks-json`` with
+    their numbers (NumPy scalars as plain numbers) and its docstring; a script that raises or is
+    killed (SIGKILL) is one failed check whose value is the exit status and the last stderr line,
+    with the last TAIL_LINES lines of stderr as detail; a missing script is a failed check; a script
+    that writes 9 MB to stdout and stderr does not block the report.  The report completes (exit 1)."""
+    from hyde_bsdf.app.report import build
+
+    vdir = tmp_path / "scripts"
+    _write_fakes(vdir, FAKES)
+    monkeypatch.setattr(build, "SECTIONS", [("Fake", [*FAKES, "absent"])])
+    monkeypatch.setattr(build, "machine_info", lambda: {"CPU": "test"})
+    ok, rows, _ = build_report(tmp_path / "report", quick=True, progress=False, scripts=vdir)
+    got = {r["script"]: r for r in rows}
+    assert not ok and len(rows) == len(FAKES) + 1
+    assert got["passing"]["value"] == 0.25 and got["passing"]["passed"] is True
+    assert got["failing"]["value"] == 3 and got["failing"]["passed"] is False
+    assert got["crashing"]["name"] == "crashing: ran" and not got["crashing"]["passed"]
+    assert got["crashing"]["value"] == "exit status 1: ValueError: boom: the fake crashed"
+    assert got["killed"]["value"] == f"exit status {-__import__('signal').SIGKILL} (no output on stderr)"
+    assert got["absent"]["name"] == "absent: script present" and got["absent"]["value"] == "missing"
+    assert got["chatty"]["passed"] is True and got["chatty"]["value"] == 40000
+    page = (tmp_path / "report" / "index.html").read_text()
+    assert "passing&#x27;s docstring." in page and "chatty&#x27;s docstring." in page
+    assert "Traceback (most recent call last)" in page and "noise noise" in page
+    with open(tmp_path / "report" / "checks.csv", newline="") as fh:
+        assert [r["passed"] for r in csv.DictReader(fh)] == ["True", "False", "False", "False", "True", "False"]
+
+
+def test_no_state_passes_from_one_script_to_the_next(tmp_path, monkeypatch):
+    """Isolation: a script that changes shared state (a global of the shared ``_common`` module, an
+    environment variable, NumPy's error settings) leaves nothing for the script after it -- in
+    the one-process report it did (the next script met the first one's module and settings)."""
+    from hyde_bsdf.app.report import build
+
+    vdir = tmp_path / "scripts"
+    _write_fakes(vdir, {
+        "dirty": "import _common\n    _common.LEAK = 1\n    os.environ['HYDE_LEAK'] = '1'\n"
+                 "    np.seterr(all='raise')\n    return [dict(name='dirtied', value=1, tolerance='-', passed=True)]",
+        "clean": "import _common\n    seen = [hasattr(_common, 'LEAK'), 'HYDE_LEAK' in os.environ, "
+                 "np.geterr()['divide'] == 'raise']\n"
+                 "    return [dict(name='nothing leaked', value=str(seen), tolerance='[False, False, False]', "
+                 "passed=not any(seen))]"})
+    monkeypatch.setattr(build, "SECTIONS", [("Fake", ["dirty", "clean"])])
+    monkeypatch.setattr(build, "machine_info", lambda: {"CPU": "test"})
+    ok, rows, _ = build_report(tmp_path / "report", quick=True, progress=False, scripts=vdir)
+    assert ok and rows[1]["value"] == "[False, False, False]", rows
+
+
+def test_a_crashed_scripts_detail_is_the_tail_of_its_stderr(tmp_path):
+    """A crash after 5000 lines on stderr: the detail is the last TAIL_LINES lines (the traceback's
+    end), not the whole 5000."""
+    from hyde_bsdf.app.report.build import TAIL_LINES, _run_script
+
+    _write_fakes(tmp_path, {"loud": "for i in range(5000):\n        print('line', i, file=sys.stderr)\n"
+                                    "    raise RuntimeError('after the noise')"})
+    checks, seconds, doc = _run_script(tmp_path / "loud.py", tmp_path, quick=True)
+    assert len(checks) == 1 and not checks[0]["passed"] and doc == "" and seconds > 0
+    detail = checks[0]["detail"].splitlines()
+    assert len(detail) == TAIL_LINES and detail[-1] == "RuntimeError: after the noise"
+    assert "line 4999" in checks[0]["detail"] and "line 4000" not in checks[0]["detail"]
+
+
+def test_a_script_without_the_protocol_is_a_failed_check_that_says_why(tmp_path):
+    """A script whose ``__main__`` block does not go through ``_common.cli`` (or that has none) ends
+    with status 0 and no checks: one failed check saying so, not a silent pass."""
+    from hyde_bsdf.app.report.build import _run_script
+
+    (tmp_path / "bare.py").write_text('"""No __main__ block."""\ndef validate(outdir, quick=False):\n    return []\n')
+    checks, _, _ = _run_script(tmp_path / "bare.py", tmp_path, quick=True)
+    assert [(c["name"], c["passed"]) for c in checks] == [("bare: ran", False)]
+    assert checks[0]["value"].startswith("exit status 0 (no output on stderr), and no checks came back")
+
+
+def test_ctrl_c_terminates_the_running_script(tmp_path):
+    """Ctrl-C (SIGINT to the report's process only: here the script itself sends it to its parent,
+    then sleeps) interrupts the report with KeyboardInterrupt, and the child is terminated and
+    reaped before the interrupt goes on: no script keeps running after the report ends."""
+    from hyde_bsdf.app.report.build import _run_script
+
+    _write_fakes(tmp_path, {"sleeper": "open(os.path.join(outdir, 'pid'), 'w').write(str(os.getpid()))\n"
+                                       "    os.kill(os.getppid(), signal.SIGINT)\n    while True:\n"
+                                       "        signal.pause()"})
+    with pytest.raises(KeyboardInterrupt):
+        _run_script(tmp_path / "sleeper.py", tmp_path, quick=True)
+    pid = int((tmp_path / "pid").read_text())
+    with pytest.raises(ProcessLookupError):       # terminated and reaped (not a zombie)
+        __import__("os").kill(pid, 0)
+
+
+def test_scripts_option_names_the_folder_and_refuses_one_without_scripts(tmp_path, capsys):
+    """``validate --scripts DIR`` (an installed package: a clone's validation/ folder): a folder
+    without the report's scripts is refused before any work, exit 2, in one line naming it."""
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert cli_main(["-o", str(tmp_path / "r"), "--scripts", str(empty)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"--scripts {str(empty)!r} holds none of the validation scripts" in err[0], err
+    assert not (tmp_path / "r").exists()
+
+
+#: what loads a file as code: a package that uses none of these runs no file outside itself
+LOADERS = {"spec_from_file_location", "SourceFileLoader", "module_from_spec", "exec_module", "load_module",
+           "run_path", "run_module", "exec", "execfile"}
+
+
+def _loads_files(source: str) -> list:
+    """(line, name) of every use of a file loader, and of every change to ``sys.path``."""
+    import ast
+
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        name = node.attr if isinstance(node, ast.Attribute) else node.id if isinstance(node, ast.Name) else None
+        if name in LOADERS:
+            found.append((node.lineno, name))
+        if isinstance(node, ast.Attribute) and node.attr == "path" and getattr(node.value, "id", "") == "sys":
+            found.append((node.lineno, "sys.path"))
+    return found
+
+
+def test_the_package_loads_no_file_outside_itself():
+    """Layering (issue 24): ``hyde_bsdf`` imports only modules by name; no module of it loads a
+    file as code (importlib's file loaders, runpy, exec) or changes ``sys.path`` -- so it cannot
+    import the checkout's validation/ scripts (the report runs them as child processes)."""
+    from pathlib import Path
+
+    package = Path(__file__).resolve().parent.parent / "hyde_bsdf"
+    found = {str(p.relative_to(package)): _loads_files(p.read_text(encoding="utf-8"))
+             for p in sorted(package.rglob("*.py"))}
+    assert {k: v for k, v in found.items() if v} == {}
+    assert "validation/" not in " ".join(
+        ln for p in package.rglob("*.py") for ln in p.read_text().splitlines() if "import" in ln)
+
+
+def test_the_loader_check_catches_the_old_in_process_loader():
+    """The check above sees what the report did before: insert the scripts' folder into sys.path
+    and load a script through importlib."""
+    old = ("import importlib.util, sys\n"
+           "def _load(path):\n    sys.path.insert(0, str(path.parent))\n"
+           "    spec = importlib.util.spec_from_file_location(path.stem, path)\n"
+           "    module = importlib.util.module_from_spec(spec)\n    spec.loader.exec_module(module)\n")
+    assert {name for _, name in _loads_files(old)} == {"sys.path", "spec_from_file_location", "module_from_spec",
+                                                      "exec_module"}

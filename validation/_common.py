@@ -1,5 +1,18 @@
-"""Shared pieces of the validation scripts: the command line and the stability-map chart."""
+"""Shared pieces of the validation scripts: the command line, the report's protocol and the
+stability-map chart.
+
+**The report's protocol.**  ``hyde-bsdf validate`` never imports a script: it runs each one as a
+child process, ``python validation/STEM.py -o OUTDIR [--quick] --checks-json FILE``, and reads
+``FILE`` back.  Every script's ``__main__`` block goes through :func:`cli`, which handles that
+option here, once: it runs ``validate(OUTDIR, quick)`` and writes (atomically)
+``{"doc": <the script's docstring>, "checks": [dict(name, value, tolerance, passed[, detail]), ...]}``
+as JSON (NumPy scalars as Python numbers, anything else unknown as its ``str``), then exits 0.
+No ``FILE`` after the child ends means the script crashed: the report shows the last lines of its
+stderr as a failed check.  A script with its own command line passes it as ``cli(validate,
+__doc__, main)``: without ``--checks-json`` its ``main()`` runs as before.
+"""
 import argparse
+import json
 import math
 import sys
 
@@ -9,16 +22,45 @@ CLASSES = ("accurate", "degrades", "refuses", "fails")
 COLOURS = {"accurate": "#2ca02c", "degrades": "#ff7f0e", "refuses": "#7f7f7f", "fails": "#d62728"}
 
 
-def cli(validate, doc):
-    """``python SCRIPT.py [-o OUTDIR] [--quick]``: run ``validate`` and print each check."""
+def cli(validate, doc, main=None):
+    """``python SCRIPT.py [-o OUTDIR] [--quick] [--checks-json FILE]``: run ``validate`` and print
+    each check, or (``--checks-json``) answer the report's protocol (see the module docstring).
+    ``main``: the script's own command line, run (its return value the exit status) when the call
+    is not the report's."""
+    if main is not None and "--checks-json" not in sys.argv[1:]:
+        sys.exit(main())
     ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("-o", "--outdir", default="out/validation")
+    ap.add_argument("-o", "--outdir", default="out/validation", help="output folder (default out/validation)")
     ap.add_argument("--quick", action="store_true", help="smaller sweeps (as in the quick report)")
+    ap.add_argument("--checks-json", metavar="FILE",
+                    help="write the docstring and the checks as JSON to FILE (how hyde-bsdf validate reads them)")
     a = ap.parse_args()
-    checks = validate(a.outdir, a.quick)
+    checks = list(validate(a.outdir, quick=a.quick))
+    if a.checks_json:
+        write_checks_json(a.checks_json, doc, checks)
+        sys.exit(0)
     for c in checks:
         print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
     sys.exit(0 if all(c["passed"] for c in checks) else 1)
+
+
+def _plain(value):
+    """A JSON-able form of a check's field: NumPy scalars as Python numbers, else ``str``."""
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    if hasattr(value, "item") and np.ndim(value) == 0:
+        return value.item()
+    return str(value)
+
+
+def write_checks_json(path, doc, checks):
+    """The report's protocol: ``{"doc": ..., "checks": [...]}`` written atomically to ``path``."""
+    from hyde_bsdf.io.atomic import atomic_open
+
+    data = {"doc": (doc or "").strip(),
+            "checks": [{k: _plain(v) for k, v in dict(c).items()} for c in checks]}
+    with atomic_open(path, "w", encoding="utf-8") as f:
+        json.dump(data, f)
 
 
 def write_csv(path, header, rows):

@@ -39,7 +39,7 @@ from hyde_bsdf.io.measurements import write_measurements
 from hyde_bsdf.io.atomic import atomic_open
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import save_figure  # noqa: E402
+from _common import cli, save_figure  # noqa: E402
 
 MATERIALS = {
     "infragold": {"n": 0.285, "k": 7.3523, "rms_slope": 0.44, "label": "LabSphere Infragold (Fig. 8)"},
@@ -314,4 +314,4 @@ def _write(path, rows):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    cli(validate, __doc__, main)

@@ -29,7 +29,7 @@ from hyde_bsdf import inverse as inv
 from hyde_bsdf.io.atomic import atomic_open
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import save_figure  # noqa: E402
+from _common import cli, save_figure  # noqa: E402
 
 AT = {"rms_slope": 0.4, "eta": 2.0, "k": 4.0}
 
@@ -140,4 +140,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    cli(validate, __doc__, main)

@@ -37,7 +37,7 @@ from hyde_bsdf import inverse as inv
 from hyde_bsdf.io.atomic import atomic_open
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import save_figure  # noqa: E402
+from _common import cli, save_figure  # noqa: E402
 from hyde_bsdf.progress import stderr_lines  # noqa: E402
 
 _log = stderr_lines("[invert]")
@@ -313,4 +313,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    cli(validate, __doc__, main)

@@ -213,4 +213,5 @@ def validate(outdir="out/validation", quick=False):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from _common import cli
+    cli(validate, __doc__, main)

@@ -56,7 +56,7 @@ from hyde_bsdf.model.roughness import alpha_from_rms_slope
 from hyde_bsdf.io.atomic import atomic_open
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import save_figure  # noqa: E402
+from _common import cli, save_figure  # noqa: E402
 
 DEFAULT_VARIANT = "llvm_ad_spectral_polarized"
 
@@ -495,4 +495,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    cli(validate, __doc__, main)

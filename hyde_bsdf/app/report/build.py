@@ -1,14 +1,27 @@
-"""``hyde-bsdf validate [--quick] -o DIR``: run every validation script, write one report.
+"""``hyde-bsdf validate [--quick] [--scripts DIR] -o DIR``: run every validation script, write one report.
 
-Each script in ``validation/`` exposes ``validate(outdir, quick=False)`` returning a list of checks
+Each script in ``validation/`` has ``validate(outdir, quick=False)`` returning a list of checks
 ``dict(name, value, tolerance, passed)`` and writes its PNG and CSV files into ``outdir``.  This
-module runs them in order (in this process, so each one's time is measured), collects the checks
-and the figures, and writes ``DIR/index.html`` (and ``DIR/checks.csv``): the machine, the time
-each script took, a table of every check with its number, tolerance and verdict, and the figures.
-A script that raises is reported as a failed check with its message; the report still completes.
+module runs them in order, each as a **child process** -- ``python SCRIPT.py -o OUT [--quick]
+--checks-json FILE``, the protocol that ``validation/_common.py`` handles once for every script
+(the child writes its docstring and checks as JSON to ``FILE``) -- times each one, collects the
+checks and the figures, and writes ``DIR/index.html`` (and ``DIR/checks.csv``): the machine, the
+time each script took, a table of every check with its number, tolerance and verdict, and the
+figures.  A script that crashes, is killed or is missing is reported as a failed check (with the
+last lines of its stderr); the report still completes.  A script's own output is not shown (run
+it alone to see it: ``python validation/STEM.py --quick``).  Ctrl-C (or SIGTERM) ends the
+running script (SIGTERM, then SIGKILL) and the report, which leaves the previous report as it was.
 Exit status: 0 when every check passes, 1 otherwise, 2 for a usage error (an output folder that
 cannot be written or holds files an earlier report did not write, no ``validation/`` scripts:
-not a source checkout).
+not a source checkout and no ``--scripts DIR``).
+
+Why child processes: **isolation** -- one script's Dr.Jit/Mitsuba state (the variant, JIT
+caches, registered plugins) and its memory cannot leak into the next, so a check cannot pass or
+fail because of the scripts that ran before it (an order-dependent failure class the in-process
+report had); and **layering** -- the package imports nothing outside itself: the scripts are
+files it runs, not modules it loads, so ``hyde_bsdf`` installs and imports without a checkout.
+The price is one interpreter start and its imports per script (1.2-1.3 CPU s each: +22 % CPU
+on the quick report, its wall time within the machine's load noise; docs/validation.md).
 
 Nothing but an earlier report's own files is ever deleted.  The report is built in a fresh hidden
 folder beside ``DIR`` and moved in at the end (:func:`hyde_bsdf.io.atomic.atomic_dir`), with a
@@ -30,12 +43,14 @@ import argparse
 import csv
 import datetime as _dt
 import html
-import importlib.util
+import json
 import os
 import platform
+import signal
+import subprocess
 import sys
+import tempfile
 import time
-import traceback
 import warnings
 from pathlib import Path
 
@@ -61,19 +76,28 @@ SECTIONS = [
 ]
 
 
-#: Where the validation scripts live: ``validation/`` of the source checkout this package is in.
+#: Where the validation scripts live by default: ``validation/`` of the source checkout this package
+#: is in (an installed package has none; ``--scripts DIR`` names another folder)
 VALIDATION_DIR = Path(__file__).resolve().parents[3] / "validation"
+#: lines of a crashed script's stderr shown as its failed check's detail
+TAIL_LINES = 20
+#: seconds an interrupted report gives a script to end after SIGTERM before it is killed
+TERMINATE_WAIT = 10.0
 
 
-def validation_dir() -> Path:
-    """The validation scripts' folder; UsageError when this is not a source checkout."""
-    here = Path(VALIDATION_DIR)
+def validation_dir(scripts=None) -> Path:
+    """The validation scripts' folder (``scripts``, or the checkout's); UsageError when it holds
+    none of the report's scripts (an installed package without ``--scripts``)."""
+    here = Path(VALIDATION_DIR if scripts is None else scripts)
     missing = [f"{stem}.py" for _, names in SECTIONS for stem in names if not (here / f"{stem}.py").is_file()]
     if not here.is_dir() or len(missing) == sum(len(n) for _, n in SECTIONS):
+        if scripts is not None:
+            raise UsageError(f"--scripts {str(here)!r} holds none of the validation scripts (fig4_priest_germer.py, "
+                             "...): give the validation/ folder of a hyde-bsdf source checkout")
         raise UsageError(f"validate needs the validation/ scripts of a source checkout, and {str(here)!r} "
-                         "has none (an installed package does not ship them): clone the repository and "
-                         "run 'pip install -e .' and 'hyde-bsdf validate' there")
-    return here
+                         "has none (an installed package does not ship them): clone the repository and run "
+                         "'hyde-bsdf validate --scripts CLONE/validation', or 'pip install -e .' there")
+    return here.resolve()
 
 
 #: the manifest of a report folder: every file the report wrote (a rerun removes only these)
@@ -130,31 +154,91 @@ def machine_info() -> dict:
     return info
 
 
-def _load(path: Path):
-    if str(path.parent) not in sys.path:      # scripts import their siblings by name
-        sys.path.insert(0, str(path.parent))
-    spec = importlib.util.spec_from_file_location(path.stem, path)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[path.stem] = module           # dataclasses look their module up here
-    spec.loader.exec_module(module)
-    return module
+def script_command(path: Path, outdir: Path, quick: bool, checks_json: Path) -> list:
+    """The child's command line: the script itself, run by this interpreter, answering the
+    protocol of ``validation/_common.py`` (``--checks-json FILE``)."""
+    cmd = [sys.executable, str(path), "-o", os.path.abspath(outdir), "--checks-json", str(checks_json)]
+    return cmd + (["--quick"] if quick else [])
+
+
+def _child_env() -> dict:
+    """The report's environment; when this package runs from a source tree, that tree goes first
+    on the child's PYTHONPATH, so the scripts import the same ``hyde_bsdf`` as the report."""
+    env = dict(os.environ)
+    root = Path(__file__).resolve().parents[3]
+    if (root / "pyproject.toml").is_file():
+        env["PYTHONPATH"] = os.pathsep.join([str(root)] + [p for p in [env.get("PYTHONPATH")] if p])
+    return env
+
+
+def _wait(cmd: list, stderr) -> int:
+    """Run ``cmd`` to its end (stdout discarded, stderr into the file ``stderr``); its exit status.
+
+    On any interruption of the report (Ctrl-C, SIGTERM as :class:`~hyde_bsdf.io.atomic.Terminated`)
+    the child is terminated -- SIGTERM, then SIGKILL after :data:`TERMINATE_WAIT` s -- and reaped
+    before the interruption goes on; a child that itself died of SIGINT (Ctrl-C reached it
+    first) interrupts the report the same way."""
+    child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=stderr,
+                             env=_child_env())
+    try:
+        status = child.wait()
+    except BaseException:
+        child.terminate()
+        try:
+            child.wait(TERMINATE_WAIT)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+        raise
+    if status == -signal.SIGINT:
+        raise KeyboardInterrupt
+    return status
+
+
+def _tail(stderr, lines: int = TAIL_LINES) -> str:
+    """The last ``lines`` lines of the open file ``stderr`` (only its last 64 KiB are read)."""
+    size = stderr.seek(0, os.SEEK_END)
+    stderr.seek(max(0, size - 65536))
+    text = stderr.read().decode("utf-8", errors="replace")
+    return "\n".join(text.rstrip().splitlines()[-lines:])
+
+
+def _read_checks(path: Path):
+    """(checks, doc) from a child's ``--checks-json`` file; None when it is absent or malformed."""
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        checks = [dict(c) for c in data["checks"]]
+        if not all("name" in c and "passed" in c for c in checks):
+            return None
+        return [dict(c, passed=bool(c["passed"])) for c in checks], str(data.get("doc") or "")
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def _run_script(path: Path, outdir: Path, quick: bool):
-    if not path.exists():
+    """Run one script as a child process: (checks, seconds, docstring).  A missing script, or one
+    that ends without its checks (a crash, a kill), is one failed check; the last lines of its
+    stderr are that check's detail.  The protocol's files live in a private temporary folder."""
+    if not path.is_file():
         return [dict(name=f"{path.stem}: script present", value="missing", tolerance="present",
                      passed=False)], 0.0, ""
     t0 = time.perf_counter()
-    try:
-        module = _load(path)
-        checks = list(module.validate(str(outdir), quick=quick))
-        doc = (module.__doc__ or "").strip()
-    except Exception as exc:  # noqa: BLE001 -- a failing script is a failed check, not a crash
-        tb = traceback.format_exc(limit=3)
-        checks = [dict(name=f"{path.stem}: ran", value=f"{type(exc).__name__}: {exc}", tolerance="no error",
-                       passed=False, detail=tb)]
-        doc = ""
-    return checks, time.perf_counter() - t0, doc
+    with tempfile.TemporaryDirectory(prefix="hyde-validate-") as work, \
+            tempfile.TemporaryFile(dir=work) as stderr:
+        checks_json = Path(work) / f"{path.stem}.checks.json"
+        status = _wait(script_command(path, outdir, quick, checks_json), stderr)
+        seconds = time.perf_counter() - t0
+        got = _read_checks(checks_json) if status == 0 else None
+        if got is not None:
+            return got[0], seconds, got[1]
+        detail = _tail(stderr)
+    last = (detail.splitlines() or [""])[-1].strip()
+    last = last if len(last) <= 300 else last[:297] + "..."
+    value = f"exit status {status}" + (f": {last}" if last else " (no output on stderr)")
+    if status == 0:
+        value += ", and no checks came back (does its __main__ block call validation/_common.py's cli?)"
+    return [dict(name=f"{path.stem}: ran", value=value, tolerance="no error", passed=False,
+                 detail=detail)], seconds, ""
 
 
 def _fmt(v):
@@ -163,15 +247,16 @@ def _fmt(v):
     return html.escape(str(v))
 
 
-def build_report(outdir, quick=False, progress=True, force=False):
+def build_report(outdir, quick=False, progress=True, force=False, scripts=None):
     """Run all scripts into ``outdir``; return (all_passed, rows, seconds).
 
     The report is built in a fresh folder and moved into ``outdir`` only once complete (see the
     module docstring); UsageError before any work for an unusable ``outdir`` (one holding files
-    an earlier report did not write, unless ``force``) or no scripts.
+    an earlier report did not write, unless ``force``) or no scripts (in ``scripts``, default the
+    checkout's ``validation/``).
     """
     final = check_report_dir(outdir, force)
-    vdir = validation_dir()
+    vdir = validation_dir(scripts)
 
     def kept(paths):
         warnings.warn("kept your file(s) the report's names would replace as: " + ", ".join(str(p) for p in paths),
@@ -257,6 +342,9 @@ def build_parser() -> Parser:
     ap = Parser(prog="hyde-bsdf validate", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)")
     ap.add_argument("--quick", action="store_true", help="small sweeps; under 3 minutes on 2 cores")
+    ap.add_argument("--scripts", metavar="DIR", default=None,
+                    help="folder of the validation scripts (default: validation/ of the source checkout this "
+                         "package runs from; an installed package has none: give a clone's validation/ folder)")
     ap.add_argument("--force", action="store_true",
                     help="write into a folder that holds files no earlier report wrote; they are kept "
                          "(a file whose name the report takes is renamed NAME.orig)")
@@ -267,7 +355,8 @@ def build_parser() -> Parser:
 def cli_main(argv=None) -> int:
     """``hyde-bsdf validate``: 0 when every check passes, 1 otherwise; user errors raise UsageError."""
     a = build_parser().parse_args(argv)
-    ok, rows, seconds = build_report(a.outdir, quick=a.quick, force=a.force, progress=not a.quiet)
+    ok, rows, seconds = build_report(a.outdir, quick=a.quick, force=a.force, progress=not a.quiet,
+                                     scripts=a.scripts)
     n_fail = sum(not r["passed"] for r in rows)
     print(f"{len(rows) - n_fail} of {len(rows)} checks pass in {seconds:.0f} s; report: {Path(a.outdir) / 'index.html'}")
     for r in rows:
