@@ -23,6 +23,15 @@ flat PEC plates at 10 pts/lambda against the analytic reflected beam, ``validati
   w = 37.5-75 lambda, L = 4w (-74, -60, -50, -44 dB at ti = 30, 60, 70, 80 deg, interpolated in ti, held
   beyond), times (4w / L)^3 (measured 4w -> 6w: -44.5 -> -49.9 dB at 80 deg) and (37.5 / w)^3 below
   w = 37.5 (measured at 70 deg, w = 20: -42.6 dB);
+* the windowed current's coherent reflection in s (window, s only): a windowed current radiates the window's
+  spectrum G(sin theta) = exp(-(k w (sin theta - sin ti))^2 / 2) with the obliquity of the current, cos^2 ti, where
+  the reflected wave has cos^2 theta -- on a flat plate sigma_s = sigma_0 G against the physical
+  sigma_0 G cos^2 theta / cos^2 ti (the same law as ``beam.window_bias``), a bias b = sigma_0 G |1 - cos^2 theta /
+  cos^2 ti| times the coherent share exp(-(k sigma_h (cos ti + cos theta))^2), +10 dB at theta = 87 deg for ti = 80
+  deg: the issue's forward-grazing excess in s.  A bias adds in power (a floor of random phase in amplitude), so
+  it enters as b / (FLOOR_MARGIN (1 - 10^(-BIAS_DB / 10))): the margin then flags a bias of more than BIAS_DB = 2 dB
+  (measured on flat PEC, w = 37.5 / 75 lambda, ti = 80 / 83 deg, 4w and 6w: without this term the window's s was
+  reported valid at 86-89 deg 7-14 dB above the analytic reflected beam);
 * observation within GRAZING_ZONE / (k w cos ti) rad of grazing is flagged outright (floor = inf): there the
   partition's shadow boundary moves sigma (measured: p -2 to -4.4 dB, s +2 to +16 dB from 89 deg on against the
   infinite plane, at any L).
@@ -48,17 +57,19 @@ __all__ = ["FLOOR_MARGIN", "partition_floor", "floor_reason"]
 FLOOR_MARGIN = 20.0
 #: sigma within this many beam widths (1 / (k w cos ti) rad) of grazing observation is flagged
 GRAZING_ZONE = 1.5
+#: the windowed current's coherent obliquity bias in s is flagged above this many dB
+BIAS_DB = 2.0
 #: the windowed current's s floor at forward grazing (dB below the specular peak; flat PEC, L = 4w, w >= 37.5)
 _SURFACE_WAVE_TI_DEG = (30.0, 60.0, 70.0, 80.0)
 _SURFACE_WAVE_DB = (-74.0, -60.0, -50.0, -44.0)
 
 
-def partition_floor(theta_i, theta_r, w, partition_length, beam, pol, tol, k=K0):
+def partition_floor(theta_i, theta_r, w, partition_length, beam, pol, tol, k=K0, sigma_h=0.0):
     """Estimated floor of sigma [n_ti, n_tr] (the units of sigma) of one polarisation.
 
     theta_i [n_ti], theta_r [n_tr] radians; w the taper width / beam footprint and partition_length in wavelengths;
     beam: bool per theta_i (the Gaussian beam, else the windowed current); pol "s" or "p"; tol the solver's relative
-    residual.  The terms and their measurements are in the module docstring.
+    residual; sigma_h the rms height in wavelengths (the coherent share of the windowed current's bias).  The terms and their measurements are in the module docstring.
     """
     ti = np.atleast_1d(np.asarray(theta_i, float))[:, None]
     tr = np.atleast_1d(np.asarray(theta_r, float))[None, :]
@@ -72,10 +83,18 @@ def partition_floor(theta_i, theta_r, w, partition_length, beam, pol, tol, k=K0)
     if pol == "s":
         wave_db = np.interp(np.degrees(ti), _SURFACE_WAVE_TI_DEG, _SURFACE_WAVE_DB)
         wave = 10.0 ** (wave_db / 10.0) * (4.0 * w / partition_length) ** 3 * max(1.0, (37.5 / w) ** 3)
-        rel = rel + np.where(lit, 0.0, wave)
+        rel = rel + np.where(lit, 0.0, wave + _window_obliquity_bias(ti, tr, w, sigma_h, k))
     # observation within GRAZING_ZONE / (k w cos ti) rad of grazing: the partition's shadow boundary (no floor bounds it)
     near = (math.pi / 2.0 - np.abs(tr)) * k * w * np.cos(ti) < GRAZING_ZONE
     return np.where(near, np.inf, peak * rel)
+
+
+def _window_obliquity_bias(ti, tr, w, sigma_h, k):
+    """The windowed current's coherent s bias relative to sigma_0, weighted so that FLOOR_MARGIN flags BIAS_DB."""
+    spectrum = np.exp(-(k * w * (np.sin(tr) - np.sin(ti))) ** 2 / 2.0)
+    coherent = np.exp(-(k * sigma_h * (np.cos(ti) + np.cos(tr))) ** 2)
+    bias = spectrum * coherent * np.abs(1.0 - np.cos(tr) ** 2 / np.cos(ti) ** 2)
+    return bias / (FLOOR_MARGIN * (1.0 - 10.0 ** (-BIAS_DB / 10.0)))
 
 
 def floor_reason(w, partition_length):
@@ -83,6 +102,7 @@ def floor_reason(w, partition_length):
     return (f"below {FLOOR_MARGIN:g} x the estimated floor of the truncated partition (L = "
             f"{partition_length / w:.3g} w: the field at its ends is exp(-(L/2w)^2) = "
             f"{math.exp(-(partition_length / (2.0 * w)) ** 2):.2g} of the centre's; a windowed current in s adds the "
-            "surface waves its lit ends launch, a beam the part of its spectrum clipped at grazing), or within "
+            "surface waves its lit ends launch and its coherent reflection's wrong obliquity, cos^2 theta_i for "
+            "cos^2 theta_r, a beam the part of its spectrum clipped at grazing), or within "
             f"{GRAZING_ZONE:g} / (k w cos theta_i) rad of grazing (the partition's shadow boundary); "
             "use incidence='beam' and partitions of 6 w or more")
