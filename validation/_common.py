@@ -86,9 +86,13 @@ def stability_chart(panels, path, title, err_label="rel. err", err_ylim=(1e-17, 
 FLAGGED_STYLE = dict(color="0.55", marker="x", ms=2.5, alpha=0.8)
 
 
+#: the start of every flagged curve's legend entry
+FLAGGED_PREFIX = "grey x: flagged"
+
+
 def flagged_label(reason, width=80):
     """The legend entry of flagged angles: "grey x: flagged -- REASON" wrapped to ``width`` characters."""
-    return textwrap.fill("grey x: flagged, not the surface's -- " + reason, width)
+    return textwrap.fill(FLAGGED_PREFIX + ", not the surface's -- " + reason, width)
 
 
 def plot_flagged(ax, x, y, valid, reason=None, **kw):
@@ -105,6 +109,26 @@ def plot_flagged(ax, x, y, valid, reason=None, **kw):
         label = None
     bad, = ax.plot(x, np.where(valid, np.nan, y), label=label, **FLAGGED_STYLE, **style)
     return good, bad
+
+
+def legend_entries(axes, flagged):
+    """(handles, labels) of the flagged curves (:func:`plot_flagged`) or of the others, over ``axes``, each once."""
+    out = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            if label.startswith(FLAGGED_PREFIX) == flagged:
+                out.setdefault(label, handle)
+    return list(out.values()), list(out)
+
+
+def flagged_legend(target, **kw):
+    """A legend of the flagged entries only, where there are any: on an axes (for the panels whose other curves the
+    figure's first legend names), or on a figure (below its panels, gathered from all of them)."""
+    axes = getattr(target, "axes", None)
+    handles, labels = legend_entries(axes if isinstance(axes, list) else [target], True)
+    if handles:
+        target.legend(handles, labels, **kw)
+    return bool(handles)
 
 
 def valid_m00(res):

@@ -140,8 +140,9 @@ def grid_check(grid):
     """One graded check over the grid: every sigma reported valid at 86-89 deg within 3 dB of the analytic result."""
     worst = max(grid, key=lambda r: r[7])
     n_valid = sum(r[5] for r in grid)
+    widths = "/".join(f"{v:g}" for v in sorted({r[1] for r in grid}))
     return dict(name=f"MoM forward grazing: flat PEC grid (theta_i {'/'.join(f'{t:g}' for t in GRID_TI)} deg, "
-                     f"w {'/'.join(f'{v:g}' for v in sorted({r[1] for r in grid}))} lambda, L 4w/6w, beam and window, s and p): "
+                     f"w {widths} lambda, L 4w/6w, beam and window, s and p): "
                      f"max |sigma - analytic| (dB) over the {n_valid} of {sum(r[6] for r in grid)} sigma at 86-89 deg "
                      f"reported valid (worst: {worst[0]:g} deg, w {worst[1]:g}, {worst[2]}w, {worst[3]}, {worst[4]})",
                 value=f"{worst[7]:.2f}", tolerance=3.0, passed=worst[7] <= 3.0)

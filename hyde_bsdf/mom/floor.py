@@ -69,7 +69,8 @@ def partition_floor(theta_i, theta_r, w, partition_length, beam, pol, tol, k=K0,
 
     theta_i [n_ti], theta_r [n_tr] radians; w the taper width / beam footprint and partition_length in wavelengths;
     beam: bool per theta_i (the Gaussian beam, else the windowed current); pol "s" or "p"; tol the solver's relative
-    residual; sigma_h the rms height in wavelengths (the coherent share of the windowed current's bias).  The terms and their measurements are in the module docstring.
+    residual; sigma_h the rms height in wavelengths (the coherent share of the windowed current's bias).  The terms
+    and their measurements are in the module docstring.
     """
     ti = np.atleast_1d(np.asarray(theta_i, float))[:, None]
     tr = np.atleast_1d(np.asarray(theta_r, float))[None, :]
