@@ -32,9 +32,16 @@ flat PEC plates at 10 pts/lambda against the analytic reflected beam, ``validati
   it enters as b / (FLOOR_MARGIN (1 - 10^(-BIAS_DB / 10))): the margin then flags a bias of more than BIAS_DB = 2 dB
   (measured on flat PEC, w = 37.5 / 75 lambda, ti = 80 / 83 deg, 4w and 6w: without this term the window's s was
   reported valid at 86-89 deg 7-14 dB above the analytic reflected beam);
-* observation within GRAZING_ZONE / (k w cos ti) rad of grazing is flagged outright (floor = inf): there the
-  partition's shadow boundary moves sigma (measured: p -2 to -4.4 dB, s +2 to +16 dB from 89 deg on against the
-  infinite plane, at any L).
+* observation within GRAZING_ZONE / (k w cos ti) rad of grazing is flagged outright (floor = inf).  The cause: a
+  field's propagating spectrum ends at K = k (grazing) -- with the value A(k) in p, with a square-root zero
+  k cos theta A in s -- so the infinite plane's current has a tail that decays only as 1/x (p), x^-3/2 (s) beyond
+  the footprint; the partition cuts it at +-L/2, which convolves the current's spectrum with the partition's
+  sinc (width 2 pi / L in K).  The far field at theta_r -> 90 deg samples that smoothed end: p falls towards
+  half its amplitude (-6 dB), s fills its zero (an excess).  Measured against the infinite plane: p -2 to -5.7 dB,
+  s +2 to +16 dB from 89 deg on, nearly independent of L (at 89 deg pi L (pi/2 - theta)^2 / 2 < 0.5 for
+  L < 1000 lambda: still at the end); the cut infinite-plane current, int_{-L/2}^{L/2} J_inf(x) e^{jkx sin theta}
+  dx, predicts the MoM's p to 0.1 dB and its s to 2 dB at 86-89.75 deg (flat PEC, beam, ti = 85 / 88 deg,
+  w = 50 - 150 lambda, 4w and 6w; ``validation/mom_forward_grazing.py``, ``truncated_plane_db``).
 
 Checked: flat PEC, beam, w = 20 / 37.5 / 75 lambda, ti = 70 / 80 / 83 / 85 / 88 deg, L = 4w and 6w: every sigma
 reported valid is within 2.3 dB of the analytic reflected beam (``tests/test_mom_beam.py``).  The window's
@@ -85,7 +92,7 @@ def partition_floor(theta_i, theta_r, w, partition_length, beam, pol, tol, k=K0,
         wave_db = np.interp(np.degrees(ti), _SURFACE_WAVE_TI_DEG, _SURFACE_WAVE_DB)
         wave = 10.0 ** (wave_db / 10.0) * (4.0 * w / partition_length) ** 3 * max(1.0, (37.5 / w) ** 3)
         rel = rel + np.where(lit, 0.0, wave + _window_obliquity_bias(ti, tr, w, sigma_h, k))
-    # observation within GRAZING_ZONE / (k w cos ti) rad of grazing: the partition's shadow boundary (no floor bounds it)
+    # observation within GRAZING_ZONE / (k w cos ti) rad of grazing: the partition cuts the current's grazing tail
     near = (math.pi / 2.0 - np.abs(tr)) * k * w * np.cos(ti) < GRAZING_ZONE
     return np.where(near, np.inf, peak * rel)
 
@@ -105,5 +112,6 @@ def floor_reason(w, partition_length):
             f"{math.exp(-(partition_length / (2.0 * w)) ** 2):.2g} of the centre's; a windowed current in s adds the "
             "surface waves its lit ends launch and its coherent reflection's wrong obliquity, cos^2 theta_i for "
             "cos^2 theta_r, a beam the part of its spectrum clipped at grazing), or within "
-            f"{GRAZING_ZONE:g} / (k w cos theta_i) rad of grazing (the partition's shadow boundary); "
+            f"{GRAZING_ZONE:g} / (k w cos theta_i) rad of grazing (there the partition's cut of the current's tail, "
+            "which the field's spectrum ending at grazing leaves, takes p towards -6 dB and raises s); "
             "use incidence='beam' and partitions of 6 w or more")
