@@ -87,3 +87,42 @@ def test_valid_m00_adds_the_two_floors(flat_plate):
     assert ok.shape == res.valid_s.shape
     assert np.all(ok[res.valid_s & res.valid_p])
     assert not np.any(ok[np.isinf(res.floor_s) | np.isinf(res.floor_p)])
+
+
+def _flat(theta_i, w, factor, incidence, theta_r):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", mom.MoMAccuracyWarning)
+        return mom.scatter(factor * w, 1, 0.0, 5.0, [theta_i], theta_r, pts_per_wl=10, executor=mom.SerialExecutor(),
+                           taper_width_wl=w, polarization=("s", "p"), solver="fast", incidence=incidence,
+                           progress=False)
+
+
+def test_windowed_current_obliquity_is_flagged_in_s():
+    """Flat PEC, 83 deg, w = 37.5 lambda on 6 w, windowed current: its s radiates the window's spectrum with the
+    current's obliquity cos^2 ti where the reflected beam has cos^2 theta_r -- 7.3 dB above the analytic result at
+    86-89 deg, and reported valid there before the floor counted it.  Now every s reported valid at 86-89 deg is
+    within 3 dB of the analytic reflected beam, and the excess angles are flagged; p (no such bias) stays valid."""
+    from mom_forward_grazing import beam_reference
+
+    tr = np.arange(86.0, 89.01, 0.25)
+    res = _flat(83.0, 37.5, 6, "window", tr)
+    ref = beam_reference(83.0, 37.5, tr)
+    err_s = 10 * np.log10(res.sigma_s[0] / ref)
+    assert err_s.max() > 6.0                       # the bias is there ...
+    assert np.all(np.abs(err_s[res.valid_s[0]]) <= 3.0) and not res.valid_s[0][err_s > 3.0].any()  # ... and flagged
+    assert res.valid_p[0].sum() >= 5 and np.all(np.abs(10 * np.log10(res.sigma_p[0] / ref))[res.valid_p[0]] <= 1.0)
+    assert "obliquity" in res.floor_reason
+
+
+def test_grazing_zone_is_the_partitions_cut_of_the_current():
+    """Flat PEC, beam, 85 deg, w = 50 lambda on 4 w: in p the MoM's departure from the infinite plane at theta_r =
+    86-89.75 deg (-0.7 to -4.2 dB) is the infinite-plane current cut to the partition, to 0.05 dB (computed
+    independently by ``truncated_plane_db``): the grazing zone's cause, named in ``floor_reason``."""
+    from mom_forward_grazing import beam_reference, truncated_plane_db
+
+    tr = np.arange(86.0, 89.76, 0.25)
+    res = _flat(85.0, 50.0, 4, "beam", tr)
+    dev = 10 * np.log10(res.sigma_p[0] / beam_reference(85.0, 50.0, tr))
+    assert dev.min() < -3.5
+    np.testing.assert_allclose(dev, truncated_plane_db(85.0, 50.0, 200.0, tr, "p"), atol=0.05)
+    assert not res.valid_p[0][-4:].any() and "cut of the current's tail" in res.floor_reason

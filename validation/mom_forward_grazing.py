@@ -42,9 +42,10 @@ FLAT = dict(theta_i=80.0, w=75.0)
 ROUGH = dict(theta_i=80.0, w=150.0)
 BANDS = (86.0, 87.0, 88.0, 89.0)
 #: the grid of flat PEC plates on which "within 3 dB of the analytic result wherever reported valid" is graded at
-#: theta_r = 86-89 deg: theta_i, taper widths (lambda; quick mode the first and last), partition lengths / w
-GRID_TI = (80.0, 83.0, 85.0, 87.0)
-GRID_W = (37.5, 75.0, 150.0)
+#: theta_r = 86-89 deg: theta_i, taper widths (lambda; quick mode GRID_W_QUICK), partition lengths / w
+GRID_TI = (80.0, 83.0, 85.0, 87.0, 88.0)
+GRID_W = (37.5, 75.0, 150.0, 300.0)
+GRID_W_QUICK = (37.5, 150.0)
 GRID_L = (4, 6)
 #: partitions of 4 w against 6 w at grazing incidence (error against cost): theta_i, taper widths (quick mode:
 #: WIDTH_W_QUICK)
@@ -221,7 +222,7 @@ def valid_grid(quick):
     band = (THETA_R >= 85.5) & (THETA_R < 89.5)
     rows = []
     for ti in GRID_TI:
-        for w in (GRID_W[0], GRID_W[-1]) if quick else GRID_W:
+        for w in GRID_W_QUICK if quick else GRID_W:
             ref = beam_reference(ti, w, THETA_R)
             for f in GRID_L:
                 for inc in ("beam", "window"):
