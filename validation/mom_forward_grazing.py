@@ -45,7 +45,7 @@ BANDS = (86.0, 87.0, 88.0, 89.0)
 #: theta_r = 86-89 deg: theta_i, taper widths (lambda; quick mode GRID_W_QUICK), partition lengths / w
 GRID_TI = (80.0, 83.0, 85.0, 87.0, 88.0)
 GRID_W = (37.5, 75.0, 150.0, 300.0)
-GRID_W_QUICK = (37.5, 150.0)
+GRID_W_QUICK = (37.5, 75.0)
 GRID_L = (4, 6)
 #: partitions of 4 w against 6 w at grazing incidence (error against cost): theta_i, taper widths (quick mode:
 #: WIDTH_W_QUICK)
