@@ -44,7 +44,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from _common import flagged_legend, plot_flagged  # noqa: E402
+from _common import flagged_legend, legend_entries, plot_flagged  # noqa: E402
 
 THETA_I_DEG = [10.0, 30.0, 45.0, 60.0, 75.0]
 RMS_SLOPE = 0.3
@@ -122,7 +122,7 @@ def main(argv=None):
     d = run_mom(args)
     tr = d["theta_r_deg"]
     rows, table = [], []
-    fig, axes = plt.subplots(1, len(THETA_I_DEG), figsize=(4.0 * len(THETA_I_DEG), 3.8), sharey=True)
+    fig, axes = plt.subplots(1, len(THETA_I_DEG), figsize=(4.0 * len(THETA_I_DEG), 4.8), sharey=True)
     for i, ti in enumerate(THETA_I_DEG):
         s = d["sigma"][i]
         se = d["sigma_std_error"][i]
@@ -163,13 +163,12 @@ def main(argv=None):
         ax.set_xlabel("theta_r (deg, + = specular side)")
         ax.set_xlim(-90, 90)
     axes[0].set_ylabel("normalised at theta_r = theta_i")
-    axes[0].legend(loc="upper left", fontsize=6)
-    for ax in axes[1:]:
-        flagged_legend(ax, loc="upper left", fontsize=5)
+    axes[0].legend(*legend_entries([axes[0]], False), loc="upper left", fontsize=7)
+    below = flagged_legend(fig, loc="lower center", fontsize=6) * 1.0 / fig.get_figheight()   # the reason, once
     fig.suptitle(f"Fig. 6: {LENGTH_WL:g} lambda PEC surface, {PARTITIONS} partitions, rms slope {RMS_SLOPE}, "
                  f"sigma_h = {RMS_HEIGHT_WL:.4f}, ell = {CORR_LENGTH_WL:g} lambda, "
                  f"{float(d['pts_per_wl']):g} pts/lambda, s-pol")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, below, 1, 1))
     png = os.path.join(args.outdir, "fig6_mom.png")
     fig.savefig(png, dpi=120)
 

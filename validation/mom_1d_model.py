@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import fig6_mom  # noqa: E402  (the shared Fig. 6 case and its MoM run)
-from _common import flagged_legend, plot_flagged  # noqa: E402
+from _common import flagged_legend, legend_entries, plot_flagged  # noqa: E402
 
 LOBE_LEVEL = 0.1
 
@@ -69,7 +69,7 @@ def main(argv=None):
     spec = model1d.sigma_equivalent(ti[:, None], tr, s_slope, diffuse=False)
     shares = model1d.lobe_energy_shares(ti, d["fine_theta_r"], d["fine_sigma"], s_slope)
     rows, table = [], []
-    fig, axes = plt.subplots(1, ti.size, figsize=(4.0 * ti.size, 3.8), sharey=True)
+    fig, axes = plt.subplots(1, ti.size, figsize=(4.0 * ti.size, 4.8), sharey=True)
     for i in range(ti.size):
         s = d["sigma"][i]
         lobe = model[i] >= LOBE_LEVEL * model[i].max()
@@ -104,12 +104,11 @@ def main(argv=None):
         ax.set_title(f"theta_i = {ti_deg[i]:g} deg")
         ax.set_xlabel("theta_r (deg, + = specular side)")
     axes[0].set_ylabel("sigma (dB, absolute)")
-    axes[0].legend(loc="lower center", fontsize=6)
-    for ax in axes[1:]:
-        flagged_legend(ax, loc="lower center", fontsize=5)
+    axes[0].legend(*legend_entries([axes[0]], False), loc="lower center", fontsize=7)
+    below = flagged_legend(fig, loc="lower center", fontsize=6) * 1.0 / fig.get_figheight()   # the reason, once
     fig.suptitle("MoM vs the pBRDF's 1-D reduction (hyde_bsdf.mom.model1d), absolute: "
                  "sigma = 2 pi cos(ti) f cos(tr); rms slope 0.3, 15000 lambda, 100 partitions")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, below, 1, 1))
     png = os.path.join(args.outdir, "mom_1d_model.png")
     fig.savefig(png, dpi=120)
     with open(os.path.join(args.outdir, "mom_1d_model.csv"), "w", newline="") as fh:
