@@ -1,5 +1,6 @@
-"""Shared pieces of the validation scripts: the command line, the report's protocol and the
-stability-map chart.
+"""Shared pieces of the validation scripts: the command line, the report's protocol, the
+stability-map chart, and MoM curves with the angles the result flags (below the truncated
+partition's floor) drawn grey with the reason.
 
 **The report's protocol.**  ``hyde-bsdf validate`` never imports a script: it runs each one as a
 child process, ``python validation/STEM.py -o OUTDIR [--quick] --checks-json FILE``, and reads
@@ -15,6 +16,7 @@ import argparse
 import json
 import math
 import sys
+import textwrap
 
 import numpy as np
 
@@ -120,3 +122,61 @@ def stability_chart(panels, path, title, err_label="rel. err", err_ylim=(1e-17, 
     fig.suptitle(title, fontsize=9)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     save_figure(fig, path, dpi=120)
+
+
+#: the colour and marker of a MoM value the result flags (``MoMResult.valid_s`` / ``valid_p`` False)
+FLAGGED_STYLE = dict(color="0.55", marker="x", ms=2.5, alpha=0.8)
+
+
+#: the start of every flagged curve's legend entry
+FLAGGED_PREFIX = "grey x: flagged"
+
+
+def flagged_label(reason, width=80):
+    """The legend entry of flagged angles: "grey x: flagged -- REASON" wrapped to ``width`` characters."""
+    return textwrap.fill(FLAGGED_PREFIX + ", not the surface's -- " + reason, width)
+
+
+def plot_flagged(ax, x, y, valid, reason=None, **kw):
+    """Plot a MoM curve y(x) (keyword arguments as for ``ax.plot``) where the result is reported valid; at the
+    angles it flags (``valid`` False: below the truncated partition's floor, ``MoMResult.floor_reason``) the curve
+    is broken and its values drawn grey with crosses.  With ``reason`` and at least one flagged angle, the grey
+    curve carries the legend entry :func:`flagged_label` -- once per axes.  Returns (valid line, flagged line)."""
+    y = np.asarray(y, float)
+    valid = np.broadcast_to(np.asarray(valid, bool), y.shape)
+    good, = ax.plot(x, np.where(valid, y, np.nan), **kw)
+    style = {k: v for k, v in kw.items() if k in ("ls", "linestyle", "lw", "linewidth", "zorder")}
+    label = flagged_label(reason) if reason and not valid.all() else None
+    if label in ax.get_legend_handles_labels()[1]:
+        label = None
+    bad, = ax.plot(x, np.where(valid, np.nan, y), label=label, **FLAGGED_STYLE, **style)
+    return good, bad
+
+
+def legend_entries(axes, flagged):
+    """(handles, labels) of the flagged curves (:func:`plot_flagged`) or of the others, over ``axes``, each once."""
+    out = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            if label.startswith(FLAGGED_PREFIX) == flagged:
+                out.setdefault(label, handle)
+    return list(out.values()), list(out)
+
+
+def flagged_legend(target, **kw):
+    """A legend of the flagged entries only, where there are any: on an axes (for the panels whose other curves the
+    figure's first legend names), or on a figure (below its panels, gathered from all of them)."""
+    axes = getattr(target, "axes", None)
+    handles, labels = legend_entries(axes if isinstance(axes, list) else [target], True)
+    if handles:
+        target.legend(handles, labels, **kw)
+    return bool(handles)
+
+
+def valid_m00(res):
+    """Where the MoM's M00 = (sigma_s + sigma_p) / 2 stands clear of its floor: M00 >= FLOOR_MARGIN x the mean of the
+    two polarisations' floors (the floors add; the same margin as ``valid_s`` / ``valid_p``); the scripts flag the
+    ratios M01/M00, M22/M00, M23/M00 at the same angles."""
+    from hyde_bsdf.mom.floor import FLOOR_MARGIN
+
+    return res.mueller["M00"] >= FLOOR_MARGIN * 0.5 * (res.floor_s + res.floor_p)

@@ -43,6 +43,9 @@ import time
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from _common import flagged_legend, legend_entries, plot_flagged  # noqa: E402
+
 THETA_I_DEG = [10.0, 30.0, 45.0, 60.0, 75.0]
 RMS_SLOPE = 0.3
 CORR_LENGTH_WL = 5.0
@@ -58,13 +61,16 @@ def run_mom(args):
 
     npz = os.path.join(args.outdir, "fig6_mom.npz")
     if args.reuse and os.path.exists(npz):
-        print(f"reusing {npz}", file=sys.stderr)
-        return dict(np.load(npz, allow_pickle=False))
+        data = dict(np.load(npz, allow_pickle=False))
+        if "valid" in data:   # an older file without the flags is run again
+            print(f"reusing {npz}", file=sys.stderr)
+            return data
     res = mom.scatter(LENGTH_WL, PARTITIONS, RMS_HEIGHT_WL, CORR_LENGTH_WL, THETA_I_DEG, THETA_R_DEG,
                       pts_per_wl=args.pts_per_wl, seed=args.seed)
     data = {
         "theta_i_deg": res.theta_i_deg, "theta_r_deg": res.theta_r_deg, "sigma": res.sigma,
         "sigma_std_error": res.sigma_std_error, "sigma_coherent": res.sigma_coherent,
+        "valid": res.valid, "floor_reason": np.str_(res.floor_reason),
         "power_balance": res.power_balance, "power_balance_nominal": res.power_balance_nominal,
         "power_coherent": res.power_coherent,
         "fine_theta_r": res.fine_theta_r, "fine_sigma": res.fine_sigma,
@@ -116,7 +122,7 @@ def main(argv=None):
     d = run_mom(args)
     tr = d["theta_r_deg"]
     rows, table = [], []
-    fig, axes = plt.subplots(1, len(THETA_I_DEG), figsize=(4.0 * len(THETA_I_DEG), 3.8), sharey=True)
+    fig, axes = plt.subplots(1, len(THETA_I_DEG), figsize=(4.0 * len(THETA_I_DEG), 4.8), sharey=True)
     for i, ti in enumerate(THETA_I_DEG):
         s = d["sigma"][i]
         se = d["sigma_std_error"][i]
@@ -146,9 +152,10 @@ def main(argv=None):
             "power_coherent": float(d["power_coherent"][i]),
         })
         for j in range(tr.size):
-            rows.append([ti, tr[j], s[j], se[j], mom_n[j], model_n[j], m1d_n[j]])
+            rows.append([ti, tr[j], s[j], se[j], mom_n[j], model_n[j], m1d_n[j], int(d["valid"][i][j])])
         ax = axes[i]
-        ax.plot(tr, mom_n, "k-", lw=0.8, label="MoM (1-D surface)")
+        plot_flagged(ax, tr, mom_n, d["valid"][i], str(d["floor_reason"]), color="k", lw=0.8,
+                     label="MoM (1-D surface)")
         ax.plot(tr, model_n, "r--", lw=1.5, label="pBRDF Eq. 17: F00 cos(tr)")
         ax.plot(tr, m1d_n, "b:", lw=1.5, label="pBRDF 1-D reduction")
         ax.axvline(ti, color="0.7", lw=0.5)
@@ -156,18 +163,19 @@ def main(argv=None):
         ax.set_xlabel("theta_r (deg, + = specular side)")
         ax.set_xlim(-90, 90)
     axes[0].set_ylabel("normalised at theta_r = theta_i")
-    axes[0].legend(loc="upper left", fontsize=7)
+    axes[0].legend(*legend_entries([axes[0]], False), loc="upper left", fontsize=7)
+    below = flagged_legend(fig, loc="lower center", fontsize=6) * 1.0 / fig.get_figheight()   # the reason, once
     fig.suptitle(f"Fig. 6: {LENGTH_WL:g} lambda PEC surface, {PARTITIONS} partitions, rms slope {RMS_SLOPE}, "
                  f"sigma_h = {RMS_HEIGHT_WL:.4f}, ell = {CORR_LENGTH_WL:g} lambda, "
                  f"{float(d['pts_per_wl']):g} pts/lambda, s-pol")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, below, 1, 1))
     png = os.path.join(args.outdir, "fig6_mom.png")
     fig.savefig(png, dpi=120)
 
     with open(os.path.join(args.outdir, "fig6_mom.csv"), "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["theta_i_deg", "theta_r_deg", "sigma_mom", "sigma_mom_std_error", "mom_normalized",
-                    "pbrdf_F00_cos_normalized", "model1d_normalized"])
+                    "pbrdf_F00_cos_normalized", "model1d_normalized", "valid_s"])
         for r in rows:
             w.writerow([f"{v:.6g}" for v in r])
     with open(os.path.join(args.outdir, "fig6_mom_table.csv"), "w", newline="") as fh:

@@ -29,6 +29,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import fig6_mom  # noqa: E402  (the shared Fig. 6 case and its MoM run)
+from _common import flagged_legend, legend_entries, plot_flagged  # noqa: E402
 
 LOBE_LEVEL = 0.1
 
@@ -68,7 +69,7 @@ def main(argv=None):
     spec = model1d.sigma_equivalent(ti[:, None], tr, s_slope, diffuse=False)
     shares = model1d.lobe_energy_shares(ti, d["fine_theta_r"], d["fine_sigma"], s_slope)
     rows, table = [], []
-    fig, axes = plt.subplots(1, ti.size, figsize=(4.0 * ti.size, 3.8), sharey=True)
+    fig, axes = plt.subplots(1, ti.size, figsize=(4.0 * ti.size, 4.8), sharey=True)
     for i in range(ti.size):
         s = d["sigma"][i]
         lobe = model[i] >= LOBE_LEVEL * model[i].max()
@@ -91,9 +92,11 @@ def main(argv=None):
             "mom_power_balance": float(d["power_balance"][i]),
         })
         for j in range(tr.size):
-            rows.append([ti_deg[i], tr_deg[j], s[j], d["sigma_std_error"][i][j], model[i][j], spec[i][j]])
+            rows.append([ti_deg[i], tr_deg[j], s[j], d["sigma_std_error"][i][j], model[i][j], spec[i][j],
+                         int(d["valid"][i][j])])
         ax = axes[i]
-        ax.plot(tr_deg, db(s), "k-", lw=0.7, label="MoM sigma (Eq. 23)")
+        plot_flagged(ax, tr_deg, db(s), d["valid"][i], str(d["floor_reason"]), color="k", lw=0.7,
+                     label="MoM sigma (Eq. 23)")
         ax.plot(tr_deg, db(model[i]), "b-", lw=1.5, label="1-D model, specular + diffuse")
         ax.plot(tr_deg, db(spec[i]), "c--", lw=1.0, label="1-D model, specular only")
         ax.set_ylim(-25, 10)
@@ -101,16 +104,17 @@ def main(argv=None):
         ax.set_title(f"theta_i = {ti_deg[i]:g} deg")
         ax.set_xlabel("theta_r (deg, + = specular side)")
     axes[0].set_ylabel("sigma (dB, absolute)")
-    axes[0].legend(loc="lower center", fontsize=7)
+    axes[0].legend(*legend_entries([axes[0]], False), loc="lower center", fontsize=7)
+    below = flagged_legend(fig, loc="lower center", fontsize=6) * 1.0 / fig.get_figheight()   # the reason, once
     fig.suptitle("MoM vs the pBRDF's 1-D reduction (hyde_bsdf.mom.model1d), absolute: "
                  "sigma = 2 pi cos(ti) f cos(tr); rms slope 0.3, 15000 lambda, 100 partitions")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, below, 1, 1))
     png = os.path.join(args.outdir, "mom_1d_model.png")
     fig.savefig(png, dpi=120)
     with open(os.path.join(args.outdir, "mom_1d_model.csv"), "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["theta_i_deg", "theta_r_deg", "sigma_mom", "sigma_mom_std_error", "sigma_model1d",
-                    "sigma_model1d_specular"])
+                    "sigma_model1d_specular", "valid_s"])
         for r in rows:
             w.writerow([f"{v:.6g}" for v in r])
     with open(os.path.join(args.outdir, "mom_1d_model_table.csv"), "w", newline="") as fh:

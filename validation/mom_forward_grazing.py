@@ -22,7 +22,16 @@ at forward grazing -- and follows the reference in p at 6 w; the beam follows it
 4 w, -54 to -59 dB, is the beam's e^-4 at the partition ends).  On the rough surface the incoherent field is
 20-50 dB above these floors and window and beam agree within 0.3-2.6 dB.
 
-Writes mom_forward_grazing.csv (sigma per case and theta_r), mom_forward_grazing.png, and the checks.
+3. Issue 25's target, graded: on flat PEC plates (GRID_TI x GRID_W x 4w/6w, beam and window, s and p) every sigma
+   reported valid at 86-89 deg is within 3 dB of the analytic result (measured: within 1.93 dB).  The windowed
+   current's s carries its coherent reflection's obliquity, cos^2 ti for cos^2 theta_r (+7.9 dB at 86 deg for
+   80-deg incidence), which the floor estimate now flags (:mod:`hyde_bsdf.mom.floor`).
+4. The grazing zone's cause: the MoM against the infinite-plane current cut to the partition
+   (:func:`truncated_plane_db`), and partitions of 4 w against 6 w at 85 and 88 deg, error against CPU cost.
+
+Writes mom_forward_grazing.csv (sigma per case and theta_r, valid_s / valid_p per case), mom_forward_grazing.png
+(flagged angles grey, with the reason), mom_forward_grazing_cost.csv, mom_forward_grazing_valid.csv (the grid),
+mom_forward_grazing_width.csv and .png (4 w against 6 w), and the checks.
 """
 import math
 import sys
@@ -32,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import cli, save_figure, write_csv  # noqa: E402
+from _common import cli, flagged_legend, legend_entries, plot_flagged, save_figure, write_csv  # noqa: E402
 
 K0 = 2.0 * math.pi
 ELL = 5.0
@@ -41,6 +50,17 @@ THETA_R = np.arange(60.0, 89.76, 0.25)
 FLAT = dict(theta_i=80.0, w=75.0)
 ROUGH = dict(theta_i=80.0, w=150.0)
 BANDS = (86.0, 87.0, 88.0, 89.0)
+#: the grid of flat PEC plates on which "within 3 dB of the analytic result wherever reported valid" is graded at
+#: theta_r = 86-89 deg: theta_i, taper widths (lambda; quick mode GRID_W_QUICK), partition lengths / w
+GRID_TI = (80.0, 83.0, 85.0, 87.0, 88.0)
+GRID_W = (37.5, 75.0, 150.0, 300.0)
+GRID_W_QUICK = (37.5, 75.0)
+GRID_L = (4, 6)
+#: partitions of 4 w against 6 w at grazing incidence (error against cost): theta_i, taper widths (quick mode:
+#: WIDTH_W_QUICK)
+WIDTH_TI = (85.0, 88.0)
+WIDTH_W = (50.0, 75.0, 100.0, 150.0, 300.0)
+WIDTH_W_QUICK = (75.0, 150.0)
 
 
 def beam_reference(theta_i_deg, w, theta_r_deg):
@@ -50,6 +70,22 @@ def beam_reference(theta_i_deg, w, theta_r_deg):
     dens = lambda t: np.cos(t) ** 2 * np.exp(-(w * K0 * (np.sin(t) - math.sin(ti))) ** 2 / 2.0)  # noqa: E731
     total = np.trapezoid(dens(th), th)
     return 2.0 * math.pi * math.cos(ti) * dens(np.radians(theta_r_deg)) / total
+
+
+def truncated_plane_db(theta_i_deg, w, length, theta_r_deg, pol):
+    """sigma of the infinite PEC plane's current cut to the partition |x| < L/2, over the analytic sigma, in dB: the
+    current's spectrum f(K) = A(K) (p) or k_z A(K) (s), |K| <= k, convolved with the partition's L sinc((K' - K) L/2),
+    at K' = k sin theta_r (independent of the MoM: the cause of the deviation at theta_r -> 90 deg)."""
+    ti = math.radians(theta_i_deg)
+    u = np.linspace(-math.pi / 2, math.pi / 2, 40001)
+    K, dK = K0 * np.sin(u), K0 * np.cos(u) * (u[1] - u[0])
+    f = np.exp(-(w * (K - K0 * math.sin(ti))) ** 2 / 4.0) * (K0 * np.cos(u) if pol == "s" else 1.0)
+    out = []
+    for t in np.radians(np.atleast_1d(theta_r_deg)):
+        kt = K0 * math.sin(t)
+        cut = np.sum(f * length * np.sinc((kt - K) * length / (2.0 * math.pi)) * dK)
+        out.append(20.0 * math.log10(abs(cut) / (2.0 * math.pi * np.interp(kt, K, f))))
+    return np.array(out)
 
 
 def run(length, partitions, sigma_h, w, theta_i, incidence, seed=3):
@@ -99,7 +135,129 @@ def validate(outdir="out/validation", quick=False):
               ["case", "cpu_s", "unknowns", "energy_error_s", "energy_error_p", "sigma_s_88_dB_below_peak"],
               cost_rows(flat, ref))
     figure(flat, rough, ref, out / "mom_forward_grazing.png")
-    return checks(flat, rough, ref)
+    grid = valid_grid(quick)
+    write_csv(out / "mom_forward_grazing_valid.csv",
+              ["theta_i_deg", "taper_w_wl", "partition_over_w", "incidence", "pol", "valid_86_89", "angles_86_89",
+               "max_abs_error_dB_where_valid", "theta_r_of_max_deg", "cpu_s"], grid)
+    width = width_study(quick)
+    write_csv(out / "mom_forward_grazing_width.csv",
+              ["theta_i_deg", "taper_w_wl", "partition_over_w", "pol", "cpu_s", "max_abs_error_dB_86_89_outside_zone",
+               "angles_compared", "valid_86_89", "angles_86_89", "max_abs_dB_mom_minus_cut_plane_86_89.75"], width)
+    width_figure(width, out / "mom_forward_grazing_width.png")
+    return checks(flat, rough, ref) + [grid_check(grid)] + width_checks(width)
+
+
+def width_study(quick):
+    """Flat PEC, beam, WIDTH_TI x WIDTH_W, partitions of 4 w and 6 w: worker CPU s; the largest |sigma - analytic| at
+    86-89 deg outside the grazing zone where the analytic is above -90 dB of its peak (what the floor does to a
+    result read without its flags); the angles reported valid there; and at 86-89.75 deg the MoM against the cut
+    infinite-plane current (:func:`truncated_plane_db`)."""
+    import time
+
+    from hyde_bsdf.mom.floor import GRAZING_ZONE
+
+    band, tail = (THETA_R >= 85.5) & (THETA_R < 89.5), THETA_R >= 86.0
+    rows = []
+    for ti in WIDTH_TI:
+        for w in WIDTH_W_QUICK if quick else WIDTH_W:
+            ref = beam_reference(ti, w, THETA_R)
+            zone = 90.0 - THETA_R < math.degrees(GRAZING_ZONE / (K0 * w * math.cos(math.radians(ti))))
+            seen = band & ~zone & (ref >= 1e-9 * ref.max())
+            for f in (4, 6):
+                t0 = time.process_time()
+                res = run(f * w, 1, 0.0, w, ti, "beam")
+                cpu = time.process_time() - t0
+                for pol in ("s", "p"):
+                    err = db(getattr(res, "sigma_" + pol)[0]) - db(ref)
+                    cut = err[tail] - truncated_plane_db(ti, w, f * w, THETA_R[tail], pol)
+                    rows.append([ti, w, f, pol, cpu, float(np.abs(err[seen]).max()) if seen.any() else float("nan"),
+                                 int(seen.sum()), int((getattr(res, "valid_" + pol)[0] & band).sum()), int(band.sum()),
+                                 float(np.abs(cut).max())])
+    return rows
+
+
+def width_checks(rows):
+    """The cut infinite-plane current explains the grazing zone (p graded at 0.3 dB, s reported); per theta_i and w
+    the cost and the error of 6 w against 4 w (reported)."""
+    out = []
+    for pol, tol in (("p", 0.3), ("s", "reported")):
+        worst = max(r[9] for r in rows if r[3] == pol)
+        out.append(dict(name=f"MoM grazing zone, flat PEC, beam, {pol}: max |MoM - cut infinite-plane current| (dB) at "
+                             "theta_r 86-89.75 deg (theta_i 85/88 deg, 4w and 6w): the partition cuts the current's "
+                             "tail that the spectrum ending at grazing leaves",
+                        value=f"{worst:.2f}", tolerance=tol, passed=worst <= tol if pol == "p" else True))
+    for ti, w in sorted({(r[0], r[1]) for r in rows}):
+        four, six = ([r for r in rows if r[0] == ti and r[1] == w and r[2] == f] for f in (4, 6))
+        out.append(dict(name=f"MoM partitions 6w against 4w, flat PEC, beam, {ti:g} deg, w = {w:g}: CPU s; max |error| "
+                             "(dB) s / p at 86-89 deg outside the grazing zone; valid angles s / p of 16",
+                        value=f"{four[0][4]:.2f} -> {six[0][4]:.2f} s ({six[0][4] / four[0][4]:.2f} x); "
+                              f"{four[0][5]:.1f} / {four[1][5]:.1f} -> {six[0][5]:.1f} / {six[1][5]:.1f} dB; "
+                              f"{four[0][7]} / {four[1][7]} -> {six[0][7]} / {six[1][7]}",
+                        tolerance="reported", passed=True))
+    return out
+
+
+def width_figure(rows, path):
+    """Error against cost: per theta_i, the largest |sigma - analytic| at 86-89 deg (outside the grazing zone) of s
+    and p against the worker CPU s, partitions of 4 w and 6 w, each point labelled with w."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    angles = sorted({r[0] for r in rows})
+    fig, axes = plt.subplots(1, len(angles), figsize=(5.5 * len(angles), 4.2), squeeze=False)
+    for ax, ti in zip(axes[0], angles):
+        for f, marker in ((4, "o"), (6, "s")):
+            for pol, col in (("s", "C0"), ("p", "C3")):
+                sel = [r for r in rows if r[0] == ti and r[2] == f and r[3] == pol]
+                ax.semilogy([r[4] for r in sel], [max(r[5], 0.01) for r in sel], marker + ("-" if f == 4 else "--"),
+                            color=col, label=f"L = {f} w, {pol}")
+                for r in sel:
+                    ax.annotate(f"w {r[1]:g}", (r[4], max(r[5], 0.01)), fontsize=6, xytext=(3, 3),
+                                textcoords="offset points")
+        ax.axhline(3.0, color="0.5", lw=0.8, ls=":")
+        ax.set(xlabel="worker CPU s (one flat partition, s + p)", ylabel="max |sigma - analytic| (dB), 86-89 deg",
+               title=f"Flat PEC, beam, theta_i = {ti:g} deg (dotted: 3 dB)")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def valid_grid(quick):
+    """Issue 25's target on flat PEC plates (GRID_TI x GRID_W x GRID_L, beam and windowed current, s and p): at
+    theta_r = 86-89 deg, the largest |sigma - analytic reflected beam| (dB) over the angles reported valid."""
+    import time
+
+    band = (THETA_R >= 85.5) & (THETA_R < 89.5)
+    rows = []
+    for ti in GRID_TI:
+        for w in GRID_W_QUICK if quick else GRID_W:
+            ref = beam_reference(ti, w, THETA_R)
+            for f in GRID_L:
+                for inc in ("beam", "window"):
+                    t0 = time.process_time()
+                    res = run(f * w, 1, 0.0, w, ti, inc)
+                    cpu = time.process_time() - t0
+                    for pol in ("s", "p"):
+                        use = band & getattr(res, "valid_" + pol)[0]
+                        err = np.abs(db(getattr(res, "sigma_" + pol)[0]) - db(ref))
+                        j = int(np.argmax(np.where(use, err, -1.0)))
+                        rows.append([ti, w, f, inc, pol, int(use.sum()), int(band.sum()),
+                                     float(err[j]) if use.any() else 0.0, float(THETA_R[j]) if use.any() else "",
+                                     cpu])
+    return rows
+
+
+def grid_check(grid):
+    """One graded check over the grid: every sigma reported valid at 86-89 deg within 3 dB of the analytic result."""
+    worst = max(grid, key=lambda r: r[7])
+    n_valid = sum(r[5] for r in grid)
+    widths = "/".join(f"{v:g}" for v in sorted({r[1] for r in grid}))
+    return dict(name=f"MoM forward grazing: flat PEC grid (theta_i {'/'.join(f'{t:g}' for t in GRID_TI)} deg, "
+                     f"w {widths} lambda, L 4w/6w, beam and window, s and p): "
+                     f"max |sigma - analytic| (dB) over the {n_valid} of {sum(r[6] for r in grid)} sigma at 86-89 deg "
+                     f"reported valid (worst: {worst[0]:g} deg, w {worst[1]:g}, {worst[2]}w, {worst[3]}, {worst[4]})",
+                value=f"{worst[7]:.2f}", tolerance=3.0, passed=worst[7] <= 3.0)
 
 
 def band_error_db(res, pol):
@@ -115,7 +273,7 @@ def checks(flat, rough, ref):
     out = []
     for name, res in flat.items():
         for pol in ("s", "p"):
-            out.append(valid_check(f"flat PEC 80 deg, w = 75, {name}", res, pol, ref, graded=name.startswith("beam")))
+            out.append(valid_check(f"flat PEC 80 deg, w = 75, {name}", res, pol, ref, graded=True))
     for tag, case in (("rough", rough),):
         for name, res in case.items():
             for pol in ("s", "p"):
@@ -170,23 +328,18 @@ def valid_check(label, res, pol, ref, graded):
                 passed=bool(err.max() <= 3.0) if graded else True)
 
 
-def plot_flagged(ax, x, y, valid, **kw):
-    """A curve solid where the result is reported valid and faint where it is flagged (below the partition's floor)."""
-    ax.plot(x, np.where(valid, y, np.nan), **kw)
-    kw.pop("label", None)
-    ax.plot(x, np.where(valid, np.nan, y), alpha=0.25, **kw)
-
-
-def sigma_panel(ax, results, scale, colours, flagged_label, **axis):
-    """sigma_s (solid) and sigma_p (dashed) of each run over theta_r in dB of ``scale``, flagged angles
-    faint, the 86-89 deg band shaded."""
+def sigma_panel(ax, results, scale, colours, **axis):
+    """sigma_s (solid) and sigma_p (dashed) of each run over theta_r in dB of ``scale``, flagged angles grey
+    (:func:`_common.plot_flagged`; the reason of each partition length in the figure's legend), the 86-89 deg band
+    shaded."""
     for (name, res), col in zip(results.items(), colours):
-        plot_flagged(ax, THETA_R, db(res.sigma_s[0] / scale), res.valid_s[0], color=col, label=f"{name} s")
-        plot_flagged(ax, THETA_R, db(res.sigma_p[0] / scale), res.valid_p[0], ls="--", color=col, label=f"{name} p")
-    ax.plot([], [], color="0.6", alpha=0.25, label=flagged_label)
+        plot_flagged(ax, THETA_R, db(res.sigma_s[0] / scale), res.valid_s[0], res.floor_reason, color=col,
+                     label=f"{name} s")
+        plot_flagged(ax, THETA_R, db(res.sigma_p[0] / scale), res.valid_p[0], res.floor_reason, ls="--", color=col,
+                     label=f"{name} p")
     ax.set(xlabel="theta_r (deg)", **axis)
     ax.axvspan(85.5, 89.5, color="0.92", zorder=0)
-    ax.legend(fontsize=6)
+    ax.legend(*legend_entries([ax], False), fontsize=6)
 
 
 def cost_rows(flat, ref):
@@ -204,21 +357,21 @@ def figure(flat, rough, ref, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4))
+    fig, axes = plt.subplots(1, 3, figsize=(16, 6))
     peak = float(ref.max())
     axes[0].plot(THETA_R, db(ref / peak), "k-", lw=2, label="analytic beam reflection")
-    sigma_panel(axes[0], flat, peak, ("C3", "C0", "C1", "C2"),
-                "faint: flagged, sigma < 20 x the truncated partition's floor",
-                ylim=(-90, 5), ylabel="sigma / specular peak (dB)", title="Flat PEC plate, theta_i = 80 deg, w = 75 lambda")
-    sigma_panel(axes[1], rough, 1.0, ("C3", "C0", "C2"), "faint: flagged (below the partition's floor)",
-                ylim=(-45, 15), ylabel="sigma (dB)", title="Rough PEC (slope 0.3, ell 5), theta_i 80 deg, w 150 lambda")
+    sigma_panel(axes[0], flat, peak, ("C3", "C0", "C1", "C2"), ylim=(-90, 5), ylabel="sigma / specular peak (dB)",
+                title="Flat PEC plate, theta_i = 80 deg, w = 75 lambda")
+    sigma_panel(axes[1], rough, 1.0, ("C3", "C0", "C2"), ylim=(-45, 15), ylabel="sigma (dB)",
+                title="Rough PEC (slope 0.3, ell 5), theta_i 80 deg, w 150 lambda")
     ax = axes[2]
     for (name, cpu, _, es, ep, floor), col in zip(cost_rows(flat, ref), ("C3", "C0", "C1", "C2")):
         ax.semilogy(cpu, max(es, 1e-5), "o", color=col, label=f"{name}: |E_s - 1|")
         ax.semilogy(cpu, 10 ** (floor / 10), "s", color=col, mfc="none", label=f"{name}: sigma_s(88) / peak")
     ax.set(xlabel="CPU s (one flat partition, s + p)", ylabel="error", title="Error against cost (flat plate)")
     ax.legend(fontsize=6)
-    fig.tight_layout()
+    below = flagged_legend(fig, loc="lower center", fontsize=6, ncol=2) * 1.2 / fig.get_figheight()
+    fig.tight_layout(rect=(0, below, 1, 1))
     save_figure(fig, path)
 
 

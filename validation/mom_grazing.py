@@ -37,7 +37,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import cli, save_figure, write_csv  # noqa: E402
+from _common import (cli, flagged_legend, legend_entries, plot_flagged, save_figure, valid_m00,  # noqa: E402
+                     write_csv)
 
 ELL = 5.0
 SLOPE = 0.3
@@ -102,7 +103,7 @@ def element_verdict(runs, shadowing="vgroove"):
         c, mb = binned(res)
         se = binned_errors(res)
         off_spike = np.abs(c - ti) > 2.0
-        lobe = (mb["M00"] >= 0.1 * mb["M00"][off_spike].max()) & off_spike
+        lobe = (mb["M00"] >= 0.1 * mb["M00"][off_spike].max()) & off_spike & binned_valid(res)["M00"]
         md = model(stem, ti, c, dict(SHADOWING)[shadowing])
         m00 = np.where(md["M00"][0] > 0, md["M00"][0], np.nan)
         for key in ("M00",) + ELEMENTS:
@@ -171,6 +172,14 @@ def binned(res):
     return centres, out
 
 
+def binned_valid(res):
+    """Per 1-deg bin: sigma_s, sigma_p and M00 reported valid at all its angles (``MoMResult.valid_s`` / ``valid_p``,
+    :func:`_common.valid_m00`; flagged: below the truncated partition's floor, ``res.floor_reason``)."""
+    nb = THETA_R.size // BIN
+    every = lambda v: v[0, :nb * BIN].reshape(nb, BIN).all(axis=1)  # noqa: E731
+    return {"s": every(res.valid_s), "p": every(res.valid_p), "M00": every(valid_m00(res))}
+
+
 def model(stem, ti, centres, shadowing):
     from hyde_bsdf.mom import model1d
 
@@ -227,7 +236,7 @@ def figure(runs, path, elements=()):
     import matplotlib.pyplot as plt
 
     angles = sorted({ti for _, ti in runs})
-    fig, axes = plt.subplots(len(angles), 5, figsize=(18, 3.0 * len(angles) + 0.6), squeeze=False)
+    fig, axes = plt.subplots(len(angles), 5, figsize=(18, 3.0 * len(angles) + 1.6), squeeze=False)
     styles = {"vgroove": "--", "smith": ":", "none": "-."}
     colours = {"pec": "C0", "infragold": "C3", "flame_sprayed_al": "C2", "glass": "C1"}
     for row, ti in zip(axes, angles):
@@ -236,8 +245,10 @@ def figure(runs, path, elements=()):
                 continue
             res, _ = runs[(stem, ti)]
             c, mb = binned(res)
+            ok = binned_valid(res)["M00"]
             col = colours[stem]
-            row[0].plot(c, 10 * np.log10(np.maximum(mb["M00"], 1e-8)), color=col, lw=1.2, label=f"MoM {title}")
+            plot_flagged(row[0], c, 10 * np.log10(np.maximum(mb["M00"], 1e-8)), ok, res.floor_reason, color=col, lw=1.2,
+                         label=f"MoM {title}")
             for name, sh in SHADOWING:
                 md = model(stem, ti, c, sh)
                 m00 = md["M00"][0]
@@ -248,7 +259,8 @@ def figure(runs, path, elements=()):
                     ax.plot(c, md[src][0] / np.where(m00 > 0, m00, np.nan), color=col, ls=styles[name], lw=0.8)
             seen = mb["M00"] >= 1e-3 * mb["M00"].max()    # ratios of the MoM where it scatters (> -30 dB of its peak)
             for ax, key in zip(row[1:], ELEMENTS):
-                ax.plot(c, np.where(seen, mb["M22" if key == "M33" else key] / mb["M00"], np.nan), color=col, lw=1.2)
+                plot_flagged(ax, c, np.where(seen, mb["M22" if key == "M33" else key] / mb["M00"], np.nan), ok,
+                             color=col, lw=1.2)
         annotate_verdicts(row, ti, elements, colours)
         row[0].set(ylim=(-35, 20), ylabel=f"theta_i = {ti:g} deg\nM00 (dB, sigma units)")
         for ax, key in zip(row[1:], ELEMENTS):
@@ -256,14 +268,15 @@ def figure(runs, path, elements=()):
                    if ti == angles[0] else None)
         if ti == angles[0]:
             row[0].set_title("M00 (MoM solid; model: -- V-groove, : Smith, -. none)")
-            row[0].legend(fontsize=6, ncol=2)
+            row[0].legend(*legend_entries([row[0]], False), fontsize=6, ncol=2)
     for ax in axes[-1]:
         ax.set_xlabel("theta_r (deg, + = specular side)")
     fig.suptitle(f"Grazing incidence: fast MoM against the 1-D model, rms slope {SLOPE}, ell = {ELL:g} lambda "
                  "(blue PEC, red Infragold, green flame-sprayed Al, orange glass; 1-deg bins); per panel the verdict "
                  "of the V-groove model per material (holds, or the lobe-mean difference MoM - model where it fails)",
                  fontsize=9)
-    fig.tight_layout()
+    below = flagged_legend(fig, loc="lower center", fontsize=6) * 1.1 / fig.get_figheight()
+    fig.tight_layout(rect=(0, below, 1, 1))
     save_figure(fig, path)
 
 
@@ -299,14 +312,17 @@ def validate(outdir="out/validation", quick=False):
     curves = []
     for (stem, ti), (res, _) in sorted(runs.items(), key=lambda kv: (kv[0][0], kv[0][1])):
         c, mb = binned(res)
+        ok = binned_valid(res)
         mods = {name: model(stem, ti, c, sh) for name, sh in SHADOWING}
         for j, tr in enumerate(c):
             row = [stem, ti, tr, mb["M00"][j]] + [mb[key][j] / mb["M00"][j] for key in RATIOS]
+            row += [int(ok["s"][j]), int(ok["p"][j]), int(ok["M00"][j])]
             for name, _ in SHADOWING:
                 m00 = mods[name]["M00"][0, j]
                 row += [m00] + [mods[name][key][0, j] / m00 if m00 > 0 else float("nan") for key in RATIOS]
             curves.append(row)
-    head = ["material", "theta_i_deg", "theta_r_deg", "mom_M00", "mom_M01/M00", "mom_M22/M00", "mom_M23/M00"]
+    head = ["material", "theta_i_deg", "theta_r_deg", "mom_M00", "mom_M01/M00", "mom_M22/M00", "mom_M23/M00",
+            "valid_s", "valid_p", "valid_M00"]
     for name, _ in SHADOWING:
         head += [f"{name}_M00", f"{name}_M01/M00", f"{name}_M22/M00", f"{name}_M23/M00"]
     write_csv(out / "mom_grazing.csv", head, curves)

@@ -53,7 +53,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import cli, save_figure, write_csv  # noqa: E402
+from _common import cli, plot_flagged, save_figure, valid_m00, write_csv  # noqa: E402
 
 ELL = 5.0
 THETA_I = [10.0, 30.0, 45.0, 60.0, 75.0]
@@ -120,25 +120,27 @@ def figure(case, res, mod, path):
     for t, c in colours.items():
         i = list(np.round(res.theta_i_deg, 6)).index(t)
         m00 = mod["M00"][i]
+        ok = valid_m00(res)[i]
         ax = axes[0, 0]
         if n is None:
-            ax.plot(THETA_R, 10 * np.log10(np.maximum(res.sigma_s[i], 1e-6)), color=c, lw=1, label=f"MoM s, {t:g}")
-            ax.plot(THETA_R, 10 * np.log10(np.maximum(res.sigma_p[i], 1e-6)), color=c, lw=1, ls=":",
-                    label=f"MoM p, {t:g}")
+            plot_flagged(ax, THETA_R, 10 * np.log10(np.maximum(res.sigma_s[i], 1e-6)), res.valid_s[i], res.floor_reason,
+                         color=c, lw=1, label=f"MoM s, {t:g}")
+            plot_flagged(ax, THETA_R, 10 * np.log10(np.maximum(res.sigma_p[i], 1e-6)), res.valid_p[i], res.floor_reason,
+                         color=c, lw=1, ls=":", label=f"MoM p, {t:g}")
         else:
-            ax.plot(THETA_R, 10 * np.log10(np.maximum(res.mueller["M00"][i], 1e-6)), color=c, lw=1,
-                    label=f"MoM, {t:g}")
+            plot_flagged(ax, THETA_R, 10 * np.log10(np.maximum(res.mueller["M00"][i], 1e-6)), ok, res.floor_reason,
+                         color=c, lw=1, label=f"MoM, {t:g}")
         ax.plot(THETA_R, 10 * np.log10(np.maximum(m00, 1e-6)), color=c, ls="--", lw=1, label=f"model, {t:g}")
         for ax, key in zip((axes[0, 1], axes[1, 0], axes[1, 1]), RATIOS):
             r, se = res.mueller_normalised[key][i], res.mueller_normalised_std_error[key][i]
-            ax.plot(THETA_R, r, color=c, lw=1)
-            ax.fill_between(THETA_R, r - se, r + se, color=c, alpha=0.2, lw=0)
+            plot_flagged(ax, THETA_R, r, ok, color=c, lw=1)
+            ax.fill_between(THETA_R, r - se, r + se, where=ok, color=c, alpha=0.2, lw=0)
             ax.plot(THETA_R, mod[key.split("/")[0]][i] / np.where(m00 > 0, m00, np.nan), color=c, ls="--", lw=1)
     axes[0, 0].set(ylim=(-30, 15), ylabel="dB (sigma units)",
                    title="M00 (PEC: sigma_s, sigma_p; model: s = p)" if n is None else "M00")
-    axes[0, 0].legend(fontsize=6, ncol=2)
+    axes[0, 0].legend(fontsize=5, ncol=2)
     for ax, key in zip((axes[0, 1], axes[1, 0], axes[1, 1]), RATIOS):
-        ax.set(title=key + " (MoM solid with +-1 s.e., model dashed)", ylim=(-1.05, 1.05))
+        ax.set(title=key + " (MoM solid with +-1 s.e., grey x flagged; model dashed)", ylim=(-1.05, 1.05))
     for ax in axes[1]:
         ax.set_xlabel("theta_r (deg, + = specular side)")
     fig.suptitle(f"MoM vs the 1-D pBRDF, {title}, rms slope {slope}, ell = {ELL:g} lambda, "
@@ -158,6 +160,7 @@ def validate(outdir="out/validation", quick=False):
         mod = model(case, theta_i(quick))
         figure(case, res, mod, out / f"mom_mueller_1d_{stem}.png")
         curves = []
+        m00_ok = valid_m00(res)
         for i, t in enumerate(np.round(res.theta_i_deg, 6)):
             for j, tr in enumerate(THETA_R):
                 row = [t, tr, res.mueller["M00"][i, j], res.mueller_std_error["M00"][i, j]]
@@ -165,12 +168,13 @@ def validate(outdir="out/validation", quick=False):
                     row += [res.mueller_normalised[key][i, j], res.mueller_normalised_std_error[key][i, j]]
                 m00 = mod["M00"][i, j]
                 row += [m00] + [mod[key.split("/")[0]][i, j] / m00 if m00 > 0 else float("nan") for key in RATIOS]
-                row += [res.sigma_s[i, j], res.sigma_p[i, j]]
+                row += [res.sigma_s[i, j], res.sigma_p[i, j], int(res.valid_s[i, j]), int(res.valid_p[i, j]),
+                        int(m00_ok[i, j])]
                 curves.append(row)
         write_csv(out / f"mom_mueller_1d_{stem}.csv",
                   ["theta_i_deg", "theta_r_deg", "mom_M00", "mom_M00_se", "mom_M01/M00", "se", "mom_M22/M00", "se",
                    "mom_M23/M00", "se", "model_M00", "model_M01/M00", "model_M22/M00", "model_M23/M00",
-                   "mom_sigma_s", "mom_sigma_p"], curves)
+                   "mom_sigma_s", "mom_sigma_p", "valid_s", "valid_p", "valid_M00"], curves)
         rows = compare(res, mod)
         table += [[title] + r for r in rows]
         top = 60.0 if quick else 75.0

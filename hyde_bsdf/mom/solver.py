@@ -1266,7 +1266,7 @@ def _floors(cfg, per):
             out[f"floor_{pol}"] = out[f"valid_{pol}"] = None
             continue
         fl = partition_floor(cfg["theta_i"], cfg["theta_r"], cfg["w"], cfg["part_len"], cfg["beam"], pol,
-                             cfg["tol"] or FAST_TOL)
+                             cfg["tol"] or FAST_TOL, sigma_h=cfg["rms_height_wl"])
         out[f"floor_{pol}"], out[f"valid_{pol}"] = fl, per[pol]["sigma"] >= FLOOR_MARGIN * fl
     out["valid"] = out[f"valid_{cfg['pols'][0]}"]
     out["floor_reason"] = floor_reason(cfg["w"], cfg["part_len"])
