@@ -54,6 +54,9 @@ class MapInversionResult:
     converged: dict = field(default_factory=dict)   # name -> (rows, cols) bool: False where the stderr is NaN
     uncertainty: Uncertainty | None = None
     adam_final: dict = field(default_factory=dict)  # the averaged Adam iterate before the polish
+    tiles: list = field(default_factory=list)       # invert_maps_tiled: per tile bounds, pixels, s/it, peak RSS
+    wall_seconds: float = float("nan")              # invert_maps_tiled: the whole run, planning included
+    messages: list = field(default_factory=list)    # (category, message) of each warning
 
     def texel_errors(self, name: str = "alpha") -> np.ndarray:
         """|final / truth - 1| over the seen texels of map ``name`` (1-D array)."""

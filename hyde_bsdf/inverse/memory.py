@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from hyde_bsdf.io.memory import available_bytes, check_memory as memory_check
 
-__all__ = ["AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "estimate_memory", "check_memory"]
+__all__ = ["AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "estimate_memory", "check_memory", "tiles_memory_check"]
 
 #: peak memory of one differentiable render (reverse mode through ``path``): a fixed part plus
 #: bytes per sample (measured: 1.4-1.5 kB/sample spectral polarized sphere at 64-128 px, 16 spp;
@@ -33,4 +33,16 @@ def check_memory(width: int, height: int, spp: int, hint: str) -> int:
         memory_check(need, f"one optimisation step on the {width}x{height} film at {spp} spp "
                      f"({AD_BYTES_PER_SAMPLE} B per sample + {AD_BYTES_FIXED // 2**20} MiB)", f"lower {hint}",
                      available=avail)
+    return need
+
+
+def tiles_memory_check(pixels: int, spp: int, concurrent: int = 1, available: int | None = None) -> int:
+    """UsageError when ``concurrent`` tiles at once, each :func:`estimate_memory` of ``pixels`` (the largest
+    tile's film crops, all pictures together: one step renders them all) at ``spp``, exceed the available
+    memory; names the options that lower it.  Returns the estimate."""
+    need = estimate_memory(int(pixels), 1, spp) * int(concurrent)
+    memory_check(need, f"{concurrent} tile(s) at once, the largest with {int(pixels)} px of film crops at {spp} spp "
+                 f"({AD_BYTES_PER_SAMPLE} B per sample + {AD_BYTES_FIXED // 2**20} MiB each)",
+                 "use more --tiles (smaller crops), a lower --spp or fewer --workers",
+                 available=_mem_available() if available is None else available)
     return need
