@@ -17,14 +17,7 @@ MAX_LINES = 60
 #: (hyde_bsdf/mitsuba/, mom/, inverse/ only).  Each entry is "path:function"; remove it when
 #: that function is split.  Every other folder has none, and none may be added here.
 PENDING = {
-    "mitsuba/plugin.py:__init__",
-    "mom/fast.py:_band_fill",
-    "mom/fast.py:__init__",
-    "mom/fast.py:_iterate",
-    "mom/fast.py:solve_fast",
-    "mom/gather.py:gather",
     "inverse/maps.py:invert_maps",
-    "inverse/scalar.py:invert",
 }
 PENDING_FOLDERS = ("mitsuba/", "mom/", "inverse/")
 

@@ -4,7 +4,7 @@ Checks that every wait on an executor ends: a dask cluster whose only worker die
 whose worker was killed and an executor that never finishes a task each end in one
 :class:`ExecutorError` line naming the executor, within seconds (liveness checks and the grace
 period are shortened here); a task's own exception reaches the caller unchanged; the heartbeat
-line appears while nothing finishes.
+line reaches the progress callback (stderr for mom.scatter's default) while nothing finishes.
 """
 import concurrent.futures as cf
 import multiprocessing
@@ -81,3 +81,15 @@ def test_task_errors_pass_through_and_bad_timeout_is_refused():
         mom.scatter(*ARGS, pts_per_wl=6, executor=mom.SerialExecutor(), timeout=0)
     res = mom.scatter(*ARGS, pts_per_wl=6, executor=mom.SerialExecutor(), timeout=30, progress=False)
     assert res.sigma.shape == (1, 1)
+
+
+def test_heartbeat_goes_only_to_the_callback(fast_checks, capsys):
+    """The library prints nothing: gather's heartbeat (every HEARTBEAT_S = 0.2 s here without a finished task)
+    reaches the caller's callback; without one there is no line at all."""
+    lines = []
+    with pytest.raises(ExecutorError, match="timeout=0.6 s"):
+        gather(NeverExecutor(), _fail, [0, 1], timeout=0.6, heartbeat=lines.append, what="partition", label="mom")
+    assert lines and lines[0].startswith("mom: waiting on the executor NeverExecutor: 0/2 partitions done")
+    with pytest.raises(ExecutorError):
+        gather(NeverExecutor(), _fail, [0], timeout=0.3, what="partition", label="mom")
+    assert capsys.readouterr().err == ""

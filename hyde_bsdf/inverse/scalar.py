@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf.inverse._common import SQRT2, NotConvergedWarning
 from hyde_bsdf.progress import as_callback
@@ -88,7 +89,7 @@ def scene_dict(*, bsdf: str = "hyde", rms_slope: float = 0.3, eta: float = 1.5, 
         material = {"type": "roughconductor", "distribution": "beckmann",
                     "alpha": SQRT2 * float(rms_slope), "eta": float(eta), "k": float(k)}
     else:
-        raise ValueError(f"bsdf must be 'hyde' or 'roughconductor', got {bsdf!r}")
+        raise UsageError(f"bsdf must be 'hyde' or 'roughconductor', got {shorten(bsdf)}")
     if lighting == "points":
         lights = {"light_front": {"type": "point", "position": [-1.5, 0.8, 3.0],
                                   "intensity": {"type": "spectrum", "value": 15.0}},
@@ -99,7 +100,7 @@ def scene_dict(*, bsdf: str = "hyde", rms_slope: float = 0.3, eta: float = 1.5, 
         lights = {"light": {"type": "directional", "direction": [-math.sin(ph), 0.0, -math.cos(ph)],
                             "irradiance": {"type": "spectrum", "value": 3.0}}}
     else:
-        raise ValueError(f"lighting must be 'points' or 'directional', got {lighting!r}")
+        raise UsageError(f"lighting must be 'points' or 'directional', got {shorten(lighting)}")
     return {
         "type": "scene",
         "integrator": {"type": "stokes", "integrator": {"type": "path", "max_depth": 2}},
@@ -136,14 +137,14 @@ def parameter_keys(params, names=PARAMETERS, prefix: str | None = None) -> dict:
     out = {}
     for name in names:
         if name not in suffix:
-            raise ValueError(f"parameter names must be from {PARAMETERS}, got {name!r}")
+            raise UsageError(f"parameter names must be from {PARAMETERS}, got {shorten(name)}")
         out[name] = _unique_key(params, name, [suffix[name]], prefix)
     return out
 
 
 def _unique_key(params, name, suffix_groups, prefix):
     """The one traverse key ending in a suffix of the first group that matches any key (under
-    ``prefix`` if given); ValueError naming ``name``, the suffixes and the keys found otherwise."""
+    ``prefix`` if given); UsageError naming ``name``, the suffixes and the keys found otherwise."""
     found = []
     for group in suffix_groups:
         found = [key for key in params.keys() if key.endswith(group)
@@ -152,9 +153,9 @@ def _unique_key(params, name, suffix_groups, prefix):
             break
     if len(found) != 1:
         suffixes = [s for group in suffix_groups for s in group]
-        raise ValueError(f"need exactly one BSDF parameter for {name!r} "
+        raise UsageError(f"need exactly one BSDF parameter for {name!r} "
                          f"(keys ending in {' or '.join(suffixes)}"
-                         f"{'' if prefix is None else ' under ' + repr(prefix)}); found {found}"
+                         f"{'' if prefix is None else ' under ' + shorten(prefix)}); found {found}"
                          f"{'; name the BSDF with prefix= (CLI: --target)' if len(found) > 1 else ''}")
     return found[0]
 
@@ -198,6 +199,85 @@ class InversionResult:
         return {n: (self.final[n] - self.truth[n]) / self.truth[n] for n in self.fitted}
 
 
+def _check_invert_args(fit, start, iterations):
+    """The fitted names in PARAMETERS order; UsageError for an empty fit, a start missing a parameter or a
+    bad iteration count."""
+    fit = tuple(p for p in PARAMETERS if p in fit)
+    if not fit:
+        raise UsageError(f"fit must name at least one of {PARAMETERS}")
+    missing = [p for p in PARAMETERS if p not in start]
+    if missing:
+        raise UsageError(f"start must give a value for every parameter; missing {missing}")
+    if not (isinstance(iterations, int) and iterations >= 1):
+        raise UsageError(f"iterations must be an integer >= 1, got {shorten(iterations)}")
+    return fit
+
+
+def _log_adam(start, fit, lr):
+    """``mi.ad.Adam`` over log(parameter) of the fitted parameters, from ``start`` clamped into RANGES."""
+    import mitsuba as mi
+
+    opt = mi.ad.Adam(lr=lr)
+    for p in fit:
+        lo, hi = RANGES[p]
+        opt[p] = mi.Float(math.log(min(max(float(start[p]), max(lo, 1e-6)), hi)))
+    return opt
+
+
+def _apply_latents(opt, params, keys, fit, bsdf):
+    """Clip each latent log(parameter) into its box, set exp(latent) into the scene (a differentiable
+    edge; roughconductor takes alpha = sqrt(2) rms_slope) and update; returns {name: value}."""
+    import drjit as dr
+
+    values = {}
+    for p in fit:
+        lo, hi = RANGES[p]
+        # keep the latent inside the box (the plugin refuses rms_slope outside parameters.RMS_SLOPE)
+        opt[p] = dr.clip(opt[p], math.log(max(lo, 1e-6)), math.log(hi))
+        values[p] = dr.exp(opt[p])
+        if p == "rms_slope" and bsdf == "roughconductor":
+            params[keys[p]] = values[p] * SQRT2
+        else:
+            params[keys[p]] = values[p]
+    params.update()
+    return values
+
+
+def _backpropagate(loss, opt, values, fit, it):
+    """The iteration's history row (loss and fitted values); FloatingPointError for a non-finite loss, else
+    the loss's gradients propagated to the latents (and checked: :func:`check_gradients`)."""
+    import drjit as dr
+
+    row = {"iteration": it, "loss": float(np.asarray(loss).ravel()[0])}
+    row.update({p: float(np.asarray(values[p]).ravel()[0]) for p in fit})
+    if not math.isfinite(row["loss"]):   # never hand back a NaN trajectory silently
+        raise FloatingPointError(f"the loss became {row['loss']} at iteration {it} with "
+                                 + ", ".join(f"{p}={row[p]:.6g}" for p in fit))
+    dr.backward(loss)
+    check_gradients({p: dr.grad(opt[p]) for p in fit}, it)
+    return row
+
+
+def _inversion_result(history, fit, fixed, start, truth, loss_fn, average_last, t_first):
+    """The InversionResult: each fitted parameter's mean over the last ``average_last`` iterations (Polyak
+    averaging), its convergence on that window, a NotConvergedWarning for one still drifting (pointing at
+    the caller of :func:`invert`)."""
+    tail = history[-min(average_last, len(history)):]
+    final = {p: float(np.mean([r[p] for r in tail])) for p in fit}
+    final.update(fixed)
+    per_it = ((history[-1]["seconds"] - history[0]["seconds"]) / (len(history) - 1)
+              if len(history) > 1 else float("nan"))
+    result = InversionResult(fitted=fit, start=dict(start), final=final, truth=truth,
+                             components=loss_fn.components, history=history,
+                             seconds_per_iteration=per_it, first_iteration_seconds=t_first)
+    for p in fit:
+        result.converged[p], message = trajectory_converged([r[p] for r in tail], p)
+        if message:
+            result.warnings.append(message)
+            warnings.warn(message, NotConvergedWarning, stacklevel=3)
+    return result
+
+
 def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iterations: int = 200,
            lr: float = 0.05, spp: int = 16, seed: int = 0, truth: dict | None = None,
            bsdf: str = "hyde", progress=True, average_last: int = 20,
@@ -216,26 +296,15 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
     ``progress``: a callback ``progress(message)`` per iteration; True for ``[invert]`` lines on
     stderr, False for none (:mod:`hyde_bsdf.progress`).
     """
-    import drjit as dr
     import mitsuba as mi
 
     progress = as_callback(progress, "[invert]")
-    fit = tuple(p for p in PARAMETERS if p in fit)
-    if not fit:
-        raise ValueError(f"fit must name at least one of {PARAMETERS}")
-    missing = [p for p in PARAMETERS if p not in start]
-    if missing:
-        raise ValueError(f"start must give a value for every parameter; missing {missing}")
-    if not (isinstance(iterations, int) and iterations >= 1):
-        raise ValueError(f"iterations must be an integer >= 1, got {iterations!r}")
+    fit = _check_invert_args(fit, start, iterations)
     params = mi.traverse(scene)
     keys = parameter_keys(params, PARAMETERS, prefix)
     fixed = {p: float(start[p]) for p in PARAMETERS if p not in fit}
     _set(params, keys, {**fixed, **{p: float(start[p]) for p in fit}}, bsdf)
-    opt = mi.ad.Adam(lr=lr)
-    for p in fit:
-        lo, hi = RANGES[p]
-        opt[p] = mi.Float(math.log(min(max(float(start[p]), max(lo, 1e-6)), hi)))
+    opt = _log_adam(start, fit, lr)
     names = None
     history = []
     t0 = time.perf_counter()
@@ -243,28 +312,11 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
     rate = lr
     for it in range(iterations):
         t_it = time.perf_counter()
-        values = {}
-        for p in fit:
-            lo, hi = RANGES[p]
-            # keep the latent inside the box (the plugin refuses rms_slope outside parameters.RMS_SLOPE)
-            opt[p] = dr.clip(opt[p], math.log(max(lo, 1e-6)), math.log(hi))
-            values[p] = dr.exp(opt[p])
-            if p == "rms_slope" and bsdf == "roughconductor":
-                params[keys[p]] = values[p] * SQRT2
-            else:
-                params[keys[p]] = values[p]
-        params.update()
+        values = _apply_latents(opt, params, keys, fit, bsdf)
         img = mi.render(scene, params, spp=int(spp), seed=int(seed) + 1 + it)
         if names is None:
             names = channel_names(scene)
-        loss = loss_fn(stokes_images(img, names))
-        row = {"iteration": it, "loss": float(np.asarray(loss).ravel()[0])}
-        row.update({p: float(np.asarray(values[p]).ravel()[0]) for p in fit})
-        if not math.isfinite(row["loss"]):   # never hand back a NaN trajectory silently
-            raise FloatingPointError(f"the loss became {row['loss']} at iteration {it} with "
-                                     + ", ".join(f"{p}={row[p]:.6g}" for p in fit))
-        dr.backward(loss)
-        check_gradients({p: dr.grad(opt[p]) for p in fit}, it)
+        row = _backpropagate(loss_fn(stokes_images(img, names)), opt, values, fit, it)
         row.update(fixed)
         opt.step()
         if it >= iterations - iterations // 4:
@@ -278,20 +330,7 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
         if progress:
             progress(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.3e}  " +
                      "  ".join(f"{p}={row[p]:.4f}" for p in fit) + f"  ({row['seconds']:.1f} s)")
-    tail = history[-min(average_last, len(history)):]
-    final = {p: float(np.mean([r[p] for r in tail])) for p in fit}
-    final.update(fixed)
-    per_it = ((history[-1]["seconds"] - history[0]["seconds"]) / (len(history) - 1)
-              if len(history) > 1 else float("nan"))
-    result = InversionResult(fitted=fit, start=dict(start), final=final, truth=truth,
-                             components=loss_fn.components, history=history,
-                             seconds_per_iteration=per_it, first_iteration_seconds=t_first)
-    for p in fit:
-        result.converged[p], message = trajectory_converged([r[p] for r in tail], p)
-        if message:
-            result.warnings.append(message)
-            warnings.warn(message, NotConvergedWarning, stacklevel=2)
-    return result
+    return _inversion_result(history, fit, fixed, start, truth, loss_fn, average_last, t_first)
 
 
 #: relative drift below which an averaged trajectory counts as settled whatever its scatter

@@ -14,6 +14,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
+from hyde_bsdf.errors import UsageError, UsageTypeError, shorten
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.mitsuba import optics as po
 from hyde_bsdf.mitsuba import param_checks as pc
@@ -210,13 +211,14 @@ for _token, _text in (("@RMS_SLOPE@", RMS_SLOPE.text()), ("@RMS_LO@", f"{RMS_SLO
 
 
 def _read_float(props, name, hint=""):
+    """A finite scalar property (``hint``: added to the message of a non-number)."""
     value = props.get(name)
     try:
         value = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"hyde: parameter '{name}' must be a number{hint}, got {value!r}") from None
+        raise UsageTypeError(f"hyde: parameter '{name}' must be a number{hint}, got {shorten(value)}") from None
     if not math.isfinite(value):
-        raise ValueError(f"hyde: parameter '{name}' must be finite, got {value!r}")
+        raise UsageError(f"hyde: parameter '{name}' must be finite, got {value!r}")
     return value
 
 
@@ -229,7 +231,7 @@ def _read_bool(props, name, default):
         return value
     if isinstance(value, str) and value.strip().lower() in ("true", "false"):
         return value.strip().lower() == "true"
-    raise ValueError(f"hyde: parameter '{name}' must be a boolean (true or false), got {value!r}")
+    raise UsageTypeError(f"hyde: parameter '{name}' must be a boolean (true or false), got {shorten(value)}")
 
 
 def _ior_texture(path):
@@ -250,12 +252,12 @@ def _ior_texture(path):
 
 # ---------------------------------------------------------------- texture checks
 def _texture(props, name, default):
-    """``props.get_unbounded_texture`` with Mitsuba's own refusal as a one-line ValueError."""
+    """``props.get_unbounded_texture`` with Mitsuba's own refusal as a one-line UsageError."""
     try:
         return props.get_unbounded_texture(name, default)
     except RuntimeError as exc:   # e.g. an all-zero spectrum: "no probability mass found"
         last = str(exc).strip().splitlines()[-1]
-        raise ValueError(f"hyde: parameter '{name}' is refused by Mitsuba ({last}); an index with "
+        raise UsageError(f"hyde: parameter '{name}' is refused by Mitsuba ({last}); an index with "
                          f"eta and k both 0 is not a material") from None
 
 
@@ -274,7 +276,7 @@ def _warn_unreadable(name, tex, clamp):
     if not pc.readable(tex):
         warnings.warn(f"hyde: the values of {name} ({tex.class_name()}) cannot be read at load; "
                       f"they are clamped to {clamp} at evaluation (NaN: no reflection)",
-                      RuntimeWarning, stacklevel=4)
+                      RuntimeWarning, stacklevel=5)
         return True
     return False
 
@@ -311,6 +313,110 @@ _PARAMS = ("rms_slope", "alpha", "sigma_h", "ell", "eta", "k", "material", "spec
            "distribution", "shadowing", "diffuse", "sample_visible")
 
 
+# ---------------------------------------------------------------- constructor: reading the properties
+def _refuse_outside_model(props):
+    """The paper's model is isotropic Beckmann: another distribution or an anisotropic roughness is refused."""
+    distribution = str(props.get("distribution", "beckmann")).lower()
+    if distribution != "beckmann":
+        raise UsageError(f"hyde: distribution={shorten(distribution)} is not supported: the paper's "
+                         f"model uses the Beckmann distribution only (isotropic)")
+    aniso = [x for x in ("alpha_u", "alpha_v") if x in props]
+    if aniso:
+        raise UsageError(f"hyde: {'/'.join(aniso)} (anisotropic roughness) is not supported: the "
+                         f"paper's model is isotropic Beckmann; give one alpha or rms_slope")
+
+
+def _sigma_h_ell_rms(props):
+    """rms_slope = sqrt(2) sigma_h / ell from the scalar pair sigma_h, ell (both > 0, given together)."""
+    missing = [x for x in ("sigma_h", "ell") if x not in props]
+    if missing:
+        raise UsageError(f"hyde: sigma_h and ell must be given together; missing {missing[0]}")
+    hint = " (sigma_h and ell are scalars; give rms_slope or alpha for a texture)"
+    sh, ell = _read_float(props, "sigma_h", hint), _read_float(props, "ell", hint)
+    if sh <= 0 or ell <= 0:
+        raise UsageError(f"hyde: sigma_h and ell must be > 0, got sigma_h={sh}, ell={ell}")
+    rms = SQRT2 * sh / ell
+    if not (RMS_RANGE[0] <= rms <= RMS_RANGE[1]):
+        raise UsageError(f"hyde: sigma_h/ell give rms_slope = sqrt(2) sigma_h/ell = {rms:g}; "
+                         f"the accepted range is [{RMS_RANGE[0]:g}, {RMS_RANGE[1]:g}]")
+    return rms
+
+
+def _read_roughness(props):
+    """(traverse name, texture) of the roughness, given as exactly one of rms_slope, alpha (Beckmann alpha,
+    a texture each) or the scalars sigma_h+ell (kept as an rms_slope); default rms_slope 0.3."""
+    groups = [g for g, names in (("rms_slope", ("rms_slope",)), ("alpha", ("alpha",)),
+                                 ("sigma_h+ell", ("sigma_h", "ell")))
+              if any(x in props for x in names)]
+    if len(groups) > 1:
+        raise UsageError(f"hyde: give the roughness as exactly one of rms_slope, alpha or "
+                         f"sigma_h+ell; got conflicting {', '.join(groups)}")
+    if "sigma_h" in props or "ell" in props:
+        return "rms_slope", props.get_texture("rms_slope", _sigma_h_ell_rms(props))
+    key = "alpha" if "alpha" in props else "rms_slope"
+    if key in props and props.type(key) == mi.Properties.Type.Float:
+        _read_float(props, key)  # finite number (the range check follows)
+    return key, props.get_texture(key, 0.3)
+
+
+def _read_index(props):
+    """(eta, k, material name or None): the spectra of a Mitsuba ``data/ior`` material, or the eta/k
+    textures (default eta 0, k 1); "none" is roughconductor's spelling of "eta/k given"."""
+    material = str(props.get("material", "none")) if "material" in props else "none"
+    if material.lower() == "none":
+        for name in ("eta", "k"):
+            if name in props and props.type(name) == mi.Properties.Type.Float:
+                _read_float(props, name)
+        return _texture(props, "eta", 0.0), _texture(props, "k", 1.0), None
+    given = [x for x in ("eta", "k") if x in props]
+    if given:
+        raise UsageError(f"hyde: give either material or eta/k, not both "
+                         f"(got material and {', '.join(given)})")
+    try:
+        eta_file, k_file = material_files(material)     # data/ior names only (no ../)
+    except ValueError as exc:
+        raise UsageError(f"hyde: {exc}") from None
+    return _ior_texture(str(eta_file)), _ior_texture(str(k_file)), material
+
+
+def _read_switches(props):
+    """(shadowing, diffuse): the model switches, each one of its accepted names (a boolean ``diffuse``
+    means "paper" or "none"); the reciprocal diffuse term needs a shadowing function."""
+    shadowing = str(props.get("shadowing", "vgroove")).lower()
+    if shadowing not in SHADOWING:
+        raise UsageError(f"hyde: shadowing={shorten(shadowing)} is not one of {', '.join(SHADOWING)}")
+    diffuse = props.get("diffuse", "paper")
+    if isinstance(diffuse, bool):  # <boolean name="diffuse" .../> also accepted
+        diffuse = "paper" if diffuse else "none"
+    diffuse = str(diffuse).lower()
+    if diffuse not in DIFFUSE:
+        raise UsageError(f"hyde: diffuse={shorten(diffuse)} is not one of {', '.join(DIFFUSE)}")
+    if diffuse == "reciprocal" and shadowing == "none":
+        # without shadowing the specular DHR average rho_avg reaches 1: 1/(1 - rho_avg) diverges
+        raise UsageError("hyde: diffuse='reciprocal' needs shadowing='vgroove' or 'smith' "
+                         "(with shadowing='none' the specular albedo average is >= 1)")
+    return shadowing, diffuse
+
+
+def _refuse_unknown(props):
+    """A property that no query read is not one of the plugin's parameters: refused, naming the accepted."""
+    unknown = [x for x in props.unqueried() if x not in _PARAMS]
+    if unknown:
+        raise UsageError(f"hyde: unknown parameter(s) {', '.join(sorted(unknown))}; "
+                         f"accepted: {', '.join(_PARAMS)}")
+
+
+def _lobe_flags(diffuse):
+    """(components, flags): component 0 the glossy specular lobe, 1 the diffuse term (unless "none")."""
+    comps = [mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide]
+    if diffuse != "none":
+        comps.append(mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide)
+    flags = comps[0]
+    for c in comps[1:]:
+        flags = flags | c
+    return comps, flags
+
+
 def _make_class():
     """Build the BSDF class for the current variant (mi.BSDF differs per variant)."""
 
@@ -319,113 +425,33 @@ def _make_class():
 
         def __init__(self, props):
             mi.BSDF.__init__(self, props)
-
-            # ---- outside the paper's model: refuse with the reason
-            distribution = str(props.get("distribution", "beckmann")).lower()
-            if distribution != "beckmann":
-                raise ValueError(f"hyde: distribution={distribution!r} is not supported: the paper's "
-                                 f"model uses the Beckmann distribution only (isotropic)")
-            aniso = [x for x in ("alpha_u", "alpha_v") if x in props]
-            if aniso:
-                raise ValueError(f"hyde: {'/'.join(aniso)} (anisotropic roughness) is not supported: the "
-                                 f"paper's model is isotropic Beckmann; give one alpha or rms_slope")
-
-            # ---- roughness: exactly one of rms_slope / alpha / (sigma_h, ell)
-            groups = [g for g, names in (("rms_slope", ("rms_slope",)), ("alpha", ("alpha",)),
-                                         ("sigma_h+ell", ("sigma_h", "ell")))
-                      if any(x in props for x in names)]
-            if len(groups) > 1:
-                raise ValueError(f"hyde: give the roughness as exactly one of rms_slope, alpha or "
-                                 f"sigma_h+ell; got conflicting {', '.join(groups)}")
-            if "sigma_h" in props or "ell" in props:
-                missing = [x for x in ("sigma_h", "ell") if x not in props]
-                if missing:
-                    raise ValueError(f"hyde: sigma_h and ell must be given together; missing {missing[0]}")
-                hint = " (sigma_h and ell are scalars; give rms_slope or alpha for a texture)"
-                sh, ell = _read_float(props, "sigma_h", hint), _read_float(props, "ell", hint)
-                if sh <= 0 or ell <= 0:
-                    raise ValueError(f"hyde: sigma_h and ell must be > 0, got sigma_h={sh}, ell={ell}")
-                rms = SQRT2 * sh / ell
-                if not (RMS_RANGE[0] <= rms <= RMS_RANGE[1]):
-                    raise ValueError(f"hyde: sigma_h/ell give rms_slope = sqrt(2) sigma_h/ell = {rms:g}; "
-                                     f"the accepted range is [{RMS_RANGE[0]:g}, {RMS_RANGE[1]:g}]")
-                key = "rms_slope"
-                self.m_rough = props.get_texture("rms_slope", rms)
-            else:
-                key = "alpha" if "alpha" in props else "rms_slope"
-                if key in props and props.type(key) == mi.Properties.Type.Float:
-                    _read_float(props, key)  # finite number (the range check follows)
-                self.m_rough = props.get_texture(key, 0.3)
+            _refuse_outside_model(props)
+            key, self.m_rough = _read_roughness(props)
             self.m_rough_key = key
             # alpha = sqrt(2) rms_slope: eval converts the texture's alpha into rms_slope
             self.m_rough_scale = 1.0 / SQRT2 if key == "alpha" else 1.0
             self.m_rough_range = ALPHA_RANGE if key == "alpha" else RMS_RANGE
-            # ---- index: eta/k or material ("none": roughconductor's spelling of "eta/k given")
-            material = str(props.get("material", "none")) if "material" in props else "none"
-            if material.lower() != "none":
-                given = [x for x in ("eta", "k") if x in props]
-                if given:
-                    raise ValueError(f"hyde: give either material or eta/k, not both "
-                                     f"(got material and {', '.join(given)})")
-                try:
-                    eta_file, k_file = material_files(material)     # data/ior names only (no ../)
-                except ValueError as exc:
-                    raise ValueError(f"hyde: {exc}") from None
-                self.m_eta = _ior_texture(str(eta_file))
-                self.m_k = _ior_texture(str(k_file))
-                self.m_material = material
-            else:
-                for name in ("eta", "k"):
-                    if name in props and props.type(name) == mi.Properties.Type.Float:
-                        _read_float(props, name)
-                self.m_eta = _texture(props, "eta", 0.0)
-                self.m_k = _texture(props, "k", 1.0)
-                self.m_material = None
+            self.m_eta, self.m_k, self.m_material = _read_index(props)
             self.m_specular_reflectance = props.get_texture("specular_reflectance", 1.0)
             self.m_snapshots, self.m_reader = {}, pc.Reader()
             self._validate()
-            # textures whose values cannot be read at load: clamped at eval, one warning each
-            lo, hi = ALPHA_RANGE if key == "alpha" else RMS_RANGE
-            _warn_unreadable(key, self.m_rough, f"[{lo:.7g}, {hi:.7g}]")
+            self._warn_unreadable_textures()
+            # ---- model switches (Python constants: branching on them is fine)
+            self.m_shadowing, self.m_diffuse = _read_switches(props)
+            self.m_sample_visible = _read_bool(props, "sample_visible", True)
+            _refuse_unknown(props)
+            self.m_polarized = bool(mi.is_polarized)
+            self.m_dhr = _dhr_lookup(self.m_shadowing) if self.m_diffuse != "none" else None
+            self.m_components, self.m_flags = _lobe_flags(self.m_diffuse)
+
+        def _warn_unreadable_textures(self):
+            """Textures whose values cannot be read at load are clamped at eval: one warning each; sets the
+            eval-time guards of the index and of specular_reflectance."""
+            lo, hi = self.m_rough_range
+            _warn_unreadable(self.m_rough_key, self.m_rough, f"[{lo:.7g}, {hi:.7g}]")
             self.m_guard_index = any([_warn_unreadable(name, tex, f"[0, {INDEX_MAX:g}]")
                                       for name, tex in (("eta", self.m_eta), ("k", self.m_k))])
             self.m_guard_scale = _warn_unreadable("specular_reflectance", self.m_specular_reflectance, "[0, 1]")
-
-            # ---- model switches (Python constants: branching on them is fine)
-            shadowing = str(props.get("shadowing", "vgroove")).lower()
-            if shadowing not in SHADOWING:
-                raise ValueError(f"hyde: shadowing={shadowing!r} is not one of {', '.join(SHADOWING)}")
-            diffuse = props.get("diffuse", "paper")
-            if isinstance(diffuse, bool):  # <boolean name="diffuse" .../> also accepted
-                diffuse = "paper" if diffuse else "none"
-            diffuse = str(diffuse).lower()
-            if diffuse not in DIFFUSE:
-                raise ValueError(f"hyde: diffuse={diffuse!r} is not one of {', '.join(DIFFUSE)}")
-            if diffuse == "reciprocal" and shadowing == "none":
-                # without shadowing the specular DHR average rho_avg reaches 1: 1/(1 - rho_avg) diverges
-                raise ValueError("hyde: diffuse='reciprocal' needs shadowing='vgroove' or 'smith' "
-                                 "(with shadowing='none' the specular albedo average is >= 1)")
-            self.m_shadowing = shadowing
-            self.m_diffuse = diffuse
-            self.m_sample_visible = _read_bool(props, "sample_visible", True)
-
-            unknown = [x for x in props.unqueried() if x not in _PARAMS]
-            if unknown:
-                raise ValueError(f"hyde: unknown parameter(s) {', '.join(sorted(unknown))}; "
-                                 f"accepted: {', '.join(_PARAMS)}")
-
-            self.m_polarized = bool(mi.is_polarized)
-            self.m_dhr = _dhr_lookup(shadowing) if diffuse != "none" else None
-
-            glossy = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
-            comps = [glossy]
-            if diffuse != "none":
-                comps.append(mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide)
-            self.m_components = comps
-            flags = comps[0]
-            for c in comps[1:]:
-                flags = flags | c
-            self.m_flags = flags
 
         # ------------------------------------------------------------------
         # Nothing derived from the roughness is cached: alpha, the DHR texture coordinate and
@@ -471,7 +497,7 @@ def _make_class():
             attrs = {self.m_rough_key: "m_rough", "eta": "m_eta", "k": "m_k",
                      "specular_reflectance": "m_specular_reflectance"}
             if name not in attrs:
-                raise ValueError(f"hyde: replace_texture: unknown parameter {name!r}; use {', '.join(attrs)}")
+                raise UsageError(f"hyde: replace_texture: unknown parameter {shorten(name)}; use {', '.join(attrs)}")
             old = getattr(self, attrs[name])
             setattr(self, attrs[name], texture)
             try:

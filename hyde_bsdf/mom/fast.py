@@ -79,6 +79,7 @@ import scipy.linalg
 import scipy.sparse
 import scipy.sparse.linalg
 
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.mom.kernels import (
     DECAY_CUTOFF, K0, _cell_moments, _complex_weights, _interp_weights, _near, _self, _sinc_derivatives, hankel2,
 )
@@ -217,6 +218,96 @@ class _BandStore:
         self.data[m, s - m + self.half] = val
 
 
+class _FarCells:
+    """The dense path's far-cell weights of one region (kernels.layer_matrices' formulas): cells more than
+    4 samples from the match point and, in a lossy medium, within the e^-40 cut-off ``band``."""
+
+    def __init__(self, x, y, fp, dx, k, band, need_S, need_D):
+        self.x, self.y, self.fp, self.dx, self.k, self.band = x, y, fp, dx, k, band
+        self.decay = abs(complex(k).imag)
+        self.need_S, self.need_D = need_S, need_D
+
+    def weights(self, m, cell):
+        """(ws, wd): far-cell weights (w0, w+, w-) for match points m [..., rows, 1], cells [..., 1, cols]
+        (None where not asked): lossless, the phase moments with the asymptotic amplitude slope; lossy,
+        the exact log-derivative."""
+        x, y, fp, dx, k = self.x, self.y, self.fp, self.dx, self.k
+        sep = np.abs(cell - m)
+        inside = (sep > _NEAR) & (sep <= self.band)
+        ddx = x[cell] - x[m]
+        ddy = y[cell] - y[m]
+        R = np.where(inside, np.hypot(ddx, ddy), 1.0)  # guard: near/self cells are integrated apart
+        fpc = fp[cell]
+        kr = k * R
+        ws = wd = None
+        if self.decay == 0.0:
+            drdt = (ddx + ddy * fpc) / R
+            sd = _sinc_derivatives((0.5 * k * dx) * drdt)
+            eps = (-0.5 * dx) * drdt / R
+            if self.need_S:
+                ws = _interp_weights(np.where(inside, (-0.25j * dx) * hankel2(0, kr), 0.0), sd, eps)
+            if self.need_D:
+                K = np.where(inside, (0.25j * k * dx) * hankel2(1, kr) * (-fpc * ddx + ddy) / R, 0.0)
+                wd = _interp_weights(K, sd, 3.0 * eps)
+        else:
+            drdt = (0.5j * dx) * (ddx + ddy * fpc) / R
+            h0 = hankel2(0, kr)
+            h1 = hankel2(1, kr)
+            if self.need_S:
+                ws = _complex_weights(np.where(inside, (-0.25j * dx) * h0, 0.0),
+                                      _cell_moments(drdt * (-k) * h1 / h0))
+            if self.need_D:
+                K = np.where(inside, (0.25j * k * dx) * h1 * (-fpc * ddx + ddy) / R, 0.0)
+                wd = _complex_weights(K, _cell_moments(drdt * (k * h0 / h1 - 2.0 / R)))
+        return ws, wd
+
+
+def _spread(wts):
+    """Rectangle over columns c0 - 1 .. c1: v_{n+1} weights one to the right, v_{n-1} one to the left."""
+    w0, wp, wm = wts
+    rect = np.zeros(w0.shape[:-1] + (w0.shape[-1] + 2,), complex)
+    rect[..., 1:-1] += w0
+    rect[..., 2:] += wp
+    rect[..., :-2] += wm
+    return rect
+
+
+def _fill_regular_blocks(cells, mats, bounds, half, reg, bsz):
+    """Far-cell entries of the blocks ``reg`` (away from the partition ends, neighbours of ``bsz`` samples too)
+    all at once: the geometry of the rectangle in index offsets is the same for every one of them."""
+    i = np.arange(bsz)
+    t = np.arange(3 * bsz)
+    bcol = (t[None, :] - bsz - i[:, None] + half)[None]                      # [1, b, 3b]
+    per = max(1, 65536 // (bsz * (3 * bsz + 2)))                             # blocks at a time (cache-sized)
+    for g0 in range(0, reg.size, per):
+        grp = reg[g0:g0 + per]
+        m = bounds[grp][:, None, None] + i[None, :, None]                     # [nr, b, 1]
+        cell = (bounds[grp - 1] - 1)[:, None, None] + np.arange(3 * bsz + 2)[None, None, :]
+        for M, wts in zip(mats, cells.weights(m, cell)):
+            if M is not None:
+                M[m, bcol] = _spread(wts)[:, :, 2:2 + 3 * bsz]
+
+
+def _fill_block(cells, mats, bounds, half, j):
+    """Far-cell entries of block j's rows over the columns of blocks j-1 .. j+1, the weights of the cells
+    beyond the partition ends folded into the end cell's column."""
+    n, nb = cells.x.size, bounds.size - 1
+    a, b = bounds[j], bounds[j + 1]
+    lo, hi = bounds[max(j - 1, 0)], bounds[min(j + 2, nb)]      # the columns kept
+    c0, c1 = max(lo - 1, 0), min(hi + 1, n)                     # cells that reach them
+    m = np.arange(a, b)[:, None]
+    for M, wts in zip(mats, cells.weights(m, np.arange(c0, c1)[None, :])):
+        if M is None:
+            continue
+        rect = _spread(wts)
+        if c1 == n:                      # partition ends: folded into the end cell's column
+            rect[:, -2] += rect[:, -1]
+        if c0 == 0:
+            rect[:, 1] += rect[:, 0]
+        cols = np.arange(lo, hi)
+        M[a:b][np.arange(b - a)[:, None], cols[None, :] - m + half] = rect[:, cols - c0 + 1]
+
+
 def _band_fill(x, y, fp, fpp, dx, k, bounds, half, need_S, need_D):
     """Entries M[m, c] of the single/double layer matrices of kernels.layer_matrices for the columns c in
     the row's block and its two neighbours, on diagonal storage [N, 2 half + 1] (M[m, c] at c - m + half).
@@ -234,85 +325,18 @@ def _band_fill(x, y, fp, fpp, dx, k, bounds, half, need_S, need_D):
     width = 2 * half + 1
     S = np.zeros((n, width), complex) if need_S else None
     D = np.zeros((n, width), complex) if need_D else None
+    cells = _FarCells(x, y, fp, dx, k, band, need_S, need_D)
     nb = bounds.size - 1
     lens = np.diff(bounds)
     bsz = int(lens[0])
-
-    def weights(m, cell):
-        """(ws, wd): far-cell weights (w0, w+, w-) for match points m [..., rows, 1], cells [..., 1, cols]."""
-        sep = np.abs(cell - m)
-        inside = (sep > _NEAR) & (sep <= band)
-        ddx = x[cell] - x[m]
-        ddy = y[cell] - y[m]
-        R = np.where(inside, np.hypot(ddx, ddy), 1.0)  # guard: near/self cells are integrated apart
-        fpc = fp[cell]
-        kr = k * R
-        ws = wd = None
-        if decay == 0.0:
-            drdt = (ddx + ddy * fpc) / R
-            sd = _sinc_derivatives((0.5 * k * dx) * drdt)
-            eps = (-0.5 * dx) * drdt / R
-            if need_S:
-                ws = _interp_weights(np.where(inside, (-0.25j * dx) * hankel2(0, kr), 0.0), sd, eps)
-            if need_D:
-                K = np.where(inside, (0.25j * k * dx) * hankel2(1, kr) * (-fpc * ddx + ddy) / R, 0.0)
-                wd = _interp_weights(K, sd, 3.0 * eps)
-        else:
-            drdt = (0.5j * dx) * (ddx + ddy * fpc) / R
-            h0 = hankel2(0, kr)
-            h1 = hankel2(1, kr)
-            if need_S:
-                ws = _complex_weights(np.where(inside, (-0.25j * dx) * h0, 0.0),
-                                      _cell_moments(drdt * (-k) * h1 / h0))
-            if need_D:
-                K = np.where(inside, (0.25j * k * dx) * h1 * (-fpc * ddx + ddy) / R, 0.0)
-                wd = _complex_weights(K, _cell_moments(drdt * (k * h0 / h1 - 2.0 / R)))
-        return ws, wd
-
-    def spread(wts):
-        """Rectangle over columns c0 - 1 .. c1: v_{n+1} weights one to the right, v_{n-1} one to the left."""
-        w0, wp, wm = wts
-        rect = np.zeros(w0.shape[:-1] + (w0.shape[-1] + 2,), complex)
-        rect[..., 1:-1] += w0
-        rect[..., 2:] += wp
-        rect[..., :-2] += wm
-        return rect
-
-    # blocks away from the partition ends whose neighbours have bsz samples too: all at once (the geometry
-    # of the rectangle in index offsets is the same for every one of them)
+    # blocks away from the partition ends whose neighbours have bsz samples too: all at once
     reg = np.array([j for j in range(2, nb - 2) if lens[j - 1] == lens[j] == lens[j + 1] == bsz], dtype=int)
     if reg.size:
-        i = np.arange(bsz)
-        t = np.arange(3 * bsz)
-        bcol = (t[None, :] - bsz - i[:, None] + half)[None]                      # [1, b, 3b]
-        per = max(1, 65536 // (bsz * (3 * bsz + 2)))                             # blocks at a time (cache-sized)
-        for g0 in range(0, reg.size, per):
-            grp = reg[g0:g0 + per]
-            m = bounds[grp][:, None, None] + i[None, :, None]                     # [nr, b, 1]
-            cell = (bounds[grp - 1] - 1)[:, None, None] + np.arange(3 * bsz + 2)[None, None, :]
-            ws, wd = weights(m, cell)
-            for M, wts in ((S, ws), (D, wd)):
-                if M is not None:
-                    M[m, bcol] = spread(wts)[:, :, 2:2 + 3 * bsz]
+        _fill_regular_blocks(cells, (S, D), bounds, half, reg, bsz)
     done = set(reg.tolist())
     for j in range(nb):
-        if j in done:
-            continue
-        a, b = bounds[j], bounds[j + 1]
-        lo, hi = bounds[max(j - 1, 0)], bounds[min(j + 2, nb)]      # the columns kept
-        c0, c1 = max(lo - 1, 0), min(hi + 1, n)                     # cells that reach them
-        m = np.arange(a, b)[:, None]
-        ws, wd = weights(m, np.arange(c0, c1)[None, :])
-        for M, wts in ((S, ws), (D, wd)):
-            if M is None:
-                continue
-            rect = spread(wts)
-            if c1 == n:                      # partition ends: folded into the end cell's column
-                rect[:, -2] += rect[:, -1]
-            if c0 == 0:
-                rect[:, 1] += rect[:, 0]
-            cols = np.arange(lo, hi)
-            M[a:b][np.arange(b - a)[:, None], cols[None, :] - m + half] = rect[:, cols - c0 + 1]
+        if j not in done:
+            _fill_block(cells, (S, D), bounds, half, j)
     offsets = [o for o in range(-_NEAR, _NEAR + 1) if o != 0 and abs(o) < n]
     SA = _BandStore(S, half) if need_S else None
     DA = _BandStore(D, half) if need_D else None
@@ -426,58 +450,68 @@ class _Far:
     CHUNK_ELEMENTS = 32768
 
     def __init__(self, x, y, fp, dx, k, bounds, phi, w, need_S, need_D):
-        cphi, sphi = np.cos(phi), np.sin(phi)
+        self.cphi, self.sphi = np.cos(phi), np.sin(phi)
         n = x.size
-        q = self.q = phi.size
+        self.q = phi.size
         self.bounds = bounds
         nb = self.nb = bounds.size - 1
         lens = np.diff(bounds)
         of = np.repeat(np.arange(nb), lens)
         loc = np.arange(n) - bounds[of]
-        table = np.exp((-1j * k * dx) * (np.arange(int(lens.max())) + 0.5)[:, None] * cphi[None, :])
-        self.prop = np.exp((-1j * k * dx) * lens[:, None] * cphi[None, :])   # across block j (either way)
-        i_left = loc                      # table[i_left] = exp(-j k (x - left edge) cos phi)
-        i_right = lens[of] - 1 - loc      # table[i_right] = exp(-j k (right edge - x) cos phi)
-        coef = (-0.25j / math.pi) * w
-        half = -0.5 * k * dx
-        ac = half * cphi[None, :]
-        ec, eci = _exp_pair(1j * ac)
-        kinds = [name for name, need in (("S", need_S), ("D", need_D)) if need]
+        self.y, self.fp, self.dx, self.k = y, fp, dx, k
+        self.table = np.exp((-1j * k * dx) * (np.arange(int(lens.max())) + 0.5)[:, None] * self.cphi[None, :])
+        self.prop = np.exp((-1j * k * dx) * lens[:, None] * self.cphi[None, :])   # across block j (either way)
+        self.i_left = loc                      # table[i_left] = exp(-j k (x - left edge) cos phi)
+        self.i_right = lens[of] - 1 - loc      # table[i_right] = exp(-j k (right edge - x) cos phi)
+        self.half = -0.5 * k * dx              # the cell moments' a = half (cos phi +- f' sin phi)
+        self.ac = self.half * self.cphi[None, :]
+        self.ec, self.eci = _exp_pair(1j * self.ac)
+        self.kinds = [name for name, need in (("S", need_S), ("D", need_D)) if need]
+        self.rcv = {"fwd": np.empty((n, self.q), complex), "bwd": np.empty((n, self.q), complex)}
+        src = {(d, name): np.empty((n, self.q), complex) for d in ("fwd", "bwd") for name in self.kinds}
+        self._fill_rows(src, (-0.25j / math.pi) * w)
+        self._fold_ends_and_edges(src)
+        self.src = {("fwd", "S"): src.get(("fwd", "S")), ("fwd", "D"): src.get(("fwd", "D")),
+                    ("bwd", "S"): src.get(("bwd", "S")), ("bwd", "D"): src.get(("bwd", "D"))}
 
-        def factors(rows):
-            """Per row set: exp(+-j k y sin phi), and per (direction, kernel) the cell weights and the plane-wave
-            factor G of each cell (times j k (sin phi -+ f' cos phi) for the double layer)."""
-            yf, yfi = _exp_pair((1j * k) * y[rows, None] * sphi[None, :])
-            out = {}
-            if kinds:
-                af = (half * fp[rows])[:, None] * sphi[None, :]
-                ef, efi = _exp_pair(1j * af)
-                for direction, sign, idx in (("fwd", 1.0, i_right), ("bwd", -1.0, i_left)):
-                    # cell moments: a = -(k dx / 2)(cos phi +- f' sin phi) (fwd +, the mirrored surface -)
-                    if sign > 0:
-                        wts = _cell_weights(ac + af, ec * ef, eci * efi, dx)
+    def _factors(self, rows):
+        """Per row set: exp(+-j k y sin phi), and per (direction, kernel) the cell weights and the plane-wave
+        factor G of each cell (times j k (sin phi -+ f' cos phi) for the double layer)."""
+        k, fp, sphi, cphi = self.k, self.fp, self.sphi, self.cphi
+        yf, yfi = _exp_pair((1j * k) * self.y[rows, None] * sphi[None, :])
+        out = {}
+        if self.kinds:
+            af = (self.half * fp[rows])[:, None] * sphi[None, :]
+            ef, efi = _exp_pair(1j * af)
+            for direction, sign, idx in (("fwd", 1.0, self.i_right), ("bwd", -1.0, self.i_left)):
+                # cell moments: a = -(k dx / 2)(cos phi +- f' sin phi) (fwd +, the mirrored surface -)
+                if sign > 0:
+                    wts = _cell_weights(self.ac + af, self.ec * ef, self.eci * efi, self.dx)
+                else:
+                    wts = _cell_weights(self.ac - af, self.ec * efi, self.eci * ef, self.dx)
+                g = self.table[idx[rows]] * yf    # fwd: exp(j k (x - right edge) cos phi) e^{j k y sin phi}; bwd: mirrored
+                for name in self.kinds:
+                    if name == "S":
+                        out[(direction, name)] = (wts, g)
                     else:
-                        wts = _cell_weights(ac - af, ec * efi, eci * ef, dx)
-                    g = table[idx[rows]] * yf    # fwd: exp(j k (x - right edge) cos phi) e^{j k y sin phi}; bwd: mirrored
-                    for name in kinds:
-                        if name == "S":
-                            out[(direction, name)] = (wts, g)
-                        else:
-                            dfac = (1j * k) * (sphi[None, :] - sign * fp[rows, None] * cphi[None, :])
-                            out[(direction, name)] = (wts, g * dfac)
-            return yf, yfi, out
+                        dfac = (1j * k) * (sphi[None, :] - sign * fp[rows, None] * cphi[None, :])
+                        out[(direction, name)] = (wts, g * dfac)
+        return yf, yfi, out
 
-        rcv = {"fwd": np.empty((n, q), complex), "bwd": np.empty((n, q), complex)}
-        src = {(d, name): np.empty((n, q), complex) for d in ("fwd", "bwd") for name in kinds}
-        step = max(16, self.CHUNK_ELEMENTS // max(q, 1))
+    def _fill_rows(self, src, coef):
+        """Receiver factors and interior source factors (each column's cells c - 1, c, c + 1, referred to the
+        column's own block edge), in row chunks of CHUNK_ELEMENTS numbers."""
+        rcv, table = self.rcv, self.table
+        n = self.y.size
+        step = max(16, self.CHUNK_ELEMENTS // max(self.q, 1))
         for r0 in range(0, n, step):
             r1 = min(n, r0 + step)
             lo, hi = max(r0 - 1, 0), min(r1 + 1, n)          # one row either side: the interpolant's neighbours
-            yf, yfi, fac = factors(slice(lo, hi))
+            yf, yfi, fac = self._factors(slice(lo, hi))
             o, m = r0 - lo, r1 - r0
             yfi *= coef
-            rcv["fwd"][r0:r1] = table[i_left[r0:r1]] * yfi[o:o + m]
-            rcv["bwd"][r0:r1] = table[i_right[r0:r1]] * yfi[o:o + m]
+            rcv["fwd"][r0:r1] = table[self.i_left[r0:r1]] * yfi[o:o + m]
+            rcv["bwd"][r0:r1] = table[self.i_right[r0:r1]] * yfi[o:o + m]
             for (direction, name), ((w0, wp, wm), G) in fac.items():
                 acc = src[(direction, name)][r0:r1]
                 np.multiply(w0[o:o + m], G[o:o + m], out=acc)
@@ -488,14 +522,18 @@ class _Far:
                 acc[t0:] += before[o + t0 - 1:o + m - 1] * G[o + t0 - 1:o + m - 1]
                 t1 = m - 1 if r1 == n else m                # rows with a cell c + 1
                 acc[:t1] += after[o + 1:o + t1 + 1] * G[o + 1:o + t1 + 1]
-        # partition ends (folded into the end columns) and block edges (the reference edge changes), from the
-        # factors of the few rows concerned
+
+    def _fold_ends_and_edges(self, src):
+        """The partition ends (folded into the end columns) and the block edges (where the reference edge
+        changes), from the factors of the few rows concerned."""
+        k, fp, sphi, cphi, bounds = self.k, self.fp, self.sphi, self.cphi, self.bounds
+        n = self.y.size
         first = bounds[1:-1]
         rows = np.concatenate([[0, n - 1], first - 1, first])
-        yf, _, fac = factors(rows)
+        yf, _, fac = self._factors(rows)
         nf = first.size
-        e_last = yf[2:2 + nf] / table[0]           # first - 1 against block j's left edge (mirrored frame)
-        e_first = yf[2 + nf:] / table[0]           # first against block j-1's right edge
+        e_last = yf[2:2 + nf] / self.table[0]           # first - 1 against block j's left edge (mirrored frame)
+        e_first = yf[2 + nf:] / self.table[0]           # first against block j-1's right edge
         for (direction, name), ((w0, wp, wm), G) in fac.items():
             acc = src[(direction, name)]
             if direction == "fwd":
@@ -512,9 +550,6 @@ class _Far:
                     gl, gf = G[2:2 + nf], G[2 + nf:]
                     acc[first - 1] += wp[2 + nf:] * gf * (self.prop[:-1] - 1.0)
                     acc[first] += wm[2:2 + nf] * (e_last * _dfac_rows(k, sphi, cphi, fp[first - 1], -1.0, name) - gl)
-        self.rcv = rcv
-        self.src = {("fwd", "S"): src.get(("fwd", "S")), ("fwd", "D"): src.get(("fwd", "D")),
-                    ("bwd", "S"): src.get(("bwd", "S")), ("bwd", "D"): src.get(("bwd", "D"))}
 
     def _blocked(self, arr):
         """[N, ...] -> ([nb - 1, B, ...] view of the equal blocks, the last block [L, ...])."""
@@ -575,39 +610,11 @@ class _System:
         if reg:
             self._regular_blocks(np.array(reg), b, half, kinds, eqs, rows_all, cols_all, vals_all)
         for j in range(nb):
-            if self.Dinv[j] is not None:
-                continue
-            rows = np.arange(bounds[j], bounds[j + 1])
-            blk = {}
-            for jj in (j - 1, j, j + 1):
-                if not 0 <= jj < nb:
-                    continue
-                cols = np.arange(bounds[jj], bounds[jj + 1])
-                off = cols[None, :] - rows[:, None] + half
-                M = np.zeros((nk * rows.size, nk * cols.size), complex)
-                for e, terms in enumerate(eqs):
-                    for kind, band, coef, ident in terms:
-                        ki = kinds.index(kind)
-                        sub = M[e * rows.size:(e + 1) * rows.size, ki * cols.size:(ki + 1) * cols.size]
-                        if band is not None:
-                            sub += coef * band[rows[:, None], off]
-                        if ident and jj == j:
-                            sub[np.arange(rows.size), np.arange(rows.size)] += ident
-                blk[jj] = M
-            # the row block's columns (blocks j-1 .. j+1) are contiguous in the block ordering: one dense slab
-            slab = np.hstack([blk[jj] for jj in sorted(blk)])
-            c0 = self.start[min(blk)]
-            rows_all[j] = np.full(slab.shape[0], slab.shape[1])
-            cols_all[j] = np.tile(np.arange(c0, c0 + slab.shape[1]), slab.shape[0])
-            vals_all[j] = slab.ravel()
-            dinv = np.linalg.inv(blk[j])
-            self.Dinv[j] = dinv
-            # x_j = Dinv_j (rhs_j - A_{j,j-1} x_{j-1} - A_{j,j+1} x_{j+1}): the neighbours' part as one product
-            # with the contiguous window of blocks j-1 .. j+1 (the middle block's columns zero)
-            off = slab.copy()
-            mid0 = self.start[j] - c0
-            off[:, mid0:mid0 + blk[j].shape[1]] = 0.0
-            self.LoUp[j] = (c0, c0 + slab.shape[1], dinv @ off) if nb > 1 else None
+            if self.Dinv[j] is None:
+                slab, c0 = self._block(j, half, eqs)
+                rows_all[j] = np.full(slab.shape[0], slab.shape[1])
+                cols_all[j] = np.tile(np.arange(c0, c0 + slab.shape[1]), slab.shape[0])
+                vals_all[j] = slab.ravel()
         N = nk * n
         indptr = np.concatenate([[0], np.cumsum(np.concatenate(rows_all))])
         self.near = scipy.sparse.csr_matrix((np.concatenate(vals_all), np.concatenate(cols_all), indptr), shape=(N, N))
@@ -617,6 +624,41 @@ class _System:
         self.lens = lens
         self.channels = [(region, direction, e, parts) for e, terms in enumerate(far) for region, parts in terms
                          for direction in ("fwd", "bwd")]
+
+    def _block(self, j, half, eqs):
+        """One block row (at the partition ends, or beside a block of another length): its slab over the columns
+        of blocks j-1 .. j+1 from the bands, the diagonal block's inverse Dinv_j and Dinv_j times the neighbours'
+        columns (in self.Dinv, self.LoUp).  Returns (slab, its first column)."""
+        bounds, kinds, nk, nb = self.bounds, self.kinds, self.nk, self.nb
+        rows = np.arange(bounds[j], bounds[j + 1])
+        blk = {}
+        for jj in (j - 1, j, j + 1):
+            if not 0 <= jj < nb:
+                continue
+            cols = np.arange(bounds[jj], bounds[jj + 1])
+            off = cols[None, :] - rows[:, None] + half
+            M = np.zeros((nk * rows.size, nk * cols.size), complex)
+            for e, terms in enumerate(eqs):
+                for kind, band, coef, ident in terms:
+                    ki = kinds.index(kind)
+                    sub = M[e * rows.size:(e + 1) * rows.size, ki * cols.size:(ki + 1) * cols.size]
+                    if band is not None:
+                        sub += coef * band[rows[:, None], off]
+                    if ident and jj == j:
+                        sub[np.arange(rows.size), np.arange(rows.size)] += ident
+            blk[jj] = M
+        # the row block's columns (blocks j-1 .. j+1) are contiguous in the block ordering: one dense slab
+        slab = np.hstack([blk[jj] for jj in sorted(blk)])
+        c0 = self.start[min(blk)]
+        dinv = np.linalg.inv(blk[j])
+        self.Dinv[j] = dinv
+        # x_j = Dinv_j (rhs_j - A_{j,j-1} x_{j-1} - A_{j,j+1} x_{j+1}): the neighbours' part as one product
+        # with the contiguous window of blocks j-1 .. j+1 (the middle block's columns zero)
+        off = slab.copy()
+        mid0 = self.start[j] - c0
+        off[:, mid0:mid0 + blk[j].shape[1]] = 0.0
+        self.LoUp[j] = (c0, c0 + slab.shape[1], dinv @ off) if nb > 1 else None
+        return slab, c0
 
     def _regular_blocks(self, reg, b, half, kinds, eqs, rows_all, cols_all, vals_all):
         """Blocks j in ``reg`` (neighbours j - 1, j + 1 of b samples too), all at once: the row slab over the
@@ -758,71 +800,84 @@ def _rel_residual(sys, xf, bf, bwd=None):
     return np.linalg.norm(r, axis=0) / np.where(den > 0, den, 1.0)
 
 
-def _iterate(sys, bf, tol, max_sweeps, method, reasons, label):
-    """Forward-backward sweeps, then GMRES where they fail; returns x, per-rhs residuals, info."""
-    r = bf.shape[1]
+def _relative_step(xf, prev):
+    """||x - x_prev|| / ||x|| per right-hand side; ``prev`` becomes x (in place)."""
+    size = np.linalg.norm(xf, axis=0)
+    prev -= xf
+    step = np.linalg.norm(prev, axis=0) / np.where(size > 0, size, 1.0)
+    prev[...] = xf
+    return step
+
+
+def _estimate_worth_checking(res, tol, history):
+    """Whether the estimated residual says converged, rising (above 1.5x the best) or stalling (above 0.8x
+    three sweeps back): then the true residual is computed."""
+    e = float(res.max())
+    return e <= tol or e > 1.5 * min(history) or (len(history) >= 3 and e > 0.8 * history[-3])
+
+
+def _divergence_or_stall(history, it):
+    """Why the sweeps stop at sweep ``it`` (0-based) -- the residual rose above 1.5x its best, or fell by less
+    than 20 % over 3 sweeps -- or None."""
+    if it >= 1 and history[-1] > 1.5 * min(history[:-1]):
+        return (f"the forward-backward iteration diverges (residual {min(history):.2g} -> "
+                f"{history[-1]:.2g} at sweep {it + 1})")
+    if it >= 3 and history[-1] > 0.8 * history[-4]:
+        return (f"the forward-backward iteration stalls (residual {history[-4]:.2g} -> "
+                f"{history[-1]:.2g} over 3 sweeps)")
+    return None
+
+
+def _forward_backward(sys, bf, tol, max_sweeps, info):
+    """Forward-backward sweeps from x = 0 until the residual is <= tol.  Returns (x, residuals, None) when
+    converged, else (the best iterate, its residuals, why the sweeps stopped)."""
     xf = np.zeros_like(bf)
-    info = {"sweeps": 0, "gmres_iterations": 0, "method": "fb"}
     history = []
-    best_x, best = xf.copy(), np.ones(r)          # x = 0 has residual 1
-    res = None
-    if method == "fb":
-        why = None
-        ahead = np.zeros_like(bf)               # the far part of x = 0
-        prev = xf.copy()
-        checked = None                          # (residual, step) of the last sweep whose residual was computed
-        info["residual_checks"] = 0
-        for it in range(max_sweeps):
-            ahead = sys.sweep(xf, bf, "bwd", sys.sweep(xf, bf, "fwd", ahead))
-            info["sweeps"] = it + 1
-            size = np.linalg.norm(xf, axis=0)
-            prev -= xf
-            step = np.linalg.norm(prev, axis=0) / np.where(size > 0, size, 1.0)
-            prev[...] = xf
-            exact = checked is None or it < 2 or it == max_sweeps - 1 or not np.all(np.isfinite(step))
-            if not exact:
-                # a linearly converging iteration's residual falls as its step: estimate it from the last check,
-                # and compute it where the estimate says converged, rising or stalling (a full product saved
-                # on the other sweeps)
-                res = checked[0] * step / np.where(checked[1] > 0, checked[1], 1.0)
-                e = float(res.max())
-                exact = e <= tol or e > 1.5 * min(history) or (len(history) >= 3 and e > 0.8 * history[-3])
-            if exact:
-                res = _rel_residual(sys, xf, bf, bwd=ahead)
-                checked = (res, step)
-                info["residual_checks"] += 1
-            if not np.all(np.isfinite(res)):
-                why = f"the forward-backward iteration produced non-finite values at sweep {it + 1}"
-                break
-            history.append(float(res.max()))
-            if not exact:
-                continue
-            better = res < best
-            best_x[:, better] = xf[:, better]
-            best = np.minimum(best, res)
-            if res.max() <= tol:
-                return xf, res, info
-            if it >= 1 and history[-1] > 1.5 * min(history[:-1]):
-                why = (f"the forward-backward iteration diverges (residual {min(history):.2g} -> "
-                       f"{history[-1]:.2g} at sweep {it + 1})")
-                break
-            if it >= 3 and history[-1] > 0.8 * history[-4]:
-                why = (f"the forward-backward iteration stalls (residual {history[-4]:.2g} -> "
-                       f"{history[-1]:.2g} over 3 sweeps)")
-                break
-        else:
-            why = f"the forward-backward iteration reached {max_sweeps} sweeps at residual {history[-1]:.2g}"
-        reasons.append(f"{label}: {why} (tolerance {tol:g}); GMRES takes over")
-        xf, res = best_x, best
-    info["method"] = "gmres"
+    best_x, best = xf.copy(), np.ones(bf.shape[1])          # x = 0 has residual 1
+    ahead = np.zeros_like(bf)               # the far part of x = 0
+    prev = xf.copy()
+    checked = None                          # (residual, step) of the last sweep whose residual was computed
+    info["residual_checks"] = 0
+    for it in range(max_sweeps):
+        ahead = sys.sweep(xf, bf, "bwd", sys.sweep(xf, bf, "fwd", ahead))
+        info["sweeps"] = it + 1
+        step = _relative_step(xf, prev)
+        exact = checked is None or it < 2 or it == max_sweeps - 1 or not np.all(np.isfinite(step))
+        if not exact:
+            # a linearly converging iteration's residual falls as its step: estimate it from the last check,
+            # and compute it where the estimate says converged, rising or stalling (a full product saved
+            # on the other sweeps)
+            res = checked[0] * step / np.where(checked[1] > 0, checked[1], 1.0)
+            exact = _estimate_worth_checking(res, tol, history)
+        if exact:
+            res = _rel_residual(sys, xf, bf, bwd=ahead)
+            checked = (res, step)
+            info["residual_checks"] += 1
+        if not np.all(np.isfinite(res)):
+            return best_x, best, f"the forward-backward iteration produced non-finite values at sweep {it + 1}"
+        history.append(float(res.max()))
+        if not exact:
+            continue
+        better = res < best
+        best_x[:, better] = xf[:, better]
+        best = np.minimum(best, res)
+        if res.max() <= tol:
+            return xf, res, None
+        why = _divergence_or_stall(history, it)
+        if why is not None:
+            return best_x, best, why
+    return best_x, best, f"the forward-backward iteration reached {max_sweeps} sweeps at residual {history[-1]:.2g}"
+
+
+def _gmres(sys, bf, xf, res, tol, info):
+    """Restarted GMRES (60, at most 5 restarts) on every right-hand side whose residual is above tol, from xf,
+    preconditioned by the sparse LU of the strong part; xf is updated in place."""
     lu = sys.lu()
     N = bf.shape[0]
     A = scipy.sparse.linalg.LinearOperator((N, N), matvec=lambda f: sys.matvec(f.reshape(-1, 1)).ravel(),
                                            dtype=complex)
     M = scipy.sparse.linalg.LinearOperator((N, N), matvec=lambda f: lu.solve(np.asarray(f, complex)), dtype=complex)
-    if res is None:
-        res = np.full(r, np.inf)
-    for c in range(r):
+    for c in range(bf.shape[1]):
         if res[c] <= tol:
             continue
         count = [0]
@@ -834,6 +889,19 @@ def _iterate(sys, bf, tol, max_sweeps, method, reasons, label):
                                            maxiter=5, M=M, callback=cb, callback_type="pr_norm")
         info["gmres_iterations"] += count[0]
         xf[:, c] = sol
+
+
+def _iterate(sys, bf, tol, max_sweeps, method, reasons, label):
+    """Forward-backward sweeps, then GMRES where they fail; returns x, per-rhs residuals, info."""
+    info = {"sweeps": 0, "gmres_iterations": 0, "method": "fb"}
+    xf, res = np.zeros_like(bf), np.full(bf.shape[1], np.inf)
+    if method == "fb":
+        xf, res, why = _forward_backward(sys, bf, tol, max_sweeps, info)
+        if why is None:
+            return xf, res, info
+        reasons.append(f"{label}: {why} (tolerance {tol:g}); GMRES takes over")
+    info["method"] = "gmres"
+    _gmres(sys, bf, xf, res, tol, info)
     return xf, _rel_residual(sys, xf, bf), info
 
 
@@ -861,6 +929,58 @@ def plan_blocks(n, dx, height, length, ks, near_wl):
             growth *= 0.75
 
 
+def _equations(pol, eta, S0, D0, S1, D1, far0, far1):
+    """(kinds, eqs, far) of one polarisation for :class:`_System` (module docstring): a PEC's EFIE
+    ``S0 v = psi`` (s) or MFIE ``(1/2 - D0) u = psi`` (p); a finite index's coupled pair
+    ``(1/2 - D0) u + S0 v = psi``, ``(1/2 + D1) u - rho S1 v = 0`` (rho = 1 in s, eta^2 in p)."""
+    if eta is None:
+        if pol == "s":
+            return ["v"], [[("v", S0, 1.0, 0.0)]], [[(far0, [("S", "v", 1.0)])]]
+        return ["u"], [[("u", D0, -1.0, 0.5)]], [[(far0, [("D", "u", -1.0)])]]
+    rho = 1.0 if pol == "s" else eta * eta
+    eqs = [[("u", D0, -1.0, 0.5), ("v", S0, 1.0, 0.0)],
+           [("u", D1, 1.0, 0.5), ("v", S1, -rho, 0.0)]]
+    far = [[(far0, [("S", "v", 1.0), ("D", "u", -1.0)])],
+           [(far1, [("S", "v", -rho), ("D", "u", 1.0)])] if far1 is not None else []]
+    return ["u", "v"], eqs, far
+
+
+def _partition_plan(x, y, dx, eta, near_wl):
+    """The partition's blocks and plane-wave rules: a metal's interior operators end within a few skin depths
+    (banded, no far part); glass's reach beyond a block and get their own rule.  Returns (blocks, rules,
+    interior_far)."""
+    n = x.size
+    height = float(y.max() - y.min())
+    length = float(x[-1] - x[0] + dx)
+    k1 = None if eta is None else K0 * eta
+    band1 = n if k1 is None or k1.imag == 0 else int(math.ceil(DECAY_CUTOFF / (abs(k1.imag) * dx)))
+    interior_far = k1 is not None and band1 >= max(8, int(math.ceil(block_length_wl(height, [K0], near_wl) / dx))) - 1
+    ks = [K0, k1] if interior_far else [K0]
+    b, rules = plan_blocks(n, dx, height, length, ks, near_wl)
+    return _Blocks(n, b), rules, interior_far
+
+
+def _operators(x, yc, fp, fpp, dx, eta, pols, blocks, rules, interior_far, info):
+    """The strong (band) and far parts of the exterior (k0) and, for a finite index, the interior (k0 eta)
+    operators: (S0, D0, S1, D1, far0, far1), None where not needed."""
+    bounds, half = blocks.bounds, 2 * blocks.width + 1
+    need0S = eta is not None or "s" in pols
+    need0D = eta is not None or "p" in pols
+    phi, w = rules[0]
+    info["plane_waves"] = phi.size
+    S0, D0, _ = _band_fill(x, yc, fp, fpp, dx, K0, bounds, half, need0S, need0D)
+    far0 = _Far(x, yc, fp, dx, K0, bounds, phi, w, need0S, need0D)
+    S1 = D1 = far1 = None
+    if eta is not None:
+        k1 = K0 * eta
+        S1, D1, _ = _band_fill(x, yc, fp, fpp, dx, k1, bounds, half, True, True)
+        if interior_far:
+            phi1, w1 = rules[1]
+            far1 = _Far(x, yc, fp, dx, k1, bounds, phi1, w1, True, True)
+            info["plane_waves_interior"] = phi1.size
+    return S0, D0, S1, D1, far0, far1
+
+
 def solve_fast(x, y, fp, fpp, dx, psi, pols, eta, *, tol=FAST_TOL, method="fb", near_wl=NEAR_WL,
                max_sweeps=MAX_SWEEPS):
     """Surface fields of one partition by the fast solver (module docstring), all incidence angles at once.
@@ -884,57 +1004,21 @@ def solve_fast(x, y, fp, fpp, dx, psi, pols, eta, *, tol=FAST_TOL, method="fb", 
     Raises FastSolverUnsuitable where the surface is too rough for the plane-wave sums.
     """
     if method not in ("fb", "gmres"):
-        raise ValueError(f"method must be 'fb' or 'gmres', got {method!r}")
+        raise UsageError(f"method must be 'fb' or 'gmres', got {shorten(method)}")
     clock = time.process_time
     t0 = clock()
     t_solve = 0.0
     n = x.size
     yc = y - 0.5 * (y.max() + y.min())
-    height = float(y.max() - y.min())
-    length = float(x[-1] - x[0] + dx)
-    k0 = K0
-    k1 = None if eta is None else k0 * eta
-    # a metal's interior operators end within a few skin depths (banded); glass's reach the whole partition
-    band1 = n if k1 is None or k1.imag == 0 else int(math.ceil(DECAY_CUTOFF / (abs(k1.imag) * dx)))
-    interior_far = k1 is not None and band1 >= max(8, int(math.ceil(block_length_wl(height, [k0], near_wl) / dx))) - 1
-    ks = [k0, k1] if interior_far else [k0]
-    b, rules = plan_blocks(n, dx, height, length, ks, near_wl)
-    blocks = _Blocks(n, b)
-    bounds = blocks.bounds
-    half = 2 * blocks.width + 1
+    blocks, rules, interior_far = _partition_plan(x, y, dx, eta, near_wl)
     reasons = []
-    info = {"block_samples": b, "blocks": blocks.nb, "reasons": reasons}   # far sources: >= (b - 1) dx away
-    need0S = eta is not None or "s" in pols
-    need0D = eta is not None or "p" in pols
-    phi, w = rules[0]
-    info["plane_waves"] = phi.size
-    S0, D0, _ = _band_fill(x, yc, fp, fpp, dx, k0, bounds, half, need0S, need0D)
-    far0 = _Far(x, yc, fp, dx, k0, bounds, phi, w, need0S, need0D)
-    far1 = None
-    if eta is not None:
-        S1, D1, _ = _band_fill(x, yc, fp, fpp, dx, k1, bounds, half, True, True)
-        if interior_far:
-            phi1, w1 = rules[1]
-            far1 = _Far(x, yc, fp, dx, k1, bounds, phi1, w1, True, True)
-            info["plane_waves_interior"] = phi1.size
+    info = {"block_samples": blocks.b, "blocks": blocks.nb, "reasons": reasons}   # far sources: >= (b - 1) dx away
+    S0, D0, S1, D1, far0, far1 = _operators(x, yc, fp, fpp, dx, eta, pols, blocks, rules, interior_far, info)
     out = {"info": info}
     for pol in pols:
         sys = None                      # the previous polarisation's system goes before the next is built
-        if eta is None:
-            if pol == "s":
-                kinds, eqs = ["v"], [[("v", S0, 1.0, 0.0)]]
-                far = [[(far0, [("S", "v", 1.0)])]]
-            else:
-                kinds, eqs = ["u"], [[("u", D0, -1.0, 0.5)]]
-                far = [[(far0, [("D", "u", -1.0)])]]
-        else:
-            rho = 1.0 if pol == "s" else eta * eta
-            kinds = ["u", "v"]
-            eqs = [[("u", D0, -1.0, 0.5), ("v", S0, 1.0, 0.0)],
-                   [("u", D1, 1.0, 0.5), ("v", S1, -rho, 0.0)]]
-            far = [[(far0, [("S", "v", 1.0), ("D", "u", -1.0)])],
-                   [(far1, [("S", "v", -rho), ("D", "u", 1.0)])] if far1 is not None else []]
-        sys = _System(n, bounds, half, kinds, eqs, far)
+        kinds, eqs, far = _equations(pol, eta, S0, D0, S1, D1, far0, far1)
+        sys = _System(n, blocks.bounds, 2 * blocks.width + 1, kinds, eqs, far)
         bf = np.zeros((sys.nk * n, psi.shape[1]), complex)
         bf[sys.idx[0]] = psi
         ta = clock()

@@ -9,29 +9,30 @@ at most ``POLL_S`` seconds at a time, and between waits it
   running, or which has had no worker for ``NO_WORKER_GRACE_S`` seconds (its only worker died),
   is dead; a process pool that lost a worker process is broken;
 * enforces the caller's ``timeout`` (seconds without any task finishing), if given;
-* writes a heartbeat line to stderr every ``HEARTBEAT_S`` seconds without a finished task.
+* reports a heartbeat line through the caller's callback every ``HEARTBEAT_S`` seconds without
+  a finished task (the module itself prints nothing).
 
 A dead or broken executor, a task killed with its worker, or a timeout ends in
 :class:`ExecutorError`, a one-line message that names the executor (``dask cluster at
 tcp://...``, ``process pool of 4 workers``) and how many tasks had finished; the tasks still
 pending are cancelled.  An exception raised *by a task* reaches the caller unchanged.
 
-May import: the standard library only.
+May import: the standard library, ``hyde_bsdf.errors`` and ``hyde_bsdf.progress``.
 """
 from __future__ import annotations
 
 import concurrent.futures as cf
-import sys
 import time
 
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, shorten
+from hyde_bsdf.progress import as_callback
 
 __all__ = ["gather", "ExecutorError", "check_executor", "describe_executor", "executor_problem",
            "POLL_S", "HEARTBEAT_S", "NO_WORKER_GRACE_S"]
 
 #: longest single wait on the executor before the liveness checks run again (seconds)
 POLL_S = 2.0
-#: a stderr line every this many seconds in which no task finished (unless heartbeat=False)
+#: a heartbeat line every this many seconds in which no task finished (when a heartbeat callback is given)
 HEARTBEAT_S = 30.0
 #: a dask cluster with no worker for this long is dead (an adaptive cluster may sit at zero
 #: workers briefly while it scales up)
@@ -116,7 +117,70 @@ def _is_executor_failure(exc) -> bool:
         and type(exc).__module__.split(".")[0] == "distributed"
 
 
-def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=True, what="task",
+class _Run:
+    """The tasks of one :func:`gather` call: their futures, results and count done, and the one-line
+    ExecutorError that names the executor (its pending tasks cancelled)."""
+
+    def __init__(self, executor, total, what, label):
+        self.executor, self.what, self.label = executor, what, label
+        self.total = total
+        self.results = [None] * self.total
+        self.futures = {}
+        self.pending = set()
+        self.done_count = 0
+        self.name = describe_executor(executor)
+        self.no_worker_since = None
+
+    def fail(self, sentence):
+        """Cancel the pending tasks; the ExecutorError to raise."""
+        for fut in self.pending:
+            fut.cancel()
+        return ExecutorError(f"{self.label}: the {self.name} {sentence}; {self.done_count} of {self.total} "
+                             f"{self.what}s had finished")
+
+    def submit(self, fn, items):
+        """One task per item; an executor that refuses them is an ExecutorError."""
+        try:
+            for i, item in enumerate(items):
+                fut = self.executor.submit(fn, item)
+                self.futures[fut] = i
+                self.pending.add(fut)
+        except (cf.BrokenExecutor, RuntimeError) as exc:
+            raise self.fail(f"refused the {self.what}s ({type(exc).__name__}: {exc})") from None
+
+    def collect(self, done, on_done):
+        """Store the results of the finished futures; a task's own exception is re-raised unchanged (the others
+        cancelled), a failure of the executor (killed worker, broken pool) is an ExecutorError."""
+        for fut in done:
+            try:
+                self.results[self.futures[fut]] = fut.result()
+            except BaseException as exc:
+                if _is_executor_failure(exc):
+                    detail = str(exc).strip().splitlines()[0] if str(exc).strip() else "no detail"
+                    raise self.fail(f"lost {self.what} {self.futures[fut] + 1} ({type(exc).__name__}: "
+                                    f"{detail})") from None
+                for other in self.pending:
+                    other.cancel()
+                raise
+            self.done_count += 1
+            if on_done is not None:
+                on_done(self.done_count)
+
+    def check_alive(self, now):
+        """ExecutorError if the executor is dead, or has had no worker for NO_WORKER_GRACE_S seconds."""
+        problem = executor_problem(self.executor)
+        if problem is None:
+            self.no_worker_since = None
+            return
+        kind, sentence = problem
+        if kind == "dead":
+            raise self.fail(f"cannot finish the work: {sentence}")
+        self.no_worker_since = now if self.no_worker_since is None else self.no_worker_since
+        if now - self.no_worker_since >= NO_WORKER_GRACE_S:
+            raise self.fail(f"is dead: {sentence}; no worker for {now - self.no_worker_since:.0f} s")
+
+
+def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, what="task",
            label="hyde-bsdf"):
     """[fn(item) for item in items], run on ``executor``, without ever waiting blindly.
 
@@ -127,7 +191,9 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=True, w
     timeout : float or None, seconds without any task finishing after which the run is
         given up (None: no limit while the executor is alive).
     on_done : callable(done_count) or None, called after every finished task (progress).
-    heartbeat : bool, write a stderr line every HEARTBEAT_S seconds in which nothing finished.
+    heartbeat : callable(message) or None (or a bool, as :func:`hyde_bsdf.progress.as_callback`
+        reads it: True is lines on stderr), called every HEARTBEAT_S seconds in which nothing
+        finished with one line naming the executor and the tasks done.
     what, label : words for the messages ('partition', 'mom').
 
     Raises
@@ -137,70 +203,27 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=True, w
     exception is re-raised unchanged.
     """
     if timeout is not None and not (timeout > 0):
-        raise ValueError(f"timeout must be > 0 seconds or None, got {timeout!r}")
+        raise UsageError(f"timeout must be > 0 seconds or None, got {shorten(timeout)}")
+    beat = as_callback(heartbeat, prefix="")
     items = list(items)
-    total = len(items)
-    results = [None] * total
-    futures = {}
-    pending = set()
-    done_count = 0
-    name = describe_executor(executor)
-
-    def fail(sentence):
-        for fut in pending:
-            fut.cancel()
-        return ExecutorError(f"{label}: the {name} {sentence}; {done_count} of {total} {what}s had finished")
-
-    try:
-        for i, item in enumerate(items):
-            fut = executor.submit(fn, item)
-            futures[fut] = i
-            pending.add(fut)
-    except (cf.BrokenExecutor, RuntimeError) as exc:
-        raise fail(f"refused the {what}s ({type(exc).__name__}: {exc})") from None
-    last_done = time.monotonic()
-    last_beat = last_done
-    no_worker_since = None
-    while pending:
+    run = _Run(executor, len(items), what, label)
+    run.submit(fn, items)
+    last_done = last_beat = time.monotonic()
+    while run.pending:
         step = POLL_S if timeout is None else min(POLL_S, max(0.01, timeout - (time.monotonic() - last_done)))
-        done, pending = cf.wait(pending, timeout=step, return_when=cf.FIRST_COMPLETED)
-        for fut in done:
-            try:
-                results[futures[fut]] = fut.result()
-            except BaseException as exc:
-                if _is_executor_failure(exc):
-                    raise fail(f"lost {what} {futures[fut] + 1} ({type(exc).__name__}: "
-                               f"{str(exc).strip().splitlines()[0] if str(exc).strip() else 'no detail'})") from None
-                for other in pending:
-                    other.cancel()
-                raise
-            done_count += 1
-            if on_done is not None:
-                on_done(done_count)
+        done, run.pending = cf.wait(run.pending, timeout=step, return_when=cf.FIRST_COMPLETED)
+        run.collect(done, on_done)
         now = time.monotonic()
         if done:
             last_done = last_beat = now
-            no_worker_since = None
+            run.no_worker_since = None
             continue
-        problem = executor_problem(executor)
-        if problem is not None:
-            kind, sentence = problem
-            if kind == "dead":
-                raise fail(f"cannot finish the work: {sentence}")
-            no_worker_since = now if no_worker_since is None else no_worker_since
-            if now - no_worker_since >= NO_WORKER_GRACE_S:
-                raise fail(f"is dead: {sentence}; no worker for {now - no_worker_since:.0f} s")
-        else:
-            no_worker_since = None
+        run.check_alive(now)
         idle = now - last_done
         if timeout is not None and idle >= timeout:
-            raise fail(f"finished no {what} for {idle:.0f} s (timeout={timeout:g} s)")
-        if heartbeat and now - last_beat >= HEARTBEAT_S:
+            raise run.fail(f"finished no {what} for {idle:.0f} s (timeout={timeout:g} s)")
+        if beat is not None and now - last_beat >= HEARTBEAT_S:
             last_beat = now
-            try:
-                sys.stderr.write(f"{label}: waiting on the {name}: {done_count}/{total} {what}s done, "
-                                 f"none finished for {idle:.0f} s\n")
-                sys.stderr.flush()
-            except (OSError, ValueError):
-                pass
-    return results
+            beat(f"{label}: waiting on the {run.name}: {run.done_count}/{run.total} {what}s done, "
+                 f"none finished for {idle:.0f} s")
+    return run.results

@@ -805,12 +805,13 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         machines.  A caller's executor is not shut down.  The wait on it never hangs:
         a dask cluster that loses its last worker (for ``gather.NO_WORKER_GRACE_S`` =
         60 s), a closed client or a broken process pool ends in :class:`ExecutorError`
-        naming it, and a stderr line reports every 30 s in which no partition finished.
+        naming it, and a ``progress`` line reports every 30 s in which no partition finished.
     taper_width_wl : float in (0, L_p], keyword-only, Eq. 22's w (default L_p / 4); with the beam, its
         footprint (the incident field's e^-(x/w)^2 on the mean plane).
     progress : callable progress(message), bool or None, keyword-only (:mod:`hyde_bsdf.progress`): a
         line "partition done/total, elapsed, left" at most every 3 s; True: on stderr; None: on stderr
-        for runs of 10 or more partitions; False: none.
+        for runs of 10 or more partitions; False: none.  The wait's heartbeat (every 30 s without a finished
+        partition) goes to the callback too (None: on stderr).
     polarization : "s", "p" or ("s", "p"), keyword-only (default "s").  s: E along z
         (TM_z, the paper's Fig. 6); p: H along z.  Both on the same surface give
         the cross term and the in-plane Mueller matrix.
@@ -1113,9 +1114,11 @@ def _solve_partitions(tasks, executor, workers, cfg, progress):
     ex = process_pool(workers) if own else executor
     update = _progress_reporter(cfg["partitions"], progress)
     try:
-        # never a blind wait: liveness checks, the caller's timeout and a heartbeat (gather.py)
+        # never a blind wait: liveness checks, the caller's timeout and a heartbeat (gather.py) through the
+        # progress callback (None: stderr lines, as True; False: none)
         return gather(ex, solve_partition, tasks, timeout=cfg["timeout"], on_done=update,
-                      heartbeat=progress is not False, what="partition", label="mom.scatter")
+                      heartbeat=as_callback(True if progress is None else progress, prefix=""),
+                      what="partition", label="mom.scatter")
     finally:
         if own:
             ex.shutdown(wait=True, cancel_futures=True)
