@@ -75,20 +75,7 @@ def build_parser():
                          "size); default: render one at --truth (built-in truth map with --maps)")
     ap.add_argument("--mask", action="append", default=None,
                     help="--maps: PNG or .npy of the pixels to use for the matching --reference (non-zero = use)")
-    ap.add_argument("--camera", default=None, help="--maps: camera calibration JSON (CV pinhole: world-to-camera R, t; "
-                    "fx, fy, cx, cy; see hyde_bsdf.render.camera): the sensors of the one --scene (the sample only)")
-    ap.add_argument("--light", default=None, help="--maps with --camera: light JSON (point positions or directional "
-                    "towards_light, optional polarizer/retarder); one scene per light, --reference light-major")
-    ap.add_argument("--tiles", default=None, help="--maps with --camera: split the map into tiles of texels, N (N x N) "
-                    "or RxC, each fitted from the film crop of the pixels wholly inside it, as an independent task "
-                    "(memory: the largest tile's crop instead of the whole picture; see hyde_bsdf.inverse.tiles)")
-    ap.add_argument("--workers", type=int, default=None, help="--tiles: run the tiles in a process pool of this many "
-                    "workers on this machine (default: one tile after the other in this process)")
-    ap.add_argument("--scheduler", default=None, help="--tiles: run the tiles on the dask cluster whose scheduler is "
-                    "at this address (tcp://HOST:8786; needs the distributed extra; start its workers with "
-                    "--nthreads 1: one tile per process at a time)")
-    ap.add_argument("--channel", default="Y", help="--maps: the colour channel of multi-channel references (default "
-                    "Y, the luminance of R, G, B; or a channel suffix such as R or 550nm)")
+    _calibrated_options(ap)
     ap.add_argument("--sensor", type=int, default=0, help="index of the sensor of each --scene (default 0)")
     ap.add_argument("--target", default=None, help="key prefix of the BSDF to recover when the scene has "
                     "several, e.g. sphere.bsdf (mi.traverse names)")
@@ -125,6 +112,24 @@ def build_parser():
     ap.add_argument("-o", "--output", default="out/invert", help="output folder (default out/invert)")
     quiet_option(ap)
     return ap
+
+
+def _calibrated_options(ap):
+    """--camera, --light (the calibrated rig), --tiles, --workers, --scheduler (tiles as tasks), --channel."""
+    ap.add_argument("--camera", default=None, help="--maps: camera calibration JSON (CV pinhole: world-to-camera R, t; "
+                    "fx, fy, cx, cy; see hyde_bsdf.render.camera): the sensors of the one --scene (the sample only)")
+    ap.add_argument("--light", default=None, help="--maps with --camera: light JSON (point positions or directional "
+                    "towards_light, optional polarizer/retarder); one scene per light, --reference light-major")
+    ap.add_argument("--tiles", default=None, help="--maps with --camera: split the map into tiles of texels, N (N x N) "
+                    "or RxC, each fitted from the film crop of the pixels wholly inside it, as an independent task "
+                    "(memory: the largest tile's crop instead of the whole picture; see hyde_bsdf.inverse.tiles)")
+    ap.add_argument("--workers", type=int, default=None, help="--tiles: run the tiles in a process pool of this many "
+                    "workers on this machine (default: one tile after the other in this process)")
+    ap.add_argument("--scheduler", default=None, help="--tiles: run the tiles on the dask cluster whose scheduler is "
+                    "at this address (tcp://HOST:8786; needs the distributed extra; start its workers with "
+                    "--nthreads 1: one tile per process at a time)")
+    ap.add_argument("--channel", default="Y", help="--maps: the colour channel of multi-channel references (default "
+                    "Y, the luminance of R, G, B; or a channel suffix such as R or 550nm)")
 
 
 def _check_args(args):
