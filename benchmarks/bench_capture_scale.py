@@ -145,7 +145,7 @@ def child(n: int, tile_texels: int, iterations: int, uncertainty: bool) -> dict:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res = tl.invert_maps_tiled(capture, {"alpha": 0.3}, tiles=grid, iterations=iterations, spp=4,
-                                       uncertainty=uncertainty, uncertainty_spp=8, polish=1, extra_polish=0,
+                                       uncertainty=uncertainty,
                                        progress=lambda m: print(m, file=sys.stderr, flush=True))
     seen = res.seen
     err = np.abs(res.final["alpha"] / truth - 1)[seen]
@@ -199,7 +199,8 @@ def main():
     ap.add_argument("--sizes", default="32,64,128,256", help="texels per side, comma-separated")
     ap.add_argument("--tile-texels", type=int, default=64, help="texels per tile side (default 64)")
     ap.add_argument("--iterations", type=int, default=4, help="Adam iterations per tile (the first is the warm-up)")
-    ap.add_argument("--uncertainty", action="store_true", help="also the standard errors (8 spp, 1 polish step)")
+    ap.add_argument("--uncertainty", action="store_true", help="also the standard errors (invert_maps' defaults: 16 spp, "
+                    "2 + up to 3 Gauss-Newton steps)")
     ap.add_argument("--memory", action="store_true", help="untiled single runs: the estimate against peak RSS")
     ap.add_argument("--child", type=int, default=None, help=argparse.SUPPRESS)
     ap.add_argument("-o", "--output", default="out/bench_capture_scale", help="output stem (.csv, .png)")

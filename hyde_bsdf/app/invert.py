@@ -203,6 +203,8 @@ def _check_tiles_args(args):
         raise UsageError("give --workers (a process pool here) or --scheduler (a dask cluster), not both")
 
 
+#: invert_maps' default samples per pixel of the uncertainty step (its forward-mode renders; memory check)
+UNCERTAINTY_SPP = 16
 #: bytes per texel of a built-in sample's maps (float64): the truth map, and per fitted parameter
 #: its value, gradient, Adam's two moments and the running average
 MAP_BYTES_PER_TEXEL_FIXED, MAP_BYTES_PER_TEXEL_FITTED = 8, 5 * 8
@@ -280,7 +282,7 @@ def _calibrated(args, fit):
             map_keys(mi.traverse(o.scene), fit, args.target)
         H, W = o.reference.shape[1:]
         check_memory(W, H, args.spp, "--tiles N (fit tiles of the map from film crops), --spp or the camera's "
-                     "width/height")
+                     "width/height", uncertainty_spp=0 if args.no_uncertainty else UNCERTAINTY_SPP)
         with user_input():
             check_reference_scale(o.reference, f"--reference {shorten(args.reference[k])}")
         if args.mask:

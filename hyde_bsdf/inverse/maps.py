@@ -57,6 +57,7 @@ class MapInversionResult:
     adam_final: dict = field(default_factory=dict)  # the averaged Adam iterate before the polish
     tiles: list = field(default_factory=list)       # invert_maps_tiled: per tile bounds, pixels, s/it, peak RSS
     wall_seconds: float = float("nan")              # invert_maps_tiled: the whole run, planning included
+    memory_estimate: int = 0                        # invert_maps_tiled: the estimate checked before the work (B)
     messages: list = field(default_factory=list)    # (category, message) of each warning
 
     def texel_errors(self, name: str = "alpha") -> np.ndarray:

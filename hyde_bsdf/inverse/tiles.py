@@ -301,7 +301,9 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
         raise UsageError("no picture has a whole pixel inside any tile: the sample is not seen (check the "
                          "--camera/--light files and the references' masks)")
     spp = int(options.get("spp", 4))
-    tiles_memory_check(max(t.pixels for t in tasks), spp, _concurrency(executor, workers))
+    unc_spp = int(options.get("uncertainty_spp", 16)) if options.get("uncertainty", True) else 0
+    estimate = tiles_memory_check(max(t.pixels for t in tasks), spp, _concurrency(executor, workers),
+                                  uncertainty_spp=unc_spp)
     own = executor is None
     ex = (process_pool(workers) if workers and workers > 1 else SerialExecutor()) if own else executor
     if say:
@@ -320,6 +322,7 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
                        regularized=bool(options.get("regularizer")) and options.get("weight", 0.0) > 0)
     res.truth = truth
     res.wall_seconds = time.perf_counter() - t0
+    res.memory_estimate = estimate
     for category, message in res.messages:
         warnings.warn(message, category, stacklevel=2)
     return res
