@@ -131,7 +131,6 @@ def child(n: int, tile_texels: int, iterations: int, uncertainty: bool) -> dict:
 
     from hyde_bsdf import inverse as inv
     from hyde_bsdf.inverse import tiles as tl
-    from hyde_bsdf.inverse.memory import tiles_memory_check
 
     inv.prepare(inv.MAP_VARIANT)
     grid = max(1, round(n / tile_texels))
@@ -141,7 +140,6 @@ def child(n: int, tile_texels: int, iterations: int, uncertainty: bool) -> dict:
         tasks, _, _ = tl.plan_tiles(capture, {"alpha": 0.3}, tiles=grid)
         t_plan = time.perf_counter() - t0
         largest = max(t.pixels for t in tasks)
-        estimate = tiles_memory_check(largest, 4, 1)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res = tl.invert_maps_tiled(capture, {"alpha": 0.3}, tiles=grid, iterations=iterations, spp=4,
@@ -151,7 +149,7 @@ def child(n: int, tile_texels: int, iterations: int, uncertainty: bool) -> dict:
     err = np.abs(res.final["alpha"] / truth - 1)[seen]
     w, h = capture.cameras[0].width, capture.cameras[0].height
     return {"texels": n, "width": w, "height": h, "raw_megapixels": round(4 * w * h / 1e6, 2),
-            "tiles": f"{grid}x{grid}", "largest_tile_px": largest, "estimate_gib": round(estimate / 2**30, 3),
+            "tiles": f"{grid}x{grid}", "largest_tile_px": largest, "estimate_gib": round(res.memory_estimate / 2**30, 3),
             "peak_rss_gib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20, 3),
             "seconds_per_iteration": round(res.seconds_per_iteration, 3),
             "first_iteration_s": round(res.first_iteration_seconds, 2), "wall_s": round(res.wall_seconds, 1),

@@ -206,3 +206,21 @@ def test_command_line_memory_refusal_names_tiles(capsys, capture, monkeypatch, t
     assert main(["invert"] + _cli_files(capture) + ["--tiles", "2", "-o", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "use more --tiles (smaller crops), a lower --spp or fewer --workers" in err[0], err
+
+
+@pytest.mark.parametrize("filter_type", ["nearest", "bilinear"])
+def test_filter_probe_of_a_large_map_stays_in_range(filter_type):
+    """The bilinear/nearest probe writes a pattern within the parameter's range at any size: a 256 x 256
+    alpha map (65 536 texels, the 5-megapixel capture's) is told apart without the plugin refusing a
+    texel value (the old pattern grew with the texel index, to alpha ~200 there)."""
+    import mitsuba as mi
+
+    from hyde_bsdf.inverse.maps import filters_bilinearly
+    from hyde_bsdf.inverse.observations import MAP_PARAMETERS, map_keys
+
+    tex = {"type": "bitmap", "bitmap": mi.Bitmap(np.full((256, 256, 1), 0.3, np.float32)), "raw": True,
+           "filter_type": filter_type}
+    scene = mi.load_dict({"type": "scene", "plane": {"type": "rectangle", "bsdf": {"type": "hyde", "alpha": tex}}})
+    params = mi.traverse(scene)
+    key = map_keys(params)["alpha"]
+    assert filters_bilinearly(params, key, (256, 256, 1), MAP_PARAMETERS["alpha"][1]) == (filter_type == "bilinear")

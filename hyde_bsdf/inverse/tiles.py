@@ -50,11 +50,9 @@ from hyde_bsdf.inverse.maps import MapInversionResult, invert_maps
 from hyde_bsdf.inverse.memory import tiles_memory_check
 from hyde_bsdf.inverse.observations import MAP_VARIANT, Observation, map_keys, pixel_texels
 from hyde_bsdf.inverse.uncertainty import CONVERGENCE_THRESHOLD, STDERR_THRESHOLD, identification_warnings
-from hyde_bsdf.mom.gather import check_executor, gather
-from hyde_bsdf.mom.solver import SerialExecutor, process_pool
 from hyde_bsdf.progress import as_callback
 
-__all__ = ["Capture", "Tile", "tile_bounds", "pixel_tiles", "plan_tiles", "run_tile", "invert_maps_tiled"]
+__all__ = ["Capture", "Tile", "tile_bounds", "pixel_tiles", "plan_tiles", "run_tile", "invert_maps_tiled", "stitch_tiles"]
 
 #: one tile at a time per process: Dr.Jit's AD graph and Mitsuba's variant are per process, and two
 #: tasks rendering at once in threads of one process (a dask worker with several threads, or a thread
@@ -243,6 +241,8 @@ def _concurrency(executor, workers) -> int:
     """How many tasks may run at once on this machine: ``workers`` when given; else 1 in process,
     the pool's size, or a dask cluster's threads (all of them when its scheduler is on this host, one
     worker's otherwise: each machine then holds its own)."""
+    from hyde_bsdf.mom.solver import SerialExecutor
+
     if workers is not None:
         return int(workers)
     if executor is None or isinstance(executor, SerialExecutor):
@@ -283,6 +283,9 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
     :class:`MapInversionResult` of the whole map; ``result.tiles`` lists each tile's bounds, pixels,
     seconds per iteration and the peak RSS of the process that ran it; ``history`` holds the tiles'
     mean loss and their summed seconds (the work of one pass over all tiles)."""
+    from hyde_bsdf.mom.gather import check_executor, gather       # the executors (mom imports on demand)
+    from hyde_bsdf.mom.solver import SerialExecutor, process_pool
+
     check_executor(executor)
     _check_workers(workers)
     if not isinstance(capture, Capture):
