@@ -166,12 +166,13 @@ def _cli_files(capture):
 
 
 def test_command_line_tiles_end_to_end(capsys, capture, tmp_path):
-    """``invert --maps ... --tiles 2`` writes the stitched 6 x 6 map, its standard errors and seen mask,
-    and reports the tiles; the map is near the truth (median error < 2 % after 12 iterations)."""
+    """``invert --maps ... --tiles 2 --workers 2`` (a process pool) writes the stitched 6 x 6 map, its
+    standard errors and seen mask, and reports the tiles; the map is near the truth (median error < 2 %
+    after 12 iterations)."""
     from hyde_bsdf.app.cli import main
 
-    assert main(["invert"] + _cli_files(capture) + ["--tiles", "2", "--iterations", "12", "--fit", "alpha",
-                                                    "-o", str(tmp_path)]) == 0
+    assert main(["invert"] + _cli_files(capture) + ["--tiles", "2", "--workers", "2", "--iterations", "12",
+                                                    "--fit", "alpha", "-o", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "tiles: 4 task(s) of 2x2" in out
     alpha, seen = np.load(tmp_path / "alpha.npy"), np.load(tmp_path / "alpha_seen.npy").astype(bool)

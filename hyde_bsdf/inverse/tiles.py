@@ -36,6 +36,7 @@ May import: ``hyde_bsdf.inverse.*``, ``hyde_bsdf.render.camera``, ``hyde_bsdf.mo
 from __future__ import annotations
 
 import dataclasses
+import gc
 import resource
 import threading
 import time
@@ -207,8 +208,17 @@ def run_tile(task: Tile) -> dict:
     """One tile's inversion (the task function: runs in any process).  Returns NumPy slices of the
     tile's texels: final, stderr, rel_stderr, converged, seen, and what the stitch needs for the
     warnings and the timing (history, seconds, peak RSS of this process)."""
+    import drjit as dr
+
     with _ONE_AT_A_TIME:
-        return _run_tile(task)
+        try:
+            return _run_tile(task)
+        finally:
+            # Dr.Jit keeps freed blocks for reuse; tiles of other crop sizes one after the other in one
+            # process would otherwise pile up blocks of every size (measured: a 256 x 256 map in 4 x 4 tiles,
+            # peak RSS 3.6 GiB against 2.9 GiB for one tile of the same size)
+            gc.collect()
+            dr.flush_malloc_cache()
 
 
 def _run_tile(task: Tile) -> dict:
