@@ -48,6 +48,7 @@ Texture mode::
                      [--regularizer tv|l2 --weight 0.1] [--no-uncertainty]
                      [--iterations 100] [--spp 4] [--spp-ref 64] [--res 80] [--sensor 0] [-o OUTDIR]
     hyde-bsdf invert --maps --scene SAMPLE.xml --camera CAMERA.json --light LIGHT.json --reference R.exr ...
+                     [--tiles N|RxC [--workers K | --scheduler tcp://HOST:8786]]
 
 writes OUTDIR/invert_maps_history.csv, OUTDIR/NAME.npy and NAME.exr per fitted map (rows along
 v; load the EXR as a ``bitmap`` texture with ``raw`` true and ``filter_type`` nearest; NaN where no
