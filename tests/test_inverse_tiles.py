@@ -226,3 +226,19 @@ def test_filter_probe_of_a_large_map_stays_in_range(filter_type):
     params = mi.traverse(scene)
     key = map_keys(params)["alpha"]
     assert filters_bilinearly(params, key, (256, 256, 1), MAP_PARAMETERS["alpha"][1]) == (filter_type == "bilinear")
+
+
+def test_command_line_scheduler_runs_the_tiles_on_a_dask_cluster(capsys, capture, tmp_path):
+    """``--scheduler ADDRESS``: the tiles go to the dask cluster there (a LocalCluster in this process,
+    threads, 2 workers) and the stitched map is written as with the tiles run here."""
+    distributed = pytest.importorskip("distributed")
+    from hyde_bsdf.app.cli import main
+
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        assert main(["invert"] + _cli_files(capture) + ["--tiles", "2", "--scheduler", cluster.scheduler_address,
+                                                        "--iterations", "6", "--no-uncertainty", "--fit", "alpha",
+                                                        "-o", str(tmp_path)]) == 0
+    assert "tiles: 4 task(s) of 2x2" in capsys.readouterr().out
+    alpha, seen = np.load(tmp_path / "alpha.npy"), np.load(tmp_path / "alpha_seen.npy").astype(bool)
+    assert seen.sum() >= 30 and np.isfinite(alpha[seen]).all()
