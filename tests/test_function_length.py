@@ -17,7 +17,6 @@ MAX_LINES = 60
 #: (hyde_bsdf/mitsuba/, mom/, inverse/ only).  Each entry is "path:function"; remove it when
 #: that function is split.  Every other folder has none, and none may be added here.
 PENDING = {
-    "inverse/maps.py:invert_maps",
 }
 PENDING_FOLDERS = ("mitsuba/", "mom/", "inverse/")
 

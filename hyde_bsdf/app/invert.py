@@ -76,12 +76,7 @@ def build_parser():
                          "size); default: render one at --truth (built-in truth map with --maps)")
     ap.add_argument("--mask", action="append", default=None,
                     help="--maps: PNG or .npy of the pixels to use for the matching --reference (non-zero = use)")
-    ap.add_argument("--camera", default=None, help="--maps: camera calibration JSON (CV pinhole: world-to-camera R, t; "
-                    "fx, fy, cx, cy; see hyde_bsdf.render.camera): the sensors of the one --scene (the sample only)")
-    ap.add_argument("--light", default=None, help="--maps with --camera: light JSON (point positions or directional "
-                    "towards_light, optional polarizer/retarder); one scene per light, --reference light-major")
-    ap.add_argument("--channel", default="Y", help="--maps: the colour channel of multi-channel references (default "
-                    "Y, the luminance of R, G, B; or a channel suffix such as R or 550nm)")
+    _calibrated_options(ap)
     ap.add_argument("--sensor", type=int, default=0, help="index of the sensor of each --scene (default 0)")
     ap.add_argument("--target", default=None, help="key prefix of the BSDF to recover when the scene has "
                     "several, e.g. sphere.bsdf (mi.traverse names)")
@@ -118,6 +113,24 @@ def build_parser():
     ap.add_argument("-o", "--output", default="out/invert", help="output folder (default out/invert)")
     quiet_option(ap)
     return ap
+
+
+def _calibrated_options(ap):
+    """--camera, --light (the calibrated rig), --tiles, --workers, --scheduler (tiles as tasks), --channel."""
+    ap.add_argument("--camera", default=None, help="--maps: camera calibration JSON (CV pinhole: world-to-camera R, t; "
+                    "fx, fy, cx, cy; see hyde_bsdf.render.camera): the sensors of the one --scene (the sample only)")
+    ap.add_argument("--light", default=None, help="--maps with --camera: light JSON (point positions or directional "
+                    "towards_light, optional polarizer/retarder); one scene per light, --reference light-major")
+    ap.add_argument("--tiles", default=None, help="--maps with --camera: split the map into tiles of texels, N (N x N) "
+                    "or RxC, each fitted from the film crop of the pixels wholly inside it, as an independent task "
+                    "(memory: the largest tile's crop instead of the whole picture; see hyde_bsdf.inverse.tiles)")
+    ap.add_argument("--workers", type=int, default=None, help="--tiles: run the tiles in a process pool of this many "
+                    "workers on this machine (default: one tile after the other in this process)")
+    ap.add_argument("--scheduler", default=None, help="--tiles: run the tiles on the dask cluster whose scheduler is "
+                    "at this address (tcp://HOST:8786; needs the distributed extra; start its workers with "
+                    "--nthreads 1: one tile per process at a time)")
+    ap.add_argument("--channel", default="Y", help="--maps: the colour channel of multi-channel references (default "
+                    "Y, the luminance of R, G, B; or a channel suffix such as R or 550nm)")
 
 
 def _check_args(args):
@@ -162,6 +175,7 @@ def _check_args(args):
         check_input(path, "input file", stdin=False)
     if args.truth is not None and refs:
         pass                                   # errors are reported against it
+    _check_tiles_args(args)
     if (args.preset or args.no_uncertainty) and not maps:
         raise UsageError("--preset and --no-uncertainty need --maps")
     if not (math.isfinite(args.noise) and 0 <= args.noise <= 1):
@@ -171,6 +185,27 @@ def _check_args(args):
                          "truth map or reads --reference")
 
 
+def _check_tiles_args(args):
+    """--tiles N or RxC (with --camera), --workers K >= 1 or --scheduler ADDRESS (with --tiles, not both)."""
+    if args.tiles is None:
+        if args.workers is not None or args.scheduler is not None:
+            raise UsageError("--workers and --scheduler run tiles: give --tiles N (or RxC) too")
+        return
+    if not args.camera:
+        raise UsageError("--tiles needs --maps --scene SAMPLE.xml --camera CAMERA.json --light LIGHT.json (the tasks "
+                         "rebuild the calibrated scenes from these files)")
+    parts = args.tiles.lower().split("x")
+    if len(parts) > 2 or not all(p.strip().isdigit() and int(p) >= 1 for p in parts):
+        raise UsageError(f"--tiles must be N or RxC with integers >= 1 (e.g. 4 or 4x8), got {shorten(args.tiles)}")
+    args.tile_grid = (int(parts[0]), int(parts[-1]))
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be an integer >= 1, got {args.workers}")
+    if args.workers is not None and args.scheduler is not None:
+        raise UsageError("give --workers (a process pool here) or --scheduler (a dask cluster), not both")
+
+
+#: invert_maps' default samples per pixel of the uncertainty step (its forward-mode renders; memory check)
+UNCERTAINTY_SPP = 16
 #: bytes per texel of a built-in sample's maps (float64): the truth map, and per fitted parameter
 #: its value, gradient, Adam's two moments and the running average
 MAP_BYTES_PER_TEXEL_FIXED, MAP_BYTES_PER_TEXEL_FITTED = 8, 5 * 8
@@ -275,7 +310,8 @@ def _calibrated(args, fit):
         with user_input(f"--scene {shorten(args.scene[0])}"):
             map_keys(mi.traverse(o.scene), fit, args.target)
         H, W = o.reference.shape[1:]
-        check_memory(W, H, args.spp, "--spp or the camera's width/height")
+        check_memory(W, H, args.spp, "--tiles N (fit tiles of the map from film crops), --spp or the camera's "
+                     "width/height", uncertainty_spp=0 if args.no_uncertainty else UNCERTAINTY_SPP)
         with user_input():
             check_reference_scale(o.reference, f"--reference {shorten(args.reference[k])}")
         if args.mask:
@@ -522,6 +558,8 @@ def _maps_run(args, fit, start, paths):
         prepare(MAP_VARIANT)
     except RuntimeError as exc:
         raise UsageError(one_line(exc)) from None
+    if args.tiles:
+        return _tiled_run(args, fit, start, paths)
     if args.preset:
         observations, truth = _preset_observations(args, fit, start)
     else:
@@ -543,6 +581,53 @@ def _maps_run(args, fit, start, paths):
         _write_map_outputs(res, paths, args)
     _print_maps_result(res, args, fit, start, len(observations), paths, messages)
     return 0
+
+
+def _tiled_run(args, fit, start, paths):
+    """--tiles: the calibrated capture (files read and checked here), the tiles on the chosen executor,
+    the stitched maps written and reported as the untiled run's."""
+    from hyde_bsdf.inverse.tiles import Capture, invert_maps_tiled
+
+    capture = Capture.from_files(args.scene[0], args.camera, args.light, args.reference, channel=args.channel,
+                                 spp=args.spp)
+    for k, d in enumerate(r for row in capture.references for r in row):
+        with user_input():
+            check_reference_scale(d["reference"], f"--reference {shorten(args.reference[k])}")
+        if args.mask:
+            m = _read_mask(args.mask[k], d["reference"].shape[1:])
+            d["mask"] = m if d["mask"] is None else d["mask"] & m
+    client = _dask_client(args.scheduler) if args.scheduler else None
+    try:
+        with user_input(), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            res = invert_maps_tiled(capture, start, fit=fit, tiles=args.tile_grid, workers=args.workers,
+                                    executor=None if client is None else client.get_executor(), prefix=args.target,
+                                    iterations=args.iterations, lr=args.lr, spp=args.spp, seed=args.seed,
+                                    components=args.loss, regularizer=args.regularizer, weight=args.weight,
+                                    uncertainty=not args.no_uncertainty)
+    finally:
+        if client is not None:
+            client.close()
+    messages = list(dict.fromkeys(res.warnings + [str(w.message) for w in caught
+                                                  if issubclass(w.category, UserWarning)]))
+    with atomic_group():
+        _write_map_outputs(res, paths, args)
+    _print_maps_result(res, args, fit, start, len(args.reference), paths, messages)
+    print(f"tiles: {len(res.tiles)} task(s) of {args.tile_grid[0]}x{args.tile_grid[1]}, {res.wall_seconds:.1f} s in all, "
+          f"peak RSS of a task's process {max(t['peak_rss'] for t in res.tiles) / 2**30:.2f} GiB")
+    return 0
+
+
+def _dask_client(address):
+    """A dask.distributed Client of the scheduler at --scheduler ADDRESS (a UsageError naming it otherwise)."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise UsageError("--scheduler needs dask.distributed: pip install 'hyde-bsdf[distributed]'") from None
+    try:
+        return Client(address, timeout=10)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise UsageError(f"--scheduler {shorten(address)}: no dask scheduler answers there ({one_line(exc)})") from None
 
 
 def _load_map_scenes(paths, fit) -> list:

@@ -12,6 +12,7 @@ It uses the renderer and produces parameter maps, so it sits right of ``render``
 ``memory``        the memory estimate of a differentiable render, checked before an inversion
 ``analyzer``      raw analyzer frames / DoFP mosaics -> Stokes images with propagated sigma, the camera noise
 ``camera_data``   Stokes inputs as cameras give them (measured components, sigma, masks), calibrated rigs
+``tiles``         per-texel maps in tiles of texels, each an independent task on an executor (:func:`invert_maps_tiled`)
 
 Every public name of these modules is importable from ``hyde_bsdf.inverse`` itself.
 
@@ -47,6 +48,7 @@ Texture mode::
                      [--regularizer tv|l2 --weight 0.1] [--no-uncertainty]
                      [--iterations 100] [--spp 4] [--spp-ref 64] [--res 80] [--sensor 0] [-o OUTDIR]
     hyde-bsdf invert --maps --scene SAMPLE.xml --camera CAMERA.json --light LIGHT.json --reference R.exr ...
+                     [--tiles N|RxC [--workers K | --scheduler tcp://HOST:8786]]
 
 writes OUTDIR/invert_maps_history.csv, OUTDIR/NAME.npy and NAME.exr per fitted map (rows along
 v; load the EXR as a ``bitmap`` texture with ``raw`` true and ``filter_type`` nearest; NaN where no
@@ -57,7 +59,8 @@ NAME_seen.npy/.exr (1 where a picture sees the texel) and OUTDIR/invert_maps.png
 """
 
 from hyde_bsdf.inverse._common import Y_WEIGHTS, NotConvergedWarning
-from hyde_bsdf.inverse.memory import AD_BYTES_FIXED, AD_BYTES_PER_SAMPLE, check_memory, estimate_memory
+from hyde_bsdf.inverse.memory import (AD_BYTES_FIXED, AD_BYTES_PER_SAMPLE, AD_FORWARD_BYTES_PER_SAMPLE, check_memory,
+                                     estimate_memory, tiles_memory_check)
 from hyde_bsdf.inverse.loss import (REFERENCE_RANGE, StokesLoss, channel_names, check_reference_scale,
                                     interior_mask, smoothness, stokes_images)
 from hyde_bsdf.inverse.acquisition import (Acquisition, Configuration, acquisition_scene_dict,
@@ -74,8 +77,10 @@ from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT,
 from hyde_bsdf.inverse.analyzer import (CameraNoise, StokesEstimate, analysis_matrix, retarder_mueller,
                                         simulate_capture, simulate_frames, simulate_mosaic, stokes_from_frames,
                                         stokes_from_mosaic, stokes_sigma, write_stokes_estimate)
-from hyde_bsdf.inverse.camera_data import (calibrated_observations, camera_observation, camera_reference,
-                                           observations_from_files)
+from hyde_bsdf.inverse.camera_data import (calibrated_observations, camera_files, camera_observation,
+                                           camera_reference, observations_from_files)
+from hyde_bsdf.inverse.tiles import (Capture, Tile, invert_maps_tiled, pixel_tiles, plan_tiles, run_tile, stitch_tiles,
+                                     tile_bounds)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, VARIANT, InversionResult,
                                       check_gradients, finite_difference_gradient, invert, trajectory_converged, load_scene, loss_and_gradient,
                                       parameter_keys, prepare, render_reference, scene_dict,
@@ -84,7 +89,8 @@ from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, VARIANT,
 __all__ = ["CameraNoise", "StokesEstimate", "analysis_matrix", "retarder_mueller", "simulate_capture",
            "simulate_frames", "simulate_mosaic", "stokes_from_frames", "stokes_from_mosaic", "stokes_sigma",
            "write_stokes_estimate", "calibrated_observations", "camera_observation", "camera_reference",
-           "observations_from_files", "VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
+           "observations_from_files", "camera_files", "Capture", "Tile", "invert_maps_tiled", "pixel_tiles", "plan_tiles",
+           "run_tile", "stitch_tiles", "tile_bounds", "VARIANT", "PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict", "load_scene",
            "parameter_keys", "stokes_images", "channel_names", "interior_mask", "StokesLoss", "REFERENCE_RANGE",
            "check_reference_scale", "render_reference",
            "InversionResult", "invert", "check_gradients", "loss_and_gradient", "finite_difference_gradient",
@@ -94,4 +100,5 @@ __all__ = ["CameraNoise", "StokesEstimate", "analysis_matrix", "retarder_mueller
            "Uncertainty", "UnidentifiedParameterWarning", "STDERR_THRESHOLD", "NotConvergedWarning",
            "BilinearFilterWarning", "CONVERGENCE_THRESHOLD", "MISFIT_P", "trajectory_converged", "filters_bilinearly", "pixel_texels", "Configuration",
            "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition", "predicted_stderr", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",
-           "estimate_memory", "check_memory", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE", "Y_WEIGHTS"]
+           "estimate_memory", "check_memory", "tiles_memory_check", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE",
+           "AD_FORWARD_BYTES_PER_SAMPLE", "Y_WEIGHTS"]

@@ -36,7 +36,7 @@ from hyde_bsdf.inverse.analyzer import StokesEstimate, stokes_sigma
 from hyde_bsdf.inverse.loss import interior_mask
 from hyde_bsdf.inverse.observations import Observation
 
-__all__ = ["camera_reference", "camera_observation", "calibrated_observations", "observations_from_files"]
+__all__ = ["camera_reference", "camera_observation", "calibrated_observations", "observations_from_files", "camera_files"]
 
 STOKES = ("S0", "S1", "S2", "S3")
 
@@ -168,7 +168,15 @@ def observations_from_files(scene, cameras, lights, references, *, masks=None, s
     builds: the calibrated observations (:func:`calibrated_observations`) of the sample ``scene`` (an XML
     file holding no sensor or emitter) with the Stokes EXRs ``references`` given light-major (for each
     light, one per camera) and optional ``masks`` (arrays (H, W), one per reference).  Every file is
-    checked before any rendering; mistakes are UsageErrors naming the file."""
+    checked before any rendering (:func:`camera_files`); mistakes are UsageErrors naming the file."""
+    cams, lts, data = camera_files(cameras, lights, references, masks=masks, channel=channel)
+    return calibrated_observations(scene, cams, lts, [[{**_stokes_dict(d)} for d in row] for row in data], spp=spp)
+
+
+def camera_files(cameras, lights, references, *, masks=None, channel: str = "Y"):
+    """(cameras, lights, data): the camera and light JSON files read, and the references (Stokes EXRs,
+    light-major) as :func:`camera_reference` results, light by light, with ``masks`` applied; each
+    reference checked against its camera's image size."""
     from hyde_bsdf.render.camera import load_cameras, load_lights
 
     cams, lts = load_cameras(cameras), load_lights(lights)
@@ -190,7 +198,7 @@ def observations_from_files(scene, cameras, lights, references, *, masks=None, s
             j, i = divmod(k, len(cams))
             d = data[j][i]
             d["mask"] = np.asarray(m, bool) if d["mask"] is None else d["mask"] & np.asarray(m, bool)
-    return calibrated_observations(scene, cams, lts, [[{**_stokes_dict(d)} for d in row] for row in data], spp=spp)
+    return cams, lts, data
 
 
 def _stokes_dict(ref: dict) -> dict:

@@ -18,7 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.inverse._common import _first_line
+from hyde_bsdf.errors import UsageError
+from hyde_bsdf.inverse._common import _first_line, record_iteration, seconds_per_iteration
 from hyde_bsdf.inverse.loss import StokesLoss, smoothness
 from hyde_bsdf.inverse.observations import (MAP_PARAMETERS, _obs_mask, film_channels, map_keys, render_stokes,
                                             texel_coverage)
@@ -54,11 +55,15 @@ class MapInversionResult:
     converged: dict = field(default_factory=dict)   # name -> (rows, cols) bool: False where the stderr is NaN
     uncertainty: Uncertainty | None = None
     adam_final: dict = field(default_factory=dict)  # the averaged Adam iterate before the polish
+    tiles: list = field(default_factory=list)       # invert_maps_tiled: per tile bounds, pixels, s/it, peak RSS
+    wall_seconds: float = float("nan")              # invert_maps_tiled: the whole run, planning included
+    memory_estimate: int = 0                        # invert_maps_tiled: the estimate checked before the work (B)
+    messages: list = field(default_factory=list)    # (category, message) of each warning
 
     def texel_errors(self, name: str = "alpha") -> np.ndarray:
         """|final / truth - 1| over the seen texels of map ``name`` (1-D array)."""
         if not self.truth or name not in self.truth:
-            raise ValueError(f"no truth for {name!r}")
+            raise UsageError(f"no truth for {name!r}")
         rel = np.abs(np.asarray(self.final[name]) / np.asarray(self.truth[name]) - 1.0)
         return rel[self.seen] if self.seen is not None and rel.shape == self.seen.shape else rel.ravel()
 
@@ -78,7 +83,7 @@ class MapInversionResult:
     def pulls(self, name: str) -> np.ndarray:
         """(final - truth) / stderr over the seen texels (1-D): standard normal when the errors are right."""
         if not self.truth or name not in self.truth or name not in self.stderr:
-            raise ValueError(f"no truth or standard error for {name!r}")
+            raise UsageError(f"no truth or standard error for {name!r}")
         z = (np.asarray(self.final[name]) - np.asarray(self.truth[name])) / self.stderr[name]
         return z[self.seen] if self.seen is not None else z.ravel()
 
@@ -118,30 +123,30 @@ class MapProblem:
 
         observations = list(observations)
         if not observations:
-            raise ValueError("observations must hold at least one Observation")
+            raise UsageError("observations must hold at least one Observation")
         fit = tuple(fit)
         if not fit:
-            raise ValueError(f"fit must name at least one of {tuple(MAP_PARAMETERS)}")
+            raise UsageError(f"fit must name at least one of {tuple(MAP_PARAMETERS)}")
         for name in fit:
             if name not in MAP_PARAMETERS:
-                raise ValueError(f"fit: unknown parameter {name!r}; use {', '.join(MAP_PARAMETERS)}")
+                raise UsageError(f"fit: unknown parameter {name!r}; use {', '.join(MAP_PARAMETERS)}")
             if name not in start:
-                raise ValueError(f"start must give a value for every fitted parameter; missing {name!r}")
+                raise UsageError(f"start must give a value for every fitted parameter; missing {name!r}")
         for o in observations:
             ref = np.asarray(o.reference)
             if ref.ndim != 3 or ref.shape[0] != 4:
-                raise ValueError(f"reference must have shape (4, H, W), got {ref.shape}")
+                raise UsageError(f"reference must have shape (4, H, W), got {ref.shape}")
             W, H = o.scene.sensors()[int(o.sensor)].film().crop_size()
             if ref.shape[1:] != (H, W):
-                raise ValueError(f"reference is {ref.shape[2]}x{ref.shape[1]} pixels but sensor {o.sensor}'s "
+                raise UsageError(f"reference is {ref.shape[2]}x{ref.shape[1]} pixels but sensor {o.sensor}'s "
                                  f"film is {W}x{H}")
             if not np.isfinite(ref).all():
-                raise ValueError("reference contains NaN or infinite pixels")
+                raise UsageError("reference contains NaN or infinite pixels")
         losses = [StokesLoss(o.reference, mask=_obs_mask(o), components=components, measured=o.measured,
                              sigma=o.sigma) for o in observations]
         wsum = float(sum(o.weight for o in observations))
         if not wsum > 0:
-            raise ValueError("the observations' weights must sum to > 0")
+            raise UsageError("the observations' weights must sum to > 0")
         scenes = []
         for o in observations:
             if all(o.scene is not s for s in scenes):
@@ -166,7 +171,7 @@ class MapProblem:
             try:
                 value = problem.as_value(name, start[name])
             except ValueError:
-                raise ValueError(f"start[{name!r}] must be a number or an array of the texture's shape "
+                raise UsageError(f"start[{name!r}] must be a number or an array of the texture's shape "
                                  f"{shapes[name][:2]}") from None
             problem.write({name: value})
         return problem
@@ -218,7 +223,9 @@ class MapProblem:
 
 def filters_bilinearly(params, key: str, shape, bounds) -> bool:
     """True when the bitmap texture whose data is ``params[key]`` (shape (rows, cols, 1)) filters
-    bilinearly (Mitsuba's default): a test pattern that differs in every texel is written and the
+    bilinearly (Mitsuba's default): a test pattern whose every texel differs from its four neighbours
+    (four values by row and column parity, within 10 % of one base value: in range for any map size;
+    a pattern growing with the texel index left alpha's range from ~25 000 texels on) is written and the
     texture is evaluated a quarter texel off the centre of a corner texel -- nearest returns one
     texel's value exactly, bilinear a blend.  The caller writes its own values afterwards."""
     import mitsuba as mi
@@ -229,7 +236,9 @@ def filters_bilinearly(params, key: str, shape, bounds) -> bool:
         return False
     lo, hi = bounds
     base = min(max(0.3, lo * 2), hi / 2)
-    pattern = base * (1.0 + 0.01 * np.arange(rows * cols, dtype=np.float64)).reshape(rows, cols, 1)
+    r, c = np.meshgrid(np.arange(rows) % 2, np.arange(cols) % 2, indexing="ij")
+    # a blend of a texel and its neighbours, weights 9/16, 3/16, 3/16, 1/16, is never one of the 4 values
+    pattern = (base * (1.0 + 0.1 * (r + 2 * c) / 3.0)).reshape(rows, cols, 1)
     params[key] = mi.TensorXf(pattern.astype(np.float32))
     params.update()
     si = mi.SurfaceInteraction3f()
@@ -532,104 +541,126 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     learning-rate schedule, the average), :func:`map_uncertainty` (the information, the polish, the
     standard errors and warnings).
     """
-    import drjit as dr
-    import mitsuba as mi
-
-    if not (isinstance(iterations, int) and iterations >= 1):
-        raise ValueError(f"iterations must be an integer >= 1, got {iterations!r}")
-    if regularizer not in (None, "tv", "l2"):
-        raise ValueError(f"regularizer must be None, 'tv' or 'l2', got {regularizer!r}")
-    if not (math.isfinite(weight) and weight >= 0):
-        raise ValueError(f"weight must be a finite number >= 0, got {weight!r}")
+    _check_options(iterations, regularizer, weight)
     progress = as_callback(progress, "[invert]")
     problem = MapProblem.build(observations, start, fit, components=components, prefix=prefix, seen=seen)
-    fit, seen, n_obs = problem.fit, problem.seen, len(problem.observations)
+    n_obs = len(problem.observations)
     average_last = max(1, iterations // 4) if average_last is None else max(1, int(average_last))
     adam = LogAdam(problem, start, lr, iterations, average_last)
     truth_np = {n: np.asarray(v, np.float64) for n, v in (truth or {}).items()}
-    step = map_step(problem, spp, regularizer, weight)
-    # dr.freeze records the step's kernels once and replays them (no Python re-tracing of the
-    # integrator and the BSDF per iteration); results equal the unfrozen step's
-    step_fn = dr.freeze(step) if freeze else step
-    tensors = [fn.tensors for fn in problem.losses]
-    history = []
-    t0 = time.perf_counter()
-    t_first = None
-    for it in range(iterations):
-        t_it = time.perf_counter()
-        seed_it = dr.opaque(mi.UInt32, seed + 1 + it * n_obs)
-        try:
-            values = adam.values()
-            if step_fn is not step:
-                # release what is pending first: arrays made from NumPy memory and waiting for
-                # the garbage collector are freed through host callbacks, which a recording
-                # cannot hold (Dr.Jit aborts the process)
-                gc.collect()
-                dr.sync_thread()
-            loss, data, reg = step_fn(problem.scenes, values, seed_it, tensors)
-        except RuntimeError as exc:
-            if step_fn is step or it > 0:
-                raise
-            # a scene object Dr.Jit cannot traverse (a custom plugin without traverse support):
-            # run unfrozen, which gives the same results, only slower
-            warnings.warn(f"dr.freeze could not record the step ({_first_line(exc)}); running unfrozen",
-                          RuntimeWarning, stacklevel=2)
-            step_fn = step
-            values = adam.values()
-            loss, data, reg = step_fn(problem.scenes, values, seed_it, tensors)
-        row = {"iteration": it, "loss": float(np.asarray(loss).ravel()[0]),
-               "data_loss": float(np.asarray(data).ravel()[0]),
-               "regularizer": float(np.asarray(reg).ravel()[0])}
-        if not math.isfinite(row["loss"]):
-            raise FloatingPointError(f"the loss became {row['loss']} at iteration {it}")
-        current = adam.step(it, values)
-        for n in truth_np:
-            if n in current and np.ndim(current[n]) == 2:
-                rel = np.abs(current[n] / truth_np[n] - 1.0)
-                rel = rel[seen] if seen is not None else rel.ravel()
-                row[f"{n}_median_error"] = float(np.median(rel))
-                row[f"{n}_p90_error"] = float(np.percentile(rel, 90))
-        dt = time.perf_counter() - t_it
-        if t_first is None:
-            t_first = dt
-        row["seconds"] = time.perf_counter() - t0
-        history.append(row)
-        if progress:
-            err = "".join(f"  {n} median err {100 * row[n + '_median_error']:.1f} %" for n in fit
-                          if n + "_median_error" in row)
-            progress(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.4e}{err}  ({row['seconds']:.1f} s)")
+    history, t_first = _adam_loop(problem, adam, map_step(problem, spp, regularizer, weight), iterations=iterations,
+                                  seed=seed, freeze=freeze, truth_np=truth_np, progress=progress)
     final = adam.average()
     adam_final = dict(final)
     # the scenes keep the result, detached: the last iteration's gradient-enabled leaves must not
     # outlive the run (a later forward-mode pass, here or in the caller's next problem, would
     # otherwise reach their edges from inside mi.render's isolated AD scope and fail)
     problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
-    del values
     unc = None
     if uncertainty:
+        regularized = regularizer is not None and weight > 0
         if progress:
-            progress(f"uncertainty: forward-mode information of {', '.join(fit)} at {uncertainty_spp} spp"
-                 + (f", {polish} Gauss-Newton step(s)" if polish and regularizer is None else ""))
+            progress(f"uncertainty: forward-mode information of {', '.join(problem.fit)} at {uncertainty_spp} spp"
+                     + (f", {polish} Gauss-Newton step(s)" if polish and not regularized else ""))
         final, unc = map_uncertainty(problem, final, spp=uncertainty_spp, seed=seed + 1 + iterations * n_obs,
-                                     noise=noise, polish=polish if (regularizer is None or weight == 0) else 0,
-                                     threshold=threshold, convergence=convergence, extra_polish=extra_polish,
-                                     regularized=regularizer is not None and weight > 0)
+                                     noise=noise, polish=0 if regularized else polish, threshold=threshold,
+                                     convergence=convergence, extra_polish=extra_polish, regularized=regularized)
     for n in problem.names:
-        if n not in fit:
+        if n not in problem.fit:
             final[n] = np.asarray(start[n], np.float64) if np.ndim(start[n]) else float(start[n])
-    per_it = ((history[-1]["seconds"] - history[0]["seconds"]) / (len(history) - 1)
-              if len(history) > 1 else float("nan"))
-    res = MapInversionResult(fitted=fit, final=final, start=dict(start), components=components, seen=seen,
-                             truth=truth, history=history, seconds_per_iteration=per_it,
-                             first_iteration_seconds=t_first, adam_final=adam_final, uncertainty=unc)
+    res = MapInversionResult(fitted=problem.fit, final=final, start=dict(start), components=components,
+                             seen=problem.seen, truth=truth, history=history,
+                             seconds_per_iteration=seconds_per_iteration(history), first_iteration_seconds=t_first,
+                             adam_final=adam_final, uncertainty=unc)
+    _attach_warnings(res, problem, unc)
+    return res
+
+
+def _check_options(iterations, regularizer, weight) -> None:
+    """One-line UsageErrors for invert_maps' loop options."""
+    if not (isinstance(iterations, int) and iterations >= 1):
+        raise UsageError(f"iterations must be an integer >= 1, got {iterations!r}")
+    if regularizer not in (None, "tv", "l2"):
+        raise UsageError(f"regularizer must be None, 'tv' or 'l2', got {regularizer!r}")
+    if not (math.isfinite(weight) and weight >= 0):
+        raise UsageError(f"weight must be a finite number >= 0, got {weight!r}")
+
+
+def _adam_loop(problem, adam, step, *, iterations, seed, freeze, truth_np, progress):
+    """Steps 2 and 3, ``iterations`` times: the loss and its gradient (``step``, frozen when ``freeze``),
+    the Adam update; returns (history rows, seconds of the first iteration)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    # dr.freeze records the step's kernels once and replays them (no Python re-tracing of the
+    # integrator and the BSDF per iteration); results equal the unfrozen step's
+    step_fn = dr.freeze(step) if freeze else step
+    tensors = [fn.tensors for fn in problem.losses]
+    history, t0, t_first = [], time.perf_counter(), None
+    for it in range(iterations):
+        t_it = time.perf_counter()
+        seed_it = dr.opaque(mi.UInt32, seed + 1 + it * len(problem.observations))
+        terms, values, step_fn = _gradient(problem, adam, step, step_fn, seed_it, tensors, it)
+        row = {"iteration": it, **{k: float(np.asarray(v).ravel()[0])
+                                   for k, v in zip(("loss", "data_loss", "regularizer"), terms)}}
+        if not math.isfinite(row["loss"]):
+            raise FloatingPointError(f"the loss became {row['loss']} at iteration {it}")
+        row.update(_map_errors(adam.step(it, values), truth_np, problem.seen))
+        t_first = record_iteration(row, history, t0, t_it, t_first)
+        if progress:
+            err = "".join(f"  {n} median err {100 * row[n + '_median_error']:.1f} %" for n in problem.fit
+                          if n + "_median_error" in row)
+            progress(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.4e}{err}  ({row['seconds']:.1f} s)")
+    return history, t_first
+
+
+def _gradient(problem, adam, step, step_fn, seed_it, tensors, it):
+    """One evaluation of the loss and its gradient: ((loss, data, reg), the values holding the gradient,
+    the step function to use from now on -- the unfrozen one when Dr.Jit could not record the step)."""
+    import drjit as dr
+
+    try:
+        values = adam.values()
+        if step_fn is not step:
+            # release what is pending first: arrays made from NumPy memory and waiting for
+            # the garbage collector are freed through host callbacks, which a recording
+            # cannot hold (Dr.Jit aborts the process)
+            gc.collect()
+            dr.sync_thread()
+        return step_fn(problem.scenes, values, seed_it, tensors), values, step_fn
+    except RuntimeError as exc:
+        if step_fn is step or it > 0:
+            raise
+        # a scene object Dr.Jit cannot traverse (a custom plugin without traverse support):
+        # run unfrozen, which gives the same results, only slower
+        warnings.warn(f"dr.freeze could not record the step ({_first_line(exc)}); running unfrozen",
+                      RuntimeWarning, stacklevel=4)
+        values = adam.values()
+        return step(problem.scenes, values, seed_it, tensors), values, step
+
+
+def _map_errors(current: dict, truth_np: dict, seen) -> dict:
+    """{NAME_median_error, NAME_p90_error} of the iterate ``current`` against the known truth maps."""
+    row = {}
+    for n in truth_np:
+        if n in current and np.ndim(current[n]) == 2:
+            rel = np.abs(current[n] / truth_np[n] - 1.0)
+            rel = rel[seen] if seen is not None else rel.ravel()
+            row[f"{n}_median_error"] = float(np.median(rel))
+            row[f"{n}_p90_error"] = float(np.percentile(rel, 90))
+    return row
+
+
+def _attach_warnings(res, problem, unc) -> None:
+    """The result's standard errors and its warnings (each issued once, also kept in ``res.warnings``)."""
     messages = [(BilinearFilterWarning, _nearest_message(problem.nearest))] if problem.nearest else []
     if unc is not None:
         res.stderr, res.rel_stderr, res.converged = unc.stderr, unc.rel_stderr, unc.converged
         messages += unc.messages
+    res.messages = messages
     res.warnings = [m for _, m in messages]
     for category, message in messages:        # each once
-        warnings.warn(message, category, stacklevel=2)
-    return res
+        warnings.warn(message, category, stacklevel=3)
 
 
 def _nearest_message(names) -> str:

@@ -31,7 +31,7 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_open
-from hyde_bsdf.inverse._common import SQRT2, NotConvergedWarning
+from hyde_bsdf.inverse._common import SQRT2, NotConvergedWarning, record_iteration
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.loss import StokesLoss, channel_names, stokes_images
 from hyde_bsdf.model.parameters import INVERSE_ETA, INVERSE_K, INVERSE_PARAMETERS, RMS_SLOPE
@@ -322,11 +322,7 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
         if it >= iterations - iterations // 4:
             rate *= 0.95
             opt.set_learning_rate(rate)
-        dt = time.perf_counter() - t_it
-        if t_first is None:
-            t_first = dt
-        row["seconds"] = time.perf_counter() - t0
-        history.append(row)
+        t_first = record_iteration(row, history, t0, t_it, t_first)
         if progress:
             progress(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.3e}  " +
                      "  ".join(f"{p}={row[p]:.4f}" for p in fit) + f"  ({row['seconds']:.1f} s)")

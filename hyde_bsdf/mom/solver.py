@@ -698,14 +698,16 @@ def _check_positive(name, value, allow_zero=False):
     return v
 
 
-def process_pool(max_workers=None):
+def process_pool(max_workers=None, start_method=None):
     """The default executor: a process pool whose workers each run single-threaded BLAS.
 
     One worker per core (``os.cpu_count()``) unless ``max_workers`` says otherwise;
     one BLAS thread per worker, since the partitions already keep every core busy.
+    ``start_method``: "fork" (the default on Linux) or "spawn" (elsewhere; and for a caller whose
+    process runs threads that a fork would copy mid-work, e.g. Dr.Jit's: the inverse's tiles).
     """
     workers = max(1, int(max_workers or os.cpu_count() or 1))
-    ctx = multiprocessing.get_context("fork" if sys.platform.startswith("linux") else "spawn")
+    ctx = multiprocessing.get_context(start_method or ("fork" if sys.platform.startswith("linux") else "spawn"))
     return cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=worker_init)
 
 
