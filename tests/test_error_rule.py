@@ -21,12 +21,8 @@ PACKAGE = Path(__file__).resolve().parent.parent / "hyde_bsdf"
 PLAIN = {"ValueError", "TypeError"}
 
 #: files (relative to hyde_bsdf/) that may still raise a plain ValueError/TypeError, each with why
-ALLOWED = {
-    # converted on branch split/tiles (another helper's file while this rule landed); the lead
-    # empties this entry after merging that branch (plugin.py, mom/fast.py, mom/gather.py,
-    # mom/solver.py and inverse/scalar.py were converted there and have left the list)
-    "inverse/maps.py": "converted on branch split/tiles",
-}
+#: (none: every library module raises the package's exceptions)
+ALLOWED: dict[str, str] = {}
 
 
 def _plain_raises(path: Path, root: Path = PACKAGE) -> list[str]:
