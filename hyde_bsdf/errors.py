@@ -62,7 +62,12 @@ def shorten(value, limit: int = SHORTEN_LIMIT) -> str:
     import os
     if isinstance(value, os.PathLike):
         value = os.fspath(value)          # a path reads as the path, not PosixPath(...)
-    text = repr(value)
+    return _cut(repr(value), limit)
+
+
+def _cut(text: str, limit: int) -> str:
+    """``text`` when at most ``limit`` characters, else its start, an ellipsis with the number of
+    characters left out, and its end (the one form of a cut value, for both functions here)."""
     if len(text) <= limit:
         return text
     head, tail = (limit * 2) // 3, limit // 3 - 1
@@ -77,10 +82,9 @@ def shorten_values(text: str, limit: int = MESSAGE_VALUE_LIMIT) -> str:
 
     def cut(match):
         value = match.group(0)
-        if len(value) <= limit or " characters]..." in value:    # short, or already cut by shorten()
+        if " characters]..." in value:                           # already cut by shorten()
             return value
-        head, tail = (limit * 2) // 3, limit // 3 - 1
-        return f"{value[:head]}...[{len(value) - head - tail} characters]...{value[-tail:]}"
+        return _cut(value, limit)
 
     return re.sub(r"'[^']*'|\"[^\"]*\"|\S+", cut, str(text))
 
