@@ -17,8 +17,6 @@ The command line converts them in one place, :func:`hyde_bsdf.app.cli.main`: a U
 OSError or an OutputError is one line ``hyde-bsdf COMMAND: error: MESSAGE`` on stderr and exit
 status 2; a RejectedResult is one line and exit status 1; any other exception is a bug and keeps
 its traceback.  Messages that echo a value the user gave cut it with :func:`shorten`.
-
-May import: the standard library only (every module of the package may import this one).
 """
 from __future__ import annotations
 

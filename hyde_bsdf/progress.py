@@ -8,8 +8,6 @@ stderr" (:func:`stderr_lines`).  The library modules themselves never print: the
 calls :func:`set_quiet`, which silences every stderr line of this module -- also those of work
 deep inside the library that no command passes a callback to (the DHR table's build) -- but
 no warning or error.
-
-May import: the standard library and ``hyde_bsdf.errors`` only (every module may import this one).
 """
 from __future__ import annotations
 

@@ -22,8 +22,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "hyde_bsdf"
 
 #: layer of each top-level part of the package; None: importable from anywhere
 LAYER = {"errors": None, "progress": None, "io": 0, "model": 1, "mitsuba": 2, "mom": 2, "fit": 2,
-         "render": 3, "inverse": 4, "app": 5,
-         "cli": 6}   # hyde_bsdf/cli.py: the old console-script target, re-exporting hyde_bsdf.app.cli.main
+         "render": 3, "inverse": 4, "app": 5}
 #: ``from hyde_bsdf import NAME`` for the package's own lazy names: where NAME lives
 ROOT_NAMES = {"register": "mitsuba", "pbrdf": "model", "dhr_specular_pec": "model", "rms_slope_from": "model",
               "alpha_from_rms_slope": "model", "rms_slope_from_alpha": "model"}

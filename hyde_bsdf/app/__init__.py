@@ -10,6 +10,4 @@
 ``report``    ``hyde-bsdf validate`` (runs the checkout's ``validation/`` scripts, each as a child process)
 ``plots``     fit and inversion plots (matplotlib)
 ``pictures``  PNG charts of a Stokes image (matplotlib)
-
-May import: anything in ``hyde_bsdf``.  Nothing in the library imports it.
 """

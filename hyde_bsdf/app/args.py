@@ -1,6 +1,4 @@
 """What every sub-command's argument parser shares: one-line errors, common argument types.
-
-May import: anything (this is the application layer).
 """
 from __future__ import annotations
 

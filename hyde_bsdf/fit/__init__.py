@@ -10,8 +10,6 @@ The files themselves (the measurement CSV, the ``.pbsdf`` format) are read and w
 data, and what its standard errors mean); ``model_selection`` (:func:`select_model`,
 :func:`select_model_pbsdf`): every shadowing x diffuse model, the smallest adequate one chosen
 (``--model auto``).
-
-May import: ``hyde_bsdf.io``, ``hyde_bsdf.model``.  Independent of Mitsuba.
 """
 from hyde_bsdf.fit.mueller_fit import *  # noqa: F401,F403
 from hyde_bsdf.fit.mueller_fit import __all__ as _fit_all

@@ -25,8 +25,6 @@ of neighbouring geometries (theta_h x theta_d bins), so that residuals that move
 as one -- is used where it is larger, and the verdict says so (``errors = "robust"``).
 When the model is inadequate no error covers the model error: the verdict says the errors are
 lower bounds (``errors = "lower bounds"``).
-
-May import: ``hyde_bsdf.model`` (nothing here needs it), numpy, scipy.
 """
 from __future__ import annotations
 

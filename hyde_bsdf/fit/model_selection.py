@@ -22,8 +22,6 @@ verdict's own tests); the rule above picks one, and only that model is fitted jo
 and geometry (:func:`hyde_bsdf.fit.fit_pbsdf` from the screen's values) and its verdict made on all
 the data; if it fails the next candidate is tried (at most :data:`MAX_FULL_FITS`).  With error bars
 (CSV) every model is fitted fully, warm-started the same way.
-
-May import: ``hyde_bsdf.model``, ``hyde_bsdf.fit``.
 """
 from __future__ import annotations
 

@@ -39,8 +39,6 @@ loader holds the mapped file and a copy of it: 2x the file size); ``M`` is strea
 slab (one phi_d slice in memory) into a temporary file renamed at the end (atomic).
 
 The command line (``hyde-bsdf export``) is :mod:`hyde_bsdf.app.export`.
-
-May import: ``hyde_bsdf.io``, ``hyde_bsdf.model``, ``hyde_bsdf.fit``, ``hyde_bsdf.errors``.
 """
 from __future__ import annotations
 

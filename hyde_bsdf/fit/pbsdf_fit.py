@@ -30,8 +30,6 @@ band's n (and k) perturbed at once (n_b moves only band b's residuals): three re
 per Jacobian, however many bands.  3000 geometries x 5 bands take a few seconds.
 
 The command line (``hyde-bsdf fit FILE.pbsdf``) and the plot are in :mod:`hyde_bsdf.app.fit`.
-
-May import: ``hyde_bsdf.io``, ``hyde_bsdf.model``, ``hyde_bsdf.fit``.
 """
 from __future__ import annotations
 

@@ -11,8 +11,6 @@ diattenuation / polarizance vector longer than (1 + tol) M00); the counts are re
 (:class:`CellCounts`).  The usable cells are converted to the paper's angles (theta_i, theta_r,
 phi = phi_r - phi_i; phi = pi the specular plane) and Stokes bases
 (:mod:`hyde_bsdf.model.evaluator`) and subsampled (fixed seed) for fitting.
-
-May import: NumPy, :mod:`hyde_bsdf.io`, :mod:`hyde_bsdf.errors`, :mod:`hyde_bsdf.progress`.
 """
 from __future__ import annotations
 

@@ -1,7 +1,5 @@
 """Small pieces the inverse modules share: luminance weights, sqrt(2), error lines, the not-converged
 warning.
-
-May import: the standard library only.
 """
 from __future__ import annotations
 

@@ -75,9 +75,6 @@ sheets (rectangles) perpendicular to the light, 100 and 90 units out along it, o
 camera's view (the cameras sit 30 units from the sample).  A point light behind such a sheet
 renders black with ``stokes`` + ``path`` (its shadow rays are blocked), so a configuration with a
 sheet uses ``stokes`` + ``volpath`` (which transmits through them); the others use ``path``.
-
-May import: ``hyde_bsdf.inverse.observations``, ``hyde_bsdf.inverse.analyzer``, ``hyde_bsdf.model`` (the Fisher prediction) and the
-standard library.
 """
 from __future__ import annotations
 

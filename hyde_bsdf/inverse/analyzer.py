@@ -51,8 +51,6 @@ Bad input raises :class:`~hyde_bsdf.errors.UsageError` with one line naming the 
 problem: frames of unequal size, fewer than 3 frames, non-finite, negative or saturated pixels
 (``saturated="mask"`` masks saturated pixels out instead), a singular or badly conditioned
 analysis matrix.
-
-May import: NumPy, ``hyde_bsdf.errors``, ``hyde_bsdf.io`` (the EXR writer, lazily).
 """
 from __future__ import annotations
 

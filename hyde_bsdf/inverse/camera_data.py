@@ -20,9 +20,6 @@ picks one channel, which matches the renders only when the scene's lights and sa
 the camera is mono.  ``noise`` (a :class:`~hyde_bsdf.inverse.analyzer.CameraNoise`) gives sigma when
 the data carry none: the data are then in DN above black, and sigma is what ideal DoFP analyzers
 (0/45/90/135 deg) with that noise give (:func:`~hyde_bsdf.inverse.analyzer.stokes_sigma`).
-
-May import: ``hyde_bsdf.inverse.observations``, ``hyde_bsdf.inverse.analyzer``, ``hyde_bsdf.inverse.loss``,
-``hyde_bsdf.io.stokes_exr``.
 """
 from __future__ import annotations
 

@@ -5,8 +5,6 @@ Stokes images (:func:`invert_maps`), with per-texel standard errors.
 (:meth:`MapProblem.build`), the loss (:func:`map_loss`) and its gradient (:func:`map_step`), the
 update (:class:`LogAdam`), and the uncertainty (:func:`map_uncertainty`,
 :mod:`hyde_bsdf.inverse.uncertainty`).
-
-May import: the other modules of ``hyde_bsdf.inverse`` except ``cli``.
 """
 from __future__ import annotations
 

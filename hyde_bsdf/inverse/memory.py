@@ -1,6 +1,4 @@
 """Memory of a differentiable render: the estimate, and the check before an inversion starts.
-
-May import: the standard library, :mod:`hyde_bsdf.io.memory`.
 """
 from __future__ import annotations
 

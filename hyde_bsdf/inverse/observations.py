@@ -1,7 +1,5 @@
 """Observations for texture-valued (SVBRDF) inversion: parameter keys, Stokes renders of one
 sensor, the :class:`Observation` record, the UV-coverage pass, and the validation's plane scene.
-
-May import: ``hyde_bsdf.inverse.loss``, ``hyde_bsdf.inverse.scalar``, ``hyde_bsdf.inverse._common``.
 """
 from __future__ import annotations
 

@@ -15,8 +15,6 @@ with a new seed (``seed + 1 + iteration``); the reference uses ``seed`` and
 
 Index convention: the plugin's ``eta``, ``k`` are Mitsuba's n + ik; the paper's
 eta = n - jk describes the same material with the same numbers.
-
-May import: ``hyde_bsdf.inverse.loss``, ``hyde_bsdf.inverse._common``, and the folders left of ``inverse``.
 """
 from __future__ import annotations
 

@@ -31,8 +31,6 @@ random numbers), so the tiled maps agree with it within the standard errors, not
 Memory: each task holds one differentiable render of its crops; :func:`check_tiles_memory` checks
 the largest tile's estimate (:func:`~hyde_bsdf.inverse.memory.estimate_memory`) times the workers
 that run at once against the available memory before any task starts.
-
-May import: ``hyde_bsdf.inverse.*``, ``hyde_bsdf.render.camera``, ``hyde_bsdf.mom`` (the executors).
 """
 from __future__ import annotations
 

@@ -70,8 +70,6 @@ converged, and neither is any parameter of a texel not converged in one
 left as a small number), ``Uncertainty.converged`` marks it False, and
 :func:`convergence_warnings` names the parameter, the fraction of texels and the largest step
 (:class:`NotConvergedWarning`).
-
-May import: ``hyde_bsdf.inverse.observations``, ``hyde_bsdf.inverse.loss``, ``hyde_bsdf.inverse._common``.
 """
 from __future__ import annotations
 

@@ -36,8 +36,6 @@ Checks: :func:`check_output_path` / :func:`check_output_dir` raise
 written -- a directory where a file is expected, a parent that is a regular file, a folder that
 cannot be created, no write permission, ``/proc``, a name longer than the file system allows --
 so that commands refuse before long work.
-
-May import: the standard library and :mod:`hyde_bsdf.errors` only (every subpackage may use it).
 """
 from __future__ import annotations
 

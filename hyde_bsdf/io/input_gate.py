@@ -18,8 +18,6 @@ Rules (``docs/troubleshooting.md``, "The file gates"):
 
 Every refusal is a :class:`~hyde_bsdf.errors.UsageError` naming the file (cut to a readable
 length) and the limit.
-
-May import: the standard library, :mod:`hyde_bsdf.errors`, :mod:`hyde_bsdf.io.memory`.
 """
 from __future__ import annotations
 

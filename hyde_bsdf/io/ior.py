@@ -5,9 +5,6 @@ A material name is accepted only if it is exactly one of the tables Mitsuba ship
 (:func:`known_materials`: "Au", "Cu_palik", ...): no path, no ``../``, no file elsewhere on
 Mitsuba's search path.  The plugin and ``export`` both go through :func:`material_files`; a
 refusal names the (cut) name and the accepted ones.
-
-May import: the standard library and :mod:`hyde_bsdf.errors`, :mod:`hyde_bsdf.io.input_gate`
-(Mitsuba is located, never imported).
 """
 from __future__ import annotations
 

@@ -5,8 +5,6 @@ that does), falling back to ``sysconf`` free pages, or None where neither exists
 :func:`check_memory` refuses, before the allocation, a need larger than what is available, with
 a :class:`~hyde_bsdf.errors.UsageError` naming what needs it, both sizes in units that show them
 (never "0.00 GiB") and the option that makes it smaller.
-
-May import: the standard library and :mod:`hyde_bsdf.errors` only.
 """
 from __future__ import annotations
 

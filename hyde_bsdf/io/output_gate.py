@@ -19,8 +19,6 @@ Rules (``docs/troubleshooting.md``, "The file gates"):
 
 Every refusal is a :class:`~hyde_bsdf.errors.UsageError` naming the file (cut to a readable
 length) and the reason.
-
-May import: the standard library, :mod:`hyde_bsdf.errors` and :mod:`hyde_bsdf.io` modules.
 """
 from __future__ import annotations
 

@@ -43,8 +43,6 @@ Angles in the paper's terms, cell classification and subsampling for fitting are
 The reader and writer are plain NumPy (``M`` is memory-mapped, so a 1 GB file is subsampled
 without loading it); Mitsuba is not needed.  Writing (:func:`write_pbsdf`) is atomic
 (:mod:`hyde_bsdf.io.atomic`) and streams ``M`` slab by slab.
-
-May import: the standard library, NumPy, ``hyde_bsdf.io.atomic``, ``hyde_bsdf.errors``.
 """
 from __future__ import annotations
 

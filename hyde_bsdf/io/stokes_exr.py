@@ -27,9 +27,6 @@ polarization camera's Stokes step gives and ``invert --maps`` reads.
 
 The derived quantities (intensity, DoLP, AoLP, DoCP) are in
 :mod:`hyde_bsdf.render.polarization`; the PNG charts in :mod:`hyde_bsdf.app.pictures`.
-
-May import: the standard library, NumPy, :mod:`hyde_bsdf.errors`, :mod:`hyde_bsdf.io.atomic`
-(OpenEXR lazily, inside the reader and writer).
 """
 from __future__ import annotations
 

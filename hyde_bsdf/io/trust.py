@@ -13,8 +13,6 @@ The rules are ssh's (``StrictModes``) for files that change what the program com
 
 A refusal is an :class:`UntrustedFileError` (an ``OSError``) whose one-line message names the
 path, the reason and the fix.
-
-May import: the standard library and :mod:`hyde_bsdf.io.input_gate` (message wording).
 """
 from __future__ import annotations
 

@@ -6,7 +6,6 @@ paper's, for comparisons), ``chi2`` (a polarization-aware adapter for Mitsuba's 
 ``variants`` (choosing a usable variant: the LLVM version guard, the CUDA guard), ``log`` (Mitsuba log
 messages repeated per scene, once per run).
 
-May import: ``hyde_bsdf.model`` for *data* only (the DHR table and parameter ranges), never its
-formula code: the plugin is an independent derivation of the evaluator, and the two are tested
-against each other.  Importing this subpackage does not import Mitsuba; using it does.
+The plugin is an independent derivation of the evaluator: it reads the model's data (the DHR
+table, the parameter ranges), never its formula code, and the two are tested against each other.
 """

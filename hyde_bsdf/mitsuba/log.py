@@ -1,8 +1,6 @@
 """Mitsuba's log, once per run: :func:`log_once` lets a message that Mitsuba repeats for every scene
 (``Monochrome mode enabled, setting film output pixel format to 'luminance'``, from every ``hdrfilm``
 loaded in a mono variant) through the first time only.
-
-May import: Mitsuba (when used).
 """
 from __future__ import annotations
 

@@ -4,9 +4,6 @@
 ``jones_mueller`` (Eqs. 9, 11), ``shadowing`` (Eq. 12, Smith, none), ``roughness`` (the
 roughness spellings), ``dhr`` (Eqs. 14-16 and the cached DHR table) and ``evaluator``
 (Eqs. 6, 13, 16, 17: :func:`pbrdf`).
-
-May import: NumPy, SciPy and the standard library only.  Everything else in the package may
-import this subpackage; it imports nothing from the rest of ``hyde_bsdf``.
 """
 from hyde_bsdf.model.dhr import dhr_specular_pec
 from hyde_bsdf.model.evaluator import diffuse_pbrdf, pbrdf, specular_pbrdf

@@ -35,8 +35,6 @@ alpha = 2 sigma_h / ell = sqrt(2) rms_slope (Mitsuba's roughconductor).
 * fit: :data:`FIT_PARAMETERS` = (``n``, ``k``, ``rms_slope``), the evaluator's names;
 * inverse: :data:`INVERSE_PARAMETERS` = (``rms_slope``, ``eta``, ``k``), the plugin's names;
 * MoM solver: ``n``, ``k`` in; inside, the complex :func:`paper_eta` = n - j k.
-
-May import: :mod:`hyde_bsdf.model.checks` only.
 """
 from __future__ import annotations
 

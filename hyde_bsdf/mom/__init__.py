@@ -8,8 +8,6 @@ spectral acceleration for long partitions and grazing incidence, GMRES and dense
 field, absorbed power), ``gather`` (waiting on an executor with liveness checks and a timeout: a
 dead dask cluster ends in one error, never a hang) and ``model1d`` (the pBRDF of a 1-D facet
 surface with V-groove, Smith or no shadowing, the apples-to-apples counterpart of the MoM result).
-
-May import: ``hyde_bsdf.model``.  Independent of Mitsuba.
 """
 from hyde_bsdf.mom.solver import *  # noqa: F401,F403  (the public names of the solver)
 from hyde_bsdf.mom.solver import __all__ as _solver_all

@@ -16,8 +16,6 @@ A dead or broken executor, a task killed with its worker, or a timeout ends in
 :class:`ExecutorError`, a one-line message that names the executor (``dask cluster at
 tcp://...``, ``process pool of 4 workers``) and how many tasks had finished; the tasks still
 pending are cancelled.  An exception raised *by a task* reaches the caller unchanged.
-
-May import: the standard library, ``hyde_bsdf.errors`` and ``hyde_bsdf.progress``.
 """
 from __future__ import annotations
 

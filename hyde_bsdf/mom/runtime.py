@@ -4,8 +4,6 @@ Not physics: the paper's equations live in :mod:`hyde_bsdf.mom.solver` and its s
 single-threaded BLAS (the partitions already keep every core busy; a 2-thread LU of a 500-unknown partition is
 10x slower here) and keeps freed heap blocks (:func:`keep_freed_memory`); :func:`memory_available` is the one
 place the MoM asks how much memory it may allocate (set-up refusals and the dense fallback's check).
-
-May import: the standard library only.
 """
 from __future__ import annotations
 

@@ -4,9 +4,6 @@
 files are :mod:`hyde_bsdf.io.stokes_exr`; the ``hyde-bsdf render`` and ``demo`` commands and the
 PNG charts are in :mod:`hyde_bsdf.app`.  Inverse rendering, which uses the renderer, is its own
 subpackage, :mod:`hyde_bsdf.inverse`.
-
-May import: ``hyde_bsdf.io``, ``hyde_bsdf.model``, ``hyde_bsdf.mitsuba``, ``hyde_bsdf.fit``.  Only
-``hyde_bsdf.inverse`` and ``hyde_bsdf.app`` import this subpackage.
 """
 from hyde_bsdf.render.renderer import (DEFAULT_VARIANT, load_scene, prepare_variant, render_stokes, rotate_stokes,
                                        sensor_to_paper_rotation)

@@ -37,8 +37,6 @@ File formats (JSON; :func:`load_cameras`, :func:`load_lights`)::
 Stokes images are a DoFP camera's super-pixel grid while the intrinsics are the raw sensor's
 (:meth:`Calibration.binned`); ``{"cameras": [...]}`` holds several) and ``{"lights": [{...}, ...]}`` (or one light object).  Mistakes raise
 :class:`~hyde_bsdf.errors.UsageError` naming the file and the key.
-
-May import: NumPy, Mitsuba, ``hyde_bsdf.errors``.
 """
 from __future__ import annotations
 

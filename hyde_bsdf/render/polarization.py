@@ -12,8 +12,6 @@ A Stokes image is the dict :mod:`hyde_bsdf.io.stokes_exr` describes (``"S0".."S3
 
 Where ``S0`` is zero (or not positive) the ratios are undefined: they are set
 to 0 and reported in the ``valid`` mask of :func:`polarization_quantities`.
-
-May import: NumPy, :mod:`hyde_bsdf.io`.
 """
 from __future__ import annotations
 

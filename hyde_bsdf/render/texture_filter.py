@@ -5,8 +5,6 @@ while per-texel fitting (:func:`hyde_bsdf.inverse.invert_maps`) and its standard
 a pixel inside a texel depends on that texel only.  A texture's ``filter_type`` cannot be changed
 through ``mi.traverse``, so :func:`bitmap_to_nearest` builds a nearest bitmap with the same data and
 puts it into the BSDF in place of the old one (the ``hyde`` plugin's ``replace_texture``).
-
-May import: ``hyde_bsdf.mitsuba`` (through the loaded plugin objects only).
 """
 from __future__ import annotations
 
