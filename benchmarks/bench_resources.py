@@ -1,15 +1,17 @@
 """Measure every entry of :data:`hyde_bsdf.resources.COSTS` and print it beside the table's value.
 
-Each memory figure is the peak resident size (ru_maxrss) of a fresh child process, so that no
-earlier work in this process counts; a fixed part and a per-unit part come from two sizes.  Times
-are CPU seconds on one core (single-threaded BLAS).  The table keeps a margin above what is
-measured: the last column, table / measured, should be >= 1 (a cost that grew past its entry
-shows < 1: raise the entry).  After a change that moves a cost, rerun and copy the figures into
-``hyde_bsdf/resources.py``.
+Memory: the peak resident size (ru_maxrss) of a fresh child process running the command the model
+is for, at three sizes, against the table's estimate at that size; the line through the smallest
+and largest size gives the fixed part and the cost per unit.  (Dr.Jit's allocator rounds blocks up
+to powers of two, so the cost per unit steps between sizes: the model is a bound, not a fit.)
+Times: CPU seconds on one core (single-threaded BLAS).  The last column, table / measured (for a
+memory model: the estimate over the measured peak), should be >= 1; a cost that grew past its
+entry shows < 1: raise the entry.  After a change that moves a cost, rerun and copy the figures
+into ``hyde_bsdf/resources.py``.
 
-    .venv/bin/python benchmarks/bench_resources.py [--only render,ad,forward,dense,fast,surface,pbsdf,disk]
+    .venv/bin/python benchmarks/bench_resources.py [--only render,ad,forward,dense,fast,surface,pbsdf]
 
-Entries not measured here: ``map_bytes_per_texel_*`` (counted: float64 arrays), ``plot_file_bytes``
+Not measured here: ``map_bytes_per_texel_*`` (counted: float64 arrays) and ``plot_file_bytes``
 (an upper bound; the plot ``invert`` writes is printed as a check).
 """
 from __future__ import annotations
@@ -37,50 +39,71 @@ def peak_rss(cmd) -> int:
     return usage.ru_maxrss * 1024
 
 
-def two_sizes(units, rss):
-    """(fixed, per unit) of the line through two (units, bytes) points."""
-    per = (rss[1] - rss[0]) / (units[1] - units[0])
-    return rss[0] - per * units[0], per
+def memory_model(name, units, commands, estimate, fixed_key, per_key):
+    """Rows of a memory model: the fixed part and the cost per unit through the smallest and largest
+    size, and, per size, the measured peak against ``estimate(units)``."""
+    rss = [peak_rss(cmd) for cmd in commands]
+    per = (rss[-1] - rss[0]) / (units[-1] - units[0])
+    rows = {fixed_key: rss[0] - per * units[0], per_key: per}
+    rows.update({f"{name} at {u:.3g} (estimate/peak)": (r, estimate(u)) for u, r in zip(units, rss)})
+    return rows
 
 
 def render(tmp, variant, polarized):
-    """``hyde-bsdf render scenes/inverse.xml`` at res 300 and 900, 1 spp."""
-    sizes = (300, 900)
-    rss = [peak_rss(CLI + ["render", "scenes/inverse.xml", "-o", str(tmp / f"r{r}.exr"), "--variant", variant,
-                           "-D", f"res={r}", "--spp", "1", "-q"]) for r in sizes]
-    fixed, per = two_sizes([r * r for r in sizes], rss)
-    key = "render_stokes_bytes_per_pixel" if polarized else "render_colour_bytes_per_pixel"
-    return {"render_fixed_bytes" if polarized else "render_fixed_bytes (colour)": fixed, key: per}
+    """``hyde-bsdf render scenes/inverse.xml`` at res 300, 600 and 900, 1 spp."""
+    from hyde_bsdf.resources import render_bytes
+
+    sizes = (300, 600, 900)
+    cmds = [CLI + ["render", "scenes/inverse.xml", "-o", str(tmp / f"r{r}.exr"), "--variant", variant,
+                   "-D", f"res={r}", "--spp", "1", "-q"] for r in sizes]
+    per_key = "render_stokes_bytes_per_pixel" if polarized else "render_colour_bytes_per_pixel"
+    return memory_model(f"render {variant} px", [r * r for r in sizes], cmds,
+                        lambda px: render_bytes(px, 1, polarized), f"render_fixed_bytes ({variant})", per_key)
 
 
 def ad(tmp):
-    """``hyde-bsdf invert`` (the built-in scene, reverse mode) at 64^2 and 128^2 px, 32 spp; its history CSV."""
-    sizes, spp = (64, 128), 32
-    rss = [peak_rss(CLI + ["invert", "--res", str(r), "--spp", str(spp), "--spp-ref", "4", "--iterations", "2",
-                           "-o", str(tmp / f"inv{r}"), "-q"]) for r in sizes]
-    fixed, per = two_sizes([r * r * spp for r in sizes], rss)
-    history = tmp / "inv128" / "invert_history.csv"
-    rows = history.read_text().count("\n")
-    plot = max((p.stat().st_size for p in (tmp / "inv128").glob("*.png")), default=0)
-    return {"ad_fixed_bytes": fixed, "ad_bytes_per_sample": per, "history_row_bytes": history.stat().st_size / rows,
-            "plot_file_bytes (invert's plot)": plot}
+    """Reverse mode: ``hyde-bsdf invert`` (the built-in scene, spectral) at 64^2, 128^2 and 192^2 px,
+    16 spp, and ``invert --maps --no-uncertainty`` (the built-in plane, mono, every light) at 48^2,
+    96^2 and 144^2 px per picture, 16 spp; the history CSV."""
+    from hyde_bsdf.inverse.observations import LIGHTS
+    from hyde_bsdf.resources import inversion_bytes
+
+    sizes, spp = (64, 128, 192), 16
+    cmds = [CLI + ["invert", "--res", str(r), "--spp", str(spp), "--spp-ref", "4", "--iterations", "2",
+                   "-o", str(tmp / f"inv{r}"), "-q"] for r in sizes]
+    rows = memory_model("invert samples", [r * r * spp for r in sizes], cmds,
+                        lambda s: inversion_bytes(s, 1), "ad_fixed_bytes (spectral)",
+                        "ad_bytes_per_sample (spectral)")
+    sizes = (48, 96, 144)
+    cmds = [CLI + ["invert", "--maps", "--map-size", "8", "--res", str(r), "--spp", str(spp), "--spp-ref", "4",
+                   "--iterations", "2", "--no-uncertainty", "-o", str(tmp / f"mapsad{r}"), "-q"] for r in sizes]
+    rows.update(memory_model("invert --maps samples", [len(LIGHTS) * r * r * spp for r in sizes], cmds,
+                             lambda s: inversion_bytes(s, 1), "ad_fixed_bytes", "ad_bytes_per_sample"))
+    history = tmp / "inv192" / "invert_history.csv"
+    rows["history_row_bytes"] = history.stat().st_size / history.read_text().count("\n")
+    rows["plot_file_bytes (invert's plot)"] = max(p.stat().st_size for p in (tmp / "inv192").glob("*.png"))
+    return rows
 
 
 def forward(tmp):
-    """``hyde-bsdf invert --maps`` (the built-in plane, every light): 1 spp steps, the uncertainty step's
-    forward-mode renders at 16 spp set the peak; at 48^2 and 96^2 px per picture."""
+    """``hyde-bsdf invert --maps`` (the built-in plane, every light): 1 spp steps, so the uncertainty
+    step's forward-mode renders at 16 spp set the peak; 48^2, 96^2 and 144^2 px per picture
+    (samples counted over all pictures)."""
     from hyde_bsdf.inverse.observations import LIGHTS
+    from hyde_bsdf.resources import inversion_bytes
 
-    sizes, spp = (48, 96), 16
-    rss = [peak_rss(CLI + ["invert", "--maps", "--map-size", "8", "--res", str(r), "--spp", "1", "--spp-ref", "4",
-                           "--iterations", "2", "-o", str(tmp / f"maps{r}"), "-q"]) for r in sizes]
-    _, per = two_sizes([len(LIGHTS) * r * r * spp for r in sizes], rss)
-    return {"ad_forward_bytes_per_sample": per}
+    sizes, spp = (48, 96, 144), 16
+    cmds = [CLI + ["invert", "--maps", "--map-size", "8", "--res", str(r), "--spp", "1", "--spp-ref", "4",
+                   "--iterations", "2", "-o", str(tmp / f"maps{r}"), "-q"] for r in sizes]
+    return memory_model("invert --maps forward samples", [len(LIGHTS) * r * r * spp for r in sizes], cmds,
+                        lambda s: inversion_bytes(s, 0, 1), "ad_fixed_bytes (forward)",
+                        "ad_forward_bytes_per_sample")
 
 
 def dense():
-    """Dense solves of a flat partition on one core: PEC s at 1000 and 2000 unknowns (fill per entry,
-    LU per n^3), glass s+p at 1500 (the lossless interior's (1/2 + D1)^-1 S1 per n^3)."""
+    """Dense solves of a flat partition on one core: PEC s at 1000 and 3 x 2000 unknowns (fill per entry,
+    LU per n^3: the least of the rounds, the least disturbed by other work), glass s+p at 1500 (the
+    lossless interior's (1/2 + D1)^-1 S1 per n^3)."""
     import numpy as np
 
     from hyde_bsdf.mom.dense import solve_dense
@@ -95,7 +118,7 @@ def dense():
         return solve_dense(x, zero, zero, zero, 0.1, psi, pols, eta, time.process_time)["times"]
 
     fill, lu = [], []
-    for n in (1000, 2000):
+    for n in (1000, 2000, 2000, 2000):
         t = solve(n, ("s",), None)
         fill.append(t[0] / n**2)
         lu.append(t[1] / n**3)
@@ -107,18 +130,22 @@ def dense():
 
 
 def fast():
-    """One Fig. 6 partition (150 wavelengths at 10 points: 1500 unknowns, sigma_h/ell as the paper's),
-    fast solver, s and p, one theta_i: CPU seconds per unknown."""
+    """The fast solver's worst case the entry stands for: one glass partition of issue 25's grazing run
+    (966 wavelengths at 8 points: 7728 unknowns, sigma_h = 2, ell = 14.1, n = 1.5, theta_i = 85 deg),
+    s and p: CPU seconds per unknown."""
+    import warnings
+
     from hyde_bsdf import mom
     from hyde_bsdf.mom.runtime import limit_blas_threads
     from hyde_bsdf.mom.solver import SerialExecutor
 
     limit_blas_threads(1)
-    ell = 5.0
     t0 = time.process_time()
-    mom.scatter(150.0, 1, 0.3 * ell / math.sqrt(2.0), ell, [30.0], [30.0], pts_per_wl=10, solver="fast",
-                polarization=("s", "p"), executor=SerialExecutor(), progress=False)
-    return {"fast_seconds_per_unknown": (time.process_time() - t0) / 1500}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        mom.scatter(966.0, 1, 2.0, 14.1, [85.0], [85.0], pts_per_wl=8, solver="fast", n=1.5, k=0.0,
+                    polarization=("s", "p"), executor=SerialExecutor(), progress=False)
+    return {"fast_seconds_per_unknown": (time.process_time() - t0) / 7728}
 
 
 def surface():
@@ -136,17 +163,19 @@ def surface():
 
 
 LOADER = r"""
-import resource, sys
+import os, sys
 import mitsuba as mi
 mi.set_variant("scalar_spectral_polarized")
-before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+def rss():
+    return int(open("/proc/self/statm").read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+before = rss()
 bsdf = mi.load_dict({"type": "measured_polarized", "filename": sys.argv[1]})
-print((resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) * 1024)
+print(rss() - before)
 """
 
 
 def pbsdf(tmp):
-    """Mitsuba loading a ~40 MB ``.pbsdf``: the rise of its peak RSS over the file size."""
+    """Mitsuba loading a ~40 MB ``.pbsdf``: the rise of its resident size over the file size."""
     from hyde_bsdf.fit.pbsdf_export import export_pbsdf
 
     path = tmp / "table.pbsdf"
@@ -174,12 +203,15 @@ def main(argv=None):
             measured.update(steps[name]())
             print(f"[bench_resources] {name}: {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
     print(f"load average {os.getloadavg()[0]:.1f}, {os.cpu_count()} cores")
-    print(f"{'entry':42s} {'measured':>12s} {'table':>12s} {'table/measured':>15s}")
+    print(f"{'entry':58s} {'measured':>11s} {'table':>11s} {'table/measured':>15s}")
     for key, value in measured.items():
-        entry = getattr(COSTS, key.split(" ")[0], None)
-        ratio = f"{entry / value:15.2f}" if entry is not None and value > 0 else f"{'':15s}"
-        print(f"{key:42s} {value:12.4g} {'' if entry is None else f'{entry:12.4g}':>12s} {ratio}")
-    print(json.dumps({k: float(v) for k, v in measured.items()}))
+        if isinstance(value, tuple):                     # a memory model at one size: (peak, estimate)
+            value, entry = value
+        else:
+            entry = getattr(COSTS, key.split(" ")[0], None)
+        ratio = f"{entry / value:15.2f}" if entry is not None and value > 0 else ""
+        print(f"{key:58s} {value:11.4g} {'' if entry is None else f'{entry:11.4g}':>11s} {ratio}")
+    print(json.dumps({k: float(v[0] if isinstance(v, tuple) else v) for k, v in measured.items()}))
 
 
 if __name__ == "__main__":

@@ -37,10 +37,10 @@ class Costs:
     render_fixed_bytes: int = 400 * MiB
     render_stokes_bytes_per_pixel: int = 800
     render_colour_bytes_per_pixel: int = 250
-    #: ``invert``: one differentiable render (reverse mode through ``path``), fixed + per sample
-    #: (pixels x spp); the uncertainty step's forward-mode renders, per sample
+    #: ``invert``: one differentiable render (reverse mode through ``path``; all pictures of a step
+    #: together), fixed + per sample (pixels x spp); the uncertainty step's forward-mode renders, per sample
     ad_fixed_bytes: int = 400 * MiB
-    ad_bytes_per_sample: int = 2048
+    ad_bytes_per_sample: int = 3072
     ad_forward_bytes_per_sample: int = 1024
     #: ``invert --maps``: float64 maps per texel: the truth, and per fitted parameter its value, gradient,
     #: Adam's two moments and the running average (counted, not measured)
@@ -51,7 +51,7 @@ class Costs:
     #: ``mom.scatter``'s dense solve, one core: matrix fill per entry and region, LU per n^3 and
     #: polarisation, a lossless interior's (1/2 + D1)^-1 S1 per n^3
     dense_fill_seconds_per_entry: float = 2.2e-7
-    dense_lu_seconds_per_n3: float = 3.9e-11
+    dense_lu_seconds_per_n3: float = 6.5e-11
     dense_interior_seconds_per_n3: float = 5.5e-10
     #: ``mom.scatter``'s fast solver, CPU seconds per unknown (where it has not run yet)
     fast_seconds_per_unknown: float = 2e-3
