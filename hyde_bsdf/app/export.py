@@ -10,7 +10,7 @@ prints the measured interpolation error and the ``<bsdf>`` element to use.
 """
 from __future__ import annotations
 
-from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.args import Parser, quiet_option, user_input, writes
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.pbsdf_export import DEFAULT_RESOLUTION, export_pbsdf
 from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
@@ -33,7 +33,7 @@ def build_parser() -> Parser:
                              "renderer (mitsuba executable, CUDA without Python) renders in *_spectral_polarized "
                              "variants; prints the measured interpolation error and the <bsdf> element to use. "
                              "Index: the paper's eta = n - jk (the plugin's eta = n, k = k).")
-    ap.add_argument("output", help="the .pbsdf file to write (atomically)")
+    writes(ap.add_argument("output", help="the .pbsdf file to write (atomically)"))
     ap.add_argument("--rms-slope", type=float, required=True, help="the paper's rms_slope = sqrt(2) sigma_h/ell")
     ap.add_argument("--material", default=None, help="a Mitsuba data/ior material (Au, Ag, Al, Cu, ...)")
     ap.add_argument("--n", default=None, help="real part of the index: one value or 5 (450..650 nm)")

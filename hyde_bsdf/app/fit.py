@@ -31,7 +31,7 @@ import math
 import warnings
 from pathlib import Path
 
-from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.args import Parser, quiet_option, reads, run_inputs, user_input, writes
 from hyde_bsdf.app.plots import PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit, plot_selection
 from hyde_bsdf.errors import RejectedResult, UsageError
 from hyde_bsdf.fit.adequacy import InadequateModelWarning
@@ -159,7 +159,7 @@ def csv_parser() -> Parser:
                     "The index is the paper's eta = n - jk (the plugin's eta = n, k = k). "
                     "Exit status: 0 fitted, 1 not converged, or with --strict an inadequate model or an ill-posed "
                     "fit, 2 bad input.")
-    ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M01, M01_sigma, ...)")
+    reads(ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M01, M01_sigma, ...)"))
     ap.add_argument("--fit", default="n,k", help="comma-separated parameters to fit, from n,k,rms_slope "
                     "(default n,k)")
     ap.add_argument("--rms-slope", type=float, default=0.3,
@@ -168,9 +168,9 @@ def csv_parser() -> Parser:
     ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k; default: several starts")
     _add_model_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
-    ap.add_argument("-o", "--output", default=None,
+    writes(ap.add_argument("-o", "--output", default=None,
                     help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)}); with --model "
-                         "auto also NAME_models.EXT, misfit against model size")
+                         "auto also NAME_models.EXT, misfit against model size"))
     quiet_option(ap)
     return ap
 
@@ -181,12 +181,13 @@ def csv_main(argv=None) -> int:
     Options and the output path are checked before the file is read.  Exit status 0 fitted, 1 not
     converged (an ill-posed fit with ``--strict`` raises, 1 too); user errors raise UsageError.
     """
-    args = csv_parser().parse_args(argv)
-    with _output_gate(args):       # the output gate's refusal comes before the file is read
+    parser = csv_parser()
+    args = parser.parse_args(argv)
+    with _output_gate(args, parser):       # the output gate's refusal comes before the file is read
         return _csv_run(args)
 
 
-def _output_gate(args):
+def _output_gate(args, parser):
     """The output gate on ``-o`` (and, when the model is chosen, its ``_models`` plot) for the whole
     run: not the data file, one writer at a time, room for each plot (:data:`~hyde_bsdf.resources.COSTS`)."""
     if not args.output:
@@ -194,7 +195,7 @@ def _output_gate(args):
     check_plot_path(args.output)
     with user_input():
         plots = [args.output] + ([_models_path(args.output)] if _auto(args) else [])
-    return output_gate(plots, inputs=[args.data], need_bytes=COSTS.plot_file_bytes * len(plots), what="-o plot")
+    return output_gate(plots, inputs=run_inputs(parser, args), need_bytes=COSTS.plot_file_bytes * len(plots), what="-o plot")
 
 
 def _csv_run(args) -> int:
@@ -241,7 +242,7 @@ def pbsdf_parser() -> Parser:
         "counts (NaN, non-physical, below the horizon), the fit with standard errors, and the hyde <bsdf>. "
         "Index: the paper's eta = n - jk (the plugin's eta = n, k = k). Exit status: 0 fitted, 1 not converged, "
         "or with --strict an inadequate model or an ill-posed fit, 2 bad input."))
-    ap.add_argument("data", help="the measured_polarized table (.pbsdf)")
+    reads(ap.add_argument("data", help="the measured_polarized table (.pbsdf)"))
     ap.add_argument("--fit", default="n,k,rms_slope", help="parameters to fit (default n,k,rms_slope)")
     ap.add_argument("--rms-slope", type=float, default=0.3, help="start (or fixed) rms_slope (default 0.3)")
     ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n of every band; default: several")
@@ -254,16 +255,17 @@ def pbsdf_parser() -> Parser:
                     help="a cell with |M_jk| or a degree of polarization above (1 + tolerance) M00 is non-physical")
     ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
-    ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element; "
-                    "with --model auto also NAME_models.EXT, misfit against model size")
+    writes(ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller "
+                           "element; with --model auto also NAME_models.EXT, misfit against model size"))
     quiet_option(ap)
     return ap
 
 
 def pbsdf_main(argv=None) -> int:
     """``hyde-bsdf fit FILE.pbsdf``: read, mask, subsample, fit, print, plot."""
-    args = pbsdf_parser().parse_args(argv)
-    with _output_gate(args):
+    parser = pbsdf_parser()
+    args = parser.parse_args(argv)
+    with _output_gate(args, parser):
         return _pbsdf_run(args)
 
 

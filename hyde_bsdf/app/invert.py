@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.args import Parser, quiet_option, reads, run_inputs, user_input, writes
 from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
@@ -27,7 +27,6 @@ from hyde_bsdf.io.atomic import atomic_open, atomic_path
 from hyde_bsdf.io.input_gate import check_input
 from hyde_bsdf.io.output_gate import check_free_space, check_output_path, output_gate
 from hyde_bsdf.io.stokes_exr import exr_bytes
-from hyde_bsdf.render.renderer import scene_inputs
 from hyde_bsdf.progress import stderr_lines
 from hyde_bsdf.resources import COSTS, check_memory, inversion_bytes
 
@@ -66,15 +65,15 @@ def build_parser():
                     "texture-valued roughness (alpha or rms_slope bitmap), optionally index maps, from "
                     "one or more images (llvm_ad_mono_polarized).")
     ap.add_argument("--maps", action="store_true", help="texture-valued mode: fit per-texel maps")
-    ap.add_argument("--scene", action="append", default=None,
+    reads(ap.add_argument("--scene", action="append", default=None,
                     help="Mitsuba XML scene holding the BSDF (repeat for several scenes, e.g. one per light; "
-                         "default: the built-in sphere (scalar) or textured plane, 3 views x 2 lights (--maps))")
-    ap.add_argument("--reference", action="append", default=None,
+                         "default: the built-in sphere (scalar) or textured plane, 3 views x 2 lights (--maps))"), "scene")
+    reads(ap.add_argument("--reference", action="append", default=None,
                     help="reference Stokes EXR of the matching --scene (hyde-bsdf render or stokes output: "
                          "S0.R..S3.B or mono S0, S1, S2[, S3], with optional _sigma layers and mask; same film "
-                         "size); default: render one at --truth (built-in truth map with --maps)")
-    ap.add_argument("--mask", action="append", default=None,
-                    help="--maps: PNG or .npy of the pixels to use for the matching --reference (non-zero = use)")
+                         "size); default: render one at --truth (built-in truth map with --maps)"))
+    reads(ap.add_argument("--mask", action="append", default=None,
+                          help="--maps: PNG or .npy of the pixels to use for the matching --reference (non-zero = use)"))
     _calibrated_options(ap)
     ap.add_argument("--sensor", type=int, default=0, help="index of the sensor of each --scene (default 0)")
     ap.add_argument("--target", default=None, help="key prefix of the BSDF to recover when the scene has "
@@ -109,17 +108,17 @@ def build_parser():
     ap.add_argument("--weight", type=float, default=0.0, help="--maps: regulariser weight lambda (loss units "
                     "per map unit (tv) or squared map unit (l2); 0.1 mild, >= 1 flattens; default 0)")
     ap.add_argument("--seed", type=int, default=0, help="random seed (integer >= 0)")
-    ap.add_argument("-o", "--output", default="out/invert", help="output folder (default out/invert)")
+    writes(ap.add_argument("-o", "--output", default="out/invert", help="output folder (default out/invert)"))
     quiet_option(ap)
     return ap
 
 
 def _calibrated_options(ap):
     """--camera, --light (the calibrated rig), --tiles, --workers, --scheduler (tiles as tasks), --channel."""
-    ap.add_argument("--camera", default=None, help="--maps: camera calibration JSON (CV pinhole: world-to-camera R, t; "
-                    "fx, fy, cx, cy; see hyde_bsdf.render.camera): the sensors of the one --scene (the sample only)")
-    ap.add_argument("--light", default=None, help="--maps with --camera: light JSON (point positions or directional "
-                    "towards_light, optional polarizer/retarder); one scene per light, --reference light-major")
+    reads(ap.add_argument("--camera", default=None, help="--maps: camera calibration JSON (CV pinhole: world-to-camera R, t; "
+                    "fx, fy, cx, cy; see hyde_bsdf.render.camera): the sensors of the one --scene (the sample only)"))
+    reads(ap.add_argument("--light", default=None, help="--maps with --camera: light JSON (point positions or directional "
+                    "towards_light, optional polarizer/retarder); one scene per light, --reference light-major"))
     ap.add_argument("--tiles", default=None, help="--maps with --camera: split the map into tiles of texels, N (N x N) "
                     "or RxC, each fitted from the film crop of the pixels wholly inside it, as an independent task "
                     "(memory: the largest tile's crop instead of the whole picture; see hyde_bsdf.inverse.tiles)")
@@ -248,12 +247,8 @@ def _scene_map_shape(observations, fit, args) -> tuple[int, int]:
 
 
 def _run_inputs(args) -> list:
-    """Every file this run reads -- each --scene and the files it names, --reference, --mask --
-    which no output may overwrite (``invert --maps -o .`` beside a scene's alpha.exr)."""
-    inputs = []
-    for scene in args.scene or []:
-        inputs += scene_inputs(scene)
-    return inputs + list(args.reference or []) + list(args.mask or [])
+    """Every file this run reads (:func:`~hyde_bsdf.app.args.run_inputs`), which no output may replace."""
+    return run_inputs(build_parser(), args)
 
 
 def _check_out(path):

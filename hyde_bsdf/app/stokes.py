@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.app.args import Parser, quiet_option
+from hyde_bsdf.app.args import Parser, quiet_option, reads, run_inputs, writes
 from hyde_bsdf.errors import UsageError, shorten
 
 __all__ = ["build_parser", "cli_main", "read_frame"]
@@ -31,8 +31,8 @@ def build_parser():
                  "division-of-focal-plane mosaic.  Least squares through the analysis matrix; the camera's "
                  "noise (gain, read noise) propagated to sigma.")
     src = ap.add_mutually_exclusive_group(required=True)
-    src.add_argument("--mosaic", help="one DoFP raw mosaic (.npy, PNG or TIFF; H, W even)")
-    src.add_argument("--frames", nargs="+", help="N >= 3 raw frames behind analyzers at --angles")
+    reads(src.add_argument("--mosaic", help="one DoFP raw mosaic (.npy, PNG or TIFF; H, W even)"))
+    reads(src.add_argument("--frames", nargs="+", help="N >= 3 raw frames behind analyzers at --angles"))
     ap.add_argument("--angles", help="analyzer angles of --frames in deg, comma-separated (counter-clockwise "
                     "from image right towards image up)")
     ap.add_argument("--layout", default="90,45,135,0", help="--mosaic: analyzer angles of the 2 x 2 cell, row by "
@@ -41,8 +41,8 @@ def build_parser():
                     help="--mosaic: superpixel (half resolution, independent pixels; default) or bilinear (full grid, "
                          "correlated neighbours)")
     ap.add_argument("--retarder", help="--frames: FAST,RETARDANCE (deg) of a retarder in front of every analyzer")
-    ap.add_argument("--analysis", help="calibrated analysis matrix (.npy, (N, 4) or (H, W, N, 4)) instead of the "
-                    "ideal analyzers")
+    reads(ap.add_argument("--analysis", help="calibrated analysis matrix (.npy, (N, 4) or (H, W, N, 4)) instead of the "
+                    "ideal analyzers"))
     ap.add_argument("--gain", type=float, default=1.0, help="DN per electron (default 1)")
     ap.add_argument("--read-noise", type=float, default=0.0, help="read noise in electrons rms (default 0)")
     ap.add_argument("--full-well", type=float, default=math.inf, help="full well in electrons (default inf)")
@@ -51,8 +51,8 @@ def build_parser():
                     "radiance unit at this exposure; the EXR is divided by it (default 1: the EXR in DN)")
     ap.add_argument("--saturated", default="error", choices=("error", "mask"),
                     help="saturated pixels: refuse (default) or leave them out (mask channel 0)")
-    ap.add_argument("-o", "--output", required=True, help="output Stokes EXR")
-    ap.add_argument("--png", default=None, help="stem of the intensity/DoLP/AoLP charts (default: beside -o)")
+    writes(ap.add_argument("-o", "--output", required=True, help="output Stokes EXR"))
+    writes(ap.add_argument("--png", default=None, help="stem of the intensity/DoLP/AoLP charts (default: beside -o)"))
     quiet_option(ap)
     return ap
 
@@ -91,10 +91,11 @@ CHARTS = ("intensity", "dolp", "aolp")
 def cli_main(argv=None) -> int:
     from hyde_bsdf.io.output_gate import output_gate
 
-    args = build_parser().parse_args(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     out, stem = _outputs(args)
     charts = [Path(f"{stem}_{name}.png") for name in CHARTS]
-    inputs = [p for p in [args.mosaic, args.analysis, *(args.frames or [])] if p]
+    inputs = run_inputs(parser, args)
     # the output gate: no output is an input, one writer at a time; the free space once the size is known
     with output_gate([out, *charts], inputs=inputs, what="-o/--output file"):
         est = _estimate(args)

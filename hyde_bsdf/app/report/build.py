@@ -46,10 +46,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from hyde_bsdf.app.args import Parser, quiet_option
+from hyde_bsdf.app.args import Parser, quiet_option, reads, writes
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.atomic import TEMP_NAME_RE, atomic_folder, atomic_open
-from hyde_bsdf.io.output_gate import check_output_dir
+from hyde_bsdf.io.output_gate import check_not_input, check_output_dir
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.resources import OutputLock, format_bytes, total_memory
 
@@ -254,6 +254,7 @@ def build_report(outdir, quick=False, progress=True, force=False, scripts=None):
     """
     final = check_report_dir(outdir, force)
     vdir = validation_dir(scripts)
+    check_not_input([final], [vdir], "--outdir")          # the report is not the scripts' folder
     with OutputLock([final], "--outdir"), atomic_folder(final) as out:     # one report run per folder
         return _build(out, vdir, quick, as_callback(progress, "[validate]"))
 
@@ -331,11 +332,11 @@ def _write_html(out, info, sections, rows, all_passed, quick):
 
 def build_parser() -> Parser:
     ap = Parser(prog="hyde-bsdf validate", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)")
+    writes(ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)"))
     ap.add_argument("--quick", action="store_true", help="small sweeps; under 3 minutes on 2 cores")
-    ap.add_argument("--scripts", metavar="DIR", default=None,
+    reads(ap.add_argument("--scripts", metavar="DIR", default=None,
                     help="folder of the validation scripts (default: validation/ of the source checkout this "
-                         "package runs from; an installed package has none: give a clone's validation/ folder)")
+                         "package runs from; an installed package has none: give a clone's validation/ folder)"), "folder")
     ap.add_argument("--force", action="store_true",
                     help="write into a folder that is not an earlier report; its files are kept, except "
                          "those of the report's names (index.html, checks.csv, the figures), which are replaced")
