@@ -55,7 +55,6 @@ def _version() -> str:
         return found.group(1) if found else "unknown"
 
 
-__version__ = _version()
 
 
 _SUBPACKAGES = ("io", "model", "mitsuba", "mom", "fit", "render", "inverse", "app")
@@ -70,6 +69,9 @@ _FUNCTIONS = {"pbrdf": "hyde_bsdf.model.evaluator", "dhr_specular_pec": "hyde_bs
 def __getattr__(name):
     import importlib
 
+    if name == "__version__":          # read on first use: the metadata costs 0.1 s of every start-up
+        globals()[name] = _version()
+        return globals()[name]
     if name in _SUBPACKAGES:
         return importlib.import_module(f"hyde_bsdf.{name}")
     if name in _FUNCTIONS:

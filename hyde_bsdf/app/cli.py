@@ -35,9 +35,12 @@ Documented exit codes of the commands themselves stay: 1 for "fit did not conver
 """
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 import sys
+
+from hyde_bsdf.app.signals import SUPERVISOR_ENV, handle_signals, supervise, work_setup
 
 #: sub-command -> (module, one-line help)
 COMMANDS = {
@@ -68,6 +71,8 @@ def _error(command: str, message: str) -> None:
     """One line ``hyde-bsdf COMMAND: MESSAGE`` on stderr, long values in it cut to a readable length."""
     from hyde_bsdf.errors import shorten_values
 
+    if sys.stderr is None:          # closed: print(file=None) would write to standard output
+        return
     try:
         print(f"hyde-bsdf {command}: {shorten_values(message)}", file=sys.stderr, flush=True)
     except (OSError, ValueError):
@@ -113,8 +118,12 @@ def _one_line_warnings(command):
 def _run(command: str, argv: list) -> int:
     import warnings
 
+    from hyde_bsdf.errors import UsageError
+
     from hyde_bsdf.progress import set_quiet
 
+    if sys.stdout is None:
+        raise UsageError(CLOSED_STDOUT)
     quiet = any(a in ("-q", "--quiet") for a in argv)
     old_quiet, old_show = set_quiet(quiet), warnings.showwarning
     warnings.showwarning = _one_line_warnings(command)
@@ -130,15 +139,51 @@ def _run(command: str, argv: list) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """``hyde-bsdf COMMAND ...``: run the sub-command and turn what it raises into one line and
-    an exit status (the module docstring lists them)."""
+    an exit status (the module docstring lists them).  From the console (no ``argv``) the command
+    runs as a child process that this one waits on, so that a signal ends it at any moment with
+    one line (:mod:`hyde_bsdf.app.signals`); with ``argv`` it runs in this process."""
+    work = os.environ.pop(SUPERVISOR_ENV, None)
+    console = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     command = argv[0] if argv else ""
     if command not in COMMANDS:
         return _usage(argv, command)
-    from hyde_bsdf.app.signals import handle_signals
+    if console and work is None:
+        if _closed_stdout():
+            _error(command, f"error: {CLOSED_STDOUT}")
+            return EXIT_USAGE
+        supervise(command, argv[1:], lambda message: _error(command, message))
+    if work is not None:
+        from hyde_bsdf.io import atomic
 
+        atomic.on_temporary = work_setup(work)
     with handle_signals():          # in-process callers (tests) get their handlers back
-        return _convert(command, argv[1:])
+        code = _convert(command, argv[1:])
+    if work is not None:            # no wait for threads a library left running (dask's)
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(code)
+    return code
+
+
+#: the refusal of a run whose standard output is closed (``>&-``)
+CLOSED_STDOUT = ("standard output is closed (>&-): the results printed there would be lost; redirect it "
+                 "(>/dev/null to discard them)")
+
+
+def _closed_stdout() -> bool:
+    """Whether standard output is closed; a closed standard input or error is opened on /dev/null
+    (so that no file this run opens takes their place)."""
+    closed = []
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            closed.append(fd)
+            if fd != 1:
+                os.open(os.devnull, os.O_RDONLY if fd == 0 else os.O_WRONLY)
+    return 1 in closed
 
 
 def _convert(command: str, argv: list) -> int:

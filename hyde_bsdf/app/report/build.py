@@ -221,7 +221,8 @@ def _run_script(path: Path, outdir: Path, quick: bool):
         return [dict(name=f"{path.stem}: script present", value="missing", tolerance="present",
                      passed=False)], 0.0, ""
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="hyde-validate-") as work, \
+    # the work folder inside the report's temporary one: a killed run leaves nothing behind
+    with tempfile.TemporaryDirectory(prefix=".work-", dir=outdir) as work, \
             tempfile.TemporaryFile(dir=work) as stderr:
         checks_json = Path(work) / f"{path.stem}.checks.json"
         status = _wait(script_command(path, outdir, quick, checks_json), stderr)
