@@ -8,6 +8,8 @@
   refuses work before its allocation with one line naming what needs the memory, both sizes in
   units that show them (never "0.00 GiB") and the parameter that makes it smaller.
 * :class:`OutputLock`: one writer per output at a time (a second run fails at once, one line).
+* :func:`wait_limit`: how long each kind of wait may last (:data:`TIMEOUTS`, changed by environment
+  variables); every wait on a network peer, a task or a child process is bounded by one.
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from pathlib import Path
 from hyde_bsdf.errors import UsageError, shorten
 
 __all__ = ["Costs", "COSTS", "available_memory", "total_memory", "format_bytes", "check_memory", "render_bytes",
-           "inversion_bytes", "dense_solve_cost", "OutputLock", "MEMINFO"]
+           "inversion_bytes", "dense_solve_cost", "OutputLock", "MEMINFO", "TIMEOUTS", "wait_limit"]
 
 MiB = 2**20
 
@@ -138,6 +140,29 @@ def check_memory(need, what: str, remedy: str, fraction: float = 1.0) -> int:
         raise UsageError(f"{what}: about {format_bytes(need)} of memory needed, but only "
                          f"{format_bytes(fraction * avail)} is available{share}; {remedy}")
     return need
+
+
+# ---------------------------------------------------------------------------
+# waits
+
+#: the longest wait of each kind (seconds); HYDE_BSDF_<KIND>_TIMEOUT overrides: "connect" a dask
+#: scheduler's connection and each question to it, "task" a pool or cluster without any task
+#: finishing, "script" one validation script
+TIMEOUTS = {"connect": 10.0, "task": 3600.0, "script": 3600.0}
+
+
+def wait_limit(kind: str) -> tuple[float, str]:
+    """(seconds, the environment variable that sets them) of a wait of ``kind`` (:data:`TIMEOUTS`);
+    a value that is not a number > 0 is a UsageError naming the variable."""
+    name = f"HYDE_BSDF_{kind.upper()}_TIMEOUT"
+    text = os.environ.get(name, "").strip()
+    try:
+        seconds = float(text) if text else TIMEOUTS[kind]
+    except ValueError:
+        seconds = -1.0
+    if not 0 < seconds < float("inf"):
+        raise UsageError(f"{name} must be a number of seconds > 0, got {shorten(text)}")
+    return seconds, name
 
 
 # ---------------------------------------------------------------------------

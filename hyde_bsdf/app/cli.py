@@ -14,11 +14,10 @@ What happens when things go wrong, for every sub-command (handled once here):
   or a numerical failure (``FloatingPointError``: a loss that became NaN) -- one line, exit 1;
 * an operating-system error on a file (missing, no permission, disk full, ...) -- one line, exit 2;
 * a missing optional Python package -- one line naming it, exit 2;
-* Ctrl-C -- ``hyde-bsdf COMMAND: interrupted``, exit 130 (outputs are atomic: the old files stay),
-  also when Mitsuba hands it back wrapped in a RuntimeError;
-* SIGTERM / SIGHUP -- ``hyde-bsdf COMMAND: terminated (SIGTERM)``, exit 143 / 129: the signal
-  unwinds like Ctrl-C, so hidden temporary files are removed (:mod:`hyde_bsdf.app.signals`;
-  after a SIGKILL the next run's output checks remove them);
+* Ctrl-C -- ``hyde-bsdf COMMAND: interrupted``, exit 130; SIGTERM / SIGHUP -- ``hyde-bsdf COMMAND:
+  terminated (SIGTERM)``, exit 143 / 129, at any moment: the command runs as a child process that
+  this one stops, removing its temporaries (:mod:`hyde_bsdf.app.signals`); the old files stay;
+* a closed standard output (``>&-``) -- refused before the work, one line, exit 2;
 * a failed write (disk full, quota, I/O error) -- one line naming the file, exit 2; that file is
   unchanged (:class:`hyde_bsdf.io.atomic.OutputWriteError`);
 * a closed output pipe (``hyde-bsdf fit data.csv | head``) -- quiet, exit 141 (as for SIGPIPE);

@@ -28,7 +28,7 @@ from hyde_bsdf.io.input_gate import check_input
 from hyde_bsdf.io.output_gate import check_free_space, check_output_path, output_gate
 from hyde_bsdf.io.stokes_exr import exr_bytes
 from hyde_bsdf.progress import stderr_lines
-from hyde_bsdf.resources import COSTS, check_memory, inversion_bytes
+from hyde_bsdf.resources import COSTS, check_memory, inversion_bytes, wait_limit
 
 __all__ = ["cli_main", "build_parser"]
 
@@ -580,16 +580,16 @@ def _tiled_run(args, fit, start, paths):
     the stitched maps written and reported as the untiled run's."""
     from hyde_bsdf.inverse.tiles import Capture, invert_maps_tiled
 
-    capture = Capture.from_files(args.scene[0], args.camera, args.light, args.reference, channel=args.channel,
-                                 spp=args.spp)
-    for k, d in enumerate(r for row in capture.references for r in row):
-        with user_input():
-            check_reference_scale(d["reference"], f"--reference {shorten(args.reference[k])}")
-        if args.mask:
-            m = _read_mask(args.mask[k], d["reference"].shape[1:])
-            d["mask"] = m if d["mask"] is None else d["mask"] & m
-    client = _dask_client(args.scheduler) if args.scheduler else None
+    client = _dask_client(args.scheduler) if args.scheduler else None     # before the work: a dead address
     try:
+        capture = Capture.from_files(args.scene[0], args.camera, args.light, args.reference, channel=args.channel,
+                                     spp=args.spp)
+        for k, d in enumerate(r for row in capture.references for r in row):
+            with user_input():
+                check_reference_scale(d["reference"], f"--reference {shorten(args.reference[k])}")
+            if args.mask:
+                m = _read_mask(args.mask[k], d["reference"].shape[1:])
+                d["mask"] = m if d["mask"] is None else d["mask"] & m
         with user_input(), warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             res = invert_maps_tiled(capture, start, fit=fit, tiles=args.tile_grid, workers=args.workers,
@@ -599,7 +599,7 @@ def _tiled_run(args, fit, start, paths):
                                     uncertainty=not args.no_uncertainty)
     finally:
         if client is not None:
-            client.close()
+            client.close(timeout=wait_limit("connect")[0])
     messages = list(dict.fromkeys(res.warnings + [str(w.message) for w in caught
                                                   if issubclass(w.category, UserWarning)]))
     _write_map_outputs(res, paths, args)
@@ -610,15 +610,31 @@ def _tiled_run(args, fit, start, paths):
 
 
 def _dask_client(address):
-    """A dask.distributed Client of the scheduler at --scheduler ADDRESS (a UsageError naming it otherwise)."""
+    """A dask.distributed Client of the scheduler at --scheduler ADDRESS, connected within
+    HYDE_BSDF_CONNECT_TIMEOUT seconds (a UsageError naming it otherwise).  The connection is made
+    in a thread of its own: a peer that accepts and never answers holds that thread, not the run."""
+    import threading
+
     try:
         from distributed import Client
     except ImportError:
         raise UsageError("--scheduler needs dask.distributed: pip install 'hyde-bsdf[distributed]'") from None
-    try:
-        return Client(address, timeout=10)
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise UsageError(f"--scheduler {shorten(address)}: no dask scheduler answers there ({one_line(exc)})") from None
+    seconds, name = wait_limit("connect")
+    box = {}
+
+    def connect():
+        try:
+            box["client"] = Client(address, timeout=seconds, set_as_default=False)
+        except Exception as exc:  # noqa: BLE001 -- reported below
+            box["error"] = exc
+
+    thread = threading.Thread(target=connect, name="dask-connect", daemon=True)
+    thread.start()
+    thread.join(seconds + 1.0)
+    if "client" in box:
+        return box["client"]
+    why = one_line(box["error"]) if "error" in box else f"no answer within {seconds:g} s ({name})"
+    raise UsageError(f"--scheduler {shorten(address)}: no dask scheduler answers there ({why})")
 
 
 def _load_map_scenes(paths, fit) -> list:

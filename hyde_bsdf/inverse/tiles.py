@@ -258,9 +258,10 @@ def _concurrency(executor, workers) -> int:
         return 1
     if hasattr(executor, "_max_workers"):
         return int(executor._max_workers)
-    client = getattr(executor, "_client", None)
+    from hyde_bsdf.mom.gather import scheduler_identity
+
     try:
-        info = client.scheduler_info()
+        info = scheduler_identity(executor._client)
         threads = [int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()] or [1]
         local = any(h in str(info.get("address", "")) for h in ("inproc", "127.0.0.1", "localhost"))
         return sum(threads) if local else max(threads)
@@ -327,12 +328,15 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
         say(f"{len(tasks)} tile task(s) of {shape[0]}x{shape[1]} texels, largest crop set "
             f"{max(t.pixels for t in tasks)} px, on {type(ex).__name__}")
     done = (lambda k: say(f"tile {k}/{len(tasks)} done ({time.perf_counter() - t0:.1f} s)")) if say else None
+    results = None
     try:
         results = gather(ex, run_tile, tasks, timeout=timeout, on_done=done, heartbeat=bool(say), what="tile",
                          label="invert_maps_tiled")
     finally:
-        if own:
-            ex.shutdown(wait=True, cancel_futures=True)
+        if own:          # after a failure, no wait for a running tile: its worker is ended
+            ex.shutdown(wait=results is not None, cancel_futures=True)
+            for proc in list((getattr(ex, "_processes", None) or {}).values()) if results is None else ():
+                proc.kill()
     res = stitch_tiles(results, shape, start, tuple(fit), components=options.get("components", "stokes"),
                        threshold=options.get("threshold", STDERR_THRESHOLD),
                        convergence=options.get("convergence", CONVERGENCE_THRESHOLD),

@@ -51,7 +51,7 @@ from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.atomic import TEMP_NAME_RE, atomic_folder, atomic_open
 from hyde_bsdf.io.output_gate import check_not_input, check_output_dir
 from hyde_bsdf.progress import as_callback
-from hyde_bsdf.resources import OutputLock, format_bytes, total_memory
+from hyde_bsdf.resources import OutputLock, format_bytes, total_memory, wait_limit
 
 __all__ = ["SECTIONS", "GENERATOR", "build_report", "check_report_dir", "cli_main"]
 
@@ -171,6 +171,7 @@ def _child_env() -> dict:
 
 def _wait(cmd: list, stderr) -> int:
     """Run ``cmd`` to its end (stdout discarded, stderr into the file ``stderr``); its exit status.
+    A script still running after ``HYDE_BSDF_SCRIPT_TIMEOUT`` seconds (default 3600) is killed.
 
     On any interruption of the report (Ctrl-C, SIGTERM as :class:`~hyde_bsdf.app.signals.Terminated`)
     the child is terminated -- SIGTERM, then SIGKILL after :data:`TERMINATE_WAIT` s -- and reaped
@@ -178,8 +179,13 @@ def _wait(cmd: list, stderr) -> int:
     first) interrupts the report the same way."""
     child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=stderr,
                              env=_child_env())
+    seconds, name = wait_limit("script")
     try:
+        status = child.wait(seconds)
+    except subprocess.TimeoutExpired:                   # a script that hangs: killed, a failed check
+        child.kill()
         status = child.wait()
+        stderr.write(f"\ntimed out after {seconds:g} s ({name}): killed\n".encode())
     except BaseException:
         child.terminate()
         try:
