@@ -55,6 +55,9 @@ def _version() -> str:
         return found.group(1) if found else "unknown"
 
 
+#: the package's version (pyproject.toml's, from the package metadata): read on first use
+__version__: str
+
 _SUBPACKAGES = ("io", "model", "mitsuba", "mom", "fit", "render", "inverse", "app")
 #: public functions, imported on first use: ``import hyde_bsdf`` (and so the command line's
 #: start-up, before it can catch Ctrl-C) loads only the standard library

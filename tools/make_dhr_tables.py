@@ -3,7 +3,7 @@
 For every shadowing record of ``hyde_bsdf.model.terms``: rho^{s,PEC} on the table's grid by the
 slope-space quadrature (``dhr.build_table``, the record's Gauss-Legendre order), float64, into
 ``dhr_table.npz``; and the plugin's 1 - rho texture resampled from it (``dhr.texture_from_table``,
-float32, stored as exact second differences of its bit patterns) into ``dhr_texture_<name>.npz``.
+float32, stored as exact second differences of its bit patterns) into ``dhr_texture_{vgroove,smith,none}.npz``.
 Run it after changing the quadrature, the grid, the texture's resolution or a shadowing record;
 ``tests/test_dhr_table.py`` recomputes a sample of nodes and texels from the shipped files.
 About 15 s on 2 cores.

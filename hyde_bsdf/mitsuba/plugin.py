@@ -176,7 +176,7 @@ the diffuse term is done at that per-point roughness.
 DHR lookup.  1 - rho^{s,PEC}, resampled from the table's bicubic ``__call__``
 onto 1025 nodes in x = 1 - sqrt(cos theta) times 192 per decade of rms_slope over
 the table's whole range @DHR_TABLE@ (4.7 MB, float32), is shipped with the package
-(``hyde_bsdf/data/dhr_texture_<shadowing>.npz``: nothing is computed at load) and read with a linear
+(``hyde_bsdf/data/dhr_texture_{vgroove,smith,none}.npz``: nothing is computed at load) and read with a linear
 ``mi.Texture2f`` (differentiable in rms_slope), at each shading point's own roughness.
 Its deviation from the table, 1 - rho clipped at 0, for rms_slope in @RMS_SLOPE@ and
 theta <= 89 deg is <= 1.9e-5 (vgroove), 2.6e-5 (smith), 1.3e-4 (none), target 2e-4

@@ -44,7 +44,7 @@ Shipped as data
 ---------------
 The tables are package data, as Mitsuba ships its spectra: ``hyde_bsdf/data/dhr_table.npz``
 holds rho and rho_avg of every shadowing term (float64, so that the evaluator's numbers do not
-depend on how the table was obtained), and ``hyde_bsdf/data/dhr_texture_<shadowing>.npz`` the
+depend on how the table was obtained), and ``hyde_bsdf/data/dhr_texture_{vgroove,smith,none}.npz`` the
 plugin's resampled 1 - rho texture (:class:`DHRTexture`, float32, the values the plugin's
 ``mi.Texture2f`` holds), so that loading a scene neither integrates, nor resamples, nor imports
 SciPy.  ``tools/make_dhr_tables.py`` writes them (:func:`build_table`, :func:`texture_from_table`);
@@ -419,8 +419,9 @@ def decode_texture_values(d2: np.ndarray) -> np.ndarray:
 
 
 def load_texture(shadowing="vgroove") -> DHRTexture:
-    """The plugin's shipped 1 - rho texture of a shadowing term (``hyde_bsdf/data/dhr_texture_<name>.npz``),
-    read once per process: no quadrature, no resampling, no SciPy."""
+    """The plugin's shipped 1 - rho texture of a shadowing term
+    (``hyde_bsdf/data/dhr_texture_{vgroove,smith,none}.npz``), read once per process: no quadrature,
+    no resampling, no SciPy."""
     name = shadowing_term(shadowing).name
     if name not in _TEXTURES:
         try:
