@@ -688,7 +688,7 @@ def _linear_covariance(J, fitted, sigma_given, chi2, dof):
     without sigmas), its correlation, the condition number, and a note when J is singular."""
     p = len(fitted)
     diag = []
-    sv = np.linalg.svd(J, compute_uv=False)
+    _, sv, Vt = np.linalg.svd(J, full_matrices=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
     if not math.isfinite(cond) or cond > 1e10:
         cov = np.full((p, p), np.inf)
@@ -697,7 +697,7 @@ def _linear_covariance(J, fitted, sigma_given, chi2, dof):
         diag.append(f"the Jacobian is singular (condition number {cond:.3g}): the data do not "
                     f"constrain {', '.join(fitted)} separately; standard errors are infinite")
         return cov, corr, cond, diag
-    cov = np.linalg.inv(J.T @ J)
+    cov = (Vt.T / sv ** 2) @ Vt      # (J^T J)^-1 from the SVD: J^T J squares the condition number
     if not sigma_given and dof > 0:
         cov *= chi2 / dof      # noise level estimated from the residual scatter
     se = np.sqrt(np.diag(cov))
