@@ -54,14 +54,17 @@ def lab_measurements(with_m00=True, seed=1, n=60, shadowing="smith"):
 
 
 @pytest.mark.parametrize("shadowing", ["vgroove", "smith", "none"])
-@pytest.mark.parametrize("diffuse", ["paper", "reciprocal", "none"])
+@pytest.mark.parametrize("diffuse", ["paper", "reciprocal", "none", "lambertian"])
 def test_prepared_factors_equal_pbrdf(shadowing, diffuse):
-    """lobe(s) x U(n, k) + diffuse(s) U_00 is Eq. 17 itself: all 16 elements to 1e-13 relative."""
+    """lobe(s) x U(n, k) + diffuse(s) U_00 (+ the Lambertian albedo / pi) is Eq. 17 itself: all 16
+    elements to 1e-13 relative."""
     if shadowing == "none" and diffuse == "reciprocal":
         pytest.skip("undefined pair")
     ti, tr, ph = geometry(200)
-    F = pbrdf(ti, tr, ph, rms_slope=0.25, n=1.4, k=4.2, shadowing=shadowing, diffuse=diffuse)
-    G = np.moveaxis(PreparedGeometry(ti, tr, ph).mueller(0.25, 1.4, 4.2, shadowing, diffuse), (0, 1), (-2, -1))
+    albedo = 0.07 if diffuse == "lambertian" else None
+    F = pbrdf(ti, tr, ph, rms_slope=0.25, n=1.4, k=4.2, shadowing=shadowing, diffuse=diffuse,
+              diffuse_reflectance=albedo)
+    G = np.moveaxis(PreparedGeometry(ti, tr, ph).mueller(0.25, 1.4, 4.2, shadowing, diffuse, albedo), (0, 1), (-2, -1))
     assert np.abs(F - G).max() <= 1e-13 * np.abs(F).max()
 
 

@@ -45,12 +45,13 @@ from hyde_bsdf.fit.lab_selection import Selection, model_size, select
 from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitError, IllPosedFitWarning
 from hyde_bsdf.io.measurements import Measurements, read_measurements
 from hyde_bsdf.model.evaluator import pbrdf
-from hyde_bsdf.model.shadowing import check_shadowing
+from hyde_bsdf.model.terms import DIFFUSE, SHADOWING, check_pair, diffuse_term
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 
 __all__ = ["LabFitResult", "fit_lab", "check_lab_options", "RENDER_RANGE_NM"]
 
-DIFFUSE_CHOICES = ("paper", "reciprocal", "none", "lambertian")
+#: the diffuse terms a CSV fit takes (every record of model/terms.py)
+DIFFUSE_CHOICES = DIFFUSE
 ALBEDO_CHOICES = ("shared", "per_wavelength")
 #: with ``progress=None`` only a problem of more geometries reports its progress
 LARGE_GEOMETRIES = 4000
@@ -93,19 +94,16 @@ def check_lab_options(fit=None, shadowing=None, diffuse=None, albedo=None, rms_s
     """:func:`fit_lab`'s options checked without data (the command line checks them before reading).
     Returns them normalized; UsageError naming the option otherwise."""
     names = _names(fit)
-    if shadowing is not None:
-        check_shadowing(shadowing)
-    if diffuse is not None and diffuse not in DIFFUSE_CHOICES:
-        raise UsageError(f"diffuse must be one of {DIFFUSE_CHOICES}, got {shorten(diffuse)}")
+    if shadowing is not None or diffuse is not None:
+        check_pair(shadowing or SHADOWING[0], diffuse or DIFFUSE[0], booleans=False)
     if albedo is not None and albedo not in ALBEDO_CHOICES:
         raise UsageError(f"albedo must be one of {ALBEDO_CHOICES}, got {shorten(albedo)}")
-    if shadowing == "none" and diffuse == "reciprocal":
-        raise UsageError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
     given = {"rms_slope": _value("rms_slope", rms_slope), "n": _value("n0", n0, True), "k": _value("k0", k0, True),
              "diffuse_reflectance": _value("diffuse_reflectance", diffuse_reflectance)}
     for q in PARAMETERS:
         # a Lambertian albedo neither fitted nor given: no Lambertian candidate (an error if one is asked for)
-        if q not in names and given[q] is None and not (q == "diffuse_reflectance" and diffuse != "lambertian"):
+        if q not in names and given[q] is None and not (q == "diffuse_reflectance" and
+                                                         q not in diffuse_term(diffuse or DIFFUSE[0]).parameters):
             flag = {"n": "n0", "k": "k0"}.get(q, q)
             raise UsageError(f"{flag} must be given when {q} is not fitted (it is then held at that value)")
     return {"fit": names, "shadowing": shadowing, "diffuse": diffuse, "albedo": albedo, "given": given}
@@ -395,7 +393,7 @@ def fit_lab(data, *, fit=None, shadowing=None, diffuse=None, albedo=None, rms_sl
         sel = select(d, fit=opts["fit"], values=values, albedo=albedo, lambertian=lambertian, tick=counter.tick)
         chosen = sel.choice.fit
     else:
-        model = LabModel(shadowing or "vgroove", diffuse or "paper", albedo or "shared")
+        model = LabModel(shadowing or SHADOWING[0], diffuse or DIFFUSE[0], albedo or "shared")
         counter.stage = f"fitting {model.label}"
         chosen = fit_model(d, model, fit=opts["fit"], values=values, tick=counter.tick)
     blamed = blame_fixed(chosen.data, chosen, counter.tick)

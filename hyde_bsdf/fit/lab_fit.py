@@ -39,6 +39,7 @@ from hyde_bsdf.fit.lab_data import LabData
 from hyde_bsdf.fit.mueller_fit import _birge_scaling, impossible_values
 from hyde_bsdf.io.measurements import M00, element_index
 from hyde_bsdf.model.parameters import DIFFUSE_REFLECTANCE, FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
+from hyde_bsdf.model.terms import diffuse_term
 
 __all__ = ["PARAMETERS", "LabModel", "ModelFit", "fit_model", "blame_fixed", "param_name", "impossible_notes",
            "check_enough"]
@@ -69,7 +70,8 @@ class LabModel:
 
     @property
     def lambertian(self) -> bool:
-        return self.diffuse == "lambertian"
+        """Whether the diffuse term has a free albedo (the ``lambertian`` record's own parameter)."""
+        return "diffuse_reflectance" in diffuse_term(self.diffuse).parameters
 
     @property
     def label(self) -> str:
@@ -95,6 +97,8 @@ class _Problem:
         idx = [element_index(c) for c in data.elements]
         self.rows_, self.cols_ = [a for a, _ in idx], [b for _, b in idx]
         self._lobes, self._units = {}, {}
+        # the Lambertian term per unit albedo (model/terms.py's record): F00 is linear in the albedo
+        self.per_albedo = [g.geometry.per_albedo(model.diffuse) for g in data.groups]
         self.lo = np.array([BOUNDS[q][0] for q, _ in self.free])
         self.hi = np.array([BOUNDS[q][1] for q, _ in self.free])
 
@@ -128,7 +132,7 @@ class _Problem:
         (L, d), (U00, Ue) = self._factors(g, s, n, k)
         F00 = (L + d) * U00
         if self.model.lambertian:
-            F00 = F00 + self.param(v, "diffuse_reflectance", g) / math.pi
+            F00 = F00 + self.param(v, "diffuse_reflectance", g) * self.per_albedo[g]
         # L / F00 <= 1 / U00 stays finite where both underflow (far from a lobe without a diffuse term)
         ratio = np.divide(L, F00, out=np.zeros_like(F00), where=F00 > 0.0)
         return F00, Ue * ratio
@@ -154,7 +158,8 @@ class _Problem:
 
     def jac(self, x) -> np.ndarray:
         """Forward differences, group by group (a group's index moves only its rows); the
-        albedo's column analytic: dF00/da = 1/pi, d(F_jk/F00)/da = -(F_jk/F00) / (pi F00)."""
+        albedo's column analytic: dF00/da = u (the term per unit albedo, 1/pi), d(F_jk/F00)/da =
+        -(F_jk/F00) u / F00."""
         v0 = self.unpack(x)
         J = np.zeros((self.data.y.size, len(self.free)))
         w = self.weights()
@@ -167,8 +172,8 @@ class _Problem:
                     continue
                 if q == "diffuse_reflectance":
                     dn = np.zeros_like(norm)
-                    np.divide(-norm, math.pi * F00, out=dn, where=F00 > 0.0)
-                    J[rows, col] = self._stack(g, np.full(F00.size, 1.0 / math.pi), dn)
+                    np.divide(-norm * self.per_albedo[g], F00, out=dn, where=F00 > 0.0)
+                    J[rows, col] = self._stack(g, self.per_albedo[g], dn)
                     continue
                 h = 1e-7 * max(1.0, abs(v0[(q, gq)]))
                 h = -h if v0[(q, gq)] + h > self.hi[col] else h
@@ -225,6 +230,7 @@ def _group_grid(data, model, g, U, slopes, w, values, free):
     fixed_a = values.get(("diffuse_reflectance", g), values.get(("diffuse_reflectance", None)))
     a_free = model.lambertian and any(key in free and key not in values for key in
                                       (("diffuse_reflectance", g), ("diffuse_reflectance", None)))
+    unit = geo.per_albedo(model.diffuse)                                   # 1/pi: F00 is linear in the albedo
     costs = np.empty((len(slopes), U.shape[0]))
     picks = np.zeros((len(slopes), U.shape[0]))
     for i, s in enumerate(slopes):
@@ -236,10 +242,10 @@ def _group_grid(data, model, g, U, slopes, w, values, free):
             albedo = np.full((U.shape[0], 1), fixed_a)
         elif data.has_m00:     # closed form: the weighted mean of the M00 excess over the specular part
             wt = 1.0 / wg[0] ** 2
-            albedo = np.clip(math.pi * ((y[0] - spec00) * wt).sum(-1) / wt.sum(), 0.0, 1.0)[:, None]
+            albedo = np.clip(((y[0] - spec00) * wt * unit).sum(-1) / (wt * unit * unit).sum(), 0.0, 1.0)[:, None]
         else:
             albedo = np.broadcast_to(np.array(GRID_ALBEDO), (U.shape[0], len(GRID_ALBEDO)))
-        F00 = spec00[:, None, :] + albedo[..., None] / math.pi             # (combos, albedos, N)
+        F00 = spec00[:, None, :] + albedo[..., None] * unit                # (combos, albedos, N)
         cost = (((F00 - y[0]) / wg[0]) ** 2).sum(-1) if data.has_m00 else np.zeros(albedo.shape)
         if idx:
             inv = np.where(F00 > 0.0, 1.0 / np.maximum(F00, 1e-300), 0.0)   # elements 0 where F00 underflows

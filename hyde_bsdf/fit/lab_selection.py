@@ -1,7 +1,7 @@
 """Model selection for lab data (``--model auto`` on a CSV): the simplest model the data need.
 
 Candidates: shadowing {none, smith, vgroove} x diffuse term {none, paper, reciprocal, lambertian}
-(reciprocal needs shadowing: 11 models); with several wavelengths each Lambertian model also with
+(the records of :mod:`hyde_bsdf.model.terms`; reciprocal needs shadowing: 11 models); with several wavelengths each Lambertian model also with
 one albedo per wavelength; and k = 0 at every wavelength (a dielectric) for the best models
 where every fitted k is below :data:`DIELECTRIC_K`.  The first candidate starts from a grid, each
 later one from its best already-fitted neighbour (one term changed).
@@ -30,14 +30,16 @@ from dataclasses import dataclass, field
 
 from hyde_bsdf.fit.lab_data import LabData
 from hyde_bsdf.fit.lab_fit import PARAMETERS, LabModel, ModelFit, fit_model
+from hyde_bsdf.model import terms
+from hyde_bsdf.model.terms import DIFFUSE_TERMS, SHADOWING_TERMS, allowed
 
-__all__ = ["SHADOWINGS", "DIFFUSES", "CANDIDATES", "DIELECTRIC_K", "NESTED_P", "SPREAD_SIGMAS", "ModelRow",
+__all__ = ["CANDIDATES", "DIELECTRIC_K", "NESTED_P", "SPREAD_SIGMAS", "ModelRow",
            "Selection", "model_size", "select"]
 
-SHADOWINGS = ("none", "smith", "vgroove")
-DIFFUSES = ("none", "paper", "reciprocal", "lambertian")
-#: every defined pair; none x reciprocal is undefined (no shadowing: the DHR exceeds 1)
-CANDIDATES = tuple((s, d) for s in SHADOWINGS for d in DIFFUSES if not (s == "none" and d == "reciprocal"))
+#: every pair of the terms of model/terms.py their rule allows (none x reciprocal is not: no shadowing,
+#: the DHR exceeds 1), simplest first
+CANDIDATES = tuple((s.name, d.name) for s in sorted(SHADOWING_TERMS, key=lambda t: t.rank)
+                   for d in sorted(DIFFUSE_TERMS, key=lambda t: t.rank) if allowed(s, d))
 #: k = 0 variants are tried for models whose fitted k is below this at every wavelength
 DIELECTRIC_K = 0.5
 #: p-value of the chi^2 difference below which a containing model replaces the choice
@@ -49,8 +51,9 @@ FIRST = ("smith", "lambertian")
 
 
 def model_size(model: LabModel, free_parameters: int) -> int:
-    """Free parameters + 1 per term the model adds (a shadowing function, a diffuse term)."""
-    return free_parameters + (model.shadowing != "none") + (model.diffuse != "none")
+    """Free parameters + 1 per term the model adds (a shadowing function, a diffuse term: the
+    records' ``adds``, :func:`hyde_bsdf.model.terms.model_size`)."""
+    return terms.model_size(model.shadowing, model.diffuse, free_parameters)
 
 
 @dataclass
@@ -90,7 +93,7 @@ def _neighbour(model: LabModel, rows: list):
 def _order(lambertian=True):
     """Candidates in an order where each (after the first) has an already-fitted neighbour."""
     first = FIRST if lambertian else (FIRST[0], "none")
-    todo = [c for c in CANDIDATES if c != first and (lambertian or c[1] != "lambertian")]
+    todo = [c for c in CANDIDATES if c != first and (lambertian or not LabModel(*c).lambertian)]
     done = [first]
     while todo:
         nxt = next(c for c in todo if any((c[0] == d[0]) + (c[1] == d[1]) == 1 for d in done))
@@ -137,7 +140,7 @@ def select(data: LabData, *, fit=PARAMETERS, values: dict | None = None, albedo=
         data = rows[0].fit.data          # with the estimated noise, when the file has no sigmas
     if len(data.groups) > 1 and lambertian and "diffuse_reflectance" in fit and albedo is None:
         for base in [r for r in rows if r.model.lambertian]:
-            rows.append(_row(data, LabModel(base.model.shadowing, "lambertian", "per_wavelength"), fit, values,
+            rows.append(_row(data, LabModel(base.model.shadowing, base.model.diffuse, "per_wavelength"), fit, values,
                              base.fit, tick))
     ks = lambda r: [v for k, v in r.fit.values.items() if k[0] == "k"]
     if "k" in fit:
