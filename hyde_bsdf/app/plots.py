@@ -288,7 +288,7 @@ def plot_lab_fit(result, path, title: str = ""):
         lo = min(a.get_xlim()[0], a.get_ylim()[0])
         hi = max(a.get_xlim()[1], a.get_ylim()[1])
         a.plot([lo, hi], [lo, hi], "k-", lw=0.7)
-        a.set_title(name + (" (1/sr)" if name == "M00" else "/M00"), fontsize=9)
+        a.set_title(name + (" (1/sr)" if name == "M00" or d.absolute else "/M00"), fontsize=9)
         a.set_xlabel("model", fontsize=8)
         a.set_ylabel("measured", fontsize=8)
         a.grid(alpha=0.3)

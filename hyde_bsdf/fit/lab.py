@@ -39,10 +39,9 @@ import numpy as np
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.adequacy import ERRORS_NOTE, InadequateModelError, InadequateModelWarning
 from hyde_bsdf.fit.lab_data import lab_data
-from hyde_bsdf.fit.lab_fit import (BOUNDS, PARAMETERS, LabModel, ModelFit, blame_fixed, check_enough, fit_model,
-                                   impossible_notes)
+from hyde_bsdf.fit.lab_fit import BOUNDS, PARAMETERS, LabModel, ModelFit, blame_fixed, check_enough, fit_model
 from hyde_bsdf.fit.lab_selection import Selection, model_size, select
-from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitError, IllPosedFitWarning
+from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitError, IllPosedFitWarning, impossible_values
 from hyde_bsdf.io.measurements import Measurements, read_measurements
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.terms import DIFFUSE, SHADOWING, check_pair, diffuse_term
@@ -344,7 +343,20 @@ def _repeats_notes(data) -> list:
     return out
 
 
-def _collect_warnings(f: ModelFit, sel: Selection | None) -> tuple:
+def impossible_notes(meas: Measurements) -> list:
+    """Normalized values no Mueller matrix has, beyond 3 of their standard deviations (the reader kept
+    them: within its file-size limit, :func:`hyde_bsdf.io.measurements.impossible_limit`)."""
+    if meas.sigma is None or not meas.values:
+        return []
+    return [f"impossible data: {what} beyond 3 sigma (worst {v:.4g} +- {e:.2g} at theta_i="
+            f"{math.degrees(meas.theta_i[i]):.4g}, theta_r={math.degrees(meas.theta_r[i]):.4g}, "
+            f"phi={math.degrees(meas.phi[i]):.4g} deg"
+            + ("" if meas.wavelength_nm is None else f", {meas.wavelength_nm[i]:g} nm") + "): no Mueller matrix "
+            "has it -- a calibration error, or sigmas too small; the fit cannot describe these values"
+            for what, i, v, e in impossible_values(meas.values, meas.uncertainty())]
+
+
+def _collect_warnings(f: ModelFit, sel: Selection | None, meas: Measurements) -> tuple:
     """(warnings, notes): what limits the result, and what is said for information (the roughness
     note without M00 -- a warning when the roughness is weakly determined, above 10 %)."""
     out = []
@@ -356,7 +368,7 @@ def _collect_warnings(f: ModelFit, sel: Selection | None) -> tuple:
         out.append(note)
     elif note:
         notes.append(note)
-    return out + impossible_notes(f.data) + _repeats_notes(f.data), notes
+    return out + impossible_notes(meas) + _repeats_notes(f.data), notes
 
 
 def fit_lab(data, *, fit=None, shadowing=None, diffuse=None, albedo=None, rms_slope=None, n0=None, k0=None,
@@ -398,7 +410,7 @@ def fit_lab(data, *, fit=None, shadowing=None, diffuse=None, albedo=None, rms_sl
         chosen = fit_model(d, model, fit=opts["fit"], values=values, tick=counter.tick)
     blamed = blame_fixed(chosen.data, chosen, counter.tick)
     counter.done()
-    warned, notes = _collect_warnings(chosen, sel)
+    warned, notes = _collect_warnings(chosen, sel, meas)
     result = LabFitResult(chosen, sel, warned, notes, meas.source, blamed)
     _raise_or_warn(result, strict)
     return result

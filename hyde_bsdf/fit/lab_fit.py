@@ -36,13 +36,12 @@ from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.adequacy import (Verdict, chi2_verdict, cluster_covariance, correlation, floor_verdict,
                                     geometry_clusters, half_angles, larger_errors)
 from hyde_bsdf.fit.lab_data import LabData
-from hyde_bsdf.fit.mueller_fit import _birge_scaling, impossible_values
+from hyde_bsdf.fit.mueller_fit import _birge_scaling
 from hyde_bsdf.io.measurements import M00, element_index
 from hyde_bsdf.model.parameters import DIFFUSE_REFLECTANCE, FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.model.terms import diffuse_term
 
-__all__ = ["PARAMETERS", "LabModel", "ModelFit", "fit_model", "blame_fixed", "param_name", "impossible_notes",
-           "check_enough"]
+__all__ = ["PARAMETERS", "LabModel", "ModelFit", "fit_model", "blame_fixed", "param_name", "check_enough"]
 
 #: the fit's parameter names, in this order everywhere (the registry's FIT_PARAMETERS, then the
 #: Lambertian albedo in the plugin's and the evaluator's spelling)
@@ -127,12 +126,15 @@ class _Problem:
         return self._lobes[(g, s)], self._units[key]
 
     def predict_group(self, v, g):
-        """(F00, normalized elements (E, N)) of group ``g`` at the parameter values ``v``."""
+        """(F00, the elements (E, N): absolute with M00 data, normalized without) of group ``g`` at the
+        parameter values ``v``."""
         s, n, k = v[("rms_slope", None)], v[("n", g)], v[("k", g)]
         (L, d), (U00, Ue) = self._factors(g, s, n, k)
         F00 = (L + d) * U00
         if self.model.lambertian:
             F00 = F00 + self.param(v, "diffuse_reflectance", g) * self.per_albedo[g]
+        if self.data.absolute:
+            return F00, Ue * L
         # L / F00 <= 1 / U00 stays finite where both underflow (far from a lobe without a diffuse term)
         ratio = np.divide(L, F00, out=np.zeros_like(F00), where=F00 > 0.0)
         return F00, Ue * ratio
@@ -171,8 +173,9 @@ class _Problem:
                 if gq is not None and gq != g:
                     continue
                 if q == "diffuse_reflectance":
-                    dn = np.zeros_like(norm)
-                    np.divide(-norm * self.per_albedo[g], F00, out=dn, where=F00 > 0.0)
+                    dn = np.zeros_like(norm)          # absolute elements do not depend on it
+                    if not self.data.absolute:
+                        np.divide(-norm * self.per_albedo[g], F00, out=dn, where=F00 > 0.0)
                     J[rows, col] = self._stack(g, self.per_albedo[g], dn)
                     continue
                 h = 1e-7 * max(1.0, abs(v0[(q, gq)]))
@@ -247,7 +250,9 @@ def _group_grid(data, model, g, U, slopes, w, values, free):
             albedo = np.broadcast_to(np.array(GRID_ALBEDO), (U.shape[0], len(GRID_ALBEDO)))
         F00 = spec00[:, None, :] + albedo[..., None] * unit                # (combos, albedos, N)
         cost = (((F00 - y[0]) / wg[0]) ** 2).sum(-1) if data.has_m00 else np.zeros(albedo.shape)
-        if idx:
+        if idx and data.absolute:        # the albedo adds to M00 only
+            cost = cost + (((L * Ue - y[off:]) / wg[off:]) ** 2).sum(axis=(-2, -1))[:, None]
+        elif idx:
             inv = np.where(F00 > 0.0, 1.0 / np.maximum(F00, 1e-300), 0.0)   # elements 0 where F00 underflows
             with np.errstate(over="ignore", invalid="ignore"):
                 norm = np.nan_to_num((L * Ue)[:, None] * inv[:, :, None, :], nan=0.0, posinf=1e3, neginf=-1e3)
@@ -263,9 +268,9 @@ def _start_noise(data: LabData) -> np.ndarray:
     N = data.geometries
     parts = []
     for c in data.columns:
-        if c == M00:
-            y00 = data.y[:N]
-            parts.append(START_NOISE["m00_relative"] * np.abs(y00) + 1e-3 * np.abs(y00).max())
+        if c == M00 or data.absolute:       # noise that scales with M00 (absolute elements too)
+            y00 = np.abs(data.y[:N])
+            parts.append(START_NOISE["m00_relative"] * y00 + 1e-3 * y00.max())
         else:
             parts.append(np.full(N, START_NOISE["elements"]))
     return np.concatenate(parts)
@@ -459,12 +464,13 @@ def _estimated_noise(problem: _Problem, x) -> np.ndarray:
     data = problem.data
     f = problem.prediction(problem.unpack(x))
     N = data.geometries
+    y00 = np.abs(data.y[:N])
     parts = []
     for c, name in enumerate(data.columns):
         y, m = data.y[c * N:(c + 1) * N], f[c * N:(c + 1) * N]
-        if name == M00:
-            rel = float(np.sqrt(np.mean(((m - y) / np.maximum(np.abs(y), 1e-300)) ** 2)))
-            parts.append(max(rel, 1e-6) * np.abs(y) + 1e-9 * np.abs(y).max())
+        if name == M00 or data.absolute:     # relative to M00 (absolute elements' noise scales with it)
+            rel = float(np.sqrt(np.mean(((m - y) / np.maximum(y00, 1e-300)) ** 2)))
+            parts.append(max(rel, 1e-6) * y00 + 1e-9 * y00.max())
         else:
             parts.append(np.full(N, max(float(np.sqrt(np.mean((m - y) ** 2))), 1e-7)))
     return np.concatenate(parts)
@@ -487,6 +493,8 @@ def _uncertainty(problem: _Problem, res) -> ModelFit:
     ti, tr, ph = data.angles()
     if data.sigma_given:
         verdict = chi2_verdict(chi2, dof, r.reshape(len(data.columns), -1), ti, tr, ph, data.neighbours())
+        if not verdict.adequate:
+            _name_the_columns(verdict, data, r)
     else:
         verdict = _floor_verdict(problem, res.x, ti, tr, ph)
     if finite and (verdict.errors == "robust" or (data.sigma_given and verdict.errors != "classic")):
@@ -520,6 +528,23 @@ def _covariance(J, names):
     return cov, correlation(cov), []
 
 
+def _name_the_columns(verdict: Verdict, data: LabData, r) -> None:
+    """An inadequate chi^2 verdict's cause from where the misfit is: the value column that carries
+    the largest share of chi^2 (M00, the lobe; an element, the polarization)."""
+    share = (r.reshape(len(data.columns), -1) ** 2).sum(axis=1)
+    share = share / max(share.sum(), 1e-300)
+    order = np.argsort(-share)
+    top = ", ".join(f"{data.columns[i]} {100 * share[i]:.0f} %" for i in order[:3])
+    lobe = data.columns[order[0]] == M00
+    what = ("the lobe does not fit (its shape: the facet distribution or the shadowing; or the diffuse part)"
+            if lobe else "the polarization does not fit (the index, a retardance or polarizing part the model lacks, "
+                         "or the diffuse part's depolarization)")
+    f = verdict.figures
+    verdict.cause = f"{what}; the largest shares of chi^2: {top}"
+    verdict.message = (f"reduced chi^2 = {f['reduced_chi2']:.4g} (chi^2 = {f['chi2']:.4g} for {f['dof']} dof, "
+                       f"p = {f['p_value']:.3g}): {verdict.cause}")
+
+
 def _floor_verdict(problem: _Problem, x, ti, tr, ph) -> Verdict:
     """The verdict without sigmas: M00's relative and the elements' absolute misfit against the
     data's own scatter (:func:`hyde_bsdf.fit.adequacy.floor_verdict`)."""
@@ -530,24 +555,9 @@ def _floor_verdict(problem: _Problem, x, ti, tr, ph) -> Verdict:
     m00 = None
     if data.has_m00:
         m00 = (resid[0] / np.maximum(np.abs(data.y[:N]), 1e-300))[None]
-        resid = resid[1:]
+        resid = resid[1:] / np.maximum(f[:N], 1e-300)        # absolute elements: as normalized ones
     elements = resid[None] if resid.shape[0] else np.zeros((1, 1, N))
     return floor_verdict(m00, elements, ti, tr, ph, data.neighbours())
-
-
-def impossible_notes(data: LabData) -> list:
-    """Values no Mueller matrix has, beyond 3 of their standard deviations (given or estimated)."""
-    if data.w is None or not data.elements:
-        return []
-    N = data.geometries
-    off = int(data.has_m00)
-    values = {c: data.y[(off + i) * N:(off + i + 1) * N] for i, c in enumerate(data.elements)}
-    noise = {c: data.w[(off + i) * N:(off + i + 1) * N] for i, c in enumerate(data.elements)}
-    ti, tr, ph = data.angles()
-    return [f"impossible data: {what} beyond 3 sigma (worst {v:.4g} +- {e:.2g} at theta_i="
-            f"{math.degrees(ti[i]):.4g}, theta_r={math.degrees(tr[i]):.4g}, phi={math.degrees(ph[i]):.4g} deg): no "
-            "Mueller matrix has it -- a calibration error, or sigmas too small; the fit cannot describe these values"
-            for what, i, v, e in impossible_values(values, noise)]
 
 
 def _parameter_notes(values, stderr, corr, free, names, dof) -> list:
