@@ -38,8 +38,8 @@ import warnings
 from pathlib import Path
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
-from hyde_bsdf.app.plots import (PLOT_BYTES, PLOT_FORMATS, check_plot_path, plot_lab_fit, plot_lab_selection,
-                                 plot_pbsdf_fit, plot_selection)
+from hyde_bsdf.app.plots import (PLOT_FORMATS, check_plot_path, plot_lab_fit, plot_lab_selection, plot_pbsdf_fit,
+                                 plot_selection)
 from hyde_bsdf.errors import RejectedResult, UsageError
 from hyde_bsdf.fit.adequacy import InadequateModelWarning
 from hyde_bsdf.fit.model_selection import select_model, select_model_pbsdf
@@ -55,6 +55,7 @@ from hyde_bsdf.io.pbsdf_file import read_pbsdf
 from hyde_bsdf.model.parameters import DIFFUSE_REFLECTANCE
 from hyde_bsdf.model.terms import DIFFUSE, DIFFUSE_TERMS, SHADOWING
 from hyde_bsdf.progress import stderr_lines
+from hyde_bsdf.resources import COSTS
 
 __all__ = ["is_pbsdf", "cli_main", "csv_main", "pbsdf_main", "csv_parser", "pbsdf_parser"]
 
@@ -216,7 +217,8 @@ def csv_main(argv=None) -> int:
 
 def _output_gate(args):
     """The output gate on ``-o`` (and, when the model is chosen, its ``_models`` plot) and on
-    ``--json FILE`` for the whole run: not the data file, one writer at a time, room for each."""
+    ``--json FILE`` for the whole run: not the data file, one writer at a time, room for each
+    (:data:`~hyde_bsdf.resources.COSTS`)."""
     plots, json_file = [], getattr(args, "json", None)
     if args.output:
         check_plot_path(args.output)
@@ -225,7 +227,7 @@ def _output_gate(args):
     outputs = plots + ([json_file] if json_file and json_file != "-" else [])
     if not outputs:
         return contextlib.nullcontext()
-    return output_gate(outputs, inputs=[args.data], need_bytes=PLOT_BYTES * max(len(outputs), 1),
+    return output_gate(outputs, inputs=[args.data], need_bytes=COSTS.plot_file_bytes * max(len(outputs), 1),
                        what="-o plot" if plots else "--json file")
 
 
