@@ -162,6 +162,23 @@ def surface():
     return {"surface_bytes_per_point": peak / points}
 
 
+def pbrdf():
+    """Peak bytes per direction of the evaluator beyond its inputs (tracemalloc, 10^6 directions)."""
+    import tracemalloc
+
+    import numpy as np
+
+    from hyde_bsdf import pbrdf as evaluate
+
+    rng = np.random.default_rng(0)
+    ti, tr, ph = rng.uniform(0.0, 1.5, (3, 10**6))
+    tracemalloc.start()
+    evaluate(ti, tr, ph, rms_slope=0.3, n=1.5)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return {"pbrdf_bytes_per_direction": peak / ti.size}
+
+
 LOADER = r"""
 import os, sys
 import mitsuba as mi
@@ -187,7 +204,7 @@ def pbsdf(tmp):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--only", default="render,ad,forward,dense,fast,surface,pbsdf")
+    ap.add_argument("--only", default="render,ad,forward,dense,fast,surface,pbrdf,pbsdf")
     args = ap.parse_args(argv)
     from hyde_bsdf.resources import COSTS
 
@@ -197,7 +214,7 @@ def main(argv=None):
         steps = {"render": lambda: {**render(tmp, "llvm_ad_spectral_polarized", True),
                                     **render(tmp, "llvm_ad_rgb", False)},
                  "ad": lambda: ad(tmp), "forward": lambda: forward(tmp), "dense": dense, "fast": fast,
-                 "surface": surface, "pbsdf": lambda: pbsdf(tmp)}
+                 "surface": surface, "pbrdf": pbrdf, "pbsdf": lambda: pbsdf(tmp)}
         for name in args.only.split(","):
             t0 = time.perf_counter()
             measured.update(steps[name]())

@@ -59,6 +59,13 @@ class Costs:
     fast_seconds_per_unknown: float = 2e-3
     #: ``export``: Mitsuba's loader holds this many copies of a ``.pbsdf`` table
     pbsdf_loader_copies: int = 2
+    #: ``pbrdf``: peak bytes per direction beyond the caller's angle arrays (the (4, 4) float64 result, the
+    #: raveled angles, the diffuse term's temporaries, the finiteness check; measured 161 B at 10^6)
+    pbrdf_bytes_per_direction: int = 192
+    #: ``stokes``: peak bytes per raw value (pixel x frame) of frames or a superpixel mosaic, and of a
+    #: bilinear (full-resolution) mosaic (measured 72-94 B and 270 B at 1-12 million values)
+    stokes_bytes_per_value: int = 128
+    stokes_bilinear_bytes_per_value: int = 384
     #: disk, upper bounds: one plot file (the largest raster figure, a 16-element fit at 120 dpi, is
     #: 10.6 MB of RGBA; the largest vector one, the .pbsdf fit, ~30 MB), one history-CSV row
     plot_file_bytes: int = 64 * MiB

@@ -21,7 +21,9 @@ What happens when things go wrong, for every sub-command (handled once here):
 * a failed write (disk full, quota, I/O error) -- one line naming the file, exit 2; that file is
   unchanged (:class:`hyde_bsdf.io.atomic.OutputWriteError`);
 * a closed output pipe (``hyde-bsdf fit data.csv | head``) -- quiet, exit 141 (as for SIGPIPE);
-* anything else is a bug and keeps its Python traceback (exit 1).
+* anything else (a library's exception: NumPy's LinAlgError, a MemoryError, Mitsuba's RuntimeError, or a
+  bug) -- one line naming its type and where in the package it was raised, exit 2
+  (:func:`unexpected`; ``HYDE_BSDF_TRACEBACK=1`` shows the traceback instead).
 
 Each sub-command raises; none converts an exception itself.  A Python warning is one line
 ``hyde-bsdf COMMAND: warning: MESSAGE``.  ``-q``/``--quiet`` (every sub-command has it) silences
@@ -215,13 +217,38 @@ def _convert(command: str, argv: list) -> int:
         where = f": {exc.filename!r}" if getattr(exc, "filename", None) else ""
         _error(command, f"error: {exc.strerror or one_line(exc)}{where}")
         return EXIT_USAGE
-    except RuntimeError as exc:
-        cause = _interrupt_in(exc)
-        if cause is None:
+    except Exception as exc:  # noqa: BLE001 -- a library's exception (or a bug): one line, never a traceback
+        cause = _interrupt_in(exc)          # Mitsuba wraps a Ctrl-C / SIGTERM in a RuntimeError
+        if cause is not None:
+            message, code = outcome(cause)
+            _error(command, message)
+            return code
+        if os.environ.get(TRACEBACK_ENV):
             raise
-        message, code = outcome(cause)
-        _error(command, message)
-        return code
+        _error(command, f"error: {unexpected(exc)}")
+        return EXIT_USAGE
+
+
+#: set (to anything) to see the traceback of an unexpected exception instead of its one line
+TRACEBACK_ENV = "HYDE_BSDF_TRACEBACK"
+
+
+def unexpected(exc: BaseException) -> str:
+    """The one line of an exception no part of the package turned into a message: what it is, where
+    it was raised (the innermost frame in hyde_bsdf), and how to see the rest."""
+    import traceback
+
+    from hyde_bsdf.errors import one_line
+
+    if isinstance(exc, MemoryError):
+        what = "out of memory" + (f" ({one_line(exc)})" if str(exc) else "") + ": give smaller inputs"
+    elif isinstance(exc, RecursionError):
+        what = "an input is nested too deeply to be read (RecursionError)"
+    else:
+        what = f"{type(exc).__name__}: {one_line(exc) or 'no message'}"
+    ours = [f for f in traceback.extract_tb(exc.__traceback__) if f"{os.sep}hyde_bsdf{os.sep}" in f.filename]
+    where = f" in {ours[-1].filename.rsplit(os.sep + 'hyde_bsdf' + os.sep, 1)[1]}:{ours[-1].lineno}" if ours else ""
+    return f"{what} (unexpected{where}; {TRACEBACK_ENV}=1 shows the traceback -- please report it)"
 
 
 if __name__ == "__main__":

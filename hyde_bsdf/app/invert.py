@@ -17,7 +17,8 @@ from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
-from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
+from hyde_bsdf.inverse.camera_data import impossible_pixels
+from hyde_bsdf.inverse.loss import StokesLoss, as_mask, check_reference_scale, interior_mask
 from hyde_bsdf.inverse.maps import invert_maps
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, Observation, example_maps,
                                             map_keys, plane_scene_dict, render_stokes_np)
@@ -316,23 +317,15 @@ def _calibrated(args, fit):
 
 
 def _read_mask(path, shape):
-    path = Path(path)
-    try:
-        if path.suffix.lower() == ".npy":
-            m = np.load(path)
-        else:
-            import matplotlib.image as mpimg
+    """The --mask file (PNG, TIFF or .npy; sized from its header first) as booleans of ``shape``."""
+    from hyde_bsdf.io.arrays import array_header, read_array
 
-            m = mpimg.imread(str(path))
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"--mask {str(path)!r}: cannot read it ({one_line(exc)}); give a PNG or .npy") from None
-    m = np.asarray(m)
-    if m.ndim == 3:
-        m = m[..., :3].max(axis=2)
-    if m.shape != tuple(shape):
-        raise UsageError(f"--mask {str(path)!r} is {m.shape[1]}x{m.shape[0]} pixels but the film is "
+    size = array_header(path, "--mask")[0][:2]
+    if size != tuple(shape):
+        raise UsageError(f"--mask {str(path)!r} is {size[1]}x{size[0]} pixels but the film is "
                          f"{shape[1]}x{shape[0]}")
-    return m != 0
+    m = read_array(path, "--mask")
+    return as_mask(m[..., :3].max(axis=2) if m.ndim == 3 else m, f"--mask {shorten(str(path))}")
 
 
 def _load_user_scene(path):
@@ -359,7 +352,7 @@ def _cli(argv):
         return _cli_maps(args)
     truth = {**TRUTH, **_parse_values(args.truth or "", "--truth")}
     start = {**START, **_parse_values(args.start or "", "--start")}
-    fit = tuple(s.strip() for s in (args.fit or ",".join(PARAMETERS)).split(",") if s.strip())
+    fit = tuple(s.strip() for s in (",".join(PARAMETERS) if args.fit is None else args.fit).split(",") if s.strip())
     bad = [p for p in fit if p not in PARAMETERS]
     if bad or not fit:
         raise UsageError(f"--fit must list parameters from {', '.join(PARAMETERS)}, got {args.fit!r}")
@@ -382,15 +375,18 @@ def _scalar_run(args, truth, start, fit, paths):
         parameter_keys(mi.traverse(scene), PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
     W, H = scene.sensors()[0].film().crop_size()
     _check_step_memory(W, H, args, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
+    mask = None
     if args.reference:
         ref = _read_reference(args.reference[0], W, H)
         truth_known = args.truth is not None
+        bad = impossible_pixels(ref, None, f"--reference {shorten(args.reference[0])}")
+        mask = interior_mask(ref[0]) & ~bad if bad.any() else None
     else:
         _log(f"rendering the reference at {truth} ({args.spp_ref} spp)")
         ref = render_reference(scene, truth, args.spp_ref, seed=args.seed, prefix=args.target)
         truth_known = True
     with user_input("--reference"):
-        loss_fn = StokesLoss(ref, components=args.loss)
+        loss_fn = StokesLoss(ref, mask=mask, components=args.loss)
     with warnings.catch_warnings(record=True) as caught:      # printed once each below, as WARNING: lines
         warnings.simplefilter("always")
         res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
@@ -418,7 +414,8 @@ def _maps_fit_and_start(args):
     names = tuple(MAP_PARAMETERS)
     ranges = {n: MAP_PARAMETERS[n][1] for n in names}
     preset_fit = {"dielectric": "alpha,eta", "metal": "alpha,eta,k"}
-    fit = tuple(s.strip() for s in (args.fit or preset_fit.get(args.preset, "alpha")).split(",") if s.strip())
+    text = preset_fit.get(args.preset, "alpha") if args.fit is None else args.fit      # "" is no parameter, not the default
+    fit = tuple(s.strip() for s in text.split(",") if s.strip())
     bad = [p for p in fit if p not in names]
     if bad or not fit:
         raise UsageError(f"--fit must list parameters from {', '.join(names)}, got {shorten(args.fit)}")

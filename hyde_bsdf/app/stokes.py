@@ -67,21 +67,12 @@ def _angles(text, what):
     return vals
 
 
-def read_frame(path) -> np.ndarray:
-    """A raw frame from ``.npy`` or a grey PNG/TIFF (8 or 16 bit), as an array (UsageError naming it)."""
-    path = Path(path)
-    if not path.is_file():
-        raise UsageError(f"frame {str(path)!r}: no such file")
-    try:
-        if path.suffix.lower() == ".npy":
-            return np.load(path, allow_pickle=False)
-        from PIL import Image
+def read_frame(path, what: str = "frame") -> np.ndarray:
+    """A raw frame from ``.npy`` or a grey PNG/TIFF (8 or 16 bit), as an array, sized from its header
+    before it is decoded (:func:`hyde_bsdf.io.arrays.read_array`; UsageError naming it)."""
+    from hyde_bsdf.io.arrays import read_array
 
-        with Image.open(path) as im:
-            return np.asarray(im)
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"frame {str(path)!r}: cannot read it ({str(exc).splitlines()[0][:120]}); give .npy, "
-                         f"PNG or TIFF") from None
+    return read_array(path, what)
 
 
 #: the charts ``stokes`` writes beside its EXR
@@ -133,10 +124,25 @@ def _check_room(est, out: Path, charts) -> None:
         check_free_space(folder, need, f"-o/--output {shorten(str(out))} ({w}x{h} px)")
 
 
+def _check_memory(args) -> None:
+    """The Stokes step's peak memory, from the frames' headers (nothing decoded yet), against the
+    available memory (:data:`~hyde_bsdf.resources.COSTS`)."""
+    from hyde_bsdf.io.arrays import array_header
+    from hyde_bsdf.resources import COSTS, check_memory
+
+    files = [args.mosaic] if args.mosaic else list(args.frames)
+    values = sum(math.prod(array_header(f, "frame")[0]) for f in files)
+    bilinear = bool(args.mosaic) and args.demosaic == "bilinear"
+    per = COSTS.stokes_bilinear_bytes_per_value if bilinear else COSTS.stokes_bytes_per_value
+    check_memory(values * per, f"the Stokes images of {len(files)} frame(s), {values} raw values ({per} B each)",
+                 "crop the frames" + ("" if not bilinear else ", or use --demosaic superpixel (a quarter of it)"))
+
+
 def _estimate(args):
     """The Stokes estimate of --mosaic or --frames, in the units of --dn-per-unit."""
     from hyde_bsdf.inverse.analyzer import CameraNoise, analysis_matrix, stokes_from_frames, stokes_from_mosaic
 
+    _check_memory(args)
     noise = CameraNoise(args.gain, args.read_noise, args.full_well, args.black_level)
     A = None
     if args.analysis:

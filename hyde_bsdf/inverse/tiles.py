@@ -315,7 +315,9 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
                          "--camera/--light files and the references' masks)")
     spp = int(options.get("spp", 4))
     unc_spp = int(options.get("uncertainty_spp", 16)) if options.get("uncertainty", True) else 0
-    largest, concurrent = max(t.pixels for t in tasks), _concurrency(executor, workers)
+    if workers is not None:
+        workers = min(workers, len(tasks))          # 1000 workers for 4 tiles: 4 processes, 4 tiles at once
+    largest, concurrent = max(t.pixels for t in tasks), min(_concurrency(executor, workers), len(tasks))
     estimate = check_memory(inversion_bytes(largest, spp, unc_spp) * concurrent,
                             f"{concurrent} tile(s) at once, the largest with {largest} px of film crops at {spp} spp",
                             "use more --tiles (smaller crops), a lower --spp or fewer --workers")

@@ -36,9 +36,11 @@ import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path
 from hyde_bsdf.errors import InputFileError, UsageError
-from hyde_bsdf.io.input_gate import check_input
+from hyde_bsdf.io.input_gate import check_dimensions, check_input
+
 
 __all__ = [
+    "open_exr",
     "STOKES_NAMES",
     "COLOURS",
     "exr_channel_names",
@@ -49,6 +51,25 @@ __all__ = [
     "write_camera_stokes",
     "read_camera_stokes",
 ]
+
+
+def open_exr(path, what: str = "EXR file"):
+    """``OpenEXR.File`` of ``path`` with its channels read separately, once its header's size (width x
+    height x channels, 4 bytes each) has passed the memory check; UsageError for an unreadable file."""
+    import OpenEXR
+
+    try:
+        header = OpenEXR.File(str(path), header_only=True).header()
+        lo, hi = header["dataWindow"]
+        dims = (int(hi[1]) - int(lo[1]) + 1, int(hi[0]) - int(lo[0]) + 1, len(header["channels"]))
+    except Exception as exc:  # noqa: BLE001 -- any unreadable file is a user's input problem
+        raise UsageError(f"{what} {str(path)!r}: not a readable OpenEXR file ({type(exc).__name__})") from None
+    check_dimensions(dims, 4, f"{what} {str(path)!r}", option="give a smaller image")
+    try:
+        return OpenEXR.File(str(path), separate_channels=True)
+    except Exception as exc:  # noqa: BLE001
+        raise UsageError(f"{what} {str(path)!r}: not a readable OpenEXR file ({type(exc).__name__})") from None
+
 
 STOKES_NAMES = ("S0", "S1", "S2", "S3")
 COLOURS = ("R", "G", "B")
@@ -185,10 +206,8 @@ def read_stokes_exr(path) -> dict:
     and ``"metadata"``: the ``hyde_bsdf.*`` header attributes as strings.
     Raises ValueError naming the missing channels if it is not a Stokes EXR.
     """
-    import OpenEXR
-
     path = check_input(path, "Stokes EXR", stdin=False)    # the input gate: a regular file, no FIFO
-    f = OpenEXR.File(str(path), separate_channels=True)
+    f = open_exr(path, "Stokes EXR")
     chans = {name: ch.pixels for name, ch in f.channels().items()}
     need = [f"{s}.{c}" for s in STOKES_NAMES for c in COLOURS]
     missing = [n for n in need if n not in chans]
@@ -281,13 +300,11 @@ def read_camera_stokes(path) -> dict:
     "colours": tuple of suffixes (("",) for mono), "metadata": {...}}`` -- only the components present
     (the camera's measured ones).  UsageError naming the file when S0 is missing or the components'
     channel suffixes differ."""
-    import OpenEXR
-
     path = Path(path)
     if not path.is_file():
         raise UsageError(f"{str(path)!r} is not an existing file")
+    f = open_exr(path, "Stokes EXR")
     try:
-        f = OpenEXR.File(str(path), separate_channels=True)
         chans = {name: ch.pixels for name, ch in f.channels().items()}
     except Exception as exc:  # noqa: BLE001 -- any unreadable file is a user's input problem
         raise UsageError(f"{path}: not a readable OpenEXR file ({type(exc).__name__})") from None
