@@ -47,7 +47,7 @@ from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.terms import DIFFUSE, SHADOWING, check_pair, diffuse_term
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 
-__all__ = ["LabFitResult", "fit_lab", "check_lab_options", "RENDER_RANGE_NM"]
+__all__ = ["LabFitResult", "fit_lab", "check_lab_options", "RENDER_RANGE_NM", "material_at"]
 
 #: the diffuse terms a CSV fit takes (every record of model/terms.py)
 DIFFUSE_CHOICES = DIFFUSE
@@ -430,3 +430,39 @@ def _raise_or_warn(result: LabFitResult, strict: bool):
     for text in result.warnings[int(not f.verdict.adequate):]:
         if text not in f.warnings:
             warnings.warn(text, FitDataWarning, stacklevel=3)
+
+
+def material_at(result: dict, wavelengths, extrapolate: bool = False) -> dict:
+    """A fit's material (its JSON dict, :meth:`LabFitResult.to_dict`) at ``wavelengths`` (nm): rms_slope,
+    shadowing, diffuse, and n, k and the albedo per wavelength, interpolated linearly between the
+    measured wavelengths.  A wavelength outside them -- every other one, for a fit at one
+    wavelength -- is refused (UsageError naming it and the measured ones) unless ``extrapolate``:
+    then the nearest measured values are held there, and ``"extrapolated"`` lists those wavelengths."""
+    try:
+        params = {(p["name"], p["wavelength_nm"]): float(p["value"]) for p in result["parameters"]}
+        model = result["model"]
+        shadowing, diffuse = str(model["shadowing"]), str(model["diffuse"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise UsageError(f"not a fit result (hyde-bsdf fit --json): {shorten(exc)}") from None
+    measured = sorted({wl for (name, wl) in params if name == "n" and wl is not None})
+    wanted = [float(w) for w in wavelengths]
+    outside = [w for w in wanted if not measured or w < measured[0] - 1e-9 or w > measured[-1] + 1e-9]
+    if outside and not extrapolate:
+        at = f"measured at {', '.join(f'{w:g}' for w in measured)} nm" if measured else "measured at no stated wavelength"
+        raise UsageError(f"the fit was {at}; the export needs {', '.join(f'{w:g}' for w in outside)} nm, outside "
+                         "them: its index there is unknown -- measure there, or give --extrapolate to hold the "
+                         "nearest measured values (a guess)")
+
+    def curve(name):
+        if (name, None) in params:               # shared by the wavelengths (or no wavelength column)
+            return [params[(name, None)]] * len(wanted)
+        pts = sorted((wl, v) for (q, wl), v in params.items() if q == name)
+        if not pts:
+            return None
+        return list(np.interp(wanted, [w for w, _ in pts], [v for _, v in pts]))
+
+    rms = params.get(("rms_slope", None))
+    if rms is None:
+        raise UsageError("not a fit result (hyde-bsdf fit --json): no rms_slope")
+    return {"rms_slope": rms, "shadowing": shadowing, "diffuse": diffuse, "n": curve("n"), "k": curve("k"),
+            "diffuse_reflectance": curve("diffuse_reflectance"), "measured_nm": measured, "extrapolated": outside}

@@ -61,7 +61,8 @@ from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, rea
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N, RMS_SLOPE
-from hyde_bsdf.model.terms import check_pair
+from hyde_bsdf.model.parameters import DIFFUSE_REFLECTANCE
+from hyde_bsdf.model.terms import PARAMETER_DEFAULTS, check_pair, term_arguments
 from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
 from hyde_bsdf.resources import COSTS, OutputLock, check_memory, format_bytes
 
@@ -203,8 +204,10 @@ def band_indices(params) -> list:
 
 
 def _model(theta_i, theta_r, phi, params, band):
+    albedo = params.get("diffuse_reflectance")
     return pbrdf(theta_i, theta_r, phi, rms_slope=params["rms_slope"], index=band_indices(params)[band],
-                 shadowing=params["shadowing"], diffuse=params["diffuse"])
+                 shadowing=params["shadowing"], diffuse=params["diffuse"],
+                 diffuse_reflectance=None if albedo is None else albedo[band])
 
 
 def _slab(p, phi_d, theta_d, theta_h, params):
@@ -381,7 +384,9 @@ class ExportReport:
         idx = ", ".join(f"{w:g} nm: {i.n:.4g} - j{i.k:.4g}" for w, i in zip(self.wavelengths, band_indices(p)))
         lines = [f"wrote {self.path} ({self.nbytes / 2**20:.1f} MiB, {'x'.join(map(str, self.resolution))} "
                  f"phi_d x theta_d x theta_h x {len(self.wavelengths)} bands, {self.seconds:.1f} s)",
-                 f"  hyde: rms_slope = {p['rms_slope']:.6g}, shadowing = {p['shadowing']}, diffuse = {p['diffuse']}",
+                 f"  hyde: rms_slope = {p['rms_slope']:.6g}, shadowing = {p['shadowing']}, diffuse = {p['diffuse']}"
+                 + (f", diffuse_reflectance = {', '.join(f'{a:.4g}' for a in p['diffuse_reflectance'])}"
+                    if p.get("diffuse_reflectance") else ""),
                  f"  index (paper eta = n - jk): {idx}"]
         e = self.errors
         if e:
@@ -392,18 +397,29 @@ class ExportReport:
         return "\n".join(lines)
 
 
-def _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths):
+def _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths, diffuse_reflectance=None):
     if not isinstance(rms_slope, (int, float)) or isinstance(rms_slope, bool) or not RMS_SLOPE.contains(rms_slope):
         raise UsageError(f"rms_slope must be a number in [{RMS_SLOPE.lo:g}, {RMS_SLOPE.hi:g}], got {rms_slope!r}")
-    check_pair(shadowing, diffuse, booleans=False)      # names only: the export takes no True/False
+    term = check_pair(shadowing, diffuse, booleans=False)[1]     # names only: the export takes no True/False
     nb, kb = band_index(wavelengths, n, k, material)
-    return {"rms_slope": float(rms_slope), "n": [float(v) for v in nb], "k": [float(v) for v in kb],
-            "shadowing": shadowing, "diffuse": diffuse, "material": material}
+    params = {"rms_slope": float(rms_slope), "n": [float(v) for v in nb], "k": [float(v) for v in kb],
+              "shadowing": shadowing, "diffuse": diffuse, "material": material}
+    if "diffuse_reflectance" not in term.parameters:
+        term_arguments(term, diffuse_reflectance=diffuse_reflectance)     # refuses an albedo, naming its term
+        return params
+    given = PARAMETER_DEFAULTS["diffuse_reflectance"] if diffuse_reflectance is None else diffuse_reflectance
+    a = np.atleast_1d(np.asarray(given, float))
+    if a.ndim != 1 or a.size not in (1, len(wavelengths)):
+        raise UsageError(f"diffuse_reflectance must be one value or {len(wavelengths)} (one per band), got {given!r}")
+    params["diffuse_reflectance"] = [DIFFUSE_REFLECTANCE.check(float(x), "diffuse_reflectance")
+                                     for x in np.broadcast_to(a, (len(wavelengths),))]
+    return params
 
 
 def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="vgroove",
                  diffuse="paper", resolution=DEFAULT_RESOLUTION, error_samples: int = 20000,
-                 alpha_sample: float | None = None, seed: int = 0, progress=None) -> ExportReport:
+                 alpha_sample: float | None = None, seed: int = 0, progress=None,
+                 diffuse_reflectance=None) -> ExportReport:
     """Write the ``hyde`` model as a ``measured_polarized`` table (see the module docstring).
 
     Parameters: ``rms_slope`` (the paper's), the index as ``n``/``k`` (eta = n - jk; one value or
@@ -411,12 +427,13 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     :func:`hyde_bsdf.pbrdf`), ``resolution`` (N_phi_d, N_theta_d, N_theta_h) or "37x55x55",
     ``error_samples`` geometries for the error estimate (0: skip it), ``alpha_sample`` (default:
     :func:`suggest_alpha_sample`), ``seed`` of the error geometries, ``progress`` a callback
-    ``progress(message)`` (True: lines on stderr; :mod:`hyde_bsdf.progress`).
+    ``progress(message)`` (True: lines on stderr; :mod:`hyde_bsdf.progress`), ``diffuse_reflectance``
+    the albedo of ``diffuse="lambertian"`` (one value or one per band; default 0.5).
     Everything is checked, and the size refused (:func:`check_table_size`), before any work.
     """
     t0 = time.perf_counter()
     wavelengths = KAIST_WAVELENGTHS
-    params = _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths)
+    params = _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths, diffuse_reflectance)
     res = _check_resolution(resolution)
     if not (isinstance(error_samples, (int, np.integer)) and 0 <= error_samples <= 10**7):
         raise UsageError(f"error_samples must be an integer in [0, 1e7], got {error_samples!r}")
