@@ -200,3 +200,10 @@ def test_export_takes_a_fits_index_per_wavelength_and_refuses_outside_it(tmp_pat
     assert main(["export", str(out), "--fit", str(path), "--extrapolate", "--resolution", "4x4x4",
                  "--error-samples", "0", "-q"]) == 0
     assert "the nearest measured index is held" in capsys.readouterr().err
+    # a Lambertian term's albedo is never a silent default (0.5 was written before)
+    plain = ["export", str(out), "--rms-slope", "0.25", "--material", "Au", "--diffuse", "lambertian",
+             "--resolution", "4x4x4", "--error-samples", "0", "-q"]
+    assert main(plain) == 2
+    assert "diffuse_reflectance must be given with diffuse='lambertian'" in capsys.readouterr().err
+    assert main(plain + ["--diffuse-reflectance", "0.1"]) == 0
+    assert "diffuse_reflectance = 0.1" in capsys.readouterr().out

@@ -90,7 +90,7 @@ def build_parser() -> Parser:
                     help=f"diffuse term: the paper's, a reciprocal variant, none, or a Lambertian term with its own albedo "
                          f"(default {DIFFUSE[0]})")
     ap.add_argument("--diffuse-reflectance", default=None,
-                    help="the Lambertian term's albedo: one value or 5 (one per band; default 0.5)")
+                    help="the Lambertian term's albedo: one value or 5 (one per band); required with --diffuse lambertian")
     ap.add_argument("--resolution", default="x".join(map(str, DEFAULT_RESOLUTION)),
                     help="N_phi_d x N_theta_d x N_theta_h (default %(default)s)")
     ap.add_argument("--error-samples", type=int, default=20000,

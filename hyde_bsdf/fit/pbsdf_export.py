@@ -60,9 +60,8 @@ from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, rea
                                      rusinkiewicz_to_directions, table_frame_x, table_nbytes)
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
-from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N, RMS_SLOPE
-from hyde_bsdf.model.parameters import DIFFUSE_REFLECTANCE
-from hyde_bsdf.model.terms import PARAMETER_DEFAULTS, check_pair, term_arguments
+from hyde_bsdf.model.parameters import ALPHA_SAMPLE, DIFFUSE_REFLECTANCE, INDEX_MIN, N, RMS_SLOPE
+from hyde_bsdf.model.terms import check_pair, term_arguments
 from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
 from hyde_bsdf.resources import COSTS, OutputLock, check_memory, format_bytes
 
@@ -407,7 +406,10 @@ def _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths, di
     if "diffuse_reflectance" not in term.parameters:
         term_arguments(term, diffuse_reflectance=diffuse_reflectance)     # refuses an albedo, naming its term
         return params
-    given = PARAMETER_DEFAULTS["diffuse_reflectance"] if diffuse_reflectance is None else diffuse_reflectance
+    if diffuse_reflectance is None:      # no silent default: a table is a material, its albedo is measured
+        raise UsageError(f"diffuse_reflectance must be given with diffuse={diffuse!r}: the Lambertian term's own "
+                         "albedo, one value or one per band (a fit's is in its JSON: hyde-bsdf export --fit FIT.json)")
+    given = diffuse_reflectance
     a = np.atleast_1d(np.asarray(given, float))
     if a.ndim != 1 or a.size not in (1, len(wavelengths)):
         raise UsageError(f"diffuse_reflectance must be one value or {len(wavelengths)} (one per band), got {given!r}")
@@ -428,7 +430,7 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     ``error_samples`` geometries for the error estimate (0: skip it), ``alpha_sample`` (default:
     :func:`suggest_alpha_sample`), ``seed`` of the error geometries, ``progress`` a callback
     ``progress(message)`` (True: lines on stderr; :mod:`hyde_bsdf.progress`), ``diffuse_reflectance``
-    the albedo of ``diffuse="lambertian"`` (one value or one per band; default 0.5).
+    the albedo of ``diffuse="lambertian"`` (one value or one per band; required with it).
     Everything is checked, and the size refused (:func:`check_table_size`), before any work.
     """
     t0 = time.perf_counter()
