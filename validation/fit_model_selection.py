@@ -42,7 +42,8 @@ import numpy as np
 
 from hyde_bsdf.fit import fit_mueller, synthetic_measurements
 from hyde_bsdf.fit.adequacy import ELEMENT_TOLERANCE, M00_TOLERANCE, InadequateModelWarning
-from hyde_bsdf.fit.model_selection import CANDIDATES, defined, model_size, select_model, select_model_pbsdf
+from hyde_bsdf.fit.model_selection import CANDIDATES, select_model, select_model_pbsdf
+from hyde_bsdf.model.terms import allowed, model_size
 from hyde_bsdf.fit.pbsdf_export import _edge_directions, band_index, edge_deg, export_pbsdf, grids
 from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, pbsdf_samples
 from hyde_bsdf.io.pbsdf_file import KAIST_WAVELENGTHS, rusinkiewicz_to_directions, write_pbsdf
@@ -51,7 +52,7 @@ from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import cli, save_figure, write_csv  # noqa: E402
 
-MODELS = [c for c in CANDIDATES if defined(*c)]
+MODELS = [c for c in CANDIDATES if allowed(*c)]
 CSV_TRUTH = {"rms_slope": 0.25, "n": 1.2, "k": 7.0}
 CSV_ELEMENTS = ("M01", "M10", "M11", "M22", "M23", "M33")
 TABLE_RMS = 0.2
@@ -165,12 +166,12 @@ def table_pulls(data, sel, truth, reps, seed, m00=0.01, elements=0.005):
 
 def table_case(model, folder, quick, reps, seed):
     path = Path(folder) / f"{model[0]}_{model[1]}.pbsdf"
-    export_pbsdf(path, rms_slope=TABLE_RMS, material="Cu", shadowing=model[0], diffuse=model[1],
-                 resolution=(9, 16, 16) if quick else (13, 24, 24), error_samples=0, alpha_sample=0.3)
+    report = export_pbsdf(path, rms_slope=TABLE_RMS, material="Cu", shadowing=model[0], diffuse=model[1],
+                          resolution=(9, 16, 16) if quick else (13, 24, 24), error_samples=0, alpha_sample=0.3)
     data = pbsdf_samples(path, max_points=400 if quick else 1500)
     sel, _ = _quiet(select_model_pbsdf, data, progress=False)
     c, res = sel.choice, sel.result
-    n, k = band_index(material="Cu")
+    n, k = np.array(report.params["n"]), np.array(report.params["k"])      # the index the table holds per band
     pulls = table_pulls(data, sel, {"rms_slope": TABLE_RMS, "n": n, "k": k}, reps, seed) if reps else {}
     allp = [x for v in pulls.values() for x in v]
     return {"kind": "pbsdf", "case": f"{model[0]}/{model[1]}", "generating": f"{model[0]}/{model[1]}",

@@ -47,6 +47,7 @@ from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.io.pbsdf_file import KAIST_WAVELENGTHS, MITSUBA_BANDS
 from hyde_bsdf.model.fresnel import fresnel_mueller_terms
+from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import INDEX_MIN
 
 __all__ = ["COLOUR_RANGE", "BAND_INDEX", "COLOUR_TARGET", "BandChoice", "colour_weights", "index_spectrum",
@@ -114,7 +115,7 @@ def _reflectance(n, k, cos_beta):
         if math.hypot(a, b) < INDEX_MIN:
             out[i] = 0.0
         else:
-            out[i] = fresnel_mueller_terms(cos_beta, float(a), float(b))[0]
+            out[i] = fresnel_mueller_terms(cos_beta, Index(float(a), float(b)))[0]
     return out
 
 
