@@ -4,14 +4,17 @@ Command line::
 
     hyde-bsdf export OUT.pbsdf --rms-slope 0.3 (--material Au | --n N[,N,...] --k K[,K,...])
                      [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
-                     [--resolution 37x55x55] [--error-samples 20000] [-q]
+                     [--resolution 37x55x55] [--error-samples 20000]
+                     [--wavelengths auto|W1,W2,W3,W4,W5] [--band-index projected|sampled] [-q]
 
-prints the measured interpolation error and the ``<bsdf>`` element to use.
+prints the chosen bands and their colour error, the measured interpolation error and the ``<bsdf>``
+element to use.
 """
 from __future__ import annotations
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.errors import UsageError, shorten
+from hyde_bsdf.fit.pbsdf_bands import BAND_INDEX, check_wavelengths, choose_bands, index_spectrum
 from hyde_bsdf.fit.pbsdf_export import DEFAULT_RESOLUTION, export_pbsdf
 from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
 from hyde_bsdf.progress import stderr_lines
@@ -47,6 +50,12 @@ def build_parser() -> Parser:
     ap.add_argument("--error-samples", type=int, default=20000,
                     help="geometries for the interpolation-error estimate (0: skip; default %(default)s)")
     ap.add_argument("--alpha-sample", type=float, default=None, help="override the suggested alpha_sample")
+    ap.add_argument("--wavelengths", default="auto",
+                    help="the 5 band wavelengths in nm (Mitsuba's loader reads exactly 5), e.g. 450,500,550,600,650; "
+                         "auto (default): chosen for --material by the colour error they cause, 450-650 for --n/--k")
+    ap.add_argument("--band-index", default="projected", choices=BAND_INDEX,
+                    help="a --material's index per band: the colour-weighted projection of its spectrum (default) "
+                         "or the tabulated index sampled at the band wavelengths")
     quiet_option(ap)
     return ap
 
@@ -57,10 +66,16 @@ def cli_main(argv=None) -> int:
     n = None if args.n is None else _floats(args.n, "n")
     k = None if args.k is None else _floats(args.k, "k")
     with user_input():
-        report = export_pbsdf(args.output, rms_slope=args.rms_slope, n=n, k=k, material=args.material,
+        bands = None if args.wavelengths == "auto" else check_wavelengths(_floats(args.wavelengths, "wavelengths"))
+        if args.band_index == "sampled":
+            if args.material is None:
+                raise UsageError("--band-index applies to --material (--n/--k are given per band)")
+            bands = choose_bands(index_spectrum(args.material), bands, "sampled")
+        report = export_pbsdf(args.output, rms_slope=args.rms_slope, n=n, k=k,
+                              material=args.material,
                               shadowing=args.shadowing, diffuse=args.diffuse, resolution=args.resolution,
                               error_samples=args.error_samples, alpha_sample=args.alpha_sample,
-                              progress=False if args.quiet else stderr_lines())
+                              progress=False if args.quiet else stderr_lines(), bands=bands)
     print(report.summary())
     print("\nMitsuba material (C++ measured_polarized, *_spectral_polarized variants):")
     print(report.xml(indent="    "))
