@@ -282,7 +282,11 @@ def test_round_trip_export_read_fit_recovers_the_parameters(exported):
     assert result.success and not result.warnings
     assert result.rms_slope == pytest.approx(0.25, rel=1e-4)
     assert np.allclose(result.n, PARAMS["n"], rtol=1e-4) and np.allclose(result.k, PARAMS["k"], rtol=1e-4)
-    assert result.stderr["rms_slope"] < 1e-4 and "spectrum" in result.plugin_xml()
+    xml = result.plugin_xml()
+    assert result.stderr["rms_slope"] < 1e-4 and "spectrum" in xml
+    # the index at the table's bands only: nothing held out to 360 or 830 nm, and the XML says so
+    first = f"{result.wavelengths[0]:g}:"
+    assert f'"{first}' in xml and "360:" not in xml and "830:" not in xml and "reads these spectra as 0" in xml
 
 
 def test_fit_cli_on_a_pbsdf_file(exported, tmp_path, capsys):

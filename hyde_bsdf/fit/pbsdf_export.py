@@ -64,8 +64,8 @@ from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, rea
                                      rusinkiewicz_to_directions, table_frame_x, table_nbytes)
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
-from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N, RMS_SLOPE
-from hyde_bsdf.model.terms import check_pair
+from hyde_bsdf.model.parameters import ALPHA_SAMPLE, DIFFUSE_REFLECTANCE, INDEX_MIN, N, RMS_SLOPE
+from hyde_bsdf.model.terms import check_pair, term_arguments
 from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
 from hyde_bsdf.resources import COSTS, OutputLock, check_memory, format_bytes
 
@@ -207,8 +207,10 @@ def band_indices(params) -> list:
 
 
 def _model(theta_i, theta_r, phi, params, band):
+    albedo = params.get("diffuse_reflectance")
     return pbrdf(theta_i, theta_r, phi, rms_slope=params["rms_slope"], index=band_indices(params)[band],
-                 shadowing=params["shadowing"], diffuse=params["diffuse"])
+                 shadowing=params["shadowing"], diffuse=params["diffuse"],
+                 diffuse_reflectance=None if albedo is None else albedo[band])
 
 
 def _slab(p, phi_d, theta_d, theta_h, params):
@@ -386,7 +388,9 @@ class ExportReport:
         idx = ", ".join(f"{w:g} nm: {i.n:.4g} - j{i.k:.4g}" for w, i in zip(self.wavelengths, band_indices(p)))
         lines = [f"wrote {self.path} ({self.nbytes / 2**20:.1f} MiB, {'x'.join(map(str, self.resolution))} "
                  f"phi_d x theta_d x theta_h x {len(self.wavelengths)} bands, {self.seconds:.1f} s)",
-                 f"  hyde: rms_slope = {p['rms_slope']:.6g}, shadowing = {p['shadowing']}, diffuse = {p['diffuse']}",
+                 f"  hyde: rms_slope = {p['rms_slope']:.6g}, shadowing = {p['shadowing']}, diffuse = {p['diffuse']}"
+                 + (f", diffuse_reflectance = {', '.join(f'{a:.4g}' for a in p['diffuse_reflectance'])}"
+                    if p.get("diffuse_reflectance") else ""),
                  f"  index (paper eta = n - jk): {idx}"]
         if self.bands is not None:
             lines.append(f"  {self.bands.text()}")
@@ -423,18 +427,32 @@ def _bands(n, k, material, bands) -> BandChoice:
                       (0.0, 0.0, 0.0) if constant else None)
 
 
-def _check_params(rms_slope, n, k, material, shadowing, diffuse, bands=None):
+def _check_params(rms_slope, n, k, material, shadowing, diffuse, bands=None, diffuse_reflectance=None):
     if not isinstance(rms_slope, (int, float)) or isinstance(rms_slope, bool) or not RMS_SLOPE.contains(rms_slope):
         raise UsageError(f"rms_slope must be a number in [{RMS_SLOPE.lo:g}, {RMS_SLOPE.hi:g}], got {rms_slope!r}")
-    check_pair(shadowing, diffuse, booleans=False)      # names only: the export takes no True/False
+    term = check_pair(shadowing, diffuse, booleans=False)[1]     # names only: the export takes no True/False
+    params = {"shadowing": shadowing, "diffuse": diffuse}
+    if "diffuse_reflectance" not in term.parameters:
+        term_arguments(term, diffuse_reflectance=diffuse_reflectance)     # refuses an albedo, naming its term
+    elif diffuse_reflectance is None:      # no silent default: a table is a material, its albedo is measured
+        raise UsageError(f"diffuse_reflectance must be given with diffuse={diffuse!r}: the Lambertian term's own "
+                         "albedo, one value or one per band (a fit's is in its JSON: hyde-bsdf export --fit FIT.json)")
+    else:
+        a = np.atleast_1d(np.asarray(diffuse_reflectance, float))
+        if a.ndim != 1 or a.size not in (1, len(KAIST_WAVELENGTHS)):
+            raise UsageError(f"diffuse_reflectance must be one value or {len(KAIST_WAVELENGTHS)} (one per band), "
+                             f"got {diffuse_reflectance!r}")
+        params["diffuse_reflectance"] = [DIFFUSE_REFLECTANCE.check(float(x), "diffuse_reflectance")
+                                         for x in np.broadcast_to(a, (len(KAIST_WAVELENGTHS),))]
     bands = _bands(n, k, material, bands)
-    return {"rms_slope": float(rms_slope), "n": list(bands.n), "k": list(bands.k),
-            "shadowing": shadowing, "diffuse": diffuse, "material": material}, bands
+    return {"rms_slope": float(rms_slope), "n": list(bands.n), "k": list(bands.k), "material": material,
+            **params}, bands
 
 
 def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="vgroove",
                  diffuse="paper", resolution=DEFAULT_RESOLUTION, error_samples: int = 20000,
-                 alpha_sample: float | None = None, seed: int = 0, progress=None, bands=None) -> ExportReport:
+                 alpha_sample: float | None = None, seed: int = 0, progress=None, bands=None,
+                 diffuse_reflectance=None) -> ExportReport:
     """Write the ``hyde`` model as a ``measured_polarized`` table (see the module docstring).
 
     Parameters: ``rms_slope`` (the paper's), the index as ``n``/``k`` (eta = n - jk; one value or
@@ -445,11 +463,13 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     ``progress(message)`` (True: lines on stderr; :mod:`hyde_bsdf.progress`), ``bands`` the five
     band wavelengths (nm; default: chosen by colour error for a material, 450-650 nm for n, k) or a
     :class:`~hyde_bsdf.fit.pbsdf_bands.BandChoice` (e.g. ``choose_bands(index_spectrum("Au"),
-    (450, 500, 550, 600, 650), "sampled")``, the index sampled at the band wavelengths).
+    (450, 500, 550, 600, 650), "sampled")``, the index sampled at the band wavelengths),
+    ``diffuse_reflectance`` the albedo of ``diffuse="lambertian"`` (one value or one per band; required
+    with it).
     Everything is checked, and the size refused (:func:`check_table_size`), before any work.
     """
     t0 = time.perf_counter()
-    params, choice = _check_params(rms_slope, n, k, material, shadowing, diffuse, bands)
+    params, choice = _check_params(rms_slope, n, k, material, shadowing, diffuse, bands, diffuse_reflectance)
     wavelengths = choice.wavelengths
     res = _check_resolution(resolution)
     if not (isinstance(error_samples, (int, np.integer)) and 0 <= error_samples <= 10**7):
