@@ -33,6 +33,7 @@ NOT_FILES = {
     ("stokes", "retarder"): "angles", ("invert", "target"): "a key prefix", ("invert", "truth"): "values",
     ("invert", "start"): "values", ("invert", "fit"): "parameter names", ("invert", "tiles"): "N or RxC",
     ("invert", "scheduler"): "a network address", ("invert", "channel"): "a channel name",
+    ("export", "diffuse_reflectance"): "numbers", ("export", "wavelengths"): "wavelengths or auto",
 }
 
 
@@ -137,10 +138,12 @@ INPUT_CASES = {
     ("invert", "tiles-camera"): MAPS[:4] + ["--camera", "out/invert_maps_history.csv", "--light", "out/light.json",
                                             "--reference", "out/ref.exr", "--tiles", "2", "-o", "out"],
     ("validate", "scripts"): ["validate", "-o", "scripts", "--scripts", "scripts", "--force"],
+    ("export", "fit"): ["export", "out/fit.pbsdf", "--fit", "out/fit.pbsdf"],
 }
 #: files the rows name that do not exist yet (made as a copy of an input)
 _MADE = {"out/invert.png": "out/ref.exr", "out/alpha_seen.npy": "out/mask.npy",
-         "out/invert_maps_history.csv": "out/cam.json", "out/invert_maps.png": "out/light.json"}
+         "out/invert_maps_history.csv": "out/cam.json", "out/invert_maps.png": "out/light.json",
+         "out/fit.pbsdf": "out/cam.json"}
 
 
 def test_every_input_option_has_a_case():

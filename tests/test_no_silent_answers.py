@@ -283,3 +283,39 @@ def test_maps_of_a_sample_no_camera_sees_are_refused_before_the_work(tmp_path, c
     err = capsys.readouterr().err.strip().splitlines()
     assert "no picture sees the sample: texels seen 0 of 4" in err[-1]
     assert not (out / "alpha.npy").exists()
+
+
+def test_model_selection_does_not_advise_itself():
+    """A fixed model's inadequate verdict advises '--model auto'; once every model was tried (auto
+    mode) the advice is dropped -- the rest of the message, its figures and cause, stay."""
+    from hyde_bsdf.fit.adequacy import MODEL_ADVICE, chi2_verdict, without_advice
+
+    th = np.radians(np.linspace(10.0, 80.0, 24))
+    r = np.tile(np.linspace(-3.0, 3.0, 24), (4, 1))           # a trend: structured misfit
+    v = chi2_verdict(float((r ** 2).sum()), 4 * 24 - 3, r, th, th, np.pi, parameters=3)
+    assert not v.adequate and v.message.endswith(MODEL_ADVICE)
+    text = v.message
+    assert without_advice(v).message == text[: -len(MODEL_ADVICE)] and "try --model auto" not in v.message
+
+
+def test_stokes_checks_the_estimate_after_calibration(tmp_path, capsys):
+    """Three frames behind 0/60/120 deg analyzers reading 200, 0, 0 DN in 2 of 16 pixels: the least-squares
+    Stokes vector there is S0 = 133, S1 = 267 -- a degree of polarization of 2 (a scene that moved, a wrong
+    angle), 17 sigma beyond 1: warned with its share, mask 0 in the EXR; the other 14 pixels pass."""
+    from hyde_bsdf.app.cli import main
+    from hyde_bsdf.io.stokes_exr import read_camera_stokes
+
+    frames = [np.full((4, 4), 100.0) for _ in range(3)]
+    frames[0][0, :2], frames[1][0, :2], frames[2][0, :2] = 200.0, 0.0, 0.0
+    names = [tmp_path / f"f{i}.npy" for i in range(3)]
+    for name, f in zip(names, frames):
+        np.save(name, f)
+    out = tmp_path / "s.exr"
+    assert main(["stokes", "--frames", *map(str, names), "--angles", "0,60,120", "--read-noise", "2", "-q",
+                 "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "the Stokes estimate of the 3 --frames: 12.5 % of the pixels (2 of 16) have a degree of polarization > 1" \
+        in err
+    d = read_camera_stokes(out)
+    dolp = np.hypot(d["stokes"]["S1"], d["stokes"]["S2"])[..., 0] / d["stokes"]["S0"][..., 0]
+    assert dolp[0, :2] == pytest.approx(2.0, rel=1e-6) and d["mask"].sum() == 14 and not d["mask"][0, :2].any()

@@ -75,7 +75,8 @@ def _error(command: str, message: str) -> None:
     if sys.stderr is None:          # closed: print(file=None) would write to standard output
         return
     try:
-        print(f"hyde-bsdf {command}: {shorten_values(message)}", file=sys.stderr, flush=True)
+        sys.stderr.write(f"hyde-bsdf {command}: {shorten_values(message)}\n")      # one write: one whole line
+        sys.stderr.flush()
     except (OSError, ValueError):
         pass
 

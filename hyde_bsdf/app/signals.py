@@ -5,7 +5,8 @@ The work blocks the three signals from its first instruction, and so does every 
 starts (pool workers, validation scripts): no library in it -- Dr.Jit and Mitsuba calling Python
 back from C++, a module being imported, dask's threads -- can swallow a signal, turn it into
 another error or abort on it.  The waiting process imports nothing heavy and sets its handlers in
-its first lines; on a signal it stops the work and every process under it (SIGKILL), removes the
+its first lines; on a signal it stops the work and every process under it (SIGKILL; it is their
+subreaper, so a pool worker whose parent died first is found too), removes the
 temporaries the work had announced before making them (:data:`hyde_bsdf.io.atomic.on_temporary`),
 prints one line and exits: Ctrl-C ``interrupted``, 130; SIGTERM ``terminated (SIGTERM)``, 143;
 SIGHUP 129.  Outputs are renamed into place whole, so each is its old file or its new one.  A work
@@ -82,16 +83,33 @@ def _descendants(pid: int) -> list[int]:
     return found
 
 
-def _stop(child, announced: int) -> None:
-    """Kill the work and its processes (stopped first, so none starts another), then remove the
-    temporaries it announced in the file ``announced``."""
-    import shutil
+def _under_us() -> list[int]:
+    """Every process under this one: the work, its processes, and (this process being their
+    subreaper) those whose parent died first -- a pool's workers, multiprocessing's resource tracker."""
+    return [pid for pid in _descendants(os.getpid()) if pid != os.getpid()]
 
-    with contextlib.suppress(OSError):
-        for sig in (signal.SIGSTOP, signal.SIGSTOP, signal.SIGKILL):
-            for pid in _descendants(child.pid):
+
+def _stop(child, announced: int) -> None:
+    """Kill the work and every process under it (stopped first, so none starts another; again until
+    none is left: an orphan comes back to this process), then remove the temporaries it announced in
+    the file ``announced``."""
+    import shutil
+    import time
+
+    for sig in (signal.SIGSTOP, signal.SIGSTOP, *[signal.SIGKILL] * 50):
+        pids = _under_us()
+        if not pids:
+            break
+        for pid in pids:
+            with contextlib.suppress(OSError):
                 os.kill(pid, sig)
-    child.wait()
+        with contextlib.suppress(ChildProcessError):
+            while sig == signal.SIGKILL and os.waitpid(-1, os.WNOHANG)[0] > 0:   # reap: zombies are listed too
+                pass
+        if sig == signal.SIGKILL:
+            time.sleep(0.01)
+    with contextlib.suppress(ChildProcessError):
+        child.wait()
     for name in os.pread(announced, os.fstat(announced).st_size, 0).split(b"\0"):
         with contextlib.suppress(OSError):
             shutil.rmtree(name) if os.path.isdir(name) and not os.path.islink(name) else os.unlink(name)
@@ -100,8 +118,11 @@ def _stop(child, announced: int) -> None:
 def work_setup(value: str):
     """In the work, first (``value``: the waiting process's ``PID:FD``): end with the waiting process
     (Linux), so that a ``kill -9`` of it leaves no work running; returns its announcement callback.
-    The signals are blocked already: the mask is inherited."""
+    The signals are blocked already (the mask is inherited) and ignored from here: the waiting process
+    alone answers them (a Ctrl-C reaches the whole process group)."""
     parent, fd = (int(v) for v in value.split(":"))
+    for sig in SIGNALS:      # and ignored: a library that unblocks them (multiprocessing's resource tracker
+        signal.signal(sig, signal.SIG_IGN)      # start does) must not end the work; its processes inherit this
     with contextlib.suppress(Exception):
         import ctypes
         ctypes.CDLL(None).prctl(1, signal.SIGKILL)             # PR_SET_PDEATHSIG
@@ -125,6 +146,9 @@ def supervise(command: str, argv: list, error) -> None:
         with tempfile.TemporaryFile() as fh:     # unnamed: nothing to clean up
             announced = os.dup(fh.fileno())
         env = {**os.environ, SUPERVISOR_ENV: f"{os.getpid()}:{announced}"}
+        with contextlib.suppress(Exception):     # Linux: the work's orphans come back here (see _stop)
+            import ctypes
+            ctypes.CDLL(None).prctl(36, 1)        # PR_SET_CHILD_SUBREAPER
         signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)  # the work inherits the mask: blocked all along
         try:
             child = subprocess.Popen([sys.executable, "-m", "hyde_bsdf.app.cli", command, *argv],
@@ -140,7 +164,7 @@ def supervise(command: str, argv: list, error) -> None:
             code = 128 - code
     except KeyboardInterrupt as exc:
         signal.pthread_sigmask(signal.SIG_BLOCK, SIGNALS)
-        if child is not None and child.returncode is None:
+        if child is not None:         # (ended or not: what it left under this process goes too)
             _stop(child, announced)
         message, code = outcome(exc)
         error(message)

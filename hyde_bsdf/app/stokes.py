@@ -89,7 +89,8 @@ def cli_main(argv=None) -> int:
     inputs = run_inputs(parser, args)
     # the output gate: no output is an input, one writer at a time; the free space once the size is known
     with output_gate([out, *charts], inputs=inputs, what="-o/--output file"):
-        est = _estimate(args)
+        est = _checked(_estimate(args), f"--mosaic {shorten(args.mosaic)}" if args.mosaic else
+                       f"the {len(args.frames)} --frames")
         _check_room(est, out, charts)
         paths = _write(est, out, stem, args.dn_per_unit)
     _report(est, paths)
@@ -131,7 +132,7 @@ def _check_memory(args) -> None:
     from hyde_bsdf.resources import COSTS, check_memory
 
     files = [args.mosaic] if args.mosaic else list(args.frames)
-    values = sum(math.prod(array_header(f, "frame")[0]) for f in files)
+    values = sum(math.prod(array_header(f, "--mosaic" if args.mosaic else "--frames")[0]) for f in files)
     bilinear = bool(args.mosaic) and args.demosaic == "bilinear"
     per = COSTS.stokes_bilinear_bytes_per_value if bilinear else COSTS.stokes_bytes_per_value
     check_memory(values * per, f"the Stokes images of {len(files)} frame(s), {values} raw values ({per} B each)",
@@ -146,14 +147,14 @@ def _estimate(args):
     noise = CameraNoise(args.gain, args.read_noise, args.full_well, args.black_level)
     A = None
     if args.analysis:
-        A = read_frame(args.analysis).astype(np.float64)
+        A = read_frame(args.analysis, "--analysis").astype(np.float64)
     if args.mosaic:
         if args.angles or args.retarder:
             raise UsageError("--angles and --retarder go with --frames; a --mosaic has --layout")
         lay = _angles(args.layout, "--layout")
         if len(lay) != 4:
             raise UsageError(f"--layout needs 4 angles (the 2 x 2 cell row by row), got {args.layout!r}")
-        est = stokes_from_mosaic(read_frame(args.mosaic), (lay[:2], lay[2:]), method=args.demosaic, analysis=A,
+        est = stokes_from_mosaic(read_frame(args.mosaic, "--mosaic"), (lay[:2], lay[2:]), method=args.demosaic, analysis=A,
                                  noise=noise, saturated=args.saturated, name=args.mosaic)
     else:
         if (args.angles is None) == (A is None):
@@ -164,9 +165,29 @@ def _estimate(args):
             raise UsageError(f"--retarder is FAST,RETARDANCE in deg, got {args.retarder!r}")
         if A is None and ret is not None:
             A = analysis_matrix(angles, retarder=tuple(ret))
-        est = stokes_from_frames([read_frame(f) for f in args.frames], angles if A is None else None, analysis=A,
+        est = stokes_from_frames([read_frame(f, "--frames") for f in args.frames], angles if A is None else None, analysis=A,
                                  noise=noise, saturated=args.saturated, names=args.frames)
     return est.in_units(args.dn_per_unit)
+
+
+def _checked(est, name: str):
+    """The estimate after calibration: pixels no light gives (S0 < 0, a degree of polarization > 1, beyond
+    5 sigma; a wrong black level or analysis matrix, a scene that moved between frames) are warned with
+    their share (:func:`~hyde_bsdf.inverse.camera_data.impossible_pixels`) and get mask 0 in the EXR."""
+    from hyde_bsdf.inverse.camera_data import impossible_pixels
+
+    h, w = est.shape
+
+    def layers(d):          # (4, H, W * C): each colour channel a pixel of its own; missing components 0
+        flat = {c: np.asarray(v, np.float64).reshape(h, -1) for c, v in d.items()}
+        n = next(iter(flat.values())).shape[1]
+        return np.stack([flat.get(c, np.zeros((h, n))) for c in ("S0", "S1", "S2", "S3")])
+
+    bad = impossible_pixels(layers(est.stokes), layers(est.sigma), f"the Stokes estimate of {name}")
+    bad = bad.reshape(h, w, -1).any(axis=-1)
+    if bad.any():
+        est.mask = est.mask & ~bad
+    return est
 
 
 def _write(est, out: Path, stem: Path, dn_per_unit: float) -> dict:

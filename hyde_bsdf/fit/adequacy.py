@@ -45,7 +45,7 @@ from hyde_bsdf.errors import RejectedResult
 __all__ = ["Verdict", "InadequateModelWarning", "InadequateModelError", "ERRORS_NOTE", "P_LIMIT",
            "M00_TOLERANCE", "ELEMENT_TOLERANCE", "Z_LIMIT", "NEIGHBOURS",
            "half_angles", "neighbour_index", "residual_structure", "angle_trends", "geometry_clusters", "cluster_covariance",
-           "correlation", "larger_errors", "MIN_GEOMETRIES", "too_few_geometries",
+           "correlation", "larger_errors", "MIN_GEOMETRIES", "too_few_geometries", "MODEL_ADVICE", "without_advice",
            "chi2_verdict", "floor_verdict", "birge_scaling", "blame_fixed_parameters", "SIGMAS_OR_MODEL"]
 
 #: chi^2 tail probability below which a fit with error bars is inadequate
@@ -60,6 +60,9 @@ Z_LIMIT = 5.0
 FLOAT32_FLOOR = 1e-6
 #: neighbours whose residuals define the systematic part
 NEIGHBOURS = 8
+#: what an inadequate verdict of one fixed model advises; model selection, which tried them all, drops it
+#: (:func:`without_advice`)
+MODEL_ADVICE = "; try --model auto"
 #: fewest distinct geometries a verdict without error bars can be "adequate" at (module docstring)
 MIN_GEOMETRIES = NEIGHBOURS + 2
 #: quantile bins of theta_h and of theta_d for the trends
@@ -236,6 +239,12 @@ def _cause(trends, elements_bad, m00_bad):
     return "the model does not fit"
 
 
+def without_advice(verdict: Verdict) -> Verdict:
+    """``verdict`` without :data:`MODEL_ADVICE` (for a model chosen among all of them)."""
+    verdict.message = verdict.message.replace(MODEL_ADVICE, "")
+    return verdict
+
+
 def too_few_geometries(theta_i, theta_r, phi, parameters: int = 0, test: str = "floor") -> Verdict | None:
     """An inadequate Verdict when the data have no more distinct geometries than ``parameters`` (what one
     wavelength's data must determine) or, for the ``"floor"`` test (no error bars), fewer than
@@ -279,8 +288,8 @@ def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi, neighbours=None, parameter
              f"{st['scatter']:.3g} sigma") if structured else \
         (f"the residuals are scatter without a trend ({st['scatter']:.3g} sigma rms): the sigmas underestimate "
          "the noise")
-    msg = (f"reduced chi^2 = {red:.4g} (chi^2 = {chi2:.4g} for {dof} dof, p = {p:.3g}): {cause}; "
-           "try --model auto" + ("" if structured else ", or check the sigmas"))
+    msg = (f"reduced chi^2 = {red:.4g} (chi^2 = {chi2:.4g} for {dof} dof, p = {p:.3g}): {cause}"
+           + ("" if structured else "; check the sigmas") + MODEL_ADVICE)
     return Verdict(False, "chi2", "lower bounds", figs, msg, cause)
 
 
@@ -320,7 +329,7 @@ def floor_verdict(m00, elements, theta_i, theta_r, phi, neighbours=None, paramet
     pct = (lambda v: f"{100 * v:.3g} %") if lead == "M00" else (lambda v: f"{v:.3g}")
     msg = (f"{lead} misfit {pct(figs[f'{lead}_rms'])} rms (systematic {pct(figs[f'{lead}_systematic'])}, the data's "
            f"floor {pct(figs[f'{lead}_scatter'])}; tolerance {pct(M00_TOLERANCE if lead == 'M00' else ELEMENT_TOLERANCE)}): "
-           f"{cause}; try --model auto")
+           f"{cause}" + MODEL_ADVICE)
     figs.update({f"trend_{k}": v for k, v in trends.items()})
     return Verdict(False, "floor", "lower bounds", figs, msg, cause)
 

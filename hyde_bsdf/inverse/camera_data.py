@@ -233,7 +233,8 @@ def camera_files(cameras, lights, references, *, masks=None, channel: str = "Y")
         for k, m in enumerate(masks):
             j, i = divmod(k, len(cams))
             d = data[j][i]
-            d["mask"] = np.asarray(m, bool) if d["mask"] is None else d["mask"] & np.asarray(m, bool)
+            m = as_mask(m, f"the mask of --reference {refs[k]!r}")
+            d["mask"] = m if d["mask"] is None else d["mask"] & m
     return cams, lts, data
 
 

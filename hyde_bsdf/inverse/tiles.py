@@ -96,12 +96,14 @@ class Capture:
                                           "crop_width": int(crop[2]), "crop_height": int(crop[3])}
         return calibrated_scene(self.scene, [self.cameras[camera]], self.lights[light], spp=self.spp, film=film)
 
-    def observations(self) -> list:
+    def observations(self, first=None) -> list:
         """The whole pictures as observations, light-major, one scene each (sensor 0); the loss mask is
-        :func:`~hyde_bsdf.inverse.camera_data.camera_observation`'s."""
+        :func:`~hyde_bsdf.inverse.camera_data.camera_observation`'s.  ``first``: the scene of light 0,
+        camera 0 when already loaded."""
         from hyde_bsdf.inverse.camera_data import _stokes_dict, camera_observation
 
-        return [camera_observation(self.scene_of(j, i), _stokes_dict(self.references[j][i]))
+        return [camera_observation(first if first is not None and (j, i) == (0, 0) else self.scene_of(j, i),
+                                   _stokes_dict(self.references[j][i]))
                 for j in range(len(self.lights)) for i in range(len(self.cameras))]
 
 
@@ -176,13 +178,14 @@ def plan_tiles(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2, 2), p
     that no picture sees wholly get none), built in this process from the whole pictures."""
     import mitsuba as mi
 
-    observations = capture.observations()
-    params = mi.traverse(observations[0].scene)
+    first = capture.scene_of(0, 0)             # the map's size and the tiles checked before the other scenes load
+    params = mi.traverse(first)
     keys = map_keys(params, tuple(fit), prefix)
     shape = next((tuple(params[keys[n]].shape[:2]) for n in fit if isinstance(params[keys[n]], mi.TensorXf)), None)
     if shape is None:
         raise UsageError(f"tiles need a texture-valued fitted parameter; {', '.join(fit)} are constants in the scene")
     bounds = tile_bounds(shape, tiles)
+    observations = capture.observations(first)
     light_cam = [(j, i) for j in range(len(capture.lights)) for i in range(len(capture.cameras))]
     owner = [pixel_tiles(o, shape, bounds, prefix) for o in observations]
     bare = dataclasses.replace(capture, references=())

@@ -19,7 +19,7 @@ from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.io.input_gate import check_dimensions, check_input
 from hyde_bsdf.resources import format_bytes
 
-__all__ = ["array_header", "read_array", "IMAGE_DTYPES"]
+__all__ = ["array_header", "read_array", "exr_shape", "check_image_memory", "IMAGE_DTYPES"]
 
 #: PIL image mode -> (dtype, values per pixel)
 IMAGE_DTYPES = {"1": (np.bool_, 1), "L": (np.uint8, 1), "P": (np.uint8, 1), "I;16": (np.uint16, 1),
@@ -87,3 +87,34 @@ def read_array(path, what: str = "array file") -> np.ndarray:
     check_dimensions(shape, dtype.itemsize, name, option="give a smaller image")
     with _image(path, what) as im:
         return np.asarray(im)
+
+
+def exr_shape(path, what: str = "EXR file") -> tuple[int, int, int]:
+    """(height, width, channels) of an OpenEXR file, from its header (no pixel read)."""
+    import OpenEXR
+
+    try:
+        header = OpenEXR.File(str(path), header_only=True).header()
+        lo, hi = header["dataWindow"]
+        return int(hi[1]) - int(lo[1]) + 1, int(hi[0]) - int(lo[0]) + 1, len(header["channels"])
+    except Exception as exc:  # noqa: BLE001 -- any unreadable file is a user's input problem
+        raise UsageError(f"{what} {shorten(str(path))}: not a readable OpenEXR file ({type(exc).__name__})") from None
+
+
+#: image files whose header PIL reads without decoding
+PIL_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".tga", ".ppm", ".pgm")
+
+
+def check_image_memory(path, what: str = "image") -> None:
+    """A texture or image file's decoded size (float32 per channel, as a renderer holds it), from its
+    header, against the available memory; other files pass.  A header that claims 100000 x 100000 is
+    one line before the renderer allocates it."""
+    name = str(path).lower()
+    if name.endswith(".exr"):
+        shape = exr_shape(path, what)
+    elif name.endswith(PIL_SUFFIXES):
+        with _image(path, what) as im:
+            shape = (im.height, im.width, len(im.getbands()))
+    else:
+        return
+    check_dimensions(shape, 4, f"{what} {shorten(str(path))}", option="give a smaller image")

@@ -24,6 +24,7 @@ import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
+from hyde_bsdf.io.arrays import check_image_memory
 from hyde_bsdf.io.input_gate import check_input
 
 __all__ = ["scene_files", "MAX_INCLUDE_DEPTH"]
@@ -91,4 +92,5 @@ def scene_files(path, params: dict | None = None) -> list[Path]:
     for p in files[1:]:
         if os.path.lexists(p):
             check_input(p, f"scene {str(path)!r}: file", stdin=False)
+            check_image_memory(p, f"scene {str(path)!r}: image")      # its size from its header
     return list(dict.fromkeys(files))

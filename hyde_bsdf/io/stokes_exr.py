@@ -58,16 +58,12 @@ def open_exr(path, what: str = "EXR file"):
     height x channels, 4 bytes each) has passed the memory check; UsageError for an unreadable file."""
     import OpenEXR
 
-    try:
-        header = OpenEXR.File(str(path), header_only=True).header()
-        lo, hi = header["dataWindow"]
-        dims = (int(hi[1]) - int(lo[1]) + 1, int(hi[0]) - int(lo[0]) + 1, len(header["channels"]))
-    except Exception as exc:  # noqa: BLE001 -- any unreadable file is a user's input problem
-        raise UsageError(f"{what} {str(path)!r}: not a readable OpenEXR file ({type(exc).__name__})") from None
-    check_dimensions(dims, 4, f"{what} {str(path)!r}", option="give a smaller image")
+    from hyde_bsdf.io.arrays import exr_shape
+
+    check_dimensions(exr_shape(path, what), 4, f"{what} {str(path)!r}", option="give a smaller image")
     try:
         return OpenEXR.File(str(path), separate_channels=True)
-    except Exception as exc:  # noqa: BLE001
+    except Exception as exc:  # noqa: BLE001 -- any unreadable file is a user's input problem
         raise UsageError(f"{what} {str(path)!r}: not a readable OpenEXR file ({type(exc).__name__})") from None
 
 
