@@ -207,3 +207,32 @@ def test_export_takes_a_fits_index_per_wavelength_and_refuses_outside_it(tmp_pat
     assert "diffuse_reflectance must be given with diffuse='lambertian'" in capsys.readouterr().err
     assert main(plain + ["--diffuse-reflectance", "0.1"]) == 0
     assert "diffuse_reflectance = 0.1" in capsys.readouterr().out
+
+
+def test_normalized_rows_are_whitened_with_their_shared_m00_noise():
+    """Without M00 a row's ratios M_jk/M00 share M00's noise: covariance C = diag(own^2) + s s^T per
+    row (s = delta r, own^2 = sigma^2 - s^2).  ``LabData.whiten`` (Sherman-Morrison, one dot product
+    per row) gives e^T C^-1 e, the chi^2 of the dense covariance, to 1e-10 relative, and whitens
+    Jacobian columns the same way; rows whose sigmas imply M00 is not above 0 within 3 sigma are left
+    out and counted.  < 1 s."""
+    from hyde_bsdf.fit.lab_data import RATIO_DELTA, lab_data
+
+    meas = lab_measurements(with_m00=False, n=40)
+    data = lab_data(meas)
+    data = data.with_shared(data.y * (1.0 + 0.1 * np.sin(np.arange(data.y.size))))   # a model's r, not the data's
+    C, N = len(data.columns), data.geometries
+    own2 = np.maximum(data.w ** 2 - data.shared ** 2, (0.1 * data.w) ** 2).reshape(C, N)
+    s = data.shared.reshape(C, N)
+    e = np.random.default_rng(3).standard_normal(data.y.size) * data.w
+    E = e.reshape(C, N)
+    dense = sum(E[:, i] @ np.linalg.solve(np.diag(own2[:, i]) + np.outer(s[:, i], s[:, i]), E[:, i])
+                for i in range(N))
+    assert float(data.whiten(e) @ data.whiten(e)) == pytest.approx(dense, rel=1e-10)
+    J = np.stack([e, 2 * e], axis=1)
+    assert np.allclose(data.whiten(J), np.stack([data.whiten(e), 2 * data.whiten(e)], axis=1), rtol=1e-12)
+    # a row whose M00 is noise (every sigma large): left out, counted, named in the fit's notes
+    noisy = lab_measurements(with_m00=False, n=40)
+    for e_ in noisy.sigma:
+        noisy.sigma[e_][:3] = 2 * RATIO_DELTA * np.hypot(1.0, noisy.values[e_][:3])
+    kept = lab_data(noisy)
+    assert kept.groups[0].uninformative == 3 and kept.groups[0].rows_in == 40
