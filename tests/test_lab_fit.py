@@ -138,7 +138,8 @@ def test_json_result_has_the_issue_schema(lab_fit, tmp_path, capsys):
     csv = write_measurements(tmp_path / "lab.csv", lab_measurements())
     out = tmp_path / "fit.json"
     assert main(["fit", str(csv), "--shadowing", "smith", "--diffuse", "lambertian", "--json", str(out), "-q"]) == 0
-    assert "<spectrum name=\"eta\" value=\"632.8:" in capsys.readouterr().out
+    xml = capsys.readouterr().out      # measured at 632.8 and 1550 nm: held from 360 nm up, said so
+    assert '<spectrum name="eta" value="360:' in xml and "over 360-632.8 nm the end values are held" in xml
     cli = json.loads(out.read_text())
     assert cli["model"] == d["model"]
     for a, b in zip(cli["parameters"], d["parameters"]):
@@ -236,3 +237,23 @@ def test_normalized_rows_are_whitened_with_their_shared_m00_noise():
         noisy.sigma[e_][:3] = 2 * RATIO_DELTA * np.hypot(1.0, noisy.values[e_][:3])
     kept = lab_data(noisy)
     assert kept.groups[0].uninformative == 3 and kept.groups[0].rows_in == 40
+
+
+def test_index_spectra_are_held_over_mitsubas_colour_range_and_say_so():
+    """An index measured at 450-650 nm, written as it was measured, is 0 outside in spectral variants
+    and the wrong colour in RGB ones (Mitsuba integrates the spectrum over 360-830 nm: a constant 0.5
+    becomes the RGB index (0.42, 0.53, 0.25)).  spectrum_element holds the end values out to 360 and
+    830 nm, so the RGB index of a flat measurement is that value to 0.2 %, and the note says where it
+    extrapolates.  < 1 s."""
+    from hyde_bsdf.fit.spectral import extrapolation_warning, spectrum_element
+    from hyde_bsdf.mitsuba.variants import set_variant
+    import mitsuba as mi
+
+    wl = [450.0, 550.0, 650.0]
+    xml = spectrum_element("eta", wl, [0.5, 0.5000001, 0.5])
+    assert xml.startswith('<spectrum name="eta" value="360:0.5, 450:0.5') and xml.endswith('650:0.5, 830:0.5"/>')
+    set_variant("scalar_rgb", fallback=False)
+    params = mi.traverse(mi.load_string(f'<bsdf version="3.0.0" type="roughconductor">{xml}</bsdf>'))
+    assert np.allclose(np.asarray(params["eta.value"]), 0.5, rtol=2e-3)
+    assert "over 360-450 and 650-830 nm the end values are held" in extrapolation_warning(wl)
+    assert extrapolation_warning([300.0, 900.0]) is None
