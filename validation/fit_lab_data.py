@@ -448,6 +448,11 @@ def _checks(worst, summaries, rows, out, quick):
     return checks
 
 
+def _short(case) -> str:
+    """A case's axis label: "issue", "B+S Lambertian 10 %", "GGX + Smith, ...", ..."""
+    return case.split(":")[0].replace("Beckmann + Smith, ", "B+S ").replace("Lambertian", "Lamb.")[:26]
+
+
 def _plot(path, summaries, rows):
     import matplotlib
     matplotlib.use("Agg")
@@ -476,7 +481,7 @@ def _plot(path, summaries, rows):
         ax.plot(i, s["pull_std"], "o", color="C0" if s["data"] != "normalized only" else "C1")
     ax.axhspan(*PULL_RANGE, color="C2", alpha=0.15)
     ax.set_xticks(range(len(claimed)))
-    ax.set_xticklabels([s["case"].split(":")[0][:22] + (" (norm.)" if s["data"] == "normalized only" else "")
+    ax.set_xticklabels([_short(s["case"]) + (" (norm.)" if s["data"] == "normalized only" else "")
                         for s in claimed], rotation=30, fontsize=7, ha="right")
     ax.set_ylabel("pull std over the noise seeds")
     ax.set_title("standard errors against the scatter (green: 0.8-1.25)", fontsize=9)
@@ -487,7 +492,7 @@ def _plot(path, summaries, rows):
         ax.semilogy(i, r["chi2_red_check"], "o", color=colour, ms=7)
     ax.axhline(1.0, color="grey", lw=0.6)
     ax.set_xticks(range(len(summaries)))
-    ax.set_xticklabels([s["case"].split(":")[0][:22] + (" (norm.)" if s["data"] == "normalized only" else "")
+    ax.set_xticklabels([_short(s["case"]) + (" (norm.)" if s["data"] == "normalized only" else "")
                         for s in summaries], rotation=30, fontsize=7, ha="right")
     ax.set_ylabel("reduced chi^2 of the chosen model (this script's test)")
     ax.set_title("green: adequate; orange: the fit warns; red: a silent misfit", fontsize=9)
