@@ -250,7 +250,7 @@ class DHRLookup:
     (for the reciprocal diffuse term), resampled through the table's
     ``average``, is an ``mi.Texture1f``.  ``use_accel=False`` keeps positional
     gradients on CUDA as well.  Interpolation error against the table's
-    ``__call__``: ``validation/plugin_checks.py`` ("DHR texture interpolation error").
+    ``__call__``: ``hyde_bsdf/validation/plugin_checks.py`` ("DHR texture interpolation error").
     """
 
     def __new__(cls, table=None):

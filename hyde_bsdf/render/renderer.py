@@ -61,7 +61,7 @@ MAX_SEED = 2**15 - 1
 #: Dr.Jit arrays hold fewer than 2^32 entries; the film holds pixels x channels floats.
 MAX_FILM_VALUES = 2**32 - 1
 #: Memory model of a whole ``hyde-bsdf render`` (peak RSS, ``/usr/bin/time -f %M``, on
-#: ``scenes/inverse.xml`` at res 300, 900 and 1800, 1-2 spp, EXR and PNGs written): a Stokes render
+#: ``hyde_bsdf/data/scenes/inverse.xml`` at res 300, 900 and 1800, 1-2 spp, EXR and PNGs written): a Stokes render
 #: (llvm_ad_spectral_polarized: 17 film channels in Mitsuba's film and image block, the float64
 #: accumulators, the output arrays, the EXR and PNG writers) took 495 B per film pixel between
 #: res 300 and 900 and 676 B/px between 300 and 1800 (Dr.Jit's allocator rounds blocks up to
