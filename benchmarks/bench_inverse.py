@@ -4,7 +4,7 @@ One iteration = set the parameters, ``mi.render(scene, params, spp, seed)`` thro
 ``stokes`` around ``path`` (llvm_ad_spectral_polarized), the masked Stokes loss,
 ``dr.backward``, one ``mi.ad.Adam`` step (exactly hyde_bsdf.inverse.invert).  Each
 material runs in its own fresh process (so the peak resident memory is its own):
-the scene of scenes/inverse.xml at ``--res`` x ``--res`` pixels and ``--spp`` samples,
+the scene of hyde_bsdf/data/scenes/inverse.xml at ``--res`` x ``--res`` pixels and ``--spp`` samples,
 ``--iterations`` iterations; reported: the first iteration (includes the JIT
 compilation), the median of the later ones, and the process's resident memory
 before the loop and at its peak (ru_maxrss).  roughconductor gets the same
@@ -16,7 +16,7 @@ The multijitter sampler rounds sample counts to a product of two near-equal inte
     python benchmarks/bench_inverse.py --scalar [--res 64] [--spp 16] [--iterations 40] [--csv out/bench_inverse.csv]
 
 Default (``--maps``): the SVBRDF inversion (hyde_bsdf.inverse.invert_maps) of the
-validation's textured plane (validation/svbrdf_inverse.py: a 32 x 32 Beckmann alpha bitmap,
+validation's textured plane (hyde_bsdf/validation/svbrdf_inverse.py: a 32 x 32 Beckmann alpha bitmap,
 3 views in one batch sensor x 2 point lights, llvm_ad_mono_polarized, 4 spp), with ``hyde``
 (diffuse "paper" and "none") against ``roughconductor`` given the same ``alpha`` texture, eta, k
 (its key ``alpha.data`` is hyde's).  All in one process: the scenes are built and JIT-warmed,

@@ -13,6 +13,7 @@ import inspect
 
 import numpy as np
 import pytest
+from conftest import library_modules
 
 import hyde_bsdf
 from hyde_bsdf.app.cli import COMMANDS, main
@@ -153,7 +154,7 @@ def test_exceptions_become_messages_in_one_place():
     root = Path(hyde_bsdf.__file__).resolve().parent
     allowed = {root / "app" / "cli.py", root / "progress.py"}
     bad = []
-    for path in sorted(root.rglob("*.py")):
+    for path in library_modules(root):
         if path in allowed:
             continue
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):

@@ -244,7 +244,7 @@ def test_validation_case_tiny(case, fit):
     alpha within 8 %; n moves the images least and is weakly determined by 3 pictures of 16 px at
     1 % noise (measured: median error 17 % from a start at 21 %; with the uncertainty step its
     relative standard errors are of the same size and flag it), so only n < 30 % is asserted.
-    validation/svbrdf_index.py measures the metal at 16 x 16 texels (docs/validation.md)."""
+    hyde_bsdf/validation/svbrdf_index.py measures the metal at 16 x 16 texels (docs/validation.md)."""
     metal = case == "metal"
     truth, obs = _tiny_problem(case, n=4, res=16, fit=fit, facet_angles=(40.0, 70.0) if metal else (25.0, 55.0))
     start = {"alpha": 0.3, "eta": 1.6 if case == "dielectric" else 0.8, "k": 4.0}

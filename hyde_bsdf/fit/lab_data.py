@@ -12,7 +12,7 @@ estimates them from its residuals: :meth:`LabData.with_noise`).
 With M00 the elements are fitted as what the instrument measured, the absolute M_jk =
 (M_jk/M00) M00 in 1/sr (``LabData.absolute``), each with its own noise: a ratio of two noisy
 values is not Gaussian where M00 is small (its tail biased the albedo by 1.2 standard errors in
-``validation/fit_lab_data.py``), and the ratios of one row share M00's noise, which a fit of
+``hyde_bsdf/validation/fit_lab_data.py``), and the ratios of one row share M00's noise, which a fit of
 ratios as independent values ignores (its errors came out 1.8x the Cramer-Rao bound of the
 design).  The absolute sigma is the file's ratio sigma with the first-order propagation undone,
 sigma_jk^2 = (M00 sigma_r)^2 - (r sigma_00)^2 -- exact for the usual propagation of independent

@@ -60,7 +60,7 @@ What the data can and cannot say (:class:`FitDataWarning`, ``FitResult.data_warn
 The command line (``hyde-bsdf fit DATA.csv``, the plot) is :mod:`hyde_bsdf.app.fit`; the CSV
 format is :mod:`hyde_bsdf.io.measurements`.  Large data sets report progress through the
 ``progress`` callback; 10^6 rows read and fit in about 20-30 s on 2 cores
-(``validation/fit_synthetic.py``, part 5).
+(``hyde_bsdf/validation/fit_synthetic.py``, part 5).
 """
 from __future__ import annotations
 
@@ -517,7 +517,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     Large data sets: with more than :data:`SEARCH_ROWS` geometries the multi-start search
     runs on a random subset of that size and only its best point is refined on all the
     data, with a forward-difference Jacobian (4 model evaluations per step instead of 7);
-    10^6 geometries fit in about 20 s (``validation/fit_synthetic.py`` measures it).
+    10^6 geometries fit in about 20 s (``hyde_bsdf/validation/fit_synthetic.py`` measures it).
 
     Returns
     -------

@@ -70,7 +70,7 @@ __all__ = ["DEFAULT_RESOLUTION", "edge_deg", "ALPHA_CANDIDATES", "ExportReport",
            "export_pbsdf"]
 
 #: (N_phi_d, N_theta_d, N_theta_h) of the default export: the smallest table of the sweep in
-#: validation/pbsdf_export.py with an M00 L1 error <= 1 % and normalized elements within 2 % (95th
+#: hyde_bsdf/validation/pbsdf_export.py with an M00 L1 error <= 1 % and normalized elements within 2 % (95th
 #: percentile) for gold at rms_slope 0.3 and 0.1 (35 MB; phi_d resolution hardly matters: the table's
 #: frames follow the facet, so 37, 73 and 145 phi_d nodes give the same error)
 DEFAULT_RESOLUTION = (37, 55, 55)

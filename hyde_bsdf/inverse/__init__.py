@@ -24,7 +24,7 @@ matched to one or more reference Stokes images (:class:`Observation`: scene, sen
 mask, weight; several views and lights), per texel, with Adam on log(value), the same Stokes loss
 per image and an optional smoothness regulariser (:func:`smoothness`, weight lambda documented
 there).  :func:`texel_coverage` finds the texels the images see (a UV-coverage pass), over which
-errors are reported.  The validation (validation/svbrdf_inverse.py) and the benchmark
+errors are reported.  The validation (hyde_bsdf/validation/svbrdf_inverse.py) and the benchmark
 (benchmarks/bench_inverse.py) use :data:`MAP_VARIANT` = ``llvm_ad_mono_polarized`` and
 :func:`plane_scene_dict` (a textured plane, 3 views in one ``batch`` sensor, one point light per
 scene).  Per-texel gradients: the rendering depends on exactly the texels the coverage pass finds

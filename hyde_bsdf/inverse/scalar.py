@@ -67,10 +67,10 @@ def prepare(variant: str = VARIANT) -> str:
 def scene_dict(*, bsdf: str = "hyde", rms_slope: float = 0.3, eta: float = 1.5, k: float = 3.0,
                res: int = 64, spp: int = 16, diffuse: str = "paper", sampler: str = "multijitter",
                lighting: str = "points", phase_deg: float = 120.0) -> dict:
-    """The inverse-rendering scene (as scenes/inverse.xml) as a ``mi.load_dict`` dict.
+    """The inverse-rendering scene (as hyde_bsdf/data/scenes/inverse.xml) as a ``mi.load_dict`` dict.
 
     ``lighting="points"``: two point lights (front and back; facet angles beta ~ 10-70 deg
-    over the image, as scenes/inverse.xml).  ``lighting="directional"``: one distant light
+    over the image, as hyde_bsdf/data/scenes/inverse.xml).  ``lighting="directional"``: one distant light
     at ``phase_deg`` from the viewing direction, so that every pixel sees nearly the same
     facet angle beta = phase_deg / 2 (the identifiability study: S0 then measures one
     reflectance value, too little for two unknowns n, k).

@@ -43,7 +43,7 @@ M01 = (sigma_s - sigma_p)/2, M22 + j M23 = <F_s F_p*> normalised like sigma.
 Absorbed power (Poynting on the vacuum side): P_abs = -(1/k0) int W^2 Im(u v*) dx
 over the incident flux through the windowed surface; energy = reflected + absorbed.
 
-Measured (validation/mom_polarization.py): a flat plate of Infragold, flame-sprayed
+Measured (hyde_bsdf/validation/mom_polarization.py): a flat plate of Infragold, flame-sprayed
 Al or glass reproduces Fresnel |r_s|^2, |r_p|^2 within 0.006 and arg(r_p/r_s)
 within 0.35 deg for theta_i = 0-80 deg at the default 10 points per wavelength.
 
@@ -133,7 +133,7 @@ Eq. 22 below (the paper's Fig. 6 is unchanged).  The windowed current's power is
 in s, its forward-grazing sigma has an artificial floor (-44.5 dB below the specular peak of an 80-deg
 flat plate at L = 4 w: the lit partition ends launch surface waves that reach the window); the beam
 reflects 1.0000 (p) and 1.0026 (s, the sampling) off a flat PEC at any tau and follows the analytic
-reflected beam to -98 dB (validation/mom_forward_grazing.py).
+reflected beam to -98 dB (hyde_bsdf/validation/mom_forward_grazing.py).
 
 and it refuses (ValueError naming the parameter) before allocating when
 * the realised surface is so steep that ``pts_per_wl`` along x gives fewer than
