@@ -32,6 +32,7 @@ import warnings
 from pathlib import Path
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.flags import for_command_line
 from hyde_bsdf.app.plots import PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit, plot_selection
 from hyde_bsdf.errors import RejectedResult, UsageError
 from hyde_bsdf.fit.adequacy import InadequateModelWarning
@@ -218,8 +219,8 @@ def _csv_run(args) -> int:
     print(f"data: {meas.source} ({len(meas)} rows, elements {', '.join(meas.elements)}"
           + (", sigma / sqrt(n_samples)" if meas.n_samples is not None else "") + ")")
     if sel is not None:
-        print(sel.summary())
-    print(result.summary())
+        print(for_command_line(sel.summary()))
+    print(for_command_line(result.summary()))
     _warn_verdict(result)
     for text in result.data_warnings:          # also on stderr, where a script's log sees them
         warnings.warn(text, FitDataWarning, stacklevel=1)
@@ -294,8 +295,8 @@ def _pbsdf_run(args) -> int:
     sel = _quiet_fit(select_model_pbsdf, data, **opts) if auto else None
     result = sel.result if auto else _quiet_fit(fit_pbsdf, data, shadowing=shadowing, diffuse=diffuse, **opts)
     if sel is not None:
-        print(sel.summary())
-    print(result.summary())
+        print(for_command_line(sel.summary()))
+    print(for_command_line(result.summary()))
     _warn_verdict(result)
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))

@@ -1,7 +1,32 @@
-"""``hyde-bsdf invert``: the command line of scalar and texture-valued (``--maps``) inversion.
+"""``hyde-bsdf invert``: the command line of scalar and texture-valued (``--maps``) inversion
+(:mod:`hyde_bsdf.inverse`); the plot is :func:`hyde_bsdf.app.plots.plot_history`.
 
-The options and outputs are described in :mod:`hyde_bsdf.inverse`; the plot is
-:func:`hyde_bsdf.app.plots.plot_history`.
+Errors: one line on stderr, exit 2; Ctrl-C: exit 130; progress per iteration on
+stderr; output paths and memory checked before any rendering; outputs written atomically::
+
+    hyde-bsdf invert [--scene SCENE.xml [--target PREFIX] | (built-in sphere)] [--truth rms_slope=0.3,eta=1.5,k=3]
+                     [--reference REF.exr] [--start rms_slope=0.6,eta=3,k=6]
+                     [--fit rms_slope,eta,k] [--loss stokes|s0] [--iterations 200]
+                     [--spp 16] [--spp-ref 512] [--res 64] [--lr 0.05] [--seed 0] [-o OUTDIR]
+
+writes OUTDIR/invert_history.csv and OUTDIR/invert.png (loss and parameter trajectories).
+Texture mode::
+
+    hyde-bsdf invert --maps [--scene S1.xml --reference R1.exr [--mask M1.png] ...
+                     | --preset dielectric|metal [--noise 0.01]
+                     | (built-in plane, 3 views x 2 lights, truth map of --map-size 32)]
+                     [--fit alpha[,eta,k][,specular_reflectance]] [--start alpha=0.3,eta=1.6]
+                     [--regularizer tv|l2 --weight 0.1] [--no-uncertainty]
+                     [--iterations 100] [--spp 4] [--spp-ref 64] [--res 80] [--sensor 0] [-o OUTDIR]
+    hyde-bsdf invert --maps --scene SAMPLE.xml --camera CAMERA.json --light LIGHT.json --reference R.exr ...
+                     [--tiles N|RxC [--workers K | --scheduler tcp://HOST:8786]]
+
+writes OUTDIR/invert_maps_history.csv, OUTDIR/NAME.npy and NAME.exr per fitted map (rows along
+v; load the EXR as a ``bitmap`` texture with ``raw`` true and ``filter_type`` nearest; NaN where no
+picture sees the texel), NAME_stderr.npy/.exr (per-texel standard errors; NaN where not valid),
+NAME_seen.npy/.exr (1 where a picture sees the texel) and OUTDIR/invert_maps.png.  ``--preset`` captures the built-in synthetic sample
+(:func:`hyde_bsdf.inverse.acquisition.example_material`) in the designed acquisition (:func:`hyde_bsdf.inverse.design_acquisition`; --res default
+4 x --map-size, so that texels span pure pixels) and reports the errors against its truth.
 """
 from __future__ import annotations
 
@@ -13,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.flags import for_command_line
 from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
@@ -413,7 +439,7 @@ def _scalar_run(args, truth, start, fit, paths):
             line += " (fixed)"
         print(line)
     for message in dict.fromkeys(res.warnings + [str(w.message) for w in caught]):
-        print(f"WARNING: {message}")
+        print(f"WARNING: {for_command_line(message)}")
     print(f"wrote {paths[0]} and {paths[1]}")
     return 0
 
@@ -535,7 +561,7 @@ def _print_maps_result(res, args, fit, start, n_images, paths, messages) -> None
     if res.seen is not None:
         print(f"  texels seen by the images: {int(res.seen.sum())} of {res.seen.size}")
     for message in messages:
-        print(f"WARNING: {message}")
+        print(f"WARNING: {for_command_line(message)}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
 
 

@@ -22,6 +22,7 @@ from hyde_bsdf.inverse.loss import StokesLoss, smoothness
 from hyde_bsdf.inverse.observations import (MAP_PARAMETERS, _obs_mask, film_channels, map_keys, render_stokes,
                                             texel_coverage)
 from hyde_bsdf.inverse.scalar import check_gradients
+from hyde_bsdf.options import Options
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, STDERR_THRESHOLD, BilinearFilterWarning,
                                            NotConvergedWarning, UnidentifiedParameterWarning, Uncertainty,
@@ -29,7 +30,7 @@ from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, STDERR_THRESHO
                                            gauss_newton_step, identification_warnings, misfit_pvalues, pixel_records,
                                            standard_errors, texel_convergence, texel_misfit)
 
-__all__ = ["MapInversionResult", "MapProblem", "filters_bilinearly", "map_loss", "map_step", "LogAdam", "map_uncertainty",
+__all__ = ["MapOptions", "MapInversionResult", "MapProblem", "filters_bilinearly", "map_loss", "map_step", "LogAdam", "map_uncertainty",
            "invert_maps"]
 
 
@@ -467,16 +468,38 @@ def _uncertainty_messages(problem, unc, found, seen, convergence, regularized) -
     return out
 
 
-def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 100, lr: float = 0.05,
-                spp: int = 4, seed: int = 0, components: str = "stokes", regularizer: str | None = None,
-                weight: float = 0.0, truth: dict | None = None, prefix: str | None = None,
-                average_last: int | None = None, progress=True,
-                seen: np.ndarray | None = None, freeze: bool = True, uncertainty: bool = True,
-                uncertainty_spp: int = 16, polish: int = 2, noise=None,
-                threshold: float = STDERR_THRESHOLD, convergence: float = CONVERGENCE_THRESHOLD,
-                extra_polish: int = 3) -> MapInversionResult:
+@dataclass(frozen=True)
+class MapOptions(Options):
+    """The loop and the uncertainty step of :func:`invert_maps` (each field is also a keyword of
+    :func:`invert_maps`; its docstring describes them)."""
+
+    iterations: int = 100
+    lr: float = 0.05
+    spp: int = 4
+    seed: int = 0
+    components: str = "stokes"
+    regularizer: str | None = None
+    weight: float = 0.0
+    average_last: int | None = None
+    freeze: bool = True
+    uncertainty: bool = True
+    uncertainty_spp: int = 16
+    polish: int = 2
+    threshold: float = STDERR_THRESHOLD
+    convergence: float = CONVERGENCE_THRESHOLD
+    extra_polish: int = 3
+
+
+def invert_maps(observations, start: dict, options: MapOptions | None = None, *, fit=("alpha",),
+                truth: dict | None = None, prefix: str | None = None, seen: np.ndarray | None = None, noise=None,
+                progress=True, **settings) -> MapInversionResult:
     """Optimise texture-valued BSDF parameters (a roughness map, optionally index maps) to match
     one or more reference Stokes images.
+
+    The loop's and the uncertainty step's settings are a :class:`MapOptions` (``options``), or its
+    fields given as keywords (``iterations=50, spp=8``): ``iterations``, ``lr``, ``spp``, ``seed``,
+    ``components``, ``regularizer``, ``weight``, ``average_last``, ``freeze``, ``uncertainty``,
+    ``uncertainty_spp``, ``polish``, ``threshold``, ``convergence``, ``extra_polish`` below.
 
     ``observations``: list of :class:`Observation`.  ``start``: name -> start value, a float
     (a constant map) or an array (rows, cols) for texture parameters; a parameter named in
@@ -539,15 +562,17 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     learning-rate schedule, the average), :func:`map_uncertainty` (the information, the polish, the
     standard errors and warnings).
     """
+    o = MapOptions.of(options, settings, "invert_maps")
+    iterations, seed, regularizer, weight = o.iterations, o.seed, o.regularizer, o.weight
     _check_options(iterations, regularizer, weight)
     progress = as_callback(progress, "[invert]")
-    problem = MapProblem.build(observations, start, fit, components=components, prefix=prefix, seen=seen)
+    problem = MapProblem.build(observations, start, fit, components=o.components, prefix=prefix, seen=seen)
     n_obs = len(problem.observations)
-    average_last = max(1, iterations // 4) if average_last is None else max(1, int(average_last))
-    adam = LogAdam(problem, start, lr, iterations, average_last)
+    average_last = max(1, iterations // 4) if o.average_last is None else max(1, int(o.average_last))
+    adam = LogAdam(problem, start, o.lr, iterations, average_last)
     truth_np = {n: np.asarray(v, np.float64) for n, v in (truth or {}).items()}
-    history, t_first = _adam_loop(problem, adam, map_step(problem, spp, regularizer, weight), iterations=iterations,
-                                  seed=seed, freeze=freeze, truth_np=truth_np, progress=progress)
+    history, t_first = _adam_loop(problem, adam, map_step(problem, o.spp, regularizer, weight), iterations=iterations,
+                                  seed=seed, freeze=o.freeze, truth_np=truth_np, progress=progress)
     final = adam.average()
     adam_final = dict(final)
     # the scenes keep the result, detached: the last iteration's gradient-enabled leaves must not
@@ -555,18 +580,18 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     # otherwise reach their edges from inside mi.render's isolated AD scope and fail)
     problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
     unc = None
-    if uncertainty:
+    if o.uncertainty:
         regularized = regularizer is not None and weight > 0
         if progress:
-            progress(f"uncertainty: forward-mode information of {', '.join(problem.fit)} at {uncertainty_spp} spp"
-                     + (f", {polish} Gauss-Newton step(s)" if polish and not regularized else ""))
-        final, unc = map_uncertainty(problem, final, spp=uncertainty_spp, seed=seed + 1 + iterations * n_obs,
-                                     noise=noise, polish=0 if regularized else polish, threshold=threshold,
-                                     convergence=convergence, extra_polish=extra_polish, regularized=regularized)
+            progress(f"uncertainty: forward-mode information of {', '.join(problem.fit)} at {o.uncertainty_spp} spp"
+                     + (f", {o.polish} Gauss-Newton step(s)" if o.polish and not regularized else ""))
+        final, unc = map_uncertainty(problem, final, spp=o.uncertainty_spp, seed=seed + 1 + iterations * n_obs,
+                                     noise=noise, polish=0 if regularized else o.polish, threshold=o.threshold,
+                                     convergence=o.convergence, extra_polish=o.extra_polish, regularized=regularized)
     for n in problem.names:
         if n not in problem.fit:
             final[n] = np.asarray(start[n], np.float64) if np.ndim(start[n]) else float(start[n])
-    res = MapInversionResult(fitted=problem.fit, final=final, start=dict(start), components=components,
+    res = MapInversionResult(fitted=problem.fit, final=final, start=dict(start), components=o.components,
                              seen=problem.seen, truth=truth, history=history,
                              seconds_per_iteration=seconds_per_iteration(history), first_iteration_seconds=t_first,
                              adam_final=adam_final, uncertainty=unc)

@@ -30,11 +30,12 @@ import numpy as np
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf.inverse._common import NotConvergedWarning, record_iteration
+from hyde_bsdf.options import Options
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.loss import StokesLoss, channel_names, stokes_images
 from hyde_bsdf.model.parameters import INVERSE_ETA, INVERSE_K, INVERSE_PARAMETERS, RMS_SLOPE, SQRT2
 
-__all__ = ["VARIANT", "PARAMETERS", "INVERSE_PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict",
+__all__ = ["InversionOptions", "VARIANT", "PARAMETERS", "INVERSE_PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict",
            "load_scene", "parameter_keys", "render_reference", "InversionResult", "invert", "trajectory_converged",
            "check_gradients", "loss_and_gradient", "finite_difference_gradient", "write_history"]
 
@@ -154,7 +155,7 @@ def _unique_key(params, name, suffix_groups, prefix):
         raise UsageError(f"need exactly one BSDF parameter for {name!r} "
                          f"(keys ending in {' or '.join(suffixes)}"
                          f"{'' if prefix is None else ' under ' + shorten(prefix)}); found {found}"
-                         f"{'; name the BSDF with prefix= (CLI: --target)' if len(found) > 1 else ''}")
+                         f"{'; name the BSDF with `prefix`' if len(found) > 1 else ''}")
     return found[0]
 
 
@@ -276,11 +277,24 @@ def _inversion_result(history, fit, fixed, start, truth, loss_fn, average_last, 
     return result
 
 
-def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iterations: int = 200,
-           lr: float = 0.05, spp: int = 16, seed: int = 0, truth: dict | None = None,
-           bsdf: str = "hyde", progress=True, average_last: int = 20,
-           prefix: str | None = None) -> InversionResult:
+@dataclass(frozen=True)
+class InversionOptions(Options):
+    """The loop of :func:`invert` (each field is also a keyword of :func:`invert`)."""
+
+    iterations: int = 200
+    lr: float = 0.05
+    spp: int = 16
+    seed: int = 0
+    average_last: int = 20
+
+
+def invert(scene, loss_fn: StokesLoss, start: dict, options: InversionOptions | None = None, *, fit=PARAMETERS,
+           truth: dict | None = None, bsdf: str = "hyde", prefix: str | None = None, progress=True,
+           **settings) -> InversionResult:
     """Optimize the BSDF parameters ``fit`` of ``scene`` to minimize ``loss_fn``.
+
+    The loop's settings are an :class:`InversionOptions` (``options``), or its fields given as
+    keywords: ``iterations`` (200), ``lr`` (0.05), ``spp`` (16), ``seed`` (0), ``average_last`` (20).
 
     ``start`` gives every parameter's start value (the unfitted ones stay there).
     Adam on log(parameter), lr decaying by 5 % per iteration over the last quarter;
@@ -296,6 +310,8 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
     """
     import mitsuba as mi
 
+    o = InversionOptions.of(options, settings, "invert")
+    iterations, lr, spp, seed = o.iterations, o.lr, o.spp, o.seed
     progress = as_callback(progress, "[invert]")
     fit = _check_invert_args(fit, start, iterations)
     params = mi.traverse(scene)
@@ -324,7 +340,7 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
         if progress:
             progress(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.3e}  " +
                      "  ".join(f"{p}={row[p]:.4f}" for p in fit) + f"  ({row['seconds']:.1f} s)")
-    return _inversion_result(history, fit, fixed, start, truth, loss_fn, average_last, t_first)
+    return _inversion_result(history, fit, fixed, start, truth, loss_fn, o.average_last, t_first)
 
 
 #: relative drift below which an averaged trajectory counts as settled whatever its scatter
