@@ -253,7 +253,7 @@ def test_observations_from_files_checks_before_rendering(tmp_path):
     (tmp_path / "lights.json").write_text(json.dumps({"lights": [{"type": "point", "position": [0, 0, 3]}] * 2}))
     S = {k: v[:6, :5, 0] for k, v in _stokes(6, 5).items() if k != "S3"}
     ref = write_camera_stokes(tmp_path / "s.exr", S)
-    with pytest.raises(UsageError, match=r"give 2 --reference files, light-major"):
+    with pytest.raises(UsageError, match=r"give 2 `references` files, light-major"):
         observations_from_files("scene.xml", tmp_path / "cam.json", tmp_path / "lights.json", [ref])
-    with pytest.raises(UsageError, match=r"is 5x6 px but camera 0 of --camera is 8x6 .*binning"):
+    with pytest.raises(UsageError, match=r"is 5x6 px but camera 0 of `cameras` is 8x6 .*binning"):
         observations_from_files("scene.xml", tmp_path / "cam.json", tmp_path / "lights.json", [ref, ref])
