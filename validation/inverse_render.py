@@ -53,7 +53,7 @@ def recovery(out, iterations, spp, spp_ref, res, lighting, tag, runs=("stokes", 
         loss_fn = inv.StokesLoss(ref, components=comp)
         res_ = inv.invert(scene, loss_fn, inv.scalar.START, iterations=iterations, spp=spp, seed=1000,
                           truth=inv.scalar.TRUTH, lr=lr)
-        inv.scalar.write_history(res_, out / f"inverse_history_{tag}_{comp}.csv")
+        res_.write_history(out / f"inverse_history_{tag}_{comp}.csv")
         results[comp] = res_
     return scene, ref, results
 

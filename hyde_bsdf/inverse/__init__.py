@@ -8,6 +8,7 @@ It uses the renderer and produces parameter maps, so it sits right of ``render``
 ``observations``  :class:`Observation`, texture keys, Stokes renders, the UV-coverage pass, the plane scene
 ``acquisition``   the designed observation set: views, lights, polarizer states (:func:`design_acquisition`)
 ``maps``          per-texel maps (:func:`invert_maps`): set-up, loss, step, update, uncertainty
+``adam``          the one optimiser of both: Adam on log(value), its schedule and average
 ``uncertainty``   per-texel standard errors (Gauss-Newton information, forward-mode AD), warnings
 ``analyzer``      raw analyzer frames / DoFP mosaics -> Stokes images with propagated sigma, the camera noise
 ``camera_data``   Stokes inputs as cameras give them (measured components, sigma, masks), calibrated rigs
