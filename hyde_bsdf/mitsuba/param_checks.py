@@ -100,6 +100,11 @@ def probe(tex, one=False):
     """
     if not _is_constant(tex):
         return None
+    if tex.class_name() == "UniformSpectrum":
+        # eval returns the stored value at every point and wavelength: read it, no kernel (a
+        # scene of constants then loads without compiling one: its cold load, issue 31)
+        value = float(np.asarray(mi.traverse(tex)["value"], dtype=float).ravel()[0])
+        return np.full(1 if one or mi.is_monochromatic else _WAVELENGTHS.size if mi.is_spectral else 3, value)
     return _eval_at(tex, np.array([0.5]), np.array([0.5]), one)
 
 

@@ -138,7 +138,8 @@ Mueller matrix rotated from the facet s/p bases into Mitsuba's Stokes bases.
 ``eval`` returns f cos(theta_o) (Mitsuba's convention); the BSDF is one-sided.
 rho = rho^{s,PEC}(theta, rms_slope) is the directional-hemispherical reflectance
 of the specular lobe of a perfect conductor (Eqs. 14-16) for the chosen
-shadowing, read from :func:`hyde_bsdf.model.dhr.load_table` through a Dr.Jit texture.
+shadowing, read from the package's shipped table (:func:`hyde_bsdf.model.dhr.load_texture`)
+through a Dr.Jit texture.
 
 Frames (as ``roughconductor``).  All vectors are in the local shading frame
 (normal +z).  Light arrives along ``-wo_hat`` and leaves along ``+wi_hat``, where
@@ -180,9 +181,10 @@ channel (unbounded sRGB) or as luminance (mono); like Mitsuba, |k| is used.
 Roughness textures are evaluated once per call (``eval_1``) and the DHR lookup of
 the diffuse term is done at that per-point roughness.
 
-DHR lookup.  1 - rho^{s,PEC} is resampled from the table's bicubic ``__call__``
+DHR lookup.  1 - rho^{s,PEC}, resampled from the table's bicubic ``__call__``
 onto 1025 nodes in x = 1 - sqrt(cos theta) times 192 per decade of rms_slope over
-the table's whole range @DHR_TABLE@ (4.7 MB, float32) and read with a linear
+the table's whole range @DHR_TABLE@ (4.7 MB, float32), is shipped with the package
+(``hyde_bsdf/data/dhr_texture_{vgroove,smith,none}.npz``: nothing is computed at load) and read with a linear
 ``mi.Texture2f`` (differentiable in rms_slope), at each shading point's own roughness.
 Its deviation from the table, 1 - rho clipped at 0, for rms_slope in @RMS_SLOPE@ and
 theta <= 89 deg is <= 1.9e-5 (vgroove), 2.6e-5 (smith), 1.3e-4 (none), target 2e-4
@@ -284,12 +286,13 @@ _DHR_CACHE: dict = {}
 
 
 def _dhr_lookup(shadowing):
-    """One DHRLookup per (variant, shadowing), shared by all instances."""
+    """One DHRLookup per (variant, shadowing), shared by all instances: the shipped texture
+    (:func:`hyde_bsdf.model.dhr.load_texture`), nothing computed at load."""
     key = (mi.variant(), shadowing)
     if key not in _DHR_CACHE:
-        from hyde_bsdf.model.dhr import load_table
+        from hyde_bsdf.model.dhr import load_texture
 
-        _DHR_CACHE[key] = po.DHRLookup(load_table(shadowing))
+        _DHR_CACHE[key] = po.DHRLookup(load_texture(shadowing))
     return _DHR_CACHE[key]
 
 

@@ -8,7 +8,7 @@
 with alpha, beta from Eq. 7, P Beckmann (Eq. 8), M the Mueller matrix of the
 rotated Fresnel Jones matrix (Eqs. 9-11, all 16 elements), G the V-groove
 shadowing (Eq. 12) or an alternative, rho^{s,PEC} the specular DHR (Eqs. 14-16)
-read from the cached table of :mod:`hyde_bsdf.model.dhr`.
+read from the shipped table of :mod:`hyde_bsdf.model.dhr`.
 
 Conventions (this interface)
 ----------------------------
