@@ -65,11 +65,13 @@ def _quiet_stdout() -> None:
 
 
 def _error(command: str, message: str) -> None:
-    """One line ``hyde-bsdf COMMAND: MESSAGE`` on stderr, long values in it cut to a readable length."""
+    """One line ``hyde-bsdf COMMAND: MESSAGE`` on stderr, the library's parameter names as the command
+    line's flags (:mod:`hyde_bsdf.app.flags`), long values cut to a readable length."""
+    from hyde_bsdf.app.flags import for_command_line
     from hyde_bsdf.errors import shorten_values
 
     try:
-        print(f"hyde-bsdf {command}: {shorten_values(message)}", file=sys.stderr, flush=True)
+        print(f"hyde-bsdf {command}: {shorten_values(for_command_line(message))}", file=sys.stderr, flush=True)
     except (OSError, ValueError):
         pass
 

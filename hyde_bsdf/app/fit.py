@@ -38,6 +38,7 @@ import warnings
 from pathlib import Path
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.flags import for_command_line
 from hyde_bsdf.app.plots import (PLOT_FORMATS, check_plot_path, plot_lab_fit, plot_lab_selection, plot_pbsdf_fit,
                                  plot_selection)
 from hyde_bsdf.errors import RejectedResult, UsageError
@@ -252,7 +253,7 @@ def _csv_run(args) -> int:
     out = sys.stderr if args.json == "-" else sys.stdout
     print(f"data: {meas.source} ({len(meas)} rows, {', '.join(result.fit.data.columns)}"
           + (", sigma / sqrt(n_samples)" if meas.n_samples is not None else "") + ")", file=out)
-    print(result.summary(), file=out)
+    print(for_command_line(result.summary()), file=out)
     _warn_verdict(result)
     for text in result.warnings:               # also on stderr, where a script's log sees them
         if text != result.verdict.message and not text.startswith("NO candidate"):
@@ -345,8 +346,8 @@ def _pbsdf_run(args) -> int:
     sel = _quiet_fit(select_model_pbsdf, data, **opts) if auto else None
     result = sel.result if auto else _quiet_fit(fit_pbsdf, data, shadowing=shadowing, diffuse=diffuse, **opts)
     if sel is not None:
-        print(sel.summary())
-    print(result.summary())
+        print(for_command_line(sel.summary()))
+    print(for_command_line(result.summary()))
     _warn_verdict(result)
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))

@@ -605,5 +605,5 @@ def blame_fixed(data: LabData, fitted: ModelFit, tick=None) -> ModelFit | None:
     v.cause = (f"the parameter(s) held fixed ({held}) cause the misfit, not the sigmas: with them fitted the "
                f"model {'describes' if free.verdict.adequate else 'fits significantly better'} the data "
                f"(chi^2 = {free.chi2:.4g} for {free.dof} dof; {freed})")
-    v.message = f"misfit (chi^2 = {fitted.chi2:.4g} for {fitted.dof} dof): {v.cause}; fit them (--fit)"
+    v.message = f"misfit (chi^2 = {fitted.chi2:.4g} for {fitted.dof} dof): {v.cause}; fit them (`fit`)"
     return free

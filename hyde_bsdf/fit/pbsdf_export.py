@@ -56,8 +56,8 @@ from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.io.output_gate import check_free_space, check_output_path
-from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, read_pbsdf,
-                                     rusinkiewicz_to_directions, table_frame_x, table_nbytes)
+from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, read_pbsdf, rusinkiewicz_to_directions,
+                                     table_frame_x, table_nbytes, write_table)
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N, RMS_SLOPE
@@ -439,7 +439,7 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
         meta = {"producer": "hyde-bsdf export", "model": "Hyde, Schmidt, Havrilla, Opt. Express 17(24) 2009, Eq. 17",
                 **params, "resolution": list(res), "wavelengths_nm": list(wavelengths),
                 "theta_h_grid": "(pi/2) u^2", "edge_deg": edge_deg(res[1])}
-        offsets = _write_arrays(tmp, res, wavelengths, (th, td, pd), slabs())
+        offsets = write_table(tmp, th, td, pd, wavelengths, slabs(), extra={"hyde_export": " " * _JSON_BYTES})
         table = read_pbsdf(tmp)
         errors = {}
         if error_samples:
@@ -453,27 +453,6 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     return ExportReport(path=Path(path), resolution=res, nbytes=os.path.getsize(path),
                         seconds=time.perf_counter() - t0, params=params, wavelengths=tuple(wavelengths),
                         alpha_sample=float(alpha_sample), errors=errors)
-
-
-def _write_arrays(tmp, res, wavelengths, axes, slabs) -> dict:
-    """The table's header, axes (theta_h, theta_d, phi_d), wavelengths and the Mueller slabs
-    into ``tmp``; the metadata field is left blank.  Returns each field's byte offset."""
-    th, td, pd = axes
-    layout = {"theta_h": (np.dtype(np.float32), (1, res[2])), "theta_d": (np.dtype(np.float32), (1, res[1])),
-              "phi_d": (np.dtype(np.float32), (1, res[0])), "wvls": (np.dtype(np.uint16), (len(wavelengths),)),
-              "hyde_export": (np.dtype(np.uint8), (_JSON_BYTES,)), "M": (np.dtype(np.float32), (*res, len(wavelengths), 4, 4))}
-    head, offsets, total = _header(layout)
-    with open(tmp, "wb") as f:
-        f.write(head)
-        for name, arr in (("theta_h", th), ("theta_d", td), ("phi_d", pd)):
-            f.seek(offsets[name])
-            f.write(np.asarray(arr, np.float32).tobytes())
-        f.seek(offsets["wvls"])
-        f.write(np.asarray(wavelengths, np.uint16).tobytes())
-        f.seek(offsets["M"])
-        for slab in slabs:
-            f.write(slab.tobytes())
-    return offsets
 
 
 def _write_metadata(tmp, offset, meta, errors, alpha_sample):

@@ -196,6 +196,7 @@ import numpy as np
 
 from hyde_bsdf import resources
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.options import Options
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import NATURAL_INDEX
 from hyde_bsdf.progress import Throttle, as_callback
@@ -209,6 +210,7 @@ from hyde_bsdf.mom.runtime import limit_blas_threads, restore_blas_threads, work
 
 __all__ = [
     "scatter",
+    "MoMOptions",
     "MoMResult",
     "MoMAccuracyWarning",
     "SerialExecutor",
@@ -774,10 +776,28 @@ MAX_UNKNOWNS = 10000
 MAX_PANELS = 64
 
 
-def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
-            pts_per_wl=10, seed=0, executor=None, *, taper_width_wl=None, progress=None,
-            polarization="s", n=None, k=None, timeout=None, solver="auto", tol=None, incidence="auto"):
+@dataclass(frozen=True)
+class MoMOptions(Options):
+    """How :func:`scatter` samples, solves and runs (each field is also a keyword of :func:`scatter`;
+    its docstring describes them)."""
+
+    pts_per_wl: float = 10
+    seed: int = 0
+    taper_width_wl: float | None = None
+    solver: str = "auto"
+    tol: float | None = None
+    incidence: str = "auto"
+    executor: object = None
+    timeout: float | None = None
+    progress: object = None
+
+
+def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, *,
+            polarization="s", n=None, k=None, options: MoMOptions | None = None, **settings):
     """Incoherent far-field scattering of a 1-D Gaussian rough surface -- paper Eqs. 18-23, both polarisations.
+
+    The sampling, the solver and the executor are a :class:`MoMOptions` (``options``), or its fields
+    given as keywords (``pts_per_wl=8, executor=...``).
 
     Parameters
     ----------
@@ -805,21 +825,21 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         a dask cluster that loses its last worker (for ``gather.NO_WORKER_GRACE_S`` =
         60 s), a closed client or a broken process pool ends in :class:`ExecutorError`
         naming it, and a ``progress`` line reports every 30 s in which no partition finished.
-    taper_width_wl : float in (0, L_p], keyword-only, Eq. 22's w (default L_p / 4); with the beam, its
+    taper_width_wl : float in (0, L_p], Eq. 22's w (default L_p / 4); with the beam, its
         footprint (the incident field's e^-(x/w)^2 on the mean plane).
-    progress : callable progress(message), bool or None, keyword-only (:mod:`hyde_bsdf.progress`): a
+    progress : callable progress(message), bool or None (:mod:`hyde_bsdf.progress`): a
         line "partition done/total, elapsed, left" at most every 3 s; True: on stderr; None: on stderr
         for runs of 10 or more partitions; False: none.  The wait's heartbeat (every 30 s without a finished
         partition) goes to the callback too (None: on stderr).
-    polarization : "s", "p" or ("s", "p"), keyword-only (default "s").  s: E along z
+    polarization : "s", "p" or ("s", "p") (default "s").  s: E along z
         (TM_z, the paper's Fig. 6); p: H along z.  Both on the same surface give
         the cross term and the in-plane Mueller matrix.
-    timeout : float or None, keyword-only: seconds without any partition finishing
+    timeout : float or None: seconds without any partition finishing
         after which the run is given up with :class:`ExecutorError` (None: no limit
         while the executor is alive).
-    n, k : float or None, keyword-only: the paper's complex index eta = n - j k
+    n, k : float or None: the paper's complex index eta = n - j k
         (n > 0, k >= 0; Infragold 0.285, 7.3523).  Neither: a perfect conductor.
-    solver : "auto", "dense" or "fast", keyword-only.  "dense": one LU of the full matrix
+    solver : "auto", "dense" or "fast".  "dense": one LU of the full matrix
         per polarisation (:mod:`hyde_bsdf.mom.dense`, at most MAX_UNKNOWNS per partition);
         "fast": forward-backward sweeps with spectral acceleration (:mod:`hyde_bsdf.mom.fast`,
         O(N) memory, up to MAX_FAST_UNKNOWNS), GMRES where the sweeps diverge or stall and
@@ -827,9 +847,9 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         "auto" (default): fast from AUTO_FAST_UNKNOWNS unknowns per partition on, and
         wherever the dense path would be refused, if the surface suits it (its height
         range against the partition length), else dense.  ``params["solver"]`` says which ran.
-    tol : float or None, keyword-only: the fast solver's relative residual
+    tol : float or None: the fast solver's relative residual
         ||b - A x|| / ||b|| (default ``fast.FAST_TOL`` = 1e-4; 1e-3 is within 0.01 dB).
-    incidence : "auto", "window" or "beam", keyword-only.  "window": the paper's plane wave with the
+    incidence : "auto", "window" or "beam".  "window": the paper's plane wave with the
         current windowed by Eq. 22; "beam": an exact Gaussian beam of footprint w, unwindowed currents
         (:mod:`hyde_bsdf.mom.beam`: no power bias, no forward-grazing floor in s); "auto" (default): the
         beam for theta_i >= BEAM_FROM_DEG = 80 deg, the window below.  ``params["incidence"]`` per theta_i.
@@ -854,9 +874,11 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     ENERGY_TOLERANCE (the value is in the message).
     """
     t_wall = time.perf_counter()
+    opts = MoMOptions.of(options, settings, "scatter")
     cfg = _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
-                        pts_per_wl, seed, taper_width_wl, polarization, n, k, timeout, solver, tol)
-    cfg["beam"] = _check_incidence(incidence, cfg["ti_deg"])
+                        polarization, n, k, opts)
+    cfg["beam"] = _check_incidence(opts.incidence, cfg["ti_deg"])
+    executor, progress = opts.executor, opts.progress
     own = check_executor(executor) is None
     workers = min(os.cpu_count() or 1, cfg["partitions"]) if own else 1
     surf = _realise_surface(cfg, workers)
@@ -899,9 +921,11 @@ def _check_incidence(incidence, ti_deg):
     return np.full(ti_deg.size, incidence == "beam")
 
 
-def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, pts_per_wl,
-                  seed, taper_width_wl, polarization, n, k, timeout, solver, tol):
+def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, polarization, n,
+                  k, opts):
     """Stage 1: every argument checked (ValueError naming it), the partition geometry and the taper."""
+    pts_per_wl, seed, taper_width_wl, timeout, solver, tol = (opts.pts_per_wl, opts.seed, opts.taper_width_wl,
+                                                               opts.timeout, opts.solver, opts.tol)
     length_wl = _check_positive("length_wl", length_wl)
     if isinstance(partitions, bool) or not isinstance(partitions, (int, np.integer, float)) \
             or int(partitions) != partitions or partitions < 1:
