@@ -146,7 +146,7 @@ class _Run:
         except (cf.BrokenExecutor, RuntimeError) as exc:
             raise self.fail(f"refused the {self.what}s ({type(exc).__name__}: {exc})") from None
 
-    def collect(self, done, on_done):
+    def collect(self, done, on_done, on_result=None):
         """Store the results of the finished futures; a task's own exception is re-raised unchanged (the others
         cancelled), a failure of the executor (killed worker, broken pool) is an ExecutorError."""
         for fut in done:
@@ -161,6 +161,8 @@ class _Run:
                     other.cancel()
                 raise
             self.done_count += 1
+            if on_result is not None:
+                on_result(self.futures[fut], self.results[self.futures[fut]])
             if on_done is not None:
                 on_done(self.done_count)
 
@@ -179,7 +181,7 @@ class _Run:
 
 
 def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, what="task",
-           label="hyde-bsdf"):
+           label="hyde-bsdf", on_result=None):
     """[fn(item) for item in items], run on ``executor``, without ever waiting blindly.
 
     Parameters
@@ -193,6 +195,8 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, w
         reads it: True is lines on stderr), called every HEARTBEAT_S seconds in which nothing
         finished with one line naming the executor and the tasks done.
     what, label : words for the messages ('partition', 'mom').
+    on_result : callable(index, result) or None, called with each task's result as it finishes (in the
+        order they finish: a caller checkpoints there, so that a killed run keeps what was done).
 
     Raises
     ------
@@ -210,7 +214,7 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, w
     while run.pending:
         step = POLL_S if timeout is None else min(POLL_S, max(0.01, timeout - (time.monotonic() - last_done)))
         done, run.pending = cf.wait(run.pending, timeout=step, return_when=cf.FIRST_COMPLETED)
-        run.collect(done, on_done)
+        run.collect(done, on_done, on_result)
         now = time.monotonic()
         if done:
             last_done = last_beat = now

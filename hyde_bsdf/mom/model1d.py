@@ -214,18 +214,59 @@ def dhr_specular(theta_i, rms_slope, shadowing=True, n=4001):
     return (f * np.cos(t)) @ w
 
 
-def brdf_diffuse(theta_i, rms_slope, shadowing=True):
-    """1-D Eq. 16 for a PEC: the Lambertian 2-D BRDF f_d = (1 - rho_s(theta_i)) / 2 (1/rad)."""
-    return 0.5 * (1.0 - dhr_specular(theta_i, rms_slope, shadowing))
+def _below_horizon(theta):
+    """|theta| kept just short of pi/2, where rho_s is taken (its (1 - rho) cos weight vanishes at the horizon)."""
+    return np.minimum(np.abs(np.asarray(theta, float)), _HALF_PI * (1.0 - 1e-9))
+
+
+def _diffuse_mode(diffuse):
+    """The diffuse mode of the model's registry (:data:`hyde_bsdf.model.evaluator.DIFFUSE`): True is "paper",
+    False "none"; a mode without a 1-D reduction here is a UsageError naming it."""
+    from hyde_bsdf.model.evaluator import check_diffuse
+
+    mode = check_diffuse(diffuse)
+    if mode not in ("paper", "reciprocal", "none"):
+        raise UsageError(f"diffuse={mode!r} has no 1-D reduction in hyde_bsdf.mom.model1d yet (add one to "
+                         "brdf_diffuse to put it in the accuracy atlas)")
+    return mode
+
+
+def brdf_diffuse(theta_i, rms_slope, shadowing=True, theta_r=None, mode="paper"):
+    """1-D Eq. 16 for a PEC: the Lambertian 2-D BRDF f_d = (1 - rho_s(theta_i)) / 2 (1/rad).
+
+    ``mode="reciprocal"`` (needs ``theta_r``): the symmetric variant of the 3-D evaluator in the plane,
+    f_d = (1 - rho(ti)) (1 - rho(tr)) / C with C = int_{-pi/2}^{pi/2} (1 - rho(t)) cos t dt, which has the
+    same integral 1 - rho(ti) over theta_r (cos theta_r weighted) and is symmetric in ti and tr;
+    ``mode="none"``: 0.  theta_i, theta_r in radians (broadcast).
+    """
+    mode = _diffuse_mode(mode)
+    if mode == "none":
+        return np.zeros(np.broadcast(np.asarray(theta_i, float), np.asarray(0.0 if theta_r is None else theta_r)).shape)
+    one_minus_i = 1.0 - dhr_specular(theta_i, rms_slope, shadowing)
+    if mode == "paper":
+        return 0.5 * one_minus_i
+    if theta_r is None:
+        raise UsageError("brdf_diffuse(mode='reciprocal') needs theta_r")
+    t, w = _theta_r_quadrature(401)
+    rho_t = dhr_specular(_below_horizon(t), rms_slope, shadowing)
+    norm = float(np.sum((1.0 - rho_t) * np.cos(t) * w))
+    if norm <= 0.0:     # rho = 1 at every angle: nothing for the diffuse term to carry
+        return np.zeros(np.broadcast(np.asarray(theta_i, float), np.asarray(theta_r, float)).shape)
+    one_minus_r = 1.0 - dhr_specular(_below_horizon(theta_r), rms_slope, shadowing)
+    return one_minus_i * one_minus_r / norm
 
 
 def brdf(theta_i, theta_r, rms_slope, shadowing=True, diffuse=True):
-    """1-D Eq. 17 for a PEC: f = f_s + f_d (1/rad); broadcasts theta_i against theta_r."""
+    """1-D Eq. 17 for a PEC: f = f_s + f_d (1/rad); broadcasts theta_i against theta_r.
+
+    ``diffuse``: True / "paper" (Eq. 16), "reciprocal" (:func:`brdf_diffuse`) or False / "none".
+    """
     theta_i, theta_r, rms_slope = _check(theta_i, theta_r, rms_slope)
     f = brdf_specular(theta_i, theta_r, rms_slope, shadowing)
-    if diffuse:
-        # f_d depends on theta_i only; its shape is theta_i's, so it broadcasts like theta_i
-        f = f + brdf_diffuse(theta_i, rms_slope, shadowing)
+    mode = _diffuse_mode(diffuse)
+    if mode != "none":
+        # the paper's f_d depends on theta_i only: its shape is theta_i's, so it broadcasts like theta_i
+        f = f + brdf_diffuse(theta_i, rms_slope, shadowing, theta_r if mode == "reciprocal" else None, mode)
     return f
 
 
@@ -293,7 +334,8 @@ def mueller_sigma(theta_i, theta_r, rms_slope, n=None, k=0.0, shadowing=True, di
     paper's eta = n - j k; ``n=None`` is a PEC.  Returns a dict "M00", "M01", "M22",
     "M23": the facet Fresnel terms (A, B, C, S) at the local incidence angle
     beta = (theta_i + theta_r)/2 times the specular sigma, plus, in M00 only, the
-    diffuse term (1 - rho_s(theta_i))/2 * A(beta) in sigma units.
+    diffuse term (1 - rho_s(theta_i))/2 * A(beta) in sigma units (``diffuse``: True / "paper",
+    "reciprocal" -- :func:`brdf_diffuse` --, or False / "none").
     """
     from hyde_bsdf.model.fresnel import fresnel_mueller_terms
 
@@ -304,7 +346,9 @@ def mueller_sigma(theta_i, theta_r, rms_slope, n=None, k=0.0, shadowing=True, di
                                        pec=n is None)
     spec = sigma_equivalent(theta_i, theta_r, rms_slope, shadowing, diffuse=False)
     out = {"M00": spec * A, "M01": spec * B, "M22": spec * C, "M23": spec * S}
-    if diffuse:
+    mode = _diffuse_mode(diffuse)
+    if mode != "none":
         units = 2.0 * math.pi * np.cos(theta_i) * np.cos(theta_r)
-        out["M00"] = out["M00"] + units * brdf_diffuse(theta_i, rms_slope, shadowing) * A
+        f_d = brdf_diffuse(theta_i, rms_slope, shadowing, theta_r if mode == "reciprocal" else None, mode)
+        out["M00"] = out["M00"] + units * f_d * A
     return out
