@@ -209,8 +209,8 @@ def heldout(atlas, out):
     folder = out / "atlas_heldout"
     mats = build.heldout_materials()
     grid = runs.Grid(theta_i_deg=build.HELDOUT_THETA_I)
-    runs.run_tasks(runs.tasks(grid, mats=mats, surfaces=build.HELDOUT_SURFACES), folder, workers=2, grid=grid,
-                   mats=mats, progress=False)
+    runs.run_tasks(runs.tasks(grid, mats=mats, surfaces=build.HELDOUT_SURFACES, seed_base=build.HELDOUT_SEED_BASE),
+                   folder, workers=2, grid=grid, mats=mats, progress=False)
     tol = _tolerances(atlas)
     lobe = atlas.regions.index("lobe")
     rows = []

@@ -34,6 +34,8 @@ sys.path.insert(0, str(REPO))
 HELDOUT_SURFACES = ((0.15, 0.3), (0.27, 0.7), (0.42, 1.5), (0.6, 3.0), (0.08, 0.35), (0.27, 2.8))
 HELDOUT_THETA_I = (5.0, 25.0, 45.0, 65.0, 75.0)
 HELDOUT_MATERIALS = ("PEC", "Al_633nm", "Ag_633nm")
+#: the held-out surfaces' seeds start here (the grid's at 10000): no held-out surface reuses a grid draw
+HELDOUT_SEED_BASE = 90000
 
 
 def _executor(args):
@@ -70,7 +72,7 @@ def cmd_heldout(args):
 
     mats = heldout_materials()
     grid = atlas.Grid(theta_i_deg=HELDOUT_THETA_I)
-    todo = atlas.tasks(grid, mats=mats, surfaces=HELDOUT_SURFACES)
+    todo = atlas.tasks(grid, mats=mats, surfaces=HELDOUT_SURFACES, seed_base=HELDOUT_SEED_BASE)
     n = atlas.run_tasks(todo, args.checkpoints, executor=_executor(args), workers=args.workers, grid=grid, mats=mats)
     print(f"ran {n} of {len(todo)} held-out tasks; checkpoints in {args.checkpoints}")
     return 0

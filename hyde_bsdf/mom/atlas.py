@@ -124,14 +124,14 @@ class Grid:
 GRID = Grid()
 
 
-def plan(rms_slope, height_wl, index=0):
+def plan(rms_slope, height_wl, index=0, seed_base=10000):
     """The MoM settings of one surface: correlation length, partition length, points per wavelength, seed."""
     ell = math.sqrt(2.0) * height_wl / rms_slope
     partition = max(PARTITION_WL, math.ceil(ELLS_PER_PARTITION * ell))
     # the spectrum needs > 3.9 / ell points per wavelength and check_sampling 5 per ell; steep surfaces 15
     ppw = max(10.0 if rms_slope < 0.5 else 15.0, math.ceil(6.0 / ell))
     # seeds 100 apart: the pilot takes seed, the other partitions seed + 1 (no surface shares a draw)
-    return dict(corr_length_wl=ell, partition_wl=float(partition), pts_per_wl=float(ppw), seed=10000 + 100 * index)
+    return dict(corr_length_wl=ell, partition_wl=float(partition), pts_per_wl=float(ppw), seed=seed_base + 100 * index)
 
 
 def _cost_rank(task):
@@ -141,14 +141,15 @@ def _cost_rank(task):
     return per_unknown * task["partition_wl"] * task["pts_per_wl"] * curvature
 
 
-def tasks(grid=GRID, mats=None, surfaces=None, theta_i_deg=None):
+def tasks(grid=GRID, mats=None, surfaces=None, theta_i_deg=None, seed_base=10000):
     """One task (a dict) per surface and material, cheapest first; ``surfaces``: (rms_slope, height) pairs
-    (default the grid's), ``mats``: Material records (default :func:`materials`)."""
+    (default the grid's), ``mats``: Material records (default :func:`materials`); ``seed_base``: the first
+    surface's seed (held-out runs take another base, so that no surface reuses the grid's draws)."""
     mats = materials() if mats is None else mats
     pairs = [(s, h) for s in grid.rms_slopes for h in grid.heights_wl] if surfaces is None else list(surfaces)
     out = []
     for i, (slope, height) in enumerate(pairs):
-        p = plan(slope, height, i)
+        p = plan(slope, height, i, seed_base)
         for m in mats:
             out.append(dict(key=f"s{slope:g}_h{height:g}_{m.name}", rms_slope=float(slope), height_wl=float(height),
                             material=m.name, n=m.n, k=m.k, theta_i_deg=list(theta_i_deg or grid.theta_i_deg),

@@ -242,18 +242,20 @@ def brdf_diffuse(theta_i, rms_slope, shadowing=True, theta_r=None, mode="paper")
     mode = _diffuse_mode(mode)
     if mode == "none":
         return np.zeros(np.broadcast(np.asarray(theta_i, float), np.asarray(0.0 if theta_r is None else theta_r)).shape)
-    one_minus_i = 1.0 - dhr_specular(theta_i, rms_slope, shadowing)
     if mode == "paper":
-        return 0.5 * one_minus_i
+        return 0.5 * (1.0 - dhr_specular(theta_i, rms_slope, shadowing))
     if theta_r is None:
         raise UsageError("brdf_diffuse(mode='reciprocal') needs theta_r")
+    # rho on 401 angles (trapezoid nodes of the normaliser, linear in between: ~1e-5 of rho)
     t, w = _theta_r_quadrature(401)
     rho_t = dhr_specular(_below_horizon(t), rms_slope, shadowing)
     norm = float(np.sum((1.0 - rho_t) * np.cos(t) * w))
     if norm <= 0.0:     # rho = 1 at every angle: nothing for the diffuse term to carry
         return np.zeros(np.broadcast(np.asarray(theta_i, float), np.asarray(theta_r, float)).shape)
-    one_minus_r = 1.0 - dhr_specular(_below_horizon(theta_r), rms_slope, shadowing)
-    return one_minus_i * one_minus_r / norm
+    def one_minus(theta):               # the same table for both angles: f_d(a, b) = f_d(b, a) exactly
+        return 1.0 - np.interp(np.asarray(theta, float), t, rho_t)
+
+    return one_minus(theta_i) * one_minus(theta_r) / norm
 
 
 def brdf(theta_i, theta_r, rms_slope, shadowing=True, diffuse=True):
