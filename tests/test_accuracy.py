@@ -194,11 +194,11 @@ def test_model1d_reciprocal_diffuse_is_reciprocal_and_conserves_energy():
     from hyde_bsdf.mom import model1d
 
     t = np.linspace(-np.pi / 2, np.pi / 2, 2001)
-    fd = model1d.brdf_diffuse(np.radians([[40.0]]), 0.4, "smith", t, "reciprocal")
+    fd = model1d.brdf_diffuse(np.radians([[40.0]]), 0.4, "smith", "reciprocal", t)
     assert np.trapezoid(fd * np.cos(t), t)[0] == pytest.approx(1 - model1d.dhr_specular(np.radians(40.0), 0.4,
                                                                                         "smith"), abs=1e-4)
-    a = model1d.brdf_diffuse(np.radians(30.0), 0.4, "vgroove", np.radians(70.0), "reciprocal")
-    b = model1d.brdf_diffuse(np.radians(70.0), 0.4, "vgroove", np.radians(30.0), "reciprocal")
+    a = model1d.brdf_diffuse(np.radians(30.0), 0.4, "vgroove", "reciprocal", np.radians(70.0))
+    b = model1d.brdf_diffuse(np.radians(70.0), 0.4, "vgroove", "reciprocal", np.radians(30.0))
     assert a == pytest.approx(b, rel=1e-9)
 
 

@@ -17,8 +17,11 @@ from conftest import examples
 
 import hyde_bsdf
 from hyde_bsdf.model import dhr
-from hyde_bsdf.model.evaluator import INDEX_MAX, INDEX_MIN, RMS_SLOPE_RANGE
-from hyde_bsdf.model.parameters import DHR_TABLE_RMS_SLOPE
+from hyde_bsdf.model.parameters import DHR_TABLE_RMS_SLOPE, INDEX_MIN, N, RMS_SLOPE
+from hyde_bsdf.model.terms import DIFFUSE, SHADOWING, allowed
+
+INDEX_MAX = N.hi
+RMS_SLOPE_RANGE = RMS_SLOPE.bounds
 
 HALF_PI = 0.5 * math.pi
 EDGE_ANGLES = [0.0, 1e-300, 1e-12, HALF_PI - 1e-12, HALF_PI, HALF_PI + 1e-12, math.pi, math.pi + 1e-9,
@@ -43,14 +46,13 @@ def pbrdf_accepts(ti, tr, ph, s, n, k, pec, shadowing, diffuse):
     slope_ok = math.isfinite(s) and RMS_SLOPE_RANGE[0] <= s <= RMS_SLOPE_RANGE[1]
     index_ok = pec or (all(math.isfinite(v) and 0.0 <= v <= INDEX_MAX for v in (n, k))
                        and math.hypot(n, k) >= INDEX_MIN)
-    combo_ok = not (shadowing == "none" and diffuse == "reciprocal")
+    combo_ok = allowed(shadowing, diffuse)     # the terms' rule (model/terms.py)
     return angles and slope_ok and index_ok and combo_ok
 
 
 @PROFILE
 @given(ti=polar, tr=polar, ph=azimuth, s=slope, n=index, k=index, pec=st.booleans(),
-       shadowing=st.sampled_from(["vgroove", "smith", "none"]),
-       diffuse=st.sampled_from(["paper", "reciprocal", "none"]))
+       shadowing=st.sampled_from(SHADOWING), diffuse=st.sampled_from(DIFFUSE))
 @example(ti=HALF_PI, tr=HALF_PI, ph=math.pi, s=1e-4, n=0.0, k=1e6, pec=False, shadowing="vgroove",
          diffuse="paper")
 @example(ti=0.0, tr=0.0, ph=0.0, s=100.0, n=1e6, k=0.0, pec=False, shadowing="smith", diffuse="reciprocal")

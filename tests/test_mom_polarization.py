@@ -88,12 +88,13 @@ def test_model1d_mueller_reduces_to_fresnel():
     """The 1-D model's Mueller elements are the facet Fresnel terms at beta = (ti + tr)/2 times the
     specular term (diffuse off); a PEC gives M22 = -M00, M01 = M23 = 0."""
     from hyde_bsdf.model.fresnel import fresnel_mueller_terms
+    from hyde_bsdf.model.index import Index
 
     ti = np.radians([[10.0], [50.0]])
     tr = np.radians([-20.0, 10.0, 45.0, 70.0])
     m = model1d.mueller_sigma(ti, tr, 0.44, *INFRAGOLD, diffuse=False)
     spec = model1d.sigma_equivalent(ti, tr, 0.44, diffuse=False)
-    A, B, C, S = fresnel_mueller_terms(np.cos(0.5 * (ti + tr)), *INFRAGOLD)
+    A, B, C, S = fresnel_mueller_terms(np.cos(0.5 * (ti + tr)), Index(*INFRAGOLD))
     np.testing.assert_allclose(m["M01"], spec * B, rtol=1e-12)
     np.testing.assert_allclose(m["M23"], spec * S, rtol=1e-12)
     pec = model1d.mueller_sigma(ti, tr, 0.44)

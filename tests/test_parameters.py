@@ -168,14 +168,6 @@ def test_each_interface_accepts_the_registry_range():
     assert P.DHR_TABLE_RMS_SLOPE.lo <= lo and P.DHR_TABLE_RMS_SLOPE.hi > hi   # the table covers it, 50 interior
 
 
-def test_plugin_constants_are_the_registry():
-    pytest.importorskip("mitsuba")
-    from hyde_bsdf.mitsuba import plugin
-    assert plugin.RMS_RANGE == P.RMS_SLOPE.bounds
-    assert plugin.ALPHA_RANGE == pytest.approx((math.sqrt(2) * 1e-4, math.sqrt(2) * 50.0), rel=1e-15)
-    assert plugin.INDEX_MAX == P.N.hi == P.K.hi
-
-
 def test_fit_result_at_the_range_edge_loads_without_a_refusal_warning():
     """The fit no longer warns "the plugin will refuse it" for a value the plugin accepts (40)."""
     import warnings
@@ -199,10 +191,12 @@ def test_alpha_and_rms_slope_convert_both_ways(s):
 
 
 def test_paper_and_mitsuba_index_are_the_same_numbers():
-    """Gold at 633 nm, Mitsuba 0.18 + 3.0i, is the paper's eta = 0.18 - j 3.0."""
-    eta = P.paper_eta(0.18, 3.0)
-    assert eta == complex(0.18, -3.0)
-    assert P.mitsuba_index(eta) == (0.18, 3.0)
+    """Gold at 633 nm, Mitsuba 0.18 + 3.0i, is the paper's eta = 0.18 - j 3.0: one Index, two spellings."""
+    from hyde_bsdf.model.index import PEC, Index
+    gold = Index.from_mitsuba(0.18, 3.0)
+    assert gold.paper_eta() == complex(0.18, -3.0)
+    assert gold.mitsuba() == {"eta": 0.18, "k": 3.0}
+    assert PEC.is_pec and PEC.paper_eta() is None and not gold.is_pec
 
 
 def test_spellings_name_each_interface_and_are_unambiguous():

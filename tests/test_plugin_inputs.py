@@ -104,10 +104,10 @@ def test_bad_texels_of_the_index_and_scale_are_refused(variant, name, texel, nee
 
 def test_alpha_zero_renders_as_the_lower_bound_with_one_warning():
     mi = _setup("llvm_ad_rgb")
-    from hyde_bsdf.mitsuba.plugin import ALPHA_RANGE
+    from hyde_bsdf.model.parameters import ALPHA
 
     si = _si(mi, (0.25, 0.25), wi=(0.3, 0.0, 0.954))
-    ref = _eval(mi, mi.load_dict({"type": "hyde", "alpha": ALPHA_RANGE[0], "material": "Au"}), si, wo=(-0.3, 0.0, 0.954))
+    ref = _eval(mi, mi.load_dict({"type": "hyde", "alpha": ALPHA.lo, "material": "Au"}), si, wo=(-0.3, 0.0, 0.954))
     for alpha in (0.0, {"type": "bitmap", "raw": True, "filter_type": "nearest",
                         "data": mi.TensorXf(np.array([[0.0, 0.3]], np.float32)[..., None])}):
         with warnings.catch_warnings(record=True) as caught:

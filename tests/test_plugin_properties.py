@@ -85,9 +85,12 @@ def test_eval_pdf_sample_finite_or_refused(rough, spelling, eta, k, shadowing, d
 
     set_variant("scalar_spectral_polarized", fallback=False)
     hyde_bsdf.register("scalar_spectral_polarized")
-    from hyde_bsdf.mitsuba.plugin import ALPHA_RANGE, INDEX_MAX, RMS_RANGE, plugin_class
+    from hyde_bsdf.mitsuba.plugin import plugin_class
+    from hyde_bsdf.model.parameters import ALPHA, ETA, RMS_SLOPE
+    from hyde_bsdf.model.terms import allowed
 
-    lo, hi = RMS_RANGE if spelling == "rms_slope" else ALPHA_RANGE
+    INDEX_MAX = ETA.hi
+    lo, hi = RMS_SLOPE if spelling == "rms_slope" else ALPHA
     props = mi.Properties("hyde")
     props[spelling] = rough
     props["eta"], props["k"] = eta, k
@@ -97,7 +100,7 @@ def test_eval_pdf_sample_finite_or_refused(rough, spelling, eta, k, shadowing, d
     invalid = (not 0.0 <= rough <= hi * (1 + 1e-6)) or k < 0 or np.float32(k) > INDEX_MAX \
         or np.float32(eta) > INDEX_MAX \
         or (np.float32(eta) == 0 and np.float32(k) == 0) \
-        or (diffuse == "reciprocal" and shadowing == "none")
+        or not allowed(shadowing, diffuse)
     if invalid:
         with pytest.raises(ValueError, match="hyde: "):
             plugin_class()(props)

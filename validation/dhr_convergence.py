@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import cli, save_figure, write_csv  # noqa: E402
 
 from hyde_bsdf.model import dhr
+from hyde_bsdf.model.terms import SHADOWING
 
 POINTS = [(0.0, 0.01), (45.0, 0.3), (80.0, 0.05), (89.0, 0.5), (89.9, 0.01), (60.0, 3.0)]
 
@@ -37,7 +38,7 @@ def convergence(out, quick):
     rows = []
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
     worst_default = {}
-    for c, sh in enumerate(dhr.SHADOWING):
+    for c, sh in enumerate(SHADOWING):
         ref = dhr.dhr_quadrature(t, s, sh, n_outer=64, n_inner=48)
         errs, times = [], []
         for n in nodes:

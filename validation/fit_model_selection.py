@@ -42,7 +42,8 @@ import numpy as np
 
 from hyde_bsdf.fit import fit_mueller, synthetic_measurements
 from hyde_bsdf.fit.adequacy import ELEMENT_TOLERANCE, M00_TOLERANCE, InadequateModelWarning
-from hyde_bsdf.fit.model_selection import CANDIDATES, defined, model_size, select_model, select_model_pbsdf
+from hyde_bsdf.fit.model_selection import CANDIDATES, select_model, select_model_pbsdf
+from hyde_bsdf.model.terms import allowed, model_size
 from hyde_bsdf.fit.pbsdf_export import _edge_directions, band_index, edge_deg, export_pbsdf, grids
 from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, pbsdf_samples
 from hyde_bsdf.io.pbsdf_file import KAIST_WAVELENGTHS, rusinkiewicz_to_directions, write_pbsdf
@@ -51,7 +52,7 @@ from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import cli, save_figure, write_csv  # noqa: E402
 
-MODELS = [c for c in CANDIDATES if defined(*c)]
+MODELS = [c for c in CANDIDATES if allowed(*c)]
 CSV_TRUTH = {"rms_slope": 0.25, "n": 1.2, "k": 7.0}
 CSV_ELEMENTS = ("M01", "M10", "M11", "M22", "M23", "M33")
 TABLE_RMS = 0.2

@@ -85,9 +85,10 @@ def valley_profile(scene, spp, seed=7, points=13):
     from scipy.optimize import brentq
 
     from hyde_bsdf.model.fresnel import fresnel_mueller_terms
+    from hyde_bsdf.model.index import Index
 
     c = np.cos(np.radians(60.0))
-    A = lambda e, k: float(fresnel_mueller_terms(np.array(c), e, k)[0])
+    A = lambda e, k: float(fresnel_mueller_terms(np.array(c), Index(e, k))[0])
     target = A(inv.TRUTH["eta"], inv.TRUTH["k"])
     ref = inv.render_reference(scene, inv.TRUTH, spp, seed=seed)
     losses = {comp: inv.StokesLoss(ref, components=comp) for comp in ("s0", "stokes")}

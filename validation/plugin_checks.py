@@ -247,14 +247,15 @@ DHR_TEXTURE_TOL = 2e-4
 def dhr_texture_error(out, quick):
     """Max |texture - table| of 1 - rho (clipped at 0) per shadowing, theta <= 89 and <= 89.9 deg."""
     import mitsuba as mi
-    from hyde_bsdf.mitsuba.plugin import RMS_RANGE, _dhr_lookup
+    from hyde_bsdf.mitsuba.plugin import _dhr_lookup
+    from hyde_bsdf.model.parameters import RMS_SLOPE
     from hyde_bsdf.mitsuba.variants import set_variant
     from hyde_bsdf.model.dhr import load_table
 
     set_variant("llvm_ad_rgb", fallback=False)
     rng = np.random.default_rng(17)
     n = 200_000 if quick else 2_000_000
-    rms = np.exp(rng.uniform(math.log(RMS_RANGE[0]), math.log(RMS_RANGE[1]), n))
+    rms = np.exp(rng.uniform(math.log(RMS_SLOPE.lo), math.log(RMS_SLOPE.hi), n))
     rows, results = [], []
     for theta_max in (89.0, 89.9):
         theta = np.arccos(rng.uniform(math.cos(math.radians(theta_max)), 1.0, n))
@@ -265,10 +266,10 @@ def dhr_texture_error(out, quick):
             want = np.maximum(1.0 - load_table(sh)(theta, rms), 0.0)
             err = np.abs(got - want)
             i = int(err.argmax())
-            rows.append([sh, theta_max, f"{RMS_RANGE[0]:g}-{RMS_RANGE[1]:g}", n, f"{err.max():.3e}",
+            rows.append([sh, theta_max, f"{RMS_SLOPE.lo:g}-{RMS_SLOPE.hi:g}", n, f"{err.max():.3e}",
                          f"{math.degrees(theta[i]):.4f}", f"{rms[i]:.4g}"])
             name = (f"DHR texture interpolation error, {sh}, theta <= {theta_max} deg, "
-                    f"rms_slope {RMS_RANGE[0]:g}-{RMS_RANGE[1]:g}")
+                    f"rms_slope {RMS_SLOPE.lo:g}-{RMS_SLOPE.hi:g}")
             if sh == "none" and theta_max > 89.0:
                 # without shadowing rho >> 1 near grazing and the table's bicubic spline rings between
                 # its nodes (clipped to rho = 0 there); the texture, linear between spline samples,

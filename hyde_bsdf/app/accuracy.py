@@ -19,8 +19,7 @@ import math
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.model.accuracy import TOLERANCE, TOLERANCE_DB, accuracy, load_atlas
-from hyde_bsdf.model.evaluator import DIFFUSE
-from hyde_bsdf.model.shadowing import SHADOWING
+from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
 
 __all__ = ["build_parser", "cli_main", "format_answer"]
 

@@ -13,8 +13,7 @@ from __future__ import annotations
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.pbsdf_export import DEFAULT_RESOLUTION, export_pbsdf
-from hyde_bsdf.model.evaluator import DIFFUSE
-from hyde_bsdf.model.shadowing import SHADOWING
+from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
 from hyde_bsdf.progress import stderr_lines
 
 __all__ = ["build_parser", "cli_main"]
@@ -39,9 +38,9 @@ def build_parser() -> Parser:
     ap.add_argument("--material", default=None, help="a Mitsuba data/ior material (Au, Ag, Al, Cu, ...)")
     ap.add_argument("--n", default=None, help="real part of the index: one value or 5 (450..650 nm)")
     ap.add_argument("--k", default=None, help="imaginary part (paper's kappa >= 0): one value or 5")
-    ap.add_argument("--shadowing", default="vgroove", choices=SHADOWING,
+    ap.add_argument("--shadowing", default=SHADOWING[0], choices=SHADOWING,
                     help="shadowing-masking: the paper's V-groove, Smith's for Beckmann, or none (default %(default)s)")
-    ap.add_argument("--diffuse", default="paper", choices=DIFFUSE,
+    ap.add_argument("--diffuse", default=DIFFUSE[0], choices=DIFFUSE,
                     help="diffuse term: the paper's, a reciprocal variant, or none (default %(default)s)")
     ap.add_argument("--resolution", default="x".join(map(str, DEFAULT_RESOLUTION)),
                     help="N_phi_d x N_theta_d x N_theta_h (default %(default)s)")

@@ -43,8 +43,7 @@ from hyde_bsdf.fit.pbsdf_fit import _check, fit_pbsdf
 from hyde_bsdf.fit.pbsdf_samples import pbsdf_samples
 from hyde_bsdf.io.measurements import read_measurements
 from hyde_bsdf.io.pbsdf_file import read_pbsdf
-from hyde_bsdf.model.evaluator import DIFFUSE
-from hyde_bsdf.model.shadowing import SHADOWING
+from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
 from hyde_bsdf.progress import stderr_lines
 
 __all__ = ["is_pbsdf", "cli_main", "csv_main", "pbsdf_main", "csv_parser", "pbsdf_parser"]
@@ -101,14 +100,14 @@ def cli_main(argv=None) -> int:
 
 MODEL_HELP = ("auto (the default unless --shadowing or --diffuse is given): fit every shadowing x diffuse "
               "model (and k = 0 where the data allow a dielectric) and keep the smallest adequate one; "
-              "fixed: one model, --shadowing (default vgroove) and --diffuse (default paper)")
+              f"fixed: one model, --shadowing (default {SHADOWING[0]}) and --diffuse (default {DIFFUSE[0]})")
 STRICT_HELP = "fail (exit 1, after the summary) when the model does not describe the data or the fit is ill-posed"
 
 
 def _add_model_options(ap):
     ap.add_argument("--model", default=None, choices=("auto", "fixed"), help=MODEL_HELP)
-    ap.add_argument("--shadowing", default=None, choices=SHADOWING, help="one shadowing model (default vgroove)")
-    ap.add_argument("--diffuse", default=None, choices=DIFFUSE, help="one diffuse term (default paper)")
+    ap.add_argument("--shadowing", default=None, choices=SHADOWING, help=f"one shadowing model (default {SHADOWING[0]})")
+    ap.add_argument("--diffuse", default=None, choices=DIFFUSE, help=f"one diffuse term (default {DIFFUSE[0]})")
 
 
 def _auto(args) -> bool:
@@ -199,7 +198,7 @@ def _output_gate(args):
 
 def _csv_run(args) -> int:
     opts = dict(fit=args.fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
-                shadowing=args.shadowing or "vgroove", diffuse=args.diffuse or "paper")
+                shadowing=args.shadowing or SHADOWING[0], diffuse=args.diffuse or DIFFUSE[0])
     sel = None
     with user_input():
         auto = _auto(args)
@@ -270,7 +269,7 @@ def pbsdf_main(argv=None) -> int:
 def _pbsdf_run(args) -> int:
     with user_input():
         auto = _auto(args)
-        shadowing, diffuse = args.shadowing or "vgroove", args.diffuse or "paper"
+        shadowing, diffuse = args.shadowing or SHADOWING[0], args.diffuse or DIFFUSE[0]
         fit = _check(args.fit, args.rms_slope, args.n0, args.k0, shadowing, diffuse)
     if not 0 <= args.seed < 2**32:
         raise UsageError(f"--seed must be an integer in [0, 2^32), got {args.seed}")

@@ -32,13 +32,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hyde_bsdf.fit.adequacy import ELEMENT_TOLERANCE, M00_TOLERANCE, InadequateModelWarning
+from hyde_bsdf.model.terms import DIFFUSE_TERMS, SHADOWING_TERMS, allowed, model_size
 
-__all__ = ["CANDIDATES", "ModelRow", "ModelSelection", "model_size", "select_model", "select_model_pbsdf"]
+__all__ = ["CANDIDATES", "ModelRow", "ModelSelection", "select_model", "select_model_pbsdf"]
 
-SHADOWINGS = ("none", "smith", "vgroove")
-DIFFUSES = ("none", "paper", "reciprocal")
-#: every combination, simplest first; none x reciprocal is undefined (no shadowing: rho > 1)
-CANDIDATES = tuple((s, d) for s in SHADOWINGS for d in DIFFUSES)
+#: every combination of the terms of model/terms.py, simplest first (each record's rank); a pair
+#: the terms' rule refuses (none x reciprocal: no shadowing, rho > 1) is listed as undefined
+CANDIDATES = tuple((s.name, d.name) for s in sorted(SHADOWING_TERMS, key=lambda t: t.rank)
+                   for d in sorted(DIFFUSE_TERMS, key=lambda t: t.rank))
 #: a k = 0 variant is tried for models whose fitted k (middle band) is below this
 DIELECTRIC_K = 0.5
 #: geometries of the screen (tables)
@@ -49,13 +50,6 @@ SCREEN_STARTS = ((1.5, 0.5), (0.3, 3.0))
 MAX_FULL_FITS = 3
 
 
-def model_size(shadowing, diffuse, free_parameters):
-    """Free parameters + 1 per term (shadowing, diffuse) the model adds."""
-    return free_parameters + (shadowing != "none") + (diffuse != "none")
-
-
-def defined(shadowing, diffuse):
-    return not (shadowing == "none" and diffuse == "reciprocal")
 
 
 @dataclass
@@ -133,7 +127,7 @@ def _choose(rows):
 
 def _order(start=("vgroove", "paper")):
     """Candidates in an order where each (after the first) has an already-fitted neighbour."""
-    todo = [c for c in CANDIDATES if defined(*c) and c != start]
+    todo = [c for c in CANDIDATES if allowed(*c) and c != start]
     done = [start]
     while todo:
         nxt = next(c for c in todo if any((c[0] == d[0]) + (c[1] == d[1]) == 1 for d in done))
@@ -150,7 +144,7 @@ def _neighbour_start(model, fitted):
 
 def _undefined_rows():
     return [ModelRow(s, d, False, {}, 0, 0, math.inf, {}, False, "undefined",
-                     "reciprocal diffuse needs shadowing") for s, d in CANDIDATES if not defined(s, d)]
+                     f"{d} diffuse needs a shadowing term with rho <= 1") for s, d in CANDIDATES if not allowed(s, d)]
 
 
 def _bic_weighted(rss, m, p):

@@ -73,9 +73,10 @@ import numpy as np
 from hyde_bsdf.errors import RejectedResult, UsageError, UsageTypeError, shorten
 from hyde_bsdf.model.checks import real_array
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
-from hyde_bsdf.model.evaluator import check_diffuse, pbrdf
-from hyde_bsdf.model.shadowing import check_shadowing
-from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
+from hyde_bsdf.model.evaluator import pbrdf
+from hyde_bsdf.model.index import Index
+from hyde_bsdf.model.parameters import FIT_PARAMETERS, INDEX_MIN, NATURAL_INDEX, RMS_SLOPE
+from hyde_bsdf.model.terms import check_pair
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
                                     chi2_verdict, cluster_covariance, correlation, floor_verdict,
                                     geometry_clusters, half_angles, larger_errors)
@@ -282,6 +283,11 @@ class FitResult:
     def ill_posed(self) -> bool:
         return bool(self.warnings)
 
+    @property
+    def index(self) -> Index:
+        """The fitted (or fixed) index n + ik."""
+        return Index(self.params["n"], self.params["k"])
+
     def model(self, theta_i, theta_r, phi, names=("M01", "M11", "M22", "M23")) -> dict:
         """The fitted model's normalized elements at other geometries (radians)."""
         return mueller_elements(theta_i, theta_r, phi, names, **self.params,
@@ -297,12 +303,12 @@ class FitResult:
     def plugin_dict(self) -> dict:
         """The ``hyde`` plugin's dict for ``mi.load_dict``.
 
-        The plugin's ``eta``, ``k`` are Mitsuba's n + ik; the paper's eta = n - jk is
-        the same material with the same numbers: eta = n, k = k.
+        The plugin's ``eta``, ``k`` are Mitsuba's n + ik (:meth:`Index.mitsuba`); the paper's
+        eta = n - jk is the same material with the same numbers: eta = n, k = k.
         """
         s = self.params["rms_slope"]    # inside parameters.RMS_SLOPE (BOUNDS), which the plugin accepts
-        return {"type": "hyde", "rms_slope": float(s), "eta": float(self.params["n"]),
-                "k": float(self.params["k"]), "shadowing": self.shadowing, "diffuse": self.diffuse}
+        return {"type": "hyde", "rms_slope": float(s), **self.index.mitsuba(),
+                "shadowing": self.shadowing, "diffuse": self.diffuse}
 
     def plugin_xml(self, indent: str = "") -> str:
         """The same as :meth:`plugin_dict`, as a Mitsuba XML ``<bsdf>`` element."""
@@ -339,7 +345,7 @@ class FitResult:
                 out.append(f"  {name:9s} = {v:.6g} +- {e:.3g}{rel}")
             else:
                 out.append(f"  {name:9s} = {v:.6g} (fixed)")
-        n, k = self.params["n"], self.params["k"]
+        n, k = self.index.n, self.index.k
         out.append(f"  index: paper eta = {n:.6g} - j{k:.6g};  Mitsuba/plugin eta = {n:.6g}, k = {k:.6g} (n + ik)")
         tag = "" if self.sigma_given else "  [no sigma given: unit weights, errors scaled by the residual scatter]"
         out.append(f"  chi^2 = {self.chi2:.4g}, dof = {self.dof}, reduced chi^2 = {self.reduced_chi2:.4g}, "
@@ -451,16 +457,13 @@ def check_options(fit=("n", "k"), rms_slope=0.3, n0=None, k0=None, shadowing="vg
     """Check :func:`fit_mueller`'s options without data (the command line does so before it
     reads a large file); returns (fitted names, diffuse mode, start/fixed values)."""
     fitted = _check_fit_names(fit)
-    mode = check_diffuse(diffuse)
+    mode = check_pair(shadowing, diffuse)[1].name       # the rules of model/terms.py
     if isinstance(corr_limit, bool) or not (isinstance(corr_limit, (int, float)) and 0 < corr_limit <= 1):
         raise UsageError(f"corr_limit must be in (0, 1], got {corr_limit!r}")
     given = {"n": _start_value("n", n0, fitted), "k": _start_value("k", k0, fitted),
              "rms_slope": _start_value("rms_slope", rms_slope, fitted)}
     if given["rms_slope"] is None:
         raise UsageError("rms_slope must be given (start value when fitted)")
-    check_shadowing(shadowing)
-    if mode == "reciprocal" and shadowing == "none":
-        raise UsageError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
     return fitted, mode, given
 
 
@@ -621,9 +624,9 @@ class _Objective:
     def unpack(self, x) -> dict:
         vals = dict(self.given)
         vals.update(zip(self.fitted, (float(v) for v in x)))
-        # eta = 0 exactly is not a material (the evaluator refuses |eta| < 1e-6)
-        if math.hypot(vals["n"], vals["k"]) < 1e-6:
-            vals["n"] = 1e-6
+        # eta = 0 exactly is not a material (the evaluator refuses |eta| < INDEX_MIN)
+        if math.hypot(vals["n"], vals["k"]) < INDEX_MIN:
+            vals["n"] = INDEX_MIN
         return vals
 
     def residual(self, sel):

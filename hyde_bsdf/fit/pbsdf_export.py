@@ -53,14 +53,16 @@ import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path, check_output_path
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.fit.pbsdf_samples import check_model_terms, paper_angles, paper_to_table, table_to_paper
+from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.io.memory import check_memory, format_bytes
 from hyde_bsdf.io.output_gate import OutputLock, check_free_space
 from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, read_pbsdf,
                                      rusinkiewicz_to_directions, table_frame_x, table_nbytes)
-from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
-from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N
+from hyde_bsdf.model.evaluator import pbrdf
+from hyde_bsdf.model.index import Index
+from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N, RMS_SLOPE
+from hyde_bsdf.model.terms import check_pair
 from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
 
 __all__ = ["DEFAULT_RESOLUTION", "edge_deg", "ALPHA_CANDIDATES", "ExportReport", "grids",
@@ -198,9 +200,14 @@ def _edge_directions(om_i, om_r, x_fallback, edge):
     return out[0], out[1], x
 
 
+def band_indices(params) -> list:
+    """The :class:`~hyde_bsdf.model.index.Index` of each band of an export's parameters."""
+    return [Index(n, k) for n, k in zip(params["n"], params["k"])]
+
+
 def _model(theta_i, theta_r, phi, params, band):
-    return pbrdf(theta_i, theta_r, phi, rms_slope=params["rms_slope"], n=params["n"][band],
-                 k=params["k"][band], shadowing=params["shadowing"], diffuse=params["diffuse"])
+    return pbrdf(theta_i, theta_r, phi, rms_slope=params["rms_slope"], index=band_indices(params)[band],
+                 shadowing=params["shadowing"], diffuse=params["diffuse"])
 
 
 def _slab(p, phi_d, theta_d, theta_h, params):
@@ -374,7 +381,7 @@ class ExportReport:
 
     def summary(self) -> str:
         p = self.params
-        idx = ", ".join(f"{w:g} nm: {n:.4g} - j{k:.4g}" for w, n, k in zip(self.wavelengths, p["n"], p["k"]))
+        idx = ", ".join(f"{w:g} nm: {i.n:.4g} - j{i.k:.4g}" for w, i in zip(self.wavelengths, band_indices(p)))
         lines = [f"wrote {self.path} ({self.nbytes / 2**20:.1f} MiB, {'x'.join(map(str, self.resolution))} "
                  f"phi_d x theta_d x theta_h x {len(self.wavelengths)} bands, {self.seconds:.1f} s)",
                  f"  hyde: rms_slope = {p['rms_slope']:.6g}, shadowing = {p['shadowing']}, diffuse = {p['diffuse']}",
@@ -389,13 +396,9 @@ class ExportReport:
 
 
 def _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths):
-    if not isinstance(rms_slope, (int, float)) or isinstance(rms_slope, bool) or not \
-            (RMS_SLOPE_RANGE[0] <= float(rms_slope) <= RMS_SLOPE_RANGE[1]):
-        raise UsageError(f"rms_slope must be a number in [{RMS_SLOPE_RANGE[0]:g}, {RMS_SLOPE_RANGE[1]:g}], "
-                         f"got {rms_slope!r}")
-    check_model_terms(shadowing, diffuse)
-    if diffuse == "reciprocal" and shadowing == "none":
-        raise UsageError("diffuse='reciprocal' needs shadowing='vgroove' or 'smith'")
+    if not isinstance(rms_slope, (int, float)) or isinstance(rms_slope, bool) or not RMS_SLOPE.contains(rms_slope):
+        raise UsageError(f"rms_slope must be a number in [{RMS_SLOPE.lo:g}, {RMS_SLOPE.hi:g}], got {rms_slope!r}")
+    check_pair(shadowing, diffuse, booleans=False)      # names only: the export takes no True/False
     nb, kb = band_index(wavelengths, n, k, material)
     return {"rms_slope": float(rms_slope), "n": [float(v) for v in nb], "k": [float(v) for v in kb],
             "shadowing": shadowing, "diffuse": diffuse, "material": material}

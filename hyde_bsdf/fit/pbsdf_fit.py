@@ -42,16 +42,18 @@ from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, Verdict, cluster_covariance, correlation, floor_verdict,
                                     geometry_clusters, half_angles, larger_errors)
 from hyde_bsdf.fit.mueller_fit import DEFAULT_STARTS, raise_or_warn
-from hyde_bsdf.fit.pbsdf_samples import check_model_terms, PbsdfSamples, pbsdf_samples
-from hyde_bsdf.model.evaluator import RMS_SLOPE_RANGE, pbrdf
-from hyde_bsdf.model.parameters import NATURAL_INDEX
+from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
+from hyde_bsdf.model.evaluator import pbrdf
+from hyde_bsdf.model.index import Index
+from hyde_bsdf.model.parameters import NATURAL_INDEX, RMS_SLOPE
+from hyde_bsdf.model.terms import check_pair
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 
 __all__ = ["PbsdfFitResult", "fit_pbsdf"]
 
 #: elements fitted besides M00 (normalized by M00): all 15
 ELEMENTS = tuple((j, k) for j in range(4) for k in range(4) if (j, k) != (0, 0))
-BOUNDS = {"n": NATURAL_INDEX.bounds, "k": NATURAL_INDEX.bounds, "rms_slope": RMS_SLOPE_RANGE}
+BOUNDS = {"n": NATURAL_INDEX.bounds, "k": NATURAL_INDEX.bounds, "rms_slope": RMS_SLOPE.bounds}
 STARTS = DEFAULT_STARTS      # the start points of the Mueller fit
 #: geometries used by the multi-start stage (the joint fit uses all)
 SEARCH_ROWS = 1000
@@ -148,14 +150,14 @@ def _check(fit, rms_slope, n0, k0, shadowing, diffuse):
     bad = [p for p in fit if p not in ("n", "k", "rms_slope")]
     if bad or not fit or len(set(fit)) != len(fit):
         raise UsageError(f"fit must be a non-empty subset of n,k,rms_slope without repeats, got {','.join(fit)!r}")
-    if not (isinstance(rms_slope, (int, float)) and RMS_SLOPE_RANGE[0] <= rms_slope <= RMS_SLOPE_RANGE[1]):
-        raise UsageError(f"rms_slope must be in [{RMS_SLOPE_RANGE[0]:g}, {RMS_SLOPE_RANGE[1]:g}], got {rms_slope!r}")
+    if not (isinstance(rms_slope, (int, float)) and RMS_SLOPE.contains(rms_slope)):
+        raise UsageError(f"rms_slope must be in [{RMS_SLOPE.lo:g}, {RMS_SLOPE.hi:g}], got {rms_slope!r}")
     for name, v in (("n0", n0), ("k0", k0)):
         if v is not None and not (isinstance(v, (int, float)) and 0 <= v <= BOUNDS[name[0]][1]):
             raise UsageError(f"{name} must be in [0, {BOUNDS[name[0]][1]:g}], got {v!r}")
     if ("n" not in fit and n0 is None) or ("k" not in fit and k0 is None):
         raise UsageError("a parameter held fixed needs its value: --n0 for n, --k0 for k")
-    check_model_terms(shadowing, diffuse)
+    check_pair(shadowing, diffuse, booleans=False)      # names only: the table interfaces take no True/False
     return fit
 
 

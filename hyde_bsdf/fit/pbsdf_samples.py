@@ -20,22 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.model.evaluator import DIFFUSE
-from hyde_bsdf.model.shadowing import check_shadowing
+from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.pbsdf_file import PbsdfFileError, PbsdfTable, read_pbsdf, table_frame_x
 from hyde_bsdf.progress import Throttle, as_callback
 
-__all__ = ["check_model_terms", "CellCounts", "PbsdfSamples", "paper_angles", "table_to_paper", "paper_to_table",
+__all__ = ["CellCounts", "PbsdfSamples", "paper_angles", "table_to_paper", "paper_to_table",
            "classify_cells", "pbsdf_samples"]
-
-
-def check_model_terms(shadowing, diffuse) -> None:
-    """The table fit's and the export's model terms: ``shadowing`` one of SHADOWING, ``diffuse``
-    one of DIFFUSE (names only: the table interfaces take no True/False); UsageError otherwise."""
-    check_shadowing(shadowing)
-    if not isinstance(diffuse, str) or diffuse not in DIFFUSE:
-        raise UsageError(f"diffuse must be one of {', '.join(DIFFUSE)}, got {shorten(diffuse)}")
 
 
 def paper_angles(om_i, om_r):

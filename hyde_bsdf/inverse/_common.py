@@ -1,14 +1,12 @@
-"""Small pieces the inverse modules share: luminance weights, sqrt(2), error lines, the not-converged
+"""Small pieces the inverse modules share: luminance weights, error lines, the not-converged
 warning.
 """
 from __future__ import annotations
 
-import math
 import time
 
 #: luminance weights of linear sRGB (the film's R, G, B)
 Y_WEIGHTS = (0.2126, 0.7152, 0.0722)
-SQRT2 = math.sqrt(2.0)
 
 
 def _first_line(exc) -> str:

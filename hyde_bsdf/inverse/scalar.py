@@ -29,10 +29,10 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_open
-from hyde_bsdf.inverse._common import SQRT2, NotConvergedWarning, record_iteration
+from hyde_bsdf.inverse._common import NotConvergedWarning, record_iteration
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.loss import StokesLoss, channel_names, stokes_images
-from hyde_bsdf.model.parameters import INVERSE_ETA, INVERSE_K, INVERSE_PARAMETERS, RMS_SLOPE
+from hyde_bsdf.model.parameters import INVERSE_ETA, INVERSE_K, INVERSE_PARAMETERS, RMS_SLOPE, SQRT2
 
 __all__ = ["VARIANT", "PARAMETERS", "INVERSE_PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict",
            "load_scene", "parameter_keys", "render_reference", "InversionResult", "invert", "trajectory_converged",

@@ -25,8 +25,6 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from hyde_bsdf.model.parameters import RMS_SLOPE
-
 __all__ = [
     "accurate_cross",
     "safe_normalize",
@@ -38,7 +36,6 @@ __all__ = [
     "fresnel_average",
     "vgroove_g",
     "DHRLookup",
-    "RMS_RANGE",
     "dhr_rms_range",
 ]
 
@@ -203,8 +200,6 @@ def vgroove_g(wi, wo, h):
     return dr.select(valid, g, 0.0)
 
 
-#: accepted rms_slope: the registry's (``hyde_bsdf.model.parameters.RMS_SLOPE``), read once at import
-RMS_RANGE = RMS_SLOPE.bounds
 #: texture nodes along x = 1 - sqrt(cos theta) on [0, 1] (error and size: plugin.DOC, "DHR lookup")
 DHR_X_POINTS = 1025
 #: texture nodes per decade of rms_slope (over the DHR table's whole range, parameters.DHR_TABLE_RMS_SLOPE)

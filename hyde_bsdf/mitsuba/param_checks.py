@@ -20,7 +20,6 @@ accepted values so that a refused ``params.update()`` leaves the BSDF as it was.
 """
 from __future__ import annotations
 
-import math
 import warnings
 
 import drjit as dr
@@ -28,20 +27,11 @@ import mitsuba as mi
 import numpy as np
 
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.mitsuba import optics as po
-from hyde_bsdf.model.parameters import ALPHA, ETA
+from hyde_bsdf.model.parameters import ALPHA, ETA, RMS_SLOPE
 
-__all__ = ["RMS_RANGE", "ALPHA_RANGE", "INDEX_MAX", "probe", "texel_values", "readable",
+__all__ = ["probe", "texel_values", "readable",
            "values_of", "Reader", "check_roughness", "check_index", "check_reflectance", "Snapshot"]
 
-SQRT2 = math.sqrt(2.0)
-#: accepted rms_slope (``hyde_bsdf.model.parameters.RMS_SLOPE``, the evaluator's too)
-RMS_RANGE = po.RMS_RANGE
-#: the same range as Beckmann alpha = sqrt(2) rms_slope (``parameters.ALPHA``)
-ALPHA_RANGE = ALPHA.bounds
-#: largest accepted eta and k (``parameters.ETA``/``K``): beyond ~1e9 the float32
-#: Fresnel terms overflow (|eta|^4), and no material comes near 1e6
-INDEX_MAX = ETA.hi
 #: relative slack on the printed bounds: a bound printed with 7 digits is itself accepted
 _SLACK = 1e-6
 #: wavelengths (nm) at which spectral textures are checked
@@ -282,8 +272,8 @@ def check_roughness(name, tex, scale, reader=None):
     floored there at evaluation (as a mesh of roughconductor with alpha = 0 renders a mirror),
     with one warning.  ``scale``: 1 for rms_slope, 1/sqrt(2) for alpha.  ``reader``: a
     :class:`Reader`.  Returns the values read (None if not readable)."""
-    lo, hi = (RMS_RANGE if scale == 1.0 else ALPHA_RANGE)
-    rng = f"[{_fmt(lo)}, {_fmt(hi)}]" + ("" if scale == 1.0 else f" (rms_slope [{RMS_RANGE[0]:g}, {RMS_RANGE[1]:g}])")
+    lo, hi = (RMS_SLOPE if scale == 1.0 else ALPHA)
+    rng = f"[{_fmt(lo)}, {_fmt(hi)}]" + ("" if scale == 1.0 else f" (rms_slope [{RMS_SLOPE.lo:g}, {RMS_SLOPE.hi:g}])")
     reader = reader or Reader()
     _raw_finite(name, tex, rng, reader)
     values = reader(tex, one=True)
@@ -302,21 +292,21 @@ def check_roughness(name, tex, scale, reader=None):
 
 
 def check_index(eta, k, reader=None):
-    """eta, k finite, in [0, INDEX_MAX] wherever they can be read, and not both 0 everywhere.
+    """eta, k finite, in [0, ETA.hi] wherever they can be read, and not both 0 everywhere.
     ``reader``: a :class:`Reader` (the plugin's, which does not read again a texture that did
     not change)."""
     reader = reader or Reader()
-    _raw_finite("eta", eta, f"[0, {INDEX_MAX:g}]", reader)
-    _raw_finite("k", k, f"[0, {INDEX_MAX:g}]", reader)
+    _raw_finite("eta", eta, f"[0, {ETA.hi:g}]", reader)
+    _raw_finite("k", k, f"[0, {ETA.hi:g}]", reader)
     read = {}
     for name, tex in (("eta", eta), ("k", k)):
         values = reader(tex)
         read[name] = values
         if values is None:
             continue
-        bad = ~np.isfinite(values) | (values < 0) | (values > INDEX_MAX)
+        bad = ~np.isfinite(values) | (values < 0) | (values > ETA.hi)
         if bad.any():
-            raise UsageError(f"hyde: parameter '{name}' must be finite and in [0, {INDEX_MAX:g}] "
+            raise UsageError(f"hyde: parameter '{name}' must be finite and in [0, {ETA.hi:g}] "
                              f"(index n + i k with k >= 0), got {_where(name, tex, values, bad)}")
     pe, pk = read["eta"], read["k"]
     if pe is not None and pk is not None and not eta.is_spatially_varying() and not k.is_spatially_varying():

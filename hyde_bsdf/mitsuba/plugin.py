@@ -19,19 +19,10 @@ from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.mitsuba import optics as po
 from hyde_bsdf.mitsuba import param_checks as pc
 from hyde_bsdf.mitsuba import stokes as ps
-from hyde_bsdf.model.parameters import ALPHA, DHR_TABLE_RMS_SLOPE, ETA, INDEX_MIN, RMS_SLOPE
+from hyde_bsdf.model import terms
+from hyde_bsdf.model.parameters import ALPHA, DHR_TABLE_RMS_SLOPE, ETA, INDEX_MIN, RMS_SLOPE, SQRT2
 
-__all__ = ["register", "plugin_class", "DOC", "SHADOWING", "DIFFUSE", "RMS_RANGE", "ALPHA_RANGE", "INDEX_MAX"]
-
-SHADOWING = ("vgroove", "smith", "none")
-DIFFUSE = ("paper", "reciprocal", "none")
-SQRT2 = math.sqrt(2.0)
-#: accepted rms_slope (``hyde_bsdf.model.parameters.RMS_SLOPE``, the evaluator's too)
-RMS_RANGE = pc.RMS_RANGE
-#: the same range as Beckmann alpha = sqrt(2) rms_slope
-ALPHA_RANGE = pc.ALPHA_RANGE
-#: largest accepted eta and k
-INDEX_MAX = pc.INDEX_MAX
+__all__ = ["register", "plugin_class", "DOC"]
 
 DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
 
@@ -71,7 +62,7 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
    - 0, 1 (a 100 % reflective mirror, as roughconductor)
    - real and imaginary part of the complex index n + i k (Mitsuba's sign;
      the paper writes the same material as eta = n - j kappa); eta and k in
-     @INDEX@ (INDEX_MAX), not both 0.  ``k = 0`` with any eta is a dielectric (dispersive if eta is a
+     @INDEX@ (``parameters.ETA``), not both 0.  ``k = 0`` with any eta is a dielectric (dispersive if eta is a
      spectrum).
    - ``eta.value``, ``k.value`` (float; ``eta.values`` for a spectrum, ``eta.data``
      for a bitmap); differentiable, discontinuous
@@ -336,9 +327,9 @@ def _sigma_h_ell_rms(props):
     if sh <= 0 or ell <= 0:
         raise UsageError(f"hyde: sigma_h and ell must be > 0, got sigma_h={sh}, ell={ell}")
     rms = SQRT2 * sh / ell
-    if not (RMS_RANGE[0] <= rms <= RMS_RANGE[1]):
+    if not RMS_SLOPE.contains(rms):
         raise UsageError(f"hyde: sigma_h/ell give rms_slope = sqrt(2) sigma_h/ell = {rms:g}; "
-                         f"the accepted range is [{RMS_RANGE[0]:g}, {RMS_RANGE[1]:g}]")
+                         f"the accepted range is [{RMS_SLOPE.lo:g}, {RMS_SLOPE.hi:g}]")
     return rms
 
 
@@ -379,23 +370,69 @@ def _read_index(props):
     return _ior_texture(str(eta_file)), _ior_texture(str(k_file)), material
 
 
-def _read_switches(props):
-    """(shadowing, diffuse): the model switches, each one of its accepted names (a boolean ``diffuse``
-    means "paper" or "none"); the reciprocal diffuse term needs a shadowing function."""
-    shadowing = str(props.get("shadowing", "vgroove")).lower()
-    if shadowing not in SHADOWING:
-        raise UsageError(f"hyde: shadowing={shorten(shadowing)} is not one of {', '.join(SHADOWING)}")
-    diffuse = props.get("diffuse", "paper")
-    if isinstance(diffuse, bool):  # <boolean name="diffuse" .../> also accepted
-        diffuse = "paper" if diffuse else "none"
-    diffuse = str(diffuse).lower()
-    if diffuse not in DIFFUSE:
-        raise UsageError(f"hyde: diffuse={shorten(diffuse)} is not one of {', '.join(DIFFUSE)}")
-    if diffuse == "reciprocal" and shadowing == "none":
-        # without shadowing the specular DHR average rho_avg reaches 1: 1/(1 - rho_avg) diverges
-        raise UsageError("hyde: diffuse='reciprocal' needs shadowing='vgroove' or 'smith' "
-                         "(with shadowing='none' the specular albedo average is >= 1)")
-    return shadowing, diffuse
+def _read_terms(props):
+    """(shadowing record, diffuse record) of :mod:`hyde_bsdf.model.terms`, checked against its rules
+    (a boolean ``diffuse`` means "paper" or "none"); a term without a Dr.Jit implementation here is refused."""
+    shadowing = str(props.get("shadowing", terms.SHADOWING[0])).lower()
+    diffuse = props.get("diffuse", terms.DIFFUSE[0])
+    if not isinstance(diffuse, bool):  # <boolean name="diffuse" .../> also accepted
+        diffuse = str(diffuse).lower()
+    try:
+        shadow, term = terms.check_pair(shadowing, diffuse)
+    except UsageError as exc:
+        raise UsageError(f"hyde: {exc}") from None
+    for kind, record, table in (("shadowing", shadow, _SHADOWING), ("diffuse", term, _DIFFUSE)):
+        if record.name not in table:
+            raise UsageError(f"hyde: {kind}={record.name!r} has no Dr.Jit implementation in the plugin; "
+                             f"use one of {', '.join(table)}")
+    return shadow, term
+
+
+# ---------------------------------------------------------------- the terms, in Dr.Jit (keyed by record name)
+# Independent derivations of the records' NumPy functions (model/shadowing.py, model/diffuse.py).
+def _g_vgroove(distr, wi, wo, h):
+    return po.vgroove_g(wi, wo, h)
+
+
+def _g_smith(distr, wi, wo, h):
+    # directions within 1e-15 of the normal: see optics.snap_to_normal (Mitsuba's G is NaN there)
+    return distr.G(po.snap_to_normal(wi), po.snap_to_normal(wo), h)
+
+
+def _g_none(distr, wi, wo, h):
+    # G = 1, but still only facets seen from the front by both directions
+    return dr.select((dr.dot(wi, h) > 0) & (dr.dot(wo, h) > 0), 1.0, 0.0)
+
+
+def _smith_visible_ratio(distr, wi, wo, m):
+    """G / G1(wi) of the uncorrelated Smith G = G1(wi) G1(wo): G1(wo), as roughconductor writes it."""
+    return distr.smith_g1(po.snap_to_normal(wo), m)
+
+
+#: shadowing name -> (G(distr, wi, wo, h), the exact G / G1(wi) for visible-normal sampling or None)
+_SHADOWING = {"vgroove": (_g_vgroove, None), "smith": (_g_smith, _smith_visible_ratio), "none": (_g_none, None)}
+
+
+def _one_minus_clipped(dhr, cos_theta, u):
+    # rho > 1 is possible without shadowing (Priest-Germer); 1 - rho is clipped at 0
+    return dr.maximum(dhr.one_minus_rho(cos_theta, u), 0.0)
+
+
+def _diffuse_paper(dhr, cos_in, cos_i, cos_o, u):
+    """Eq. 17: (1/pi)(1 - rho(theta_in)), theta_in the direction the light arrives from."""
+    return _one_minus_clipped(dhr, cos_in, u) * dr.inv_pi
+
+
+def _diffuse_reciprocal(dhr, cos_in, cos_i, cos_o, u):
+    """(1 - rho(theta_i))(1 - rho(theta_o)) / (pi (1 - rho_avg))."""
+    # without shadowing rho_avg can reach 1: keep the division finite
+    one_minus_avg = dr.maximum(dhr.one_minus_rho_avg(u), 1e-30)
+    return _one_minus_clipped(dhr, cos_i, u) * _one_minus_clipped(dhr, cos_o, u) * dr.inv_pi / one_minus_avg
+
+
+#: diffuse name -> its factor (dhr, cos theta_in, cos theta_i, cos theta_o, slope coordinate): the
+#: term without M00 and without cos theta_o ("none": no diffuse lobe)
+_DIFFUSE = {"paper": _diffuse_paper, "reciprocal": _diffuse_reciprocal, "none": None}
 
 
 def _refuse_unknown(props):
@@ -407,9 +444,9 @@ def _refuse_unknown(props):
 
 
 def _lobe_flags(diffuse):
-    """(components, flags): component 0 the glossy specular lobe, 1 the diffuse term (unless "none")."""
+    """(components, flags): component 0 the glossy specular lobe, 1 the diffuse term (if the record has one)."""
     comps = [mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide]
-    if diffuse != "none":
+    if diffuse.present:
         comps.append(mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide)
     flags = comps[0]
     for c in comps[1:]:
@@ -430,26 +467,30 @@ def _make_class():
             self.m_rough_key = key
             # alpha = sqrt(2) rms_slope: eval converts the texture's alpha into rms_slope
             self.m_rough_scale = 1.0 / SQRT2 if key == "alpha" else 1.0
-            self.m_rough_range = ALPHA_RANGE if key == "alpha" else RMS_RANGE
+            self.m_rough_range = (ALPHA if key == "alpha" else RMS_SLOPE).bounds
             self.m_eta, self.m_k, self.m_material = _read_index(props)
             self.m_specular_reflectance = props.get_texture("specular_reflectance", 1.0)
             self.m_snapshots, self.m_reader = {}, pc.Reader()
             self._validate()
             self._warn_unreadable_textures()
             # ---- model switches (Python constants: branching on them is fine)
-            self.m_shadowing, self.m_diffuse = _read_switches(props)
+            shadow, term = _read_terms(props)
+            self.m_shadowing, self.m_diffuse = shadow.name, term.name
+            self.m_g, self.m_visible_ratio = _SHADOWING[shadow.name]
+            self.m_diffuse_factor = _DIFFUSE[term.name]
             self.m_sample_visible = _read_bool(props, "sample_visible", True)
             _refuse_unknown(props)
             self.m_polarized = bool(mi.is_polarized)
-            self.m_dhr = _dhr_lookup(self.m_shadowing) if self.m_diffuse != "none" else None
-            self.m_components, self.m_flags = _lobe_flags(self.m_diffuse)
+            # the DHR texture serves the diffuse factor and the lobe choice (p_spec)
+            self.m_dhr = _dhr_lookup(shadow.name) if term.present else None
+            self.m_components, self.m_flags = _lobe_flags(term)
 
         def _warn_unreadable_textures(self):
             """Textures whose values cannot be read at load are clamped at eval: one warning each; sets the
             eval-time guards of the index and of specular_reflectance."""
             lo, hi = self.m_rough_range
             _warn_unreadable(self.m_rough_key, self.m_rough, f"[{lo:.7g}, {hi:.7g}]")
-            self.m_guard_index = any([_warn_unreadable(name, tex, f"[0, {INDEX_MAX:g}]")
+            self.m_guard_index = any([_warn_unreadable(name, tex, f"[0, {ETA.hi:g}]")
                                       for name, tex in (("eta", self.m_eta), ("k", self.m_k))])
             self.m_guard_scale = _warn_unreadable("specular_reflectance", self.m_specular_reflectance, "[0, 1]")
 
@@ -589,10 +630,10 @@ def _make_class():
             tiny = (n < INDEX_MIN) & (k < INDEX_MIN)
             n = dr.select(tiny, dr.select((n == 0) & (k == 0), 1.0, INDEX_MIN), n)
             if self.m_guard_index:
-                # values not readable at load: clamped to [0, INDEX_MAX]; NaN -> index 1 (no reflection)
+                # values not readable at load: clamped to [0, ETA.hi]; NaN -> index 1 (no reflection)
                 bad = dr.isnan(n) | dr.isnan(k)
-                n = dr.select(bad, 1.0, dr.clip(n, 0.0, INDEX_MAX))
-                k = dr.select(bad, 0.0, dr.minimum(k, INDEX_MAX))
+                n = dr.select(bad, 1.0, dr.clip(n, 0.0, ETA.hi))
+                k = dr.select(bad, 0.0, dr.minimum(k, ETA.hi))
             return n, k
 
         @staticmethod
@@ -610,31 +651,16 @@ def _make_class():
             cos_o = mi.Frame3f.cos_theta(wo)
             return active & (cos_i > 0) & (cos_o > 0), cos_i, cos_o, self._half_vector(si.wi, wo)
 
-        def _shadowing(self, distr, wi, wo, h):
-            if self.m_shadowing == "smith":
-                # directions within 1e-15 of the normal: see optics.snap_to_normal (Mitsuba's G is NaN there)
-                return distr.G(po.snap_to_normal(wi), po.snap_to_normal(wo), h)
-            if self.m_shadowing == "vgroove":
-                return po.vgroove_g(wi, wo, h)
-            # "none": G = 1, but still only facets seen from the front by both directions
-            return dr.select((dr.dot(wi, h) > 0) & (dr.dot(wo, h) > 0), 1.0, 0.0)
-
-        def _diffuse_factor(self, ctx, si, wo, u):
-            """(1/pi)(1 - rho(theta_in)) [paper, Eq. 17] or its reciprocal form; no M00, no cos."""
-            # rho > 1 is possible without shadowing (Priest-Germer); 1 - rho is clipped at 0
-            if self.m_diffuse == "paper":
-                wo_hat_z = wo.z if ctx.mode == mi.TransportMode.Radiance else si.wi.z
-                return dr.maximum(self.m_dhr.one_minus_rho(wo_hat_z, u), 0.0) * dr.inv_pi
-            one_minus_i = dr.maximum(self.m_dhr.one_minus_rho(si.wi.z, u), 0.0)
-            one_minus_o = dr.maximum(self.m_dhr.one_minus_rho(wo.z, u), 0.0)
-            # without shadowing rho_avg can reach 1: keep the division finite
-            one_minus_avg = dr.maximum(self.m_dhr.one_minus_rho_avg(u), 1e-30)
-            return one_minus_i * one_minus_o * dr.inv_pi / one_minus_avg
+        def _diffuse(self, ctx, si, wo, u):
+            """The diffuse term's factor (no M00, no cos theta_o); theta_in is the polar angle of the
+            direction the light arrives from (wo_hat: ``wo`` in Radiance mode, ``si.wi`` in Importance)."""
+            cos_in = wo.z if ctx.mode == mi.TransportMode.Radiance else si.wi.z
+            return self.m_diffuse_factor(self.m_dhr, cos_in, si.wi.z, wo.z, u)
 
         def _lobes(self, ctx):
             """(specular on, diffuse on) for this context (Python booleans)."""
             return (ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0),
-                    self.m_diffuse != "none" and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1))
+                    self.m_diffuse_factor is not None and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1))
 
         def _p_spec(self, ctx, si, rough):
             """Probability of sampling the specular lobe (a Python constant or a Float)."""
@@ -706,9 +732,8 @@ def _make_class():
             spec = 0.0
             if spec_on:
                 # D G / (4 cos_i) = (Eq. 13 without M) * cos_o
-                spec = dr.minimum(distr.eval(h) * self._shadowing(distr, si.wi, wo, h) / (4.0 * _pos(cos_i)),
-                                  MAX_LOBE)
-            diff = self._diffuse_factor(ctx, si, wo, rough[2]) * cos_o if diff_on else 0.0
+                spec = dr.minimum(distr.eval(h) * self.m_g(distr, si.wi, wo, h) / (4.0 * _pos(cos_i)), MAX_LOBE)
+            diff = self._diffuse(ctx, si, wo, rough[2]) * cos_o if diff_on else 0.0
             if inv_pdf is not None:     # scaled here: a division of the whole Mueller matrix is slow to trace
                 spec, diff = spec * inv_pdf, (diff * inv_pdf if diff_on else 0.0)
                 active = active & (inv_pdf > 0)
@@ -762,12 +787,12 @@ def _make_class():
             active = active & (pdf != 0) & (mi.Frame3f.cos_theta(bs.wo) > 0)
             bs.pdf = pdf / (4.0 * _pos(dr.dot(bs.wo, m)))
             # weight = f cos_o / pdf, written with the sampled m like roughconductor
-            if self.m_shadowing == "smith" and self.m_sample_visible:
-                g_ratio = distr.smith_g1(po.snap_to_normal(bs.wo), m)
+            if self.m_sample_visible and self.m_visible_ratio is not None:
+                g_ratio = self.m_visible_ratio(distr, si.wi, bs.wo, m)
             elif self.m_sample_visible:
-                g_ratio = self._shadowing(distr, si.wi, bs.wo, m) / _pos(distr.smith_g1(po.snap_to_normal(si.wi), m))
+                g_ratio = self.m_g(distr, si.wi, bs.wo, m) / _pos(distr.smith_g1(po.snap_to_normal(si.wi), m))
             else:
-                g_ratio = (self._shadowing(distr, si.wi, bs.wo, m) * dr.dot(si.wi, m)
+                g_ratio = (self.m_g(distr, si.wi, bs.wo, m) * dr.dot(si.wi, m)
                            / _pos(cos_i * mi.Frame3f.cos_theta(m)))
             n, k = self._index(si, active)
             bs.pdf = dr.select(active, bs.pdf, 0.0)

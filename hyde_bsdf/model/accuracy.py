@@ -216,8 +216,7 @@ def _verdict(err, se, tol):
 
 def _check_query(theta_i, theta_r, rms_slope, n, k, sigma_h_wl, shadowing, diffuse, tol_db, tol):
     """The query's values checked (UsageError naming the parameter); angles back in degrees."""
-    from hyde_bsdf.model.evaluator import check_diffuse
-    from hyde_bsdf.model.shadowing import check_shadowing
+    from hyde_bsdf.model.terms import diffuse_term, shadowing_term
 
     def real(name, v, lo=-math.inf, hi=math.inf, lo_open=False):
         try:
@@ -235,7 +234,7 @@ def _check_query(theta_i, theta_r, rms_slope, n, k, sigma_h_wl, shadowing, diffu
                n=None if n is None else real("n", n, 0.0, math.inf, True),
                k=None if n is None and k is None else real("k", 0.0 if k is None else k, 0.0),
                sigma_h_wl=None if sigma_h_wl is None else real("sigma_h_wl", sigma_h_wl, 0.0, math.inf, True),
-               shadowing=check_shadowing(shadowing), diffuse=check_diffuse(diffuse),
+               shadowing=shadowing_term(shadowing).name, diffuse=diffuse_term(diffuse).name,
                tol_db=real("tol_db", tol_db, 0.0, math.inf, True), tol=real("tol", tol, 0.0, math.inf, True))
     if n is None and k is not None:
         raise UsageError(f"k={shorten(k)} needs n (the index n - jk); give n, or neither for a perfect conductor")

@@ -85,10 +85,11 @@ from hyde_bsdf.io.trust import UntrustedFileError, make_private_dir, open_truste
 from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
 from hyde_bsdf.model.parameters import DHR_TABLE_RMS_SLOPE
 from hyde_bsdf.model import shadowing as _shadowing_module
-from hyde_bsdf.model.shadowing import SHADOWING, check_shadowing, g1_smith_beckmann
+from hyde_bsdf.model import terms as _terms_module
+from hyde_bsdf.model.terms import shadowing_term
 from hyde_bsdf.progress import Throttle, as_callback
 
-__all__ = ["dhr_specular_pec", "dhr_quadrature", "DHRTable", "load_table", "build_table",
+__all__ = ["dhr_specular_pec", "dhr_quadrature", "DHRTable", "DHRHemisphere", "load_table", "build_table",
            "x_of_theta", "theta_of_x", "table_x_nodes", "cache_dir", "cache_path", "DHRCacheWarning",
            "TABLE_THETA_POINTS", "TABLE_SLOPE_POINTS", "TABLE_SLOPE_RANGE"]
 
@@ -115,28 +116,11 @@ _SPOT_NODES = ((0, 0), (0, -1), (-1, 0), (-1, -1), (-3, 2), (-9, 30), (76, 60), 
 _SPOT_RANDOM = 690
 #: the per-user secret (mode 0600) in the cache folder that seals the cache files (HMAC-SHA256)
 CACHE_KEY_NAME = ".dhr-cache-key"
-#: Gauss-Legendre nodes per piece (outer, inner) used for the table: the V-groove
-#: integrand is split at all its kinks and converges fastest; Smith's G1(theta_r)
-#: has a steep layer near the horizon that wants more nodes.
-_TABLE_ORDER = {"vgroove": (10, 6), "smith": (20, 12), "none": (20, 12)}
 
 
 def _gauss_legendre(n):
     x, w = np.polynomial.legendre.leggauss(n)
     return x, w
-
-
-def _weight(shadowing, u, r2, cos_i, rms_slope):
-    """W(p, q) of the module docstring for the given shadowing model."""
-    X = 4.0 * u / (1.0 + r2) - 2.0
-    if shadowing == "vgroove":
-        return np.maximum(np.minimum(np.minimum(u, 2.0), X), 0.0)
-    inside = X > 0.0
-    if shadowing == "smith":
-        cos_r = np.clip(0.5 * cos_i * X, 0.0, 1.0)
-        w = u * g1_smith_beckmann(cos_i, rms_slope) * g1_smith_beckmann(cos_r, rms_slope)
-        return np.where(inside, w, 0.0)
-    return np.where(inside, u, 0.0)          # "none"
 
 
 def _chi_of_p(p, pe, cos_i):
@@ -146,8 +130,8 @@ def _chi_of_p(p, pe, cos_i):
     return 2.0 * np.arcsin(np.sqrt(x))
 
 
-def _dhr_batch(theta, slope, shadowing, n_outer, n_inner):
-    """rho for 1-D arrays theta, slope of equal length (no validation)."""
+def _dhr_batch(theta, slope, term, n_outer, n_inner):
+    """rho for 1-D arrays theta, slope of equal length and a shadowing record (no validation)."""
     theta = np.minimum(theta, _THETA_MAX)
     ci, si = np.cos(theta), np.sin(theta)
     tan = si / ci
@@ -156,15 +140,11 @@ def _dhr_batch(theta, slope, shadowing, n_outer, n_inner):
     chi_a = _chi_of_p(np.minimum(win, pe), pe, ci)
     chi_b = _chi_of_p(np.maximum(-win, pe - 2.0 / ci), pe, ci)
     # Split points in p: the Gaussian's scale (a Gaussian over +-8.5 sigma needs
-    # many nodes in one piece, few in pieces of 2.5 sigma) and, for the V-groove,
-    # where the inner integral is not smooth in p because a kink curve starts or
-    # ends: u = 2 at p = -cot; X = 2 meets q = 0 at p = 0 and p = -tan; X = u
-    # meets q = 0 where t p^3 - 3 p^2 - 3 t p + 1 = 0, i.e. p = tan((pi/2 - ti + m pi)/3).
+    # many nodes in one piece, few in pieces of 2.5 sigma) and where the shadowing's
+    # integrand has kinks (the V-groove's: ShadowingTerm.dhr_kinks_p)
     splits = [c * slope for c in (-5.0, -2.5, 0.0, 2.5, 5.0)]
-    if shadowing == "vgroove":
-        with np.errstate(divide="ignore", over="ignore"):    # theta_i = 0 or subnormal: -inf, clipped
-            splits += [-ci / si, -tan]
-        splits += [np.tan((0.5 * math.pi - theta + m * math.pi) / 3.0) for m in (-1, 0, 1)]
+    if term.dhr_kinks_p is not None:
+        splits += term.dhr_kinks_p(theta, ci, si, tan)
     chis = np.sort(np.stack([np.clip(_chi_of_p(k, pe, ci), chi_a, chi_b) for k in splits]), axis=0)
     outer_edges = [chi_a, *chis, chi_b]
     xo, wo = _gauss_legendre(n_outer)
@@ -181,11 +161,8 @@ def _dhr_batch(theta, slope, shadowing, n_outer, n_inner):
         q_top = np.minimum(sin_chi / ci[b], win[b])
         u = 1.0 - p * tan[b]
         q_splits = [np.minimum(c * slope[b], q_top) for c in (2.5, 5.0)]   # Gaussian scale
-        if shadowing == "vgroove":
-            q2_top = q_top * q_top
-            q_splits.append(np.sqrt(np.clip(u - 1.0 - p * p, 0.0, q2_top)))                 # X = 2
-            with np.errstate(divide="ignore", invalid="ignore"):
-                q_splits.append(np.sqrt(np.clip(4.0 * u / (u + 2.0) - 1.0 - p * p, 0.0, q2_top)))  # X = u
+        if term.dhr_kinks_q is not None:
+            q_splits += term.dhr_kinks_q(u, p, q_top)
         inner_edges = [np.zeros_like(q_top), *np.sort(np.stack(q_splits), axis=0), q_top]
         inner = np.zeros_like(p)
         for qlo, qhi in zip(inner_edges[:-1], inner_edges[1:]):
@@ -194,7 +171,7 @@ def _dhr_batch(theta, slope, shadowing, n_outer, n_inner):
             r2 = p[..., None] ** 2 + q * q
             s2 = (slope * slope)[:, None, None]
             g = np.exp(-r2 / (2.0 * s2)) / (2.0 * math.pi * s2)
-            W = _weight(shadowing, u[..., None], r2, ci[:, None, None], slope[:, None, None])
+            W = term.dhr_weight(u[..., None], r2, ci[:, None, None], slope[:, None, None])
             inner += qh * np.einsum("bok,k->bo", g * W, wi)
         total += half * np.einsum("bo,o->b", 2.0 * inner * jac, wo)  # 2: q and -q
     return total
@@ -216,7 +193,7 @@ def dhr_quadrature(theta_i, rms_slope, shadowing="vgroove", n_outer=16, n_inner=
     boolean argument raises TypeError, a non-finite, out-of-range or non-broadcastable one
     ValueError, each naming the parameter.
     """
-    check_shadowing(shadowing)
+    term = shadowing_term(shadowing)
     t = real_array("theta_i", theta_i, "radians in [0, pi/2]")
     s = real_array("rms_slope", rms_slope, f"in [{TABLE_SLOPE_RANGE[0]:g}, {TABLE_SLOPE_RANGE[1]:g}]")
     broadcast_named(theta_i=t, rms_slope=s)
@@ -239,10 +216,10 @@ def dhr_quadrature(theta_i, rms_slope, shadowing="vgroove", n_outer=16, n_inner=
     step = max(1, chunk * 48 * 24 // (n_outer * n_inner))
     for i in range(0, t.size, step):
         sl = slice(i, i + step)
-        rho[sl] = _dhr_batch(t[sl], s[sl], shadowing, n_outer, n_inner)
+        rho[sl] = _dhr_batch(t[sl], s[sl], term, n_outer, n_inner)
         if error_estimate:
             # twice the change under node doubling: a safe bound for exponential convergence
-            err[sl] = 2.0 * np.abs(rho[sl] - _dhr_batch(t[sl], s[sl], shadowing, 2 * n_outer, 2 * n_inner))
+            err[sl] = 2.0 * np.abs(rho[sl] - _dhr_batch(t[sl], s[sl], term, 2 * n_outer, 2 * n_inner))
     rho = rho.reshape(shape)
     return (rho, err.reshape(shape)) if error_estimate else rho
 
@@ -309,6 +286,37 @@ class DHRTable:
         return id(self)
 
 
+class DHRHemisphere:
+    """The specular DHR of a PEC on the 2-D surface at one ``rms_slope``, read from the table: the
+    hemisphere the diffuse terms of :mod:`hyde_bsdf.model.diffuse` are written on.
+
+    ``one_minus(theta)`` = 1 - rho(theta) (linear in x on the table's fine slice: :meth:`DHRTable.x_slice`),
+    ``measure`` = int cos dw = pi, ``one_minus_avg`` = 1 - rho_avg = int_0^1 4 (1-x)^3 (1 - rho(x)) dx
+    from the very samples ``one_minus`` interpolates (1 - rho clipped at 0), so that a term's
+    hemispherical integral is exactly 1 - rho(theta_i).  The table is read on first use.
+    """
+    measure = math.pi
+
+    def __init__(self, shadowing, rms_slope):
+        self.shadowing, self.rms_slope = shadowing, float(rms_slope)
+        self._samples = None
+
+    def _slice(self):
+        if self._samples is None:
+            grid, rho_x = load_table(self.shadowing).x_slice(self.rms_slope)
+            self._samples = grid, 1.0 - rho_x
+        return self._samples
+
+    def one_minus(self, theta):
+        grid, one_minus_x = self._slice()
+        return np.interp(x_of_theta(theta), grid, one_minus_x)
+
+    @property
+    def one_minus_avg(self) -> float:
+        grid, one_minus_x = self._slice()
+        return float(np.trapezoid(4.0 * (1.0 - grid) ** 3 * np.maximum(one_minus_x, 0.0), grid))
+
+
 def x_of_theta(theta):
     """Table coordinate x = 1 - sqrt(cos theta) (theta clipped to [0, pi/2])."""
     return 1.0 - np.sqrt(np.cos(np.clip(theta, 0.0, 0.5 * math.pi)).clip(0.0, 1.0))
@@ -359,7 +367,7 @@ def build_table(shadowing="vgroove", progress=True) -> DHRTable:
     report = Throttle(as_callback(progress), 1.0)
     for i in range(0, flat_t.size, step):
         rho[i:i + step] = dhr_quadrature(flat_t[i:i + step], flat_s[i:i + step], shadowing,
-                                         *_TABLE_ORDER[shadowing])
+                                         *shadowing_term(shadowing).dhr_order)
         report(lambda: f"building DHR table ({shadowing}): {min(i + step, flat_t.size)}/{flat_t.size}")
     rho = rho.reshape(T.shape)
     return DHRTable(x, theta, log_slope, rho, _rho_average(x, rho), shadowing,
@@ -380,7 +388,7 @@ def cache_dir() -> Path:
 def _code_version() -> str:
     """Hash of the source that determines the table's values (quadrature, shadowing, grid)."""
     parts = [str(_TABLE_VERSION)]
-    for obj in (_weight, _chi_of_p, _dhr_batch, table_x_nodes, _grid, _rho_average, _shadowing_module):
+    for obj in (_chi_of_p, _dhr_batch, table_x_nodes, _grid, _rho_average, _shadowing_module, _terms_module):
         try:
             parts.append(inspect.getsource(obj))
         except (OSError, TypeError):       # no source (frozen install): the version number alone
@@ -394,7 +402,7 @@ def _build_params(shadowing) -> dict:
             "shadowing": shadowing, "x_steps": TABLE_X_STEPS, "x_refine_from": TABLE_X_REFINE_FROM,
             "x_refine": TABLE_X_REFINE, "theta_points": TABLE_THETA_POINTS,
             "slope_points": TABLE_SLOPE_POINTS, "slope_range": list(TABLE_SLOPE_RANGE),
-            "order": list(_TABLE_ORDER[shadowing])}
+            "order": list(shadowing_term(shadowing).dhr_order)}
 
 
 _ARRAYS = ("x", "theta", "log_slope", "rho", "rho_avg")
@@ -479,7 +487,8 @@ def _read_table(path: Path, shadowing) -> DHRTable:
     drawn = _spot_rng().choice(rho.size, _SPOT_RANDOM, replace=False)
     ix = np.concatenate([[i % x.size for i, _ in _SPOT_NODES], drawn // log_slope.size])
     js = np.concatenate([[j % log_slope.size for _, j in _SPOT_NODES], drawn % log_slope.size])
-    fresh = dhr_quadrature(theta_of_x(x[ix]), np.exp(log_slope[js]), shadowing, *_TABLE_ORDER[shadowing])
+    fresh = dhr_quadrature(theta_of_x(x[ix]), np.exp(log_slope[js]), shadowing,
+                         *shadowing_term(shadowing).dhr_order)
     bad = np.abs(fresh - rho[ix, js]) > _SPOT_TOL
     if bad.any():
         i = int(np.argmax(bad))
@@ -501,7 +510,7 @@ def load_table(shadowing="vgroove") -> DHRTable:
     A cache file that fails any check (module docstring, "The disk cache") is reported with a
     :class:`DHRCacheWarning` naming it and rebuilt; the new file replaces it atomically.
     """
-    check_shadowing(shadowing)
+    shadowing = shadowing_term(shadowing).name
     if shadowing in _TABLES:
         return _TABLES[shadowing]
     path = cache_path(shadowing)

@@ -42,7 +42,7 @@ def fresnel_rs_rp(cos_beta, n, k):
     return np.conj(rs), np.conj(rp)
 
 
-def fresnel_mueller_terms(cos_beta, n, k, pec=False):
+def fresnel_mueller_terms(cos_beta, index):
     """The four distinct entries of a facet's Fresnel Mueller matrix.
 
     The in-plane Mueller matrix of the facet (paper Eq. 11 with T = diag(r_s, r_p))
@@ -50,15 +50,16 @@ def fresnel_mueller_terms(cos_beta, n, k, pec=False):
     A = (|r_s|^2+|r_p|^2)/2, B = (|r_s|^2-|r_p|^2)/2, C = Re(r_s r_p*),
     S = Im(r_s r_p*) (e^{+jwt} phasors; Stokes S3 = -2 Im(E_s E_p*)).
 
-    Returns (A, B, C, S) as float arrays broadcast like ``cos_beta``.  A perfect
-    conductor (``pec=True``) has r_s = -1, r_p = 1: A = 1, B = 0, C = -1, S = 0.
+    ``index``: an :class:`hyde_bsdf.model.index.Index` (n + ik, the paper's eta = n - jk).
+    Returns (A, B, C, S) as float arrays broadcast like ``cos_beta``.  The perfect conductor
+    (``index.is_pec``, k -> infinity) has r_s = -1, r_p = 1: A = 1, B = 0, C = -1, S = 0.
     """
     c = np.asarray(cos_beta, dtype=float)
-    if pec:
+    if index.is_pec:
         one = np.ones_like(c)
         zero = np.zeros_like(c)
         return one, zero, -one, zero
-    rs, rp = fresnel_rs_rp(c, n, k)
+    rs, rp = fresnel_rs_rp(c, index.n, index.k)
     rs2 = rs.real ** 2 + rs.imag ** 2
     rp2 = rp.real ** 2 + rp.imag ** 2
     x = rs * np.conj(rp)

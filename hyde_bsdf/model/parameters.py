@@ -24,9 +24,9 @@ Ranges
 
 Conventions and spellings (one per interface, converted at the boundary)
 ------------------------------------------------------------------------
-The paper writes the index eta = n - j kappa (time factor e^{+jwt}); Mitsuba and SCATMECH write
-the same material as n + i k (e^{-iwt}).  The two real numbers are the same: n = eta_Mitsuba,
-kappa = k.  Roughness: rms_slope = sqrt(2) sigma_h / ell (the paper's), Beckmann
+The index is one value, :class:`hyde_bsdf.model.index.Index` (n, k of n + ik, the PEC as
+k -> infinity), whose docstring states the convention: the paper writes the same material as
+eta = n - j kappa, Mitsuba and SCATMECH as n + i k, the same two numbers.  Roughness: rms_slope = sqrt(2) sigma_h / ell (the paper's), Beckmann
 alpha = 2 sigma_h / ell = sqrt(2) rms_slope (Mitsuba's roughconductor).
 
 * evaluator (:mod:`hyde_bsdf.model`): ``rms_slope``, ``n``, ``k``; the paper's eta = n - j k;
@@ -34,7 +34,7 @@ alpha = 2 sigma_h / ell = sqrt(2) rms_slope (Mitsuba's roughconductor).
   eta + i k (the same numbers);
 * fit: :data:`FIT_PARAMETERS` = (``n``, ``k``, ``rms_slope``), the evaluator's names;
 * inverse: :data:`INVERSE_PARAMETERS` = (``rms_slope``, ``eta``, ``k``), the plugin's names;
-* MoM solver: ``n``, ``k`` in; inside, the complex :func:`paper_eta` = n - j k.
+* MoM solver: ``n``, ``k`` in (n=None: the PEC); inside, the complex :meth:`Index.paper_eta` = n - j k.
 """
 from __future__ import annotations
 
@@ -45,8 +45,7 @@ from hyde_bsdf.model.checks import real_scalar
 
 __all__ = ["Range", "RMS_SLOPE", "ALPHA", "DHR_TABLE_RMS_SLOPE", "N", "K", "ETA", "INDEX_MIN", "NATURAL_INDEX",
            "INVERSE_ETA", "INVERSE_K", "INVERSE_K_LOG_FLOOR", "INVERSE_SCALE", "ALPHA_SAMPLE", "FIT_PARAMETERS",
-           "INVERSE_PARAMETERS", "SPELLINGS", "SQRT2", "alpha_from_rms_slope", "rms_slope_from_alpha",
-           "paper_eta", "mitsuba_index"]
+           "INVERSE_PARAMETERS", "SPELLINGS", "SQRT2", "alpha_from_rms_slope", "rms_slope_from_alpha"]
 
 SQRT2 = math.sqrt(2.0)
 
@@ -133,13 +132,3 @@ def rms_slope_from_alpha(alpha):
     """The paper's rms slope = Beckmann alpha / sqrt(2)."""
     return alpha / SQRT2
 
-
-def paper_eta(n, k) -> complex:
-    """The paper's complex index eta = n - j k from Mitsuba's (eta, k) = (n, k)."""
-    return complex(n, -k)
-
-
-def mitsuba_index(eta: complex) -> tuple:
-    """Mitsuba's (eta, k) of n + ik from the paper's complex eta = n - j k."""
-    eta = complex(eta)
-    return eta.real, -eta.imag

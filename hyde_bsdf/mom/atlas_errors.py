@@ -58,21 +58,14 @@ ENERGY_LIMIT = 0.05
 
 
 def variants():
-    """(shadowing, diffuse) pairs of the model's registry (``model.shadowing.SHADOWING`` x
-    ``model.evaluator.DIFFUSE``) that the evaluator accepts: a variant added there joins the atlas."""
-    from hyde_bsdf.errors import UsageError
-    from hyde_bsdf.model.evaluator import DIFFUSE, pbrdf
-    from hyde_bsdf.model.shadowing import SHADOWING
+    """(shadowing, diffuse) pairs of the model's registry (:mod:`hyde_bsdf.model.terms`) that make a model
+    (:func:`~hyde_bsdf.model.terms.allowed`) and have no parameters of their own: a term added there joins the
+    atlas when the table is rebuilt (a term with its own parameters -- a free Lambertian albedo -- has no one
+    value to grade, and is left out)."""
+    from hyde_bsdf.model.terms import DIFFUSE_TERMS, SHADOWING_TERMS, allowed
 
-    out = []
-    for sh in SHADOWING:
-        for df in DIFFUSE:
-            try:
-                pbrdf(0.3, 0.3, math.pi, rms_slope=0.3, pec=True, shadowing=sh, diffuse=df)
-            except UsageError:
-                continue
-            out.append((sh, df))
-    return out
+    return [(s.name, d.name) for s in SHADOWING_TERMS for d in DIFFUSE_TERMS
+            if allowed(s.name, d.name) and not d.parameters]
 
 
 def _smooth(a, steps):

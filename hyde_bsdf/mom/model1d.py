@@ -33,7 +33,9 @@ Pieces (each the 1-D counterpart of a paper equation)
   standard deviation ``rms_slope = sqrt(2) sigma_h / ell``, so the pdf of the
   facet angle per radian is  p(alpha) = N(tan alpha; 0, rms_slope) / cos^2 alpha.
   (The x-length of surface with tilt in d alpha is p(alpha) d alpha.)
-* :func:`vgroove_shadowing` (Eq. 12): the Torrance-Sparrow V-groove function
+* shadowing (Eq. 12 and the alternatives): each shadowing term's record in
+  :mod:`hyde_bsdf.model.terms` carries its in-plane form ``g_plane``
+  (:mod:`hyde_bsdf.model.shadowing`).  The Torrance-Sparrow V-groove function
   is itself a 2-D derivation, so it is exact in the plane:
   G = min(1, 2 cos(alpha) cos(theta_r) / cos(beta), 2 cos(alpha) cos(theta_i) / cos(beta)).
 * :func:`brdf_specular` (Eqs. 6, 13): per unit x-length the facets with tilt
@@ -54,7 +56,9 @@ Pieces (each the 1-D counterpart of a paper equation)
 * :func:`dhr_specular` (Eq. 14): rho_s(theta_i) = int_{-pi/2}^{pi/2} f_s cos(theta_r) d theta_r.
 * :func:`brdf_diffuse` (Eq. 16): a Lambertian 2-D BRDF is a constant f_d, and
   int f_d cos(theta_r) d theta_r = 2 f_d, so energy conservation for a PEC
-  gives f_d = (1 - rho_s(theta_i)) / 2.
+  gives f_d = (1 - rho_s(theta_i)) / 2.  Each diffuse term of :mod:`hyde_bsdf.model.terms` is
+  the same function as on the 2-D surface (:mod:`hyde_bsdf.model.diffuse`), evaluated on the
+  in-plane hemisphere :class:`PlaneHemisphere` (measure 2 instead of pi).
 * :func:`brdf` (Eq. 17): f = f_s + f_d.
 * :func:`mueller_sigma` (Eqs. 9-11, 17 in the plane): for a finite index the
   facet's Fresnel Mueller matrix at the local incidence angle beta (single
@@ -77,16 +81,18 @@ import math
 
 import numpy as np
 
-from hyde_bsdf.errors import UsageError, shorten
+from hyde_bsdf.errors import UsageError
+from hyde_bsdf.model.fresnel import fresnel_mueller_terms
+from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import RMS_SLOPE
+from hyde_bsdf.model.terms import check_pair, shadowing_term
 
 __all__ = [
     "facet_angles",
     "facet_pdf",
-    "vgroove_shadowing",
-    "smith_shadowing",
     "brdf_specular",
     "dhr_specular",
+    "PlaneHemisphere",
     "brdf_diffuse",
     "brdf",
     "sigma_equivalent",
@@ -126,63 +132,23 @@ def facet_pdf(alpha, rms_slope):
     return np.exp(-0.5 * (t / rms_slope) ** 2) / (math.sqrt(2.0 * math.pi) * rms_slope * c * c)
 
 
-def vgroove_shadowing(theta_i, theta_r):
-    """Eq. 12 in the plane: G = min(1, 2 cos(alpha) cos(theta_r)/cos(beta), 2 cos(alpha) cos(theta_i)/cos(beta)).
-
-    Zero where the facet faces away from source or observer (cos beta <= 0).
-    """
-    alpha, beta = facet_angles(theta_i, theta_r)
-    cb = np.cos(beta)
-    ca = np.cos(alpha)
-    with np.errstate(divide="ignore", invalid="ignore"):  # cos(beta) = 0 handled by the where below
-        g = np.minimum(1.0, np.minimum(2.0 * ca * np.cos(theta_r) / cb, 2.0 * ca * np.cos(theta_i) / cb))
-    return np.where(cb > 0.0, np.clip(g, 0.0, 1.0), 0.0)
-
-
-def _smith_lambda(theta, rms_slope):
-    """Smith's Lambda for a 1-D Gaussian slope distribution (std rms_slope), mu = cot|theta|:
-    (1/2) [sqrt(2/pi) (s/mu) exp(-mu^2 / (2 s^2)) - erfc(mu / (sqrt(2) s))]; 0 at normal incidence."""
-    import scipy.special
-
-    c = np.abs(np.cos(theta))
-    sn = np.abs(np.sin(theta))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        mu = c / sn
-        lam = 0.5 * (math.sqrt(2.0 / math.pi) * (rms_slope / mu) * np.exp(-0.5 * (mu / rms_slope) ** 2)
-                     - scipy.special.erfc(mu / (math.sqrt(2.0) * rms_slope)))
-    return np.where(sn > 0, np.where(c > 1e-12, lam, np.inf), 0.0)
-
-
-def smith_shadowing(theta_i, theta_r, rms_slope):
-    """Smith's (1967) shadowing of a Gaussian surface in the plane: G = 1 / (1 + Lambda(ti) + Lambda(tr)).
-
-    The bistatic form that treats source and observer as uncorrelated (pbrt's), for the 1-D
-    surface's Gaussian slopes (std ``rms_slope``); zero where the facet faces away (cos beta <= 0).
-    The statistical alternative to the V-groove G of Eq. 12 (Ref. 26 of the paper).
-    """
-    _, beta = facet_angles(theta_i, theta_r)
-    g = 1.0 / (1.0 + _smith_lambda(np.asarray(theta_i, float), rms_slope)
-               + _smith_lambda(np.asarray(theta_r, float), rms_slope))
-    return np.where(np.cos(beta) > 0.0, g, 0.0)
+def _term_name(shadowing):
+    """The record name of a shadowing argument: True is "vgroove", False "none" (this module's spelling)."""
+    return "vgroove" if shadowing is True else "none" if shadowing is False else shadowing
 
 
 def _shadowing(theta_i, theta_r, rms_slope, shadowing):
-    """G of the chosen shadowing: True / "vgroove" (Eq. 12), "smith", False / "none" (front-facing facets)."""
-    if shadowing is True or shadowing == "vgroove":
-        return vgroove_shadowing(theta_i, theta_r)
-    if shadowing == "smith":
-        return smith_shadowing(theta_i, theta_r, rms_slope)
-    if shadowing is False or shadowing == "none":
-        return (np.cos(facet_angles(theta_i, theta_r)[1]) > 0).astype(float)
-    raise UsageError(f"shadowing must be True/'vgroove', 'smith' or False/'none', got {shorten(shadowing)}")
+    """G in the plane of the chosen shadowing term (its record's ``g_plane``, :mod:`hyde_bsdf.model.terms`)."""
+    return shadowing_term(_term_name(shadowing)).g_plane(theta_i, theta_r, rms_slope)
 
 
 def brdf_specular(theta_i, theta_r, rms_slope, shadowing=True):
     """1-D counterpart of Eq. 13 for a PEC: f_s = p(alpha) G cos(beta) / (2 cos(ti) cos(tr) cos(alpha)), 1/rad.
 
     theta_i in [0, pi/2), theta_r signed in (-pi/2, pi/2) (radians; broadcast).
-    ``shadowing``: True or "vgroove" (Eq. 12's V-groove G), "smith" (Smith's G,
-    :func:`smith_shadowing`), False or "none" (G = 1 for front-facing facets).
+    ``shadowing``: a shadowing term of :mod:`hyde_bsdf.model.terms` (its in-plane ``g_plane``): True
+    or "vgroove" (Eq. 12's V-groove G), "smith" (Smith's G of the 1-D Gaussian surface), False or
+    "none" (G = 1 for front-facing facets).
     Returns 0 at |theta_r| = pi/2 (the observer at the horizon sees no facet).
     """
     theta_i, theta_r, rms_slope = _check(theta_i, theta_r, rms_slope)
@@ -214,62 +180,56 @@ def dhr_specular(theta_i, rms_slope, shadowing=True, n=4001):
     return (f * np.cos(t)) @ w
 
 
-def _below_horizon(theta):
-    """|theta| kept just short of pi/2, where rho_s is taken (its (1 - rho) cos weight vanishes at the horizon)."""
-    return np.minimum(np.abs(np.asarray(theta, float)), _HALF_PI * (1.0 - 1e-9))
+class PlaneHemisphere:
+    """The hemisphere of :mod:`hyde_bsdf.model.diffuse` for the 1-D surface (scattering in the plane):
+    ``one_minus(theta)`` = 1 - rho_s(|theta|) of :func:`dhr_specular` (Eq. 14 in the plane),
+    ``measure`` = int_{-pi/2}^{pi/2} cos(theta) d theta = 2, and ``one_minus_avg`` =
+    (1/2) int (1 - rho_s)^+ cos(theta) d theta (Gauss-Legendre, :data:`AVERAGE_NODES` nodes in
+    |theta|): with it a diffuse term's in-plane integral is 1 - rho_s(theta_i), the 1-D Eq. 15."""
+    measure = 2.0
+
+    def __init__(self, rms_slope, shadowing=True):
+        self.rms_slope, self.shadowing = rms_slope, shadowing
+
+    def one_minus(self, theta):
+        # |theta| = pi/2 (an observer on the horizon) is taken just above it: rho_s is continuous there
+        t = np.minimum(np.abs(np.asarray(theta, dtype=float)), _THETA_MAX)
+        return 1.0 - dhr_specular(t, self.rms_slope, self.shadowing)
+
+    @property
+    def one_minus_avg(self) -> float:
+        x, w = np.polynomial.legendre.leggauss(AVERAGE_NODES)
+        t = 0.25 * math.pi * (x + 1.0)
+        return float(0.25 * math.pi * np.sum(w * np.maximum(self.one_minus(t), 0.0) * np.cos(t)))
 
 
-def _diffuse_mode(diffuse):
-    """The diffuse mode of the model's registry (:data:`hyde_bsdf.model.evaluator.DIFFUSE`): True is "paper",
-    False "none"; a mode without a 1-D reduction here is a UsageError naming it."""
-    from hyde_bsdf.model.evaluator import check_diffuse
-
-    mode = check_diffuse(diffuse)
-    if mode not in ("paper", "reciprocal", "none"):
-        raise UsageError(f"diffuse={mode!r} has no 1-D reduction in hyde_bsdf.mom.model1d yet (add one to "
-                         "brdf_diffuse to put it in the accuracy atlas)")
-    return mode
+#: Gauss-Legendre nodes in |theta| of :attr:`PlaneHemisphere.one_minus_avg` (rho_s has kinks: the
+#: error falls as a power of the nodes; 1e-5 at 200, measured against 1600)
+AVERAGE_NODES = 200
+_THETA_MAX = _HALF_PI * (1.0 - 1e-12)
 
 
-def brdf_diffuse(theta_i, rms_slope, shadowing=True, theta_r=None, mode="paper"):
-    """1-D Eq. 16 for a PEC: the Lambertian 2-D BRDF f_d = (1 - rho_s(theta_i)) / 2 (1/rad).
-
-    ``mode="reciprocal"`` (needs ``theta_r``): the symmetric variant of the 3-D evaluator in the plane,
-    f_d = (1 - rho(ti)) (1 - rho(tr)) / C with C = int_{-pi/2}^{pi/2} (1 - rho(t)) cos t dt, which has the
-    same integral 1 - rho(ti) over theta_r (cos theta_r weighted) and is symmetric in ti and tr;
-    ``mode="none"``: 0.  theta_i, theta_r in radians (broadcast).
-    """
-    mode = _diffuse_mode(mode)
-    if mode == "none":
-        return np.zeros(np.broadcast(np.asarray(theta_i, float), np.asarray(0.0 if theta_r is None else theta_r)).shape)
-    if mode == "paper":
-        return 0.5 * (1.0 - dhr_specular(theta_i, rms_slope, shadowing))
-    if theta_r is None:
-        raise UsageError("brdf_diffuse(mode='reciprocal') needs theta_r")
-    # rho on 401 angles (trapezoid nodes of the normaliser, linear in between: ~1e-5 of rho)
-    t, w = _theta_r_quadrature(401)
-    rho_t = dhr_specular(_below_horizon(t), rms_slope, shadowing)
-    norm = float(np.sum((1.0 - rho_t) * np.cos(t) * w))
-    if norm <= 0.0:     # rho = 1 at every angle: nothing for the diffuse term to carry
-        return np.zeros(np.broadcast(np.asarray(theta_i, float), np.asarray(theta_r, float)).shape)
-    def one_minus(theta):               # the same table for both angles: f_d(a, b) = f_d(b, a) exactly
-        return 1.0 - np.interp(np.asarray(theta, float), t, rho_t)
-
-    return one_minus(theta_i) * one_minus(theta_r) / norm
+def brdf_diffuse(theta_i, rms_slope, shadowing=True, diffuse=True, theta_r=None):
+    """1-D Eq. 16 for a PEC: the diffuse term ``diffuse`` (a diffuse record of :mod:`hyde_bsdf.model.terms`,
+    True = "paper") on the in-plane hemisphere, 1/rad; the paper's is the Lambertian 2-D BRDF
+    f_d = (1 - rho_s(theta_i)) / 2.  ``theta_r`` (signed, radians) is needed by a term that
+    depends on it (the reciprocal one); it broadcasts against ``theta_i``."""
+    _, term = check_pair(_term_name(shadowing), diffuse)
+    theta_i = np.asarray(theta_i, dtype=float)
+    theta_r = theta_i if theta_r is None else np.asarray(theta_r, dtype=float)
+    if not term.present:
+        return np.zeros(np.broadcast(theta_i, theta_r).shape)
+    return term.f00(PlaneHemisphere(rms_slope, shadowing), theta_i, theta_r, 1.0)
 
 
 def brdf(theta_i, theta_r, rms_slope, shadowing=True, diffuse=True):
     """1-D Eq. 17 for a PEC: f = f_s + f_d (1/rad); broadcasts theta_i against theta_r.
 
-    ``diffuse``: True / "paper" (Eq. 16), "reciprocal" (:func:`brdf_diffuse`) or False / "none".
-    """
+    ``diffuse``: a diffuse term of :mod:`hyde_bsdf.model.terms` (True = "paper", False = "none")."""
     theta_i, theta_r, rms_slope = _check(theta_i, theta_r, rms_slope)
+    check_pair(_term_name(shadowing), diffuse)
     f = brdf_specular(theta_i, theta_r, rms_slope, shadowing)
-    mode = _diffuse_mode(diffuse)
-    if mode != "none":
-        # the paper's f_d depends on theta_i only: its shape is theta_i's, so it broadcasts like theta_i
-        f = f + brdf_diffuse(theta_i, rms_slope, shadowing, theta_r if mode == "reciprocal" else None, mode)
-    return f
+    return f + brdf_diffuse(theta_i, rms_slope, shadowing, diffuse, theta_r)
 
 
 def sigma_equivalent(theta_i, theta_r, rms_slope, shadowing=True, diffuse=True):
@@ -329,28 +289,25 @@ def lobe_energy_shares(theta_i, theta_r, sigma_mom, rms_slope, level=0.01):
     }
 
 
-def mueller_sigma(theta_i, theta_r, rms_slope, n=None, k=0.0, shadowing=True, diffuse=True):
+def mueller_sigma(theta_i, theta_r, rms_slope, n=None, k=0.0, shadowing=True, diffuse=True, index=None):
     """In-plane Mueller elements of the 1-D model in the MoM's sigma units (Eqs. 9-11, 16, 17 in the plane).
 
-    theta_i [n_ti, 1] against theta_r [n_tr] (radians; broadcast).  ``n``, ``k``: the
-    paper's eta = n - j k; ``n=None`` is a PEC.  Returns a dict "M00", "M01", "M22",
+    theta_i [n_ti, 1] against theta_r [n_tr] (radians; broadcast).  ``n``, ``k``: the index
+    n + ik (the paper's eta = n - j k); ``n=None`` is the PEC; or ``index``, an
+    :class:`~hyde_bsdf.model.index.Index`.  Returns a dict "M00", "M01", "M22",
     "M23": the facet Fresnel terms (A, B, C, S) at the local incidence angle
     beta = (theta_i + theta_r)/2 times the specular sigma, plus, in M00 only, the
-    diffuse term (1 - rho_s(theta_i))/2 * A(beta) in sigma units (``diffuse``: True / "paper",
-    "reciprocal" -- :func:`brdf_diffuse` --, or False / "none").
+    diffuse term (the paper's: (1 - rho_s(theta_i))/2) * A(beta) in sigma units.
     """
-    from hyde_bsdf.model.fresnel import fresnel_mueller_terms
-
+    index = Index.from_keywords(n, k, index=index, pec_if_missing=True)
+    _, term = check_pair(_term_name(shadowing), diffuse)
     theta_i = np.asarray(theta_i, dtype=float)
     theta_r = np.asarray(theta_r, dtype=float)
     _, beta = facet_angles(theta_i, theta_r)
-    A, B, C, S = fresnel_mueller_terms(np.clip(np.cos(beta), 0.0, 1.0), n if n is not None else 1.0, k,
-                                       pec=n is None)
+    A, B, C, S = fresnel_mueller_terms(np.clip(np.cos(beta), 0.0, 1.0), index)
     spec = sigma_equivalent(theta_i, theta_r, rms_slope, shadowing, diffuse=False)
     out = {"M00": spec * A, "M01": spec * B, "M22": spec * C, "M23": spec * S}
-    mode = _diffuse_mode(diffuse)
-    if mode != "none":
+    if term.present:
         units = 2.0 * math.pi * np.cos(theta_i) * np.cos(theta_r)
-        f_d = brdf_diffuse(theta_i, rms_slope, shadowing, theta_r if mode == "reciprocal" else None, mode)
-        out["M00"] = out["M00"] + units * f_d * A
+        out["M00"] = out["M00"] + units * brdf_diffuse(theta_i, rms_slope, shadowing, term, theta_r) * A
     return out

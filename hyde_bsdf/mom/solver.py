@@ -196,7 +196,8 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.memory import check_memory, format_bytes
-from hyde_bsdf.model.parameters import NATURAL_INDEX, paper_eta
+from hyde_bsdf.model.index import Index
+from hyde_bsdf.model.parameters import NATURAL_INDEX
 from hyde_bsdf.progress import Throttle, as_callback
 from hyde_bsdf.mom import cost as _cost
 from hyde_bsdf.mom.beam import gaussian_beam, window_bias
@@ -746,17 +747,15 @@ def _check_polarization(polarization):
 
 
 def _check_index(n, k):
-    """None, None: a PEC; else the paper's eta = n - j k (n > 0, k >= 0)."""
-    if n is None:
-        if k is not None:
-            raise UsageError(f"k={k!r} needs n (the real part of the index n - jk); give n, or neither for a PEC")
-        return None
-    n = _check_positive("n", n)
-    k = 0.0 if k is None else _check_positive("k", k, allow_zero=True)
-    if not (NATURAL_INDEX.contains(n) and NATURAL_INDEX.contains(k)):
-        raise UsageError(f"n and k must be <= {NATURAL_INDEX.hi:g} (use the PEC, n=None, for a better conductor), "
-                         f"got n={n:g}, k={k:g}")
-    return paper_eta(n, k)
+    """The paper's eta = n - j k the solver works with (the boundary of :class:`Index`'s spelling),
+    None for the PEC (n=None); n > 0, k >= 0, both in NATURAL_INDEX."""
+    if n is not None:
+        n = _check_positive("n", n)
+        k = None if k is None else _check_positive("k", k, allow_zero=True)
+        if not (NATURAL_INDEX.contains(n) and (k is None or NATURAL_INDEX.contains(k))):
+            raise UsageError(f"n and k must be <= {NATURAL_INDEX.hi:g} (use the PEC, n=None, for a better "
+                             f"conductor), got n={n:g}, k={k or 0.0:g}")
+    return Index.from_keywords(n, k, pec_if_missing=True, n_range=NATURAL_INDEX, k_range=NATURAL_INDEX).paper_eta()
 
 
 def _matrices_per_partition(pols, eta):
