@@ -112,3 +112,43 @@ def format_answer(a) -> str:
     if a.get("advice"):
         lines.append("advice: " + a["advice"])
     return "\n".join(lines)
+
+
+def add_height_options(ap) -> None:
+    """The surface height options of a fit (``--sigma-h-wl``, or ``--sigma-h-um`` with ``--wavelength-nm``): told
+    them, the fit states the accuracy atlas's verdict for the fitted model at the data's incidence angles."""
+    ap.add_argument("--sigma-h-wl", type=float, default=None, metavar="H",
+                    help="rms surface height in wavelengths: the summary then states the accuracy atlas's verdict "
+                         "on the fitted model (hyde-bsdf accuracy)")
+    ap.add_argument("--sigma-h-um", type=float, default=None, metavar="UM",
+                    help="rms surface height in micrometres (with --wavelength-nm): as --sigma-h-wl")
+    ap.add_argument("--wavelength-nm", type=float, default=None, metavar="NM",
+                    help="the measurement's wavelength in nm (with --sigma-h-um)")
+
+
+def height_wl(args):
+    """sigma_h / lambda from the height options (None if not given); UsageError naming the option otherwise."""
+    from hyde_bsdf.errors import UsageError
+
+    if args.sigma_h_wl is not None and args.sigma_h_um is not None:
+        raise UsageError("give --sigma-h-wl or --sigma-h-um (with --wavelength-nm), not both")
+    if args.sigma_h_um is not None:
+        if args.wavelength_nm is None:
+            raise UsageError("--sigma-h-um needs --wavelength-nm (the height in wavelengths is what the atlas reads)")
+        for name, v in (("--sigma-h-um", args.sigma_h_um), ("--wavelength-nm", args.wavelength_nm)):
+            if not (math.isfinite(v) and v > 0):
+                raise UsageError(f"{name} must be a positive number, got {v:g}")
+        return 1000.0 * args.sigma_h_um / args.wavelength_nm
+    if args.sigma_h_wl is not None and not (math.isfinite(args.sigma_h_wl) and args.sigma_h_wl > 0):
+        raise UsageError(f"--sigma-h-wl must be a positive number, got {args.sigma_h_wl:g}")
+    return args.sigma_h_wl
+
+
+def fit_verdict(theta_i, params, shadowing, diffuse, sigma_h_wl) -> str:
+    """The atlas's verdict line for a fitted model (``params``: n, k, rms_slope) at the data's incidence angles
+    (radians); the pec case is n = None."""
+    from hyde_bsdf.model.accuracy import verdict
+
+    v = verdict(theta_i, params["rms_slope"], params.get("n"), params.get("k"), sigma_h_wl=sigma_h_wl,
+                shadowing=shadowing, diffuse=diffuse)
+    return f"{v['summary']} (sigma_h = {sigma_h_wl:.3g} lambda; details: hyde-bsdf accuracy)"

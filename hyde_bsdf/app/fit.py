@@ -5,7 +5,7 @@ Command lines::
 
     hyde-bsdf fit DATA.csv [--fit n,k,rms_slope] [--rms-slope X] [--n0 N] [--k0 K]
                   [--model auto|fixed] [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
-                  [--strict] [-o plot.png] [-q]
+                  [--sigma-h-wl H | --sigma-h-um UM --wavelength-nm NM] [--strict] [-o plot.png] [-q]
     hyde-bsdf fit FILE.pbsdf [--fit n,k,rms_slope] [--rms-slope 0.3] [--n0 N] [--k0 K]
                   [--model auto|fixed] [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
                   [--max-points 3000] [--theta-max 80] [--tolerance 0.05] [--seed 0]
@@ -16,7 +16,9 @@ Without ``--shadowing`` and ``--diffuse`` the model is chosen (``--model auto``,
 adequate one kept; the table of models is printed and, with ``-o``, plotted (misfit against model
 size) beside the fit as ``NAME_models.EXT``.  Every fit prints its verdict
 (:mod:`hyde_bsdf.fit.adequacy`); an inadequate model is a ``WARNING:`` line in the summary and on
-stderr.
+stderr.  Told the surface height (``--sigma-h-wl``, or ``--sigma-h-um`` and ``--wavelength-nm``), a CSV fit also
+states the accuracy atlas's verdict on the fitted model at the data's incidence angles
+(:func:`hyde_bsdf.model.accuracy.verdict`: how far the model may be from exact EM there).
 
 (CSV format: :mod:`hyde_bsdf.io.measurements`; the fits: :mod:`hyde_bsdf.fit.mueller_fit`,
 :mod:`hyde_bsdf.fit.pbsdf_fit`.)  Options and the ``-o`` path are checked before the file is
@@ -31,6 +33,7 @@ import math
 import warnings
 from pathlib import Path
 
+from hyde_bsdf.app.accuracy import add_height_options, fit_verdict, height_wl
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.app.plots import PLOT_BYTES, PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit, plot_selection
 from hyde_bsdf.errors import RejectedResult, UsageError
@@ -166,6 +169,7 @@ def csv_parser() -> Parser:
     ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n; default: several starts")
     ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k; default: several starts")
     _add_model_options(ap)
+    add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
     ap.add_argument("-o", "--output", default=None,
                     help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)}); with --model "
@@ -203,6 +207,7 @@ def _csv_run(args) -> int:
     with user_input():
         auto = _auto(args)
         check_options(**opts)
+        sigma_h_wl = height_wl(args)
     if args.output:
         check_plot_path(args.output)
     meas = read_measurements(args.data, progress=_progress(args))
@@ -219,6 +224,8 @@ def _csv_run(args) -> int:
     if sel is not None:
         print(sel.summary())
     print(result.summary())
+    if sigma_h_wl is not None:
+        print(fit_verdict(meas.theta_i, result.params, result.shadowing, result.diffuse, sigma_h_wl))
     _warn_verdict(result)
     for text in result.data_warnings:          # also on stderr, where a script's log sees them
         warnings.warn(text, FitDataWarning, stacklevel=1)

@@ -486,6 +486,6 @@ def _summary(per, shadowing, diffuse):
             parts.append(f"unknown at {angles} deg ({rows[0]['reason']})")
         else:
             parts.append(f"{status} at {angles} deg")
-    recs = sorted({p["recommended"] for p in per})
+    recs = sorted({p["recommended"] for p in per if p["status"] != "unknown"})
     return (f"accuracy atlas (model {shadowing}/{diffuse} vs exact EM, 1-D surfaces): " + "; ".join(parts)
-            + f"; cheapest adequate: {', '.join(recs)}")
+            + (f"; cheapest adequate: {', '.join(recs)}" if recs else ""))

@@ -59,7 +59,7 @@ PARTITIONS = 8
 #: fewest partitions of a run: the spread between partitions is the MoM's statistical error
 MIN_PARTITIONS = 2
 #: CPU seconds one surface and material may cost (estimated from the pilot partition)
-TASK_CPU_CAP_S = 240.0
+TASK_CPU_CAP_S = 120.0
 #: shortest partition (wavelengths) and the least correlation lengths per partition
 PARTITION_WL = 300.0
 ELLS_PER_PARTITION = 10.0
@@ -201,7 +201,9 @@ def run_task(task):
                        np.where(np.abs(pilot.energy_p - 1) > np.abs(rest.energy_p - 1), pilot.energy_p, rest.energy_p)])
     weights = np.array([1.0, more]) / (1.0 + more)
     coherent = sum(w * r.power_coherent / r.power_balance_nominal for w, r in zip(weights, runs))
-    return dict(base, status="ok", F_s=fields["s"], F_p=fields["p"], partitions=1 + more,
+    stage = ("fill", "factor", "solve", "far_field")
+    times = np.array([[r.times[s] for s in stage] for r in runs])     # CPU s per stage: pilot, the others
+    return dict(base, status="ok", F_s=fields["s"], F_p=fields["p"], partitions=1 + more, times=times,
                 valid=pilot.valid_s & pilot.valid_p & rest.valid_s & rest.valid_p, energy=energy,
                 coherent=coherent, cpu_s=_cpu(pilot) + _cpu(rest), wall_s=time.perf_counter() - t0,
                 incidence=json.dumps(pilot.params["incidence"]), taper_width_wl=float(pilot.params["taper_width_wl"]),

@@ -184,6 +184,7 @@ all incidence angles at once.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import functools
 import math
 import multiprocessing
 import os
@@ -640,6 +641,8 @@ class MoMResult:
     valid_s, valid_p : bool ndarray [n_ti, n_tr], sigma >= FLOOR_MARGIN (20) x the floor: within about 2.5 dB
         of what an untruncated partition gives; ``valid`` the same for the first polarisation.
     floor_reason : str, why a sigma flagged invalid is not the surface's (for legends and summaries).
+    atlas_verdict : dict (a property, computed when first read): the accuracy atlas's verdict on the model at
+        this run's geometry, :func:`hyde_bsdf.model.accuracy.verdict` (``["summary"]``: one line).
     partition_fields : dict "s" / "p" of complex ndarrays [M, n_ti, n_tr]: each partition's far field on
         ``theta_r``, scaled so that ``sigma_P = mean(|F|^2, axis=0)`` (and sigma_sp = mean(F_s conj(F_p))) --
         what any other statistic over partitions (coherent Mueller elements, a jackknife) needs.
@@ -688,6 +691,19 @@ class MoMResult:
     @property
     def theta_i_deg(self):
         return np.degrees(self.theta_i)
+
+    @functools.cached_property
+    def atlas_verdict(self):
+        """The accuracy atlas's verdict on the model (V-groove, the paper's diffuse term) at this run's geometry:
+        :func:`hyde_bsdf.model.accuracy.verdict` at each theta_i for the run's rms slope, height and index -- how
+        far the model may be from this very kind of result, and the cheapest adequate variant (``["summary"]``,
+        one line; ``["per_angle"]``).  Computed when first read."""
+        from hyde_bsdf.model.accuracy import verdict
+
+        p = self.params
+        if not p.get("rms_height_wl"):
+            return {"per_angle": [], "answers": [], "summary": "accuracy atlas: not applicable (a flat surface)"}
+        return verdict(self.theta_i, p["rms_slope"], p["n"], p["k"], sigma_h_wl=p["rms_height_wl"])
 
     @property
     def theta_r_deg(self):
