@@ -22,14 +22,15 @@ Checks:
    tolerance.  The held-out runs are reused from OUTDIR/atlas_heldout when present (about 10 CPU minutes
    otherwise).
 
-Writes accuracy_atlas_maps_<element>.png (the atlas as maps per element: material x (slope, height) x
-theta_i, coloured by the verdict of the paper's variant), accuracy_atlas_speed.png (accuracy against
-time per method), accuracy_atlas.csv (per cell and variant, the lobe errors and the verdicts) and, in full
-mode, accuracy_atlas_heldout.csv.
+Writes accuracy_atlas_maps.png (the atlas as maps per element and material: (slope, height) x theta_i,
+coloured by the verdict of the paper's variant), accuracy_atlas_speed.png (accuracy against time per
+method), accuracy_atlas.csv (per cell and variant, the lobe errors and the verdicts) and, in full mode,
+accuracy_atlas_maps_<element>.png (one per element, the errors written in) and accuracy_atlas_heldout.csv.
 """
 import json
 import math
 import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -60,39 +61,81 @@ def verdict_codes(err, se, tol):
     return np.where(np.isfinite(err), code, 3)
 
 
-def maps(atlas, out):
-    """One figure per graded element: per material a map of (slope, height) rows x theta_i columns."""
+def _codes_map(atlas, e, v):
+    """Verdict codes [material, slope x height, theta_i] of element e, variant v, over the lobe; and the errors."""
+    lobe = atlas.regions.index("lobe")
+    err = atlas["error"][:, :, :, :, v, e, lobe].astype(float)
+    se = atlas["se"][:, :, :, :, v, e, lobe].astype(float)
+    shape = (len(atlas.materials), -1, atlas.theta_i.size)
+    return verdict_codes(err, se, _tolerances(atlas)[e]).reshape(shape), err.reshape(shape)
+
+
+def _draw_map(ax, atlas, codes, err=None):
+    from matplotlib.colors import ListedColormap
+
+    ax.imshow(codes, cmap=ListedColormap(VERDICT_COLOURS), vmin=-0.5, vmax=3.5, aspect="auto",
+              interpolation="nearest")
+    if err is not None:
+        for (r, c), val in np.ndenumerate(err):
+            if math.isfinite(val):
+                ax.text(c, r, f"{val:.2g}", ha="center", va="center", fontsize=4.5)
+    ax.set_xticks(range(atlas.theta_i.size), [f"{t:g}" for t in atlas.theta_i], fontsize=5)
+    for r in range(1, atlas.slopes.size):
+        ax.axhline(r * atlas.heights.size - 0.5, color="k", lw=0.6)
+
+
+VERDICT_COLOURS = ["#2ca02c", "#ffdd57", "#d62728", "#bbbbbb"]
+MAP_NOTE = ("green valid (error + 2 se within the tolerance: 1 dB, 0.1), yellow undecided, red invalid, grey unknown; "
+            "rows: rms slope s and sigma_h/lambda h; columns theta_i (deg)")
+
+
+def maps_all(atlas, path, variant=("vgroove", "paper")):
+    """The atlas in one picture: elements (rows) x materials (columns), each a (slope, height) x theta_i map."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.colors import ListedColormap
 
-    cmap = ListedColormap(["#2ca02c", "#ffdd57", "#d62728", "#bbbbbb"])
-    tol = _tolerances(atlas)
+    v = atlas.variants.index(variant)
+    n_el, n_m = len(atlas.elements), len(atlas.materials)
+    fig, axes = plt.subplots(n_el, n_m, figsize=(2.2 * n_m + 1.0, 2.6 * n_el), sharex=True, sharey=True, squeeze=False)
+    labels = [f"s {s:g} h {h:g}" if h == atlas.heights[0] else f"h {h:g}" for s in atlas.slopes for h in atlas.heights]
+    for e, name in enumerate(atlas.elements):
+        codes, _ = _codes_map(atlas, e, v)
+        for m in range(n_m):
+            ax = axes[e, m]
+            _draw_map(ax, atlas, codes[m])
+            if e == 0:
+                ax.set_title(atlas.materials[m], fontsize=8)
+            if m == 0:
+                ax.set_ylabel(ELEMENT_LABELS[name], fontsize=8)
+                ax.set_yticks(range(len(labels)), labels, fontsize=4)
+    fig.suptitle(textwrap.fill(f"Accuracy atlas: model {'/'.join(variant)} against the MoM over the lobe, 1-D "
+                               "surfaces. " + MAP_NOTE, 110), fontsize=7)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    save_figure(fig, path, dpi=90)
+    return path
+
+
+def maps(atlas, out):
+    """One figure per graded element, with the errors written in: per material a (slope, height) x theta_i map."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
     v = atlas.variants.index(("vgroove", "paper"))
-    lobe = atlas.regions.index("lobe")
+    labels = [f"s {s:g}, h {h:g}" for s in atlas.slopes for h in atlas.heights]
     paths = []
     for e, name in enumerate(atlas.elements):
-        fig, axes = plt.subplots(1, len(atlas.materials), figsize=(3.0 * len(atlas.materials), 7.5), sharey=True)
-        for m, ax in enumerate(np.atleast_1d(axes)):
-            err = atlas["error"][m, :, :, :, v, e, lobe].astype(float)
-            se = atlas["se"][m, :, :, :, v, e, lobe].astype(float)
-            codes = verdict_codes(err, se, tol[e]).reshape(-1, atlas.theta_i.size)
-            ax.imshow(codes, cmap=cmap, vmin=-0.5, vmax=3.5, aspect="auto", interpolation="nearest")
-            flat = err.reshape(-1, atlas.theta_i.size)
-            for (r, c), val in np.ndenumerate(flat):
-                if math.isfinite(val):
-                    ax.text(c, r, f"{val:.2g}", ha="center", va="center", fontsize=4.5)
-            ax.set_xticks(range(atlas.theta_i.size), [f"{t:g}" for t in atlas.theta_i], fontsize=6)
-            ax.set_xlabel("theta_i (deg)", fontsize=7)
+        codes, err = _codes_map(atlas, e, v)
+        fig, axes = plt.subplots(1, len(atlas.materials), figsize=(3.0 * len(atlas.materials), 7.5), sharey=True,
+                                 squeeze=False)
+        for m, ax in enumerate(axes[0]):
+            _draw_map(ax, atlas, codes[m], err[m])
             ax.set_title(atlas.materials[m], fontsize=8)
-            for r in range(1, atlas.slopes.size):
-                ax.axhline(r * atlas.heights.size - 0.5, color="k", lw=0.6)
-        labels = [f"s {s:g}, h {h:g}" for s in atlas.slopes for h in atlas.heights]
-        np.atleast_1d(axes)[0].set_yticks(range(len(labels)), labels, fontsize=5)
-        fig.suptitle(f"Accuracy atlas, {ELEMENT_LABELS[name]} over the lobe, model vgroove/paper vs MoM (1-D surfaces; "
-                     f"rows: rms slope s, sigma_h/lambda h); green valid (err + 2 se <= {tol[e]:g}), yellow undecided, "
-                     "red invalid, grey unknown; numbers: error", fontsize=8)
+            ax.set_xlabel("theta_i (deg)", fontsize=7)
+        axes[0, 0].set_yticks(range(len(labels)), labels, fontsize=5)
+        fig.suptitle(f"Accuracy atlas, {ELEMENT_LABELS[name]} over the lobe, model vgroove/paper vs MoM (1-D surfaces); "
+                     + MAP_NOTE + "; numbers: the error", fontsize=7)
         fig.tight_layout(rect=(0, 0, 1, 0.95))
         path = out / f"accuracy_atlas_maps_{name}.png"
         save_figure(fig, path, dpi=110)
@@ -131,14 +174,17 @@ def speed_chart(atlas, out):
         axes[0].plot([r[1], r[1]], [max(r[2], 1e-3), max(r[3], 1e-3)], "-", color=axes[0].lines[-1].get_color(), lw=1)
         axes[1].semilogx(r[1], 100 * r[4], mark, ms=7)
         axes[1].annotate(r[0], (r[1], 100 * r[4]), fontsize=6, xytext=(3, 3), textcoords="offset points")
-    axes[0].set(xlabel="seconds per evaluation (model: 3-D pbrdf per direction pair; MoM: CPU s per in-plane "
-                       "(theta_i, theta_r), s and p)", ylabel="M00 error over the lobe (dB): median, bar to 90th pct",
+    axes[0].set(xlabel="seconds per evaluation", ylabel="M00 error over the lobe, dB (median; bar: 90th pct)",
                 title="accuracy against time (MoM: its statistical error)")
     axes[0].legend(fontsize=6)
-    axes[1].set(xlabel="seconds per evaluation", ylabel="% of atlas cells adequate in every element (MoM: converged)",
-                title="where each method is enough (tolerances 1 dB, 0.1)")
-    fig.suptitle("Accuracy atlas: methods' cost against accuracy (1-D surfaces; perturbation theory not charted: "
-                 "it is outside the atlas's heights, k sigma_h >= 0.63)", fontsize=8)
+    axes[1].set(xlabel="seconds per evaluation", ylabel="% of cells adequate in every element",
+                title="where each method is enough (1 dB, 0.1)")
+    for ax in axes:
+        ax.title.set_fontsize(9)
+        ax.xaxis.label.set_fontsize(8)
+        ax.yaxis.label.set_fontsize(8)
+    fig.suptitle("Accuracy atlas, 1-D surfaces: model variants (3-D pbrdf, per direction pair) and the MoM (CPU s per "
+                 "in-plane theta_i, theta_r, s and p; 'adequate' = converged)", fontsize=8)
     fig.tight_layout()
     save_figure(fig, out / "accuracy_atlas_speed.png")
     return rows
@@ -241,7 +287,9 @@ def validate(outdir="out/validation", quick=False):
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     atlas = _atlas()
-    maps(atlas, out)
+    maps_all(atlas, out / "accuracy_atlas_maps.png")
+    if not quick:
+        maps(atlas, out)
     speed = speed_chart(atlas, out)
     n_rows = table_csv(atlas, out)
     prov = atlas.provenance
