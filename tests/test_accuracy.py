@@ -224,3 +224,11 @@ def test_gather_hands_each_result_over_as_it_finishes():
     seen = []
     assert gather(SerialExecutor(), abs, [-1, -2, -3], on_result=lambda i, r: seen.append((i, r))) == [1, 2, 3]
     assert sorted(seen) == [(0, 1), (1, 2), (2, 3)]
+
+
+def test_fit_height_options_are_checked_before_the_data(tmp_path, capsys):
+    """hyde-bsdf fit --sigma-h-um without --wavelength-nm: one line naming both, exit 2, before the file is read
+    (here it does not even exist)."""
+    assert main(["fit", str(tmp_path / "missing.csv"), "--sigma-h-um", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "--sigma-h-um needs --wavelength-nm" in err

@@ -7,7 +7,7 @@ W(x) on radiation) or an exact Gaussian beam (the incident field tapered, the cu
 ``incidence="auto"`` takes the beam from 80 deg on.  Pairs (20, 80), (50, 80), (20, 50) deg in backscatter
 (theta_r = -theta_b), s and p, on the issue's surface (sigma_h = 0.5 lambda, ell = 2.5 lambda, rms slope
 0.28, a PEC), 2 partitions, seeds 1-3 (quick: seed 1), for the window, the beam and auto, at footprints
-w = 37.5 and 75 lambda with partitions of 4 w, and 75 lambda with 8 w.
+w = 37.5 and 75 lambda with partitions of 4 w, 75 lambda with 8 w and 150 lambda with 6 w.
 
 Why the beam cannot keep it: with a symmetric moment matrix Z, the windowed current's far field
 psi_b^T W Z^-1 psi_a and its reciprocal psi_a^T W Z^-1 psi_b differ only by how W commutes with Z^-1 (the
@@ -33,7 +33,7 @@ SIGMA_H, ELL = 0.5, 2.5
 ANGLES = (20.0, 50.0, 80.0)
 PAIRS = ((0, 2), (1, 2), (0, 1))
 #: (footprint w, partition length) in wavelengths
-GEOMETRIES = ((37.5, 150.0), (75.0, 300.0), (75.0, 600.0))
+GEOMETRIES = ((37.5, 150.0), (75.0, 300.0), (75.0, 600.0), (150.0, 900.0))
 INCIDENCE = ("window", "beam", "auto")
 
 
@@ -92,7 +92,7 @@ def validate(outdir="out/validation", quick=False):
     rows, out = [], Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     for inc in INCIDENCE:
-        for w, length in (GEOMETRIES[1:] if quick else GEOMETRIES):
+        for w, length in (GEOMETRIES[1:3] if quick else GEOMETRIES):
             for seed in ((1,) if quick else (1, 2, 3)):
                 rows += run(inc, w, length, seed)
     write_csv(out / "mom_reciprocity.csv", ["incidence", "w_wl", "L_over_w", "seed", "pol", "theta_a_deg",

@@ -14,8 +14,11 @@ covers every height in the atlas (0.1-4 wavelengths).  ``--json`` prints the ans
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
+
+import numpy as np
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.model.accuracy import TOLERANCE, TOLERANCE_DB, accuracy, load_atlas
@@ -126,15 +129,17 @@ def add_height_options(ap) -> None:
                     help="the measurement's wavelength in nm (with --sigma-h-um)")
 
 
-def height_wl(args):
-    """sigma_h / lambda from the height options (None if not given); UsageError naming the option otherwise."""
+def height_wl(args, wavelength_nm=None):
+    """sigma_h / lambda from the height options (None if not given; ``wavelength_nm``: the data's own, where
+    ``--wavelength-nm`` may be left out); UsageError naming the option otherwise."""
     from hyde_bsdf.errors import UsageError
 
     if args.sigma_h_wl is not None and args.sigma_h_um is not None:
         raise UsageError("give --sigma-h-wl or --sigma-h-um (with --wavelength-nm), not both")
     if args.sigma_h_um is not None:
-        if args.wavelength_nm is None:
+        if args.wavelength_nm is None and wavelength_nm is None:
             raise UsageError("--sigma-h-um needs --wavelength-nm (the height in wavelengths is what the atlas reads)")
+        args = argparse.Namespace(**{**vars(args), "wavelength_nm": args.wavelength_nm or wavelength_nm})
         for name, v in (("--sigma-h-um", args.sigma_h_um), ("--wavelength-nm", args.wavelength_nm)):
             if not (math.isfinite(v) and v > 0):
                 raise UsageError(f"{name} must be a positive number, got {v:g}")
@@ -152,3 +157,21 @@ def fit_verdict(theta_i, params, shadowing, diffuse, sigma_h_wl) -> str:
     v = verdict(theta_i, params["rms_slope"], params.get("n"), params.get("k"), sigma_h_wl=sigma_h_wl,
                 shadowing=shadowing, diffuse=diffuse)
     return f"{v['summary']} (sigma_h = {sigma_h_wl:.3g} lambda; details: hyde-bsdf accuracy)"
+
+
+def pbsdf_verdict_lines(theta_i, result, args) -> list:
+    """The atlas's verdict per band of a table fit (``result``: rms_slope, n and k per band, ``wavelengths`` in
+    nm), at the atlas's incidence angles within the data's range: ``--sigma-h-um`` gives each band its own
+    sigma_h / lambda; ``--sigma-h-wl`` the same for every band.  [] when no height was given."""
+    h = height_wl(args, wavelength_nm=1000.0)      # a table carries its wavelengths (each band's below)
+    if h is None:
+        return []
+    lo, hi = float(np.min(theta_i)), float(np.max(theta_i))
+    grid = np.radians([t for t in range(0, 90, 10) if math.radians(t) >= lo - 1e-9 and math.radians(t) <= hi + 1e-9])
+    lines = []
+    for w, n, k in zip(result.wavelengths, result.n, result.k):
+        band_h = 1000.0 * args.sigma_h_um / w if args.sigma_h_um is not None else h
+        line = fit_verdict(grid if grid.size else [lo], {"rms_slope": result.rms_slope, "n": n, "k": k},
+                           result.shadowing, result.diffuse, band_h)
+        lines.append(f"{w:g} nm: {line}")
+    return lines

@@ -33,7 +33,7 @@ import math
 import warnings
 from pathlib import Path
 
-from hyde_bsdf.app.accuracy import add_height_options, fit_verdict, height_wl
+from hyde_bsdf.app.accuracy import add_height_options, fit_verdict, height_wl, pbsdf_verdict_lines
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.app.plots import PLOT_BYTES, PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit, plot_selection
 from hyde_bsdf.errors import RejectedResult, UsageError
@@ -259,6 +259,7 @@ def pbsdf_parser() -> Parser:
     ap.add_argument("--tolerance", type=float, default=0.05,
                     help="a cell with |M_jk| or a degree of polarization above (1 + tolerance) M00 is non-physical")
     ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
+    add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
     ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element; "
                     "with --model auto also NAME_models.EXT, misfit against model size")
@@ -278,6 +279,7 @@ def _pbsdf_run(args) -> int:
         auto = _auto(args)
         shadowing, diffuse = args.shadowing or SHADOWING[0], args.diffuse or DIFFUSE[0]
         fit = _check(args.fit, args.rms_slope, args.n0, args.k0, shadowing, diffuse)
+        height_wl(args, wavelength_nm=1000.0)             # the height options checked before the table is read
     if not 0 <= args.seed < 2**32:
         raise UsageError(f"--seed must be an integer in [0, 2^32), got {args.seed}")
     if not 0 < args.theta_max <= 90:
@@ -302,6 +304,8 @@ def _pbsdf_run(args) -> int:
     if sel is not None:
         print(sel.summary())
     print(result.summary())
+    for line in pbsdf_verdict_lines(data.theta_i, result, args):
+        print(line)
     _warn_verdict(result)
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))

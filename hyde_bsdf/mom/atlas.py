@@ -59,7 +59,7 @@ PARTITIONS = 8
 #: fewest partitions of a run: the spread between partitions is the MoM's statistical error
 MIN_PARTITIONS = 2
 #: CPU seconds one surface and material may cost (estimated from the pilot partition)
-TASK_CPU_CAP_S = 120.0
+TASK_CPU_CAP_S = 60.0
 #: shortest partition (wavelengths) and the least correlation lengths per partition
 PARTITION_WL = 300.0
 ELLS_PER_PARTITION = 10.0

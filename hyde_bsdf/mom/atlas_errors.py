@@ -17,9 +17,11 @@ M11/M00 is exactly 1; the model's is below 1 by its unpolarised diffuse share; M
 M32 = -M23 and the other eight elements are 0 in both).
 
 Regions (:data:`REGIONS`), from the MoM's smoothed incoherent M00, over the angles where the MoM is clear
-of its partition floor (``valid``) and |theta_r| <= 88 deg: ``lobe`` where M00 >= 10 % of its peak (rms
-of the difference), ``specular`` within 2.5 deg of theta_r = theta_i (the mean difference, signed), and
-``wing`` where M00 is 1-10 % of its peak (rms).
+of its partition floor (``valid``) and |theta_r| <= 88 deg: ``lobe``, the rms of the difference weighted by
+the MoM's M00 (relative to its peak, wherever that is >= 1 %: the light that is there counts, and no angle
+near a threshold flips in or out with the speckle), ``specular`` within 2.5 deg of theta_r = theta_i (the
+mean difference, signed), and ``wing`` where M00 is 1-10 % of its peak (rms).  For an observation angle,
+the lobe is where M00 >= 10 % of its peak.
 
 Statistical error: a jackknife over partitions (leave one out; the coherent part and the regions are
 re-estimated in each replicate, so their speckle counts too; with only 2 partitions the coherent part is
@@ -124,32 +126,47 @@ def _differences(model, mom):
 
 
 def _regions(mom_m00, valid, theta_i_deg, theta_r_deg):
-    """Masks [n_ti, n_tr] of lobe, specular window and wing; their theta_r bounds [n_ti, 2] (deg)."""
+    """Weights [n_ti, n_tr] of the three regions; the lobe's and the lobe + wing's theta_r bounds [n_ti, 2] (deg).
+
+    The lobe is weighted by the MoM's M00 / its peak wherever that is >= WING_LEVEL (a power-weighted rms: an
+    angle near the 10 % level, which the speckle would put in or out of a hard mask from one replicate to the
+    next, counts a tenth either way); the specular window and the wing weigh their angles equally.  The bounds
+    (where M00 >= LOBE_LEVEL, resp. WING_LEVEL) say which region an observation angle falls in."""
     tr = np.asarray(theta_r_deg)[None, :]
     usable = valid & (np.abs(tr) <= GRAZING_DEG) & (mom_m00 > 0)
     peak = np.max(np.where(usable, mom_m00, 0.0), axis=1, keepdims=True)
-    lobe = usable & (mom_m00 >= LOBE_LEVEL * peak)
-    wing = usable & (mom_m00 >= WING_LEVEL * peak) & ~lobe
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = np.where(usable, mom_m00 / peak, 0.0)
+    lobe = rel >= LOBE_LEVEL
+    wing = (rel >= WING_LEVEL) & ~lobe
     spec = usable & (np.abs(tr - np.asarray(theta_i_deg)[:, None]) <= SPECULAR_HALF_DEG)
 
     def bounds(mask):
         lo = np.where(mask.any(1), np.min(np.where(mask, tr, np.inf), 1), np.nan)
         return np.stack([lo, np.where(mask.any(1), np.max(np.where(mask, tr, -np.inf), 1), np.nan)], 1)
 
-    return {"lobe": lobe, "specular": spec, "wing": wing}, bounds(lobe), bounds(lobe | wing)
+    weights = {"lobe": np.where(rel >= WING_LEVEL, rel, 0.0), "specular": spec.astype(float),
+               "wing": wing.astype(float)}
+    return weights, bounds(lobe), bounds(lobe | wing)
 
 
-def _moments(diffs, masks):
-    """[n_el, n_reg, n_ti] of the region statistic: mean square (lobe, wing) or mean (specular)."""
-    out = np.full((len(ELEMENTS), len(REGIONS), next(iter(masks.values())).shape[0]), np.nan)
+def _weighted(diffs, weights, square):
+    """[n_el, n_reg, n_ti]: the weighted mean of d^2 (``square``; the specular window's of d) over each region."""
+    out = np.full((len(ELEMENTS), len(REGIONS), next(iter(weights.values())).shape[0]), np.nan)
     for e, el in enumerate(ELEMENTS):
         d = diffs[el]
         for r, reg in enumerate(REGIONS):
-            m = masks[reg] & np.isfinite(d)
-            count = m.sum(1)
-            val = np.where(m, d * d if reg != "specular" else d, 0.0).sum(1)
-            out[e, r] = np.where(count > 0, val / np.maximum(count, 1), np.nan)
+            w = np.where(np.isfinite(d), weights[reg], 0.0)
+            total = w.sum(1)
+            f = d * d if (square and reg != "specular") else d
+            val = np.where(w > 0, f * w, 0.0).sum(1)
+            out[e, r] = np.where(total > 0, val / np.where(total > 0, total, 1.0), np.nan)
     return out
+
+
+def _moments(diffs, weights):
+    """[n_el, n_reg, n_ti] of the region statistic: mean square (lobe, wing) or mean (specular)."""
+    return _weighted(diffs, weights, True)
 
 
 def _jackknife(full, parts):
@@ -165,7 +182,7 @@ def _status(ck, n_ti, masks):
         return np.full(n_ti, STATUS.index("too_costly"), np.int8), np.full(n_ti, np.nan)
     energy_error = np.max(np.abs(ck["energy"] - 1.0), axis=0)
     status[energy_error > ENERGY_LIMIT] = STATUS.index("not_converged")
-    status[(status == 0) & ~masks["lobe"].any(1)] = STATUS.index("no_signal")
+    status[(status == 0) & ~(masks["lobe"] > 0).any(1)] = STATUS.index("no_signal")
     return status, energy_error
 
 
@@ -211,14 +228,9 @@ def cell_errors(ck, var=None):
                 lobe_deg=lobe, wing_deg=wing)
 
 
-def _moments_mean(diffs, masks):
+def _moments_mean(diffs, weights):
     """[n_el, n_reg, n_ti] mean difference over each region (the signed error)."""
-    out = np.full((len(ELEMENTS), len(REGIONS), next(iter(masks.values())).shape[0]), np.nan)
-    for e, el in enumerate(ELEMENTS):
-        for r, reg in enumerate(REGIONS):
-            m = masks[reg] & np.isfinite(diffs[el])
-            out[e, r] = np.where(m.any(1), np.where(m, diffs[el], 0.0).sum(1) / np.maximum(m.sum(1), 1), np.nan)
-    return out
+    return _weighted(diffs, weights, False)
 
 
 def _finish(est, se, mean):
