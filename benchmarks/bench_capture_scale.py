@@ -18,7 +18,7 @@ or without the uncertainty step (``--uncertainty``).
 
 Each size runs in its own fresh process (its peak resident memory, ru_maxrss, is its own).  Reported per
 size: the film, the tiles, the largest tile's film crops (pixels), the memory estimate checked before
-the work (:func:`hyde_bsdf.inverse.memory.tiles_memory_check`: largest tile x workers), the measured peak
+the work (:func:`hyde_bsdf.resources.inversion_bytes`: largest tile x workers), the measured peak
 RSS, seconds per iteration (all tiles together: the median over iterations 3.. of the tiles' summed
 time of that iteration), the Adam loops' total (``loop_s``, all tiles, warm-up included), the rest of
 the run (``rest_s``: scene builds, the uncertainty step), the whole run's wall time, the planning time

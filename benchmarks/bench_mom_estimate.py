@@ -3,7 +3,8 @@
 Runs single partitions of the fast solver over surfaces, materials, samplings and incidence counts (one core,
 in process), and prints per run the measured CPU seconds of each stage (set-up, solve, far field) beside the
 estimate, and the ratio measured / estimated of the total.  ``--fit`` also prints the least-squares constants
-of the cost model (copy them into cost.FAST_CONSTANTS after a change to the solver).
+of the cost model (copy them into hyde_bsdf/resources.py's COSTS, fast_fill_seconds_per_entry ...
+far_field_seconds, after a change to the solver).
 
     .venv/bin/python benchmarks/bench_mom_estimate.py [--fit] [--quick]
 """

@@ -40,7 +40,8 @@ def main(argv=None):
     import drjit as dr
     import mitsuba as mi
     import hyde_bsdf
-    from hyde_bsdf.io.atomic import atomic_open, check_output_path
+    from hyde_bsdf.io.atomic import atomic_open
+    from hyde_bsdf.io.output_gate import check_output_path
     from hyde_bsdf.fit import export_pbsdf
     from hyde_bsdf.mitsuba.variants import set_variant
     from hyde_bsdf.model.roughness import alpha_from_rms_slope

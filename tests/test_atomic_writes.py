@@ -1,5 +1,6 @@
-"""Atomic outputs (issue 10): a write that is interrupted -- by an exception, Ctrl-C, or SIGKILL at
-any moment -- leaves the previous file intact or the new one complete, never a truncated file.
+"""Atomic outputs (issue 10): a write that is interrupted -- by an exception, Ctrl-C, SIGTERM or
+SIGKILL at any moment -- leaves the previous file intact or the new one complete, never a
+truncated file, and (but for SIGKILL) no temporary.
 
 Behaviour checked:
 - SIGKILL at random moments while ``write_stokes_exr`` (the writer of ``render`` and ``demo``)
@@ -9,21 +10,15 @@ Behaviour checked:
   shows that the kills do land mid-write and that the check would see the damage;
 - ``atomic_path`` / ``atomic_open``: an exception inside the block leaves the old file and no
   temporary; the new file gets the permissions ``open`` would give it (0666 & ~umask);
-- ``atomic_dir``: the folder is replaced as a whole on success, untouched on an exception;
-  it removes only the files its manifest lists: a folder with other files is refused, and with
-  ``force`` those files are kept (a clashing name is kept as ``NAME.orig``) (issue 15);
-- ``atomic_group``: a failed write -- a real OS limit (RLIMIT_FSIZE: OpenEXR's and matplotlib's
-  own errors) or a simulated ENOSPC -- leaves the whole previous EXR + PNG set byte for byte,
-  no temporary, and one ``OutputWriteError`` line naming the file (issue 15);
+- a real OS limit (RLIMIT_FSIZE: OpenEXR's and matplotlib's own errors) leaves the file being
+  written byte for byte, no temporary, and one ``OutputWriteError`` line naming the file;
 - temporary names fit NAME_MAX (a 244-character output name works); a name that cannot fit is
   refused by ``check_output_path`` before any work;
-- SIGTERM removes the temporaries and ``.partial`` folder in flight; the temporaries a SIGKILLed
-  run left are removed by the next run, and a live process's are not;
+- SIGTERM removes the temporaries in flight; the temporaries a SIGKILLed run left are removed by
+  the next run's output check, and a live process's are not;
 - ``check_output_path`` / ``check_output_dir`` refuse a directory, a parent that is a file,
   ``/proc`` and an unwritable folder with a message naming the path.
 """
-import errno
-import hashlib
 import os
 import random
 import re
@@ -38,10 +33,10 @@ import numpy as np
 import pytest
 from conftest import scaled
 
-from hyde_bsdf.io import atomic
-from hyde_bsdf.io.atomic import (OutputWriteError, atomic_dir, atomic_group, atomic_open, atomic_path, check_output_dir,
-                              check_output_path, read_manifest)
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.io import atomic
+from hyde_bsdf.io.atomic import atomic_open, atomic_path
+from hyde_bsdf.io.output_gate import check_output_dir, check_output_path
 
 ROOT = Path(__file__).resolve().parent.parent
 SIZE = 256            # 256 x 256 px x 15 float32 channels: ~4 MB, ~0.1-0.2 s per write here
@@ -161,7 +156,7 @@ def test_atomic_path_exception_keeps_old_file(tmp_path):
     assert target.read_text() == "old\n"
     assert [p.name for p in tmp_path.iterdir()] == ["a.csv"]      # no temporary left
     with atomic_path(target) as tmp:
-        assert tmp.parent == tmp_path and tmp.name.endswith(".tmp.csv")
+        assert tmp.parent == tmp_path and tmp.name.endswith(".csv") and atomic.TEMP_NAME_RE.match(tmp.name)
         tmp.write_text("new\n")
         assert target.read_text() == "old\n"                       # not visible before the end
     assert target.read_text() == "new\n"
@@ -177,61 +172,9 @@ def test_atomic_file_permissions_follow_umask(tmp_path):
     assert (tmp_path / "b.txt").stat().st_mode & 0o777 == 0o640     # 0666 & ~027, not mkstemp's 0600
 
 
-def test_atomic_dir_swaps_whole_folder(tmp_path):
-    report = tmp_path / "report"
-    with atomic_dir(report) as new:                 # an earlier run: its manifest lists its files
-        (new / "index.html").write_text("old report")
-        (new / "old_figure.png").write_text("old")
-    assert read_manifest(report) == {"index.html", "old_figure.png"}
-    with pytest.raises(RuntimeError):
-        with atomic_dir(report) as new:
-            (new / "index.html").write_text("half")
-            raise RuntimeError("interrupted")
-    assert sorted(p.name for p in report.iterdir()) == [".hyde-manifest.json", "index.html", "old_figure.png"]
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
-    with atomic_dir(report) as new:
-        (new / "index.html").write_text("new report")
-        assert (report / "index.html").read_text() == "old report"
-    assert sorted(p.name for p in report.iterdir()) == [".hyde-manifest.json", "index.html"]   # no stale figure
-    assert (report / "index.html").read_text() == "new report"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
-
-
-def test_atomic_dir_never_deletes_files_it_did_not_write(tmp_path):
-    """A web site's folder (index.html, style.css, no manifest) is refused before any work; with
-    force the site's files stay, its index.html is kept as index.html.orig; a rerun replaces only
-    the report's own files, and a file added to the folder later is refused again."""
-    site = tmp_path / "site"
-    site.mkdir()
-    (site / "index.html").write_text("my web site")
-    (site / "style.css").write_text("body{}")
-    with pytest.raises(UsageError, match=r"'.*site' holds 2 file\(s\) that no earlier run wrote "
-                                         r"\('index.html', 'style.css'; it has no \.hyde-manifest\.json") as info:
-        with atomic_dir(site) as new:
-            raise AssertionError("the work started")
-    assert "\n" not in str(info.value) and "--force" in str(info.value)
-    kept = []
-    with atomic_dir(site, force=True, on_kept=kept.extend) as new:
-        (new / "index.html").write_text("report 1")
-        (new / "fig.png").write_text("figure 1")
-    assert kept == [site / "index.html.orig"]
-    assert (site / "index.html.orig").read_text() == "my web site" and (site / "style.css").read_text() == "body{}"
-    assert (site / "index.html").read_text() == "report 1" and read_manifest(site) == {"index.html", "fig.png"}
-    with atomic_dir(site, force=True) as new:      # rerun: only the report's files change
-        (new / "index.html").write_text("report 2")
-    assert sorted(p.name for p in site.iterdir()) == [".hyde-manifest.json", "index.html", "index.html.orig",
-                                                      "style.css"]
-    assert (site / "index.html").read_text() == "report 2"
-    with pytest.raises(UsageError, match="that no earlier run wrote"):
-        with atomic_dir(site) as new:
-            pass
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["site"]    # no .partial / .old left
-
-
 FSIZE_WRITER = textwrap.dedent(r"""
     import resource, signal, sys
     import numpy as np
-    from hyde_bsdf.io.atomic import atomic_group
     from hyde_bsdf.app.pictures import save_polarization_pngs
     from hyde_bsdf.io.stokes_exr import write_stokes_exr
     ramp = np.broadcast_to(np.linspace(0.1, 0.5, 32, dtype=np.float32)[:, None, None], (32, 32, 3))
@@ -240,9 +183,8 @@ FSIZE_WRITER = textwrap.dedent(r"""
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)       # writes past the limit fail with EFBIG
     resource.setrlimit(resource.RLIMIT_FSIZE, (limit, resource.RLIM_INFINITY))
     try:
-        with atomic_group():
-            write_stokes_exr(out + ".exr", st)
-            save_polarization_pngs(st, out)
+        write_stokes_exr(out + ".exr", st)
+        save_polarization_pngs(st, out)
     except OSError as exc:
         print(type(exc).__name__, exc.strerror)
 """)
@@ -257,10 +199,10 @@ def _old_set(folder):
 
 
 @pytest.mark.parametrize("limit, failing", [(1000, "a.exr"), (6000, "a_intensity.png")])
-def test_file_size_limit_keeps_the_old_output_set(tmp_path, limit, failing):
+def test_file_size_limit_keeps_the_file_it_stopped_at(tmp_path, limit, failing):
     """A real write failure from the real writers (the process's file-size limit: OpenEXR raises
-    its RuntimeError, matplotlib an OSError): one OutputWriteError naming the file, the old EXR
-    and PNGs byte for byte, no temporary."""
+    its RuntimeError, matplotlib an OSError): one OutputWriteError naming the file, that file and
+    those after it byte for byte as they were, no temporary (the EXR, ~3 KB, is written first)."""
     before = _old_set(tmp_path)
     proc = subprocess.run([sys.executable, "-c", FSIZE_WRITER, str(tmp_path / "a"), str(limit)], cwd=ROOT,
                           capture_output=True, text=True, timeout=scaled(120))
@@ -268,36 +210,11 @@ def test_file_size_limit_keeps_the_old_output_set(tmp_path, limit, failing):
     # OpenEXR's C++ stream may swallow the error of its last flush: the read-back check names it then
     reason = "(File too large|the file written does not read back complete .disk full or a file-size limit..)"
     assert re.fullmatch(f"OutputWriteError cannot write '{re.escape(str(tmp_path / failing))}': {reason}; "
-                        r"no output was replaced \(the earlier files are unchanged\)", proc.stdout.strip()), proc.stdout
-    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
-
-
-def test_simulated_full_disk_in_a_group(tmp_path, monkeypatch):
-    """ENOSPC from the third of three writes: nothing replaced, no temporary, the file named."""
-    before = _old_set(tmp_path)
-    real_write = os.write
-    calls = []
-
-    def full(fd, data):
-        calls.append(fd)
-        if len(calls) == 3:
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-        return real_write(fd, data)
-
-    with pytest.raises(OutputWriteError) as info:
-        with atomic_group():
-            for name in ("a.exr", "a_dolp.png", "a_rgb.png"):
-                with atomic_path(tmp_path / name) as tmp:
-                    fd = os.open(tmp, os.O_WRONLY)
-                    try:
-                        monkeypatch.setattr(os, "write", full)
-                        os.write(fd, b"new " + name.encode())
-                    finally:
-                        monkeypatch.setattr(os, "write", real_write)
-                        os.close(fd)
-    assert str(info.value) == (f"[Errno 28] cannot write '{tmp_path / 'a_rgb.png'}': No space left on device; "
-                               "no output was replaced (the earlier files are unchanged)")
-    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+                        r"the earlier file is unchanged", proc.stdout.strip()), proc.stdout
+    after = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    assert set(after) == set(before)                                 # no temporary
+    kept = [n for n in before if n != "a.exr"] if failing != "a.exr" else list(before)
+    assert {n: after[n] for n in kept} == {n: before[n] for n in kept}
 
 
 def test_temporary_names_fit_the_file_system(tmp_path):
@@ -306,7 +223,7 @@ def test_temporary_names_fit_the_file_system(tmp_path):
     name_max = os.pathconf(tmp_path, "PC_NAME_MAX")
     target = tmp_path / ("x" * 240 + ".exr")
     with atomic_path(target) as tmp:
-        assert len(os.fsencode(tmp.name)) <= name_max and tmp.name.endswith(".tmp.exr")
+        assert len(os.fsencode(tmp.name)) <= name_max and tmp.name.endswith(".exr")
         assert atomic.TEMP_NAME_RE.match(tmp.name)
         tmp.write_bytes(b"ok")
     assert target.read_bytes() == b"ok"
@@ -323,29 +240,27 @@ def test_temporary_names_fit_the_file_system(tmp_path):
 SIGTERM_WRITER = textwrap.dedent(r"""
     import sys, time
     from pathlib import Path
-    from hyde_bsdf.io.atomic import atomic_dir, atomic_path, install_signal_cleanup, Terminated
-    install_signal_cleanup()
+    from hyde_bsdf.app.signals import Terminated, handle_signals
+    from hyde_bsdf.io.atomic import atomic_path
     out = Path(sys.argv[1])
     try:
-        with atomic_dir(out / "report") as new:
-            (new / "index.html").write_text("half")
-            with atomic_path(out / "a.exr") as tmp:
-                tmp.write_bytes(b"half")
-                print("ready", flush=True)
-                time.sleep(60)
+        with handle_signals(), atomic_path(out / "a.exr") as tmp:
+            tmp.write_bytes(b"half")
+            print("ready", flush=True)
+            time.sleep(60)
     except Terminated as exc:
         print("terminated", exc.signum, flush=True)
         sys.exit(143)
 """)
 
 
-def test_sigterm_removes_temporaries_and_partial_folders(tmp_path):
+def test_sigterm_removes_temporaries(tmp_path):
     (tmp_path / "a.exr").write_bytes(b"old")
     proc = subprocess.Popen([sys.executable, "-c", SIGTERM_WRITER, str(tmp_path)], cwd=ROOT,
                             stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout.readline().strip() == "ready"
-        assert len(list(tmp_path.iterdir())) == 3          # a.exr, its temporary, the .partial folder
+        assert len(list(tmp_path.iterdir())) == 2          # a.exr and its temporary
         proc.send_signal(signal.SIGTERM)
         out, _ = proc.communicate(timeout=scaled(30))
     finally:
@@ -357,25 +272,20 @@ def test_sigterm_removes_temporaries_and_partial_folders(tmp_path):
 
 def test_next_run_removes_what_a_killed_run_left(tmp_path):
     """Temporaries of a dead process (a child that has exited) are removed by the next run's
-    output check; a live process's, a user's look-alike file without our pattern, and an earlier
-    version's temporary younger than an hour stay."""
+    output check; a live process's, and a user's look-alike file, stay."""
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True,
                           text=True).stdout.strip()
     host = atomic._HOST
-    stale_file = tmp_path / f".a.exr.{host}{dead}-abc123.tmp.exr"
-    stale_dir = tmp_path / f".report.{host}{dead}-abc123.partial"
-    live_file = tmp_path / f".b.exr.{host}{os.getppid()}-abc123.tmp.exr"
+    stale_file = tmp_path / f".a.exr.tmp-{host}-{dead}-abc123.exr"
+    stale_dir = tmp_path / f".report.tmp-{host}-{dead}-abc123"
+    live_file = tmp_path / f".b.exr.tmp-{host}-{os.getppid()}-abc123.exr"
     user_file = tmp_path / ".a.exr.notours.tmp.exr"
-    legacy_old = tmp_path / ".a.exr.k3j_9xq2.tmp.exr"              # an earlier version's, 2 h old
-    legacy_new = tmp_path / ".b.exr.p0q1r2s3.tmp.exr"              # ... and a fresh one: kept
-    for f in (stale_file, live_file, user_file, legacy_old, legacy_new):
+    for f in (stale_file, live_file, user_file):
         f.write_bytes(b"x")
-    os.utime(legacy_old, (os.path.getmtime(legacy_old) - 7200,) * 2)
     stale_dir.mkdir()
     (stale_dir / "index.html").write_text("half")
-    atomic._CLEANED.discard(os.path.abspath(tmp_path))
     check_output_path(tmp_path / "a.exr")                          # before the work of the next run
-    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live_file.name, user_file.name, legacy_new.name])
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([live_file.name, user_file.name])
 
 
 def test_check_output_paths_refuse_before_work(tmp_path):
@@ -393,63 +303,3 @@ def test_check_output_paths_refuse_before_work(tmp_path):
         assert str(path) in str(info.value) and "\n" not in str(info.value)
     assert check_output_path(tmp_path / "new" / "x.exr") == tmp_path / "new" / "x.exr"
     assert (tmp_path / "new").is_dir()
-
-
-# ---- issue 24: the folder manifest vouches only for unchanged files; symlinks are never followed
-
-def _report(folder, files):
-    with atomic_dir(folder) as new:
-        for name, text in files.items():
-            (new / name).parent.mkdir(parents=True, exist_ok=True)
-            (new / name).write_text(text)
-
-
-def test_a_listed_file_changed_since_is_not_deleted(tmp_path):
-    """The manifest lists fig.png, but the user replaced it with their own image (same name): its
-    SHA-256 no longer matches, so it is the user's -- refused without force, kept with it."""
-    report = tmp_path / "report"
-    _report(report, {"index.html": "r1", "fig.png": "figure 1"})
-    (report / "fig.png").write_text("the user's own image")
-    with pytest.raises(UsageError, match=r"holds 1 file\(s\) that no earlier run wrote \('fig.png'"):
-        with atomic_dir(report) as new:
-            raise AssertionError("the work started")
-    with atomic_dir(report, force=True) as new:
-        (new / "index.html").write_text("r2")
-    assert (report / "fig.png").read_text() == "the user's own image" and (report / "index.html").read_text() == "r2"
-
-
-def test_a_users_empty_folder_tree_is_never_removed(tmp_path):
-    report = tmp_path / "report"
-    _report(report, {"index.html": "r1", "figs/a.png": "a"})
-    (report / "mine" / "empty" / "tree").mkdir(parents=True)
-    with pytest.raises(UsageError, match=r"'mine/'"):
-        with atomic_dir(report) as new:
-            raise AssertionError("the work started")
-    with atomic_dir(report, force=True) as new:
-        (new / "index.html").write_text("r2")
-    assert (report / "mine" / "empty" / "tree").is_dir()
-    assert not (report / "figs").exists()            # the folder the earlier run created, now empty: removed
-
-
-def test_a_hand_edited_manifest_cannot_reach_outside_through_a_symlink(tmp_path):
-    """A manifest edited to list 'link/victim.txt' (with the right hash) where 'link' points
-    outside the folder: nothing outside is deleted, even with force."""
-    import json
-    outside = tmp_path / "outside"
-    outside.mkdir()
-    (outside / "victim.txt").write_text("precious")
-    report = tmp_path / "report"
-    _report(report, {"index.html": "r1"})
-    os.symlink(outside, report / "link")
-    m = report / ".hyde-manifest.json"
-    data = json.loads(m.read_text())
-    data["files"].append("link/victim.txt")
-    data["sha256"]["link/victim.txt"] = hashlib.sha256(b"precious").hexdigest()
-    data["files"].append("../outside/victim.txt")
-    m.write_text(json.dumps(data))
-    with atomic_dir(report, force=True) as new:
-        (new / "index.html").write_text("r2")
-        (new / "link").mkdir()
-        (new / "link" / "victim.txt").write_text("new")   # a new file under the link's name
-    assert (outside / "victim.txt").read_text() == "precious"
-    assert (report / "link.orig").is_symlink() and (report / "link" / "victim.txt").read_text() == "new"

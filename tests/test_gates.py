@@ -1,4 +1,4 @@
-"""The file gates (``hyde_bsdf.io``): the one memory check, the input gate and the output gate.
+"""The one memory check (``hyde_bsdf.resources``) and the file gates (``hyde_bsdf.io``).
 
 Each refusal is a UsageError whose one line names the file and the reason, and leaves the file
 system as it was (contents, modes, special files).  The command-level rows are in
@@ -13,7 +13,8 @@ import threading
 import pytest
 
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.io import input_gate, memory, output_gate
+from hyde_bsdf import resources
+from hyde_bsdf.io import input_gate, output_gate
 
 
 # ---- memory
@@ -21,22 +22,23 @@ from hyde_bsdf.io import input_gate, memory, output_gate
 @pytest.mark.parametrize("n, text", [(0, "0 B"), (512, "512 B"), (1536, "1.5 KiB"), (150 * 2**20, "150 MiB"),
                                      (int(74.5 * 2**30), "74.5 GiB"), (3 * 2**40, "3 TiB")])
 def test_sizes_are_printed_in_units_that_show_them(n, text):
-    assert memory.format_bytes(n) == text
+    assert resources.format_bytes(n) == text
 
 
-def test_memory_refusal_names_what_and_the_option_never_zero_gib():
+def test_memory_refusal_names_what_and_the_remedy_never_zero_gib(monkeypatch):
+    monkeypatch.setattr(resources, "available_memory", lambda: 2**20)
     with pytest.raises(UsageError) as exc:
-        memory.check_memory(3 * 2**20, "the 100000x100000 maps", "lower --map-size", available=2**20)
+        resources.check_memory(3 * 2**20, "the 100000x100000 maps", "lower map_size")
     msg = str(exc.value)
-    assert "3 MiB" in msg and "1 MiB" in msg and "--map-size" in msg and "0.00" not in msg
-    assert memory.check_memory(2**20, "x", "y", available=2**20) == 2**20
+    assert "3 MiB" in msg and "1 MiB" in msg and "map_size" in msg and "0.00" not in msg
+    assert resources.check_memory(2**20, "x", "y") == 2**20
 
 
 def test_meminfo_is_read_in_one_place(tmp_path, monkeypatch):
     fake = tmp_path / "meminfo"
     fake.write_text("MemTotal:       16000 kB\nMemAvailable:    8000 kB\n")
-    monkeypatch.setattr(memory, "MEMINFO", str(fake))
-    assert memory.available_bytes() == 8000 * 1024 and memory.total_bytes() == 16000 * 1024
+    monkeypatch.setattr(resources, "MEMINFO", str(fake))
+    assert resources.available_memory() == 8000 * 1024 and resources.total_memory() == 16000 * 1024
 
 
 def test_no_other_module_reads_proc_meminfo():
@@ -44,7 +46,7 @@ def test_no_other_module_reads_proc_meminfo():
     from pathlib import Path
     root = Path(hyde_bsdf.__file__).parent
     readers = [str(p.relative_to(root)) for p in root.rglob("*.py")
-               if "/proc/meminfo" in p.read_text() and p.name != "memory.py"]
+               if "/proc/meminfo" in p.read_text() and p.name != "resources.py"]
     assert readers == []
 
 
@@ -158,19 +160,19 @@ def test_concurrent_writers_of_one_output_fail_fast(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path / "run"))
     (tmp_path / "run").mkdir(mode=0o700)
     target = tmp_path / "render.exr"
-    with output_gate.OutputLock([target], "render output"):
+    with resources.OutputLock([target], "render output"):
         err = []
         t = threading.Thread(target=lambda: _try_lock(target, err))
         t.start()
         t.join()
         assert len(err) == 1 and f"pid {os.getpid()}" in err[0] and "another run" in err[0]
-    with output_gate.OutputLock([target]):      # released: free again
+    with resources.OutputLock([target]):      # released: free again
         pass
 
 
 def _try_lock(target, err):
     try:
-        with output_gate.OutputLock([target], "render output"):
+        with resources.OutputLock([target], "render output"):
             pass
     except UsageError as exc:
         err.append(str(exc))

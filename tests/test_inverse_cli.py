@@ -98,14 +98,15 @@ def test_bad_output_path_refused_before_optimising(capsys, tmp_path):
 
 
 def test_memory_estimate_refused_with_the_flag(capsys, monkeypatch, tmp_path):
-    monkeypatch.setattr("hyde_bsdf.inverse.memory._mem_available", lambda: 64 * 2**20)
+    monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 64 * 2**20)
     rc, _, err = _run(capsys, TINY + ["-o", str(tmp_path)])
     assert rc == 2
     line = _one_error_line(err)
     assert "of memory needed" in line and "64 MiB is available" in line and "--spp" in line and "--res" in line
     rc, _, err = _run(capsys, ["--maps"] + TINY + ["-o", str(tmp_path)])
     assert rc == 2 and "--spp" in _one_error_line(err)
-    assert inv.estimate_memory(64, 64, 16) == inv.AD_BYTES_FIXED + inv.AD_BYTES_PER_SAMPLE * 64 * 64 * 16
+    from hyde_bsdf.resources import COSTS, inversion_bytes
+    assert inversion_bytes(64 * 64, 16) == COSTS.ad_fixed_bytes + COSTS.ad_bytes_per_sample * 64 * 64 * 16
 
 
 def test_maps_mode_end_to_end_progress_and_atomic_outputs(capsys, tmp_path):

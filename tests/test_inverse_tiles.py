@@ -139,16 +139,13 @@ def test_dask_local_cluster_gives_the_same_maps_as_one_process(capture, serial):
     np.testing.assert_allclose(res.stderr["alpha"], serial.stderr["alpha"], rtol=1e-6, equal_nan=True)
 
 
-def test_memory_check_names_the_tiles_option(monkeypatch):
-    """The estimate of the largest tile times the workers against the available memory: refused
-    with one line naming --tiles, --spp and --workers; 1224 x 1024 at 4 spp in one piece needs ~10 GB."""
-    from hyde_bsdf.inverse import memory
+def test_memory_estimate_of_a_tile():
+    """1224 x 1024 px at 4 spp in one piece needs ~16 GB (400 MiB + 3 kB per sample); two tiles of a
+    sixteenth at once fit in 4 GiB (the refusal naming --tiles is test_command_line_memory_refusal_names_tiles)."""
+    from hyde_bsdf.resources import inversion_bytes
 
-    need = memory.estimate_memory(1224, 1024, 4)
-    assert 9.5e9 < need < 11e9
-    with pytest.raises(UsageError, match=r"use more --tiles \(smaller crops\), a lower --spp or fewer --workers$"):
-        memory.tiles_memory_check(1224 * 1024, 4, 1, available=4 * 2**30)
-    assert memory.tiles_memory_check(1224 * 1024 // 16, 4, 2, available=4 * 2**30) < 4 * 2**30
+    assert 15e9 < inversion_bytes(1224 * 1024, 4) < 16.5e9
+    assert 2 * inversion_bytes(1224 * 1024 // 16, 4) < 4 * 2**30
 
 
 def _cli_files(capture):
@@ -202,7 +199,7 @@ def test_command_line_memory_refusal_names_tiles(capsys, capture, monkeypatch, t
     """Too little memory for the whole picture: the refusal names --tiles; with tiles, names --workers too."""
     from hyde_bsdf.app.cli import main
 
-    monkeypatch.setattr("hyde_bsdf.inverse.memory._mem_available", lambda: 64 * 2**20)
+    monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 64 * 2**20)
     assert main(["invert"] + _cli_files(capture) + ["-o", str(tmp_path)]) == 2
     assert "--tiles N" in capsys.readouterr().err
     assert main(["invert"] + _cli_files(capture) + ["--tiles", "2", "-o", str(tmp_path)]) == 2

@@ -320,11 +320,11 @@ def test_lossy_dielectric_interior_with_its_own_plane_waves(length, sigma_h, see
 
 @pytest.mark.parametrize("solver", ["fast", "dense"])
 def test_run_beyond_available_memory_is_refused_before_allocating(monkeypatch, solver):
-    """With 16 MiB available (runtime.memory_available patched), a 1000-unknown partition is refused by the set-up
+    """With 16 MiB available (resources.available_memory patched), a 1000-unknown partition is refused by the set-up
     with one UsageError line naming the need, what is available and the option (`partitions`); nothing is solved."""
     from hyde_bsdf.errors import UsageError
 
-    monkeypatch.setattr(mom.solver, "memory_available", lambda: 16 * 2**20)
+    monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 16 * 2**20)
     monkeypatch.setattr(mom.solver, "solve_partition", lambda task: pytest.fail("a partition was solved"))
     need = r"MiB for 1 worker\(s\), more than the 12\.8 MiB available.*`partitions`"
     with pytest.raises(UsageError, match=need) as exc:

@@ -226,15 +226,27 @@ def test_cpp_eval_of_the_export_agrees_with_the_hyde_plugin_within_the_reported_
 
 # ---------------------------------------------------------------------------------- refusal
 
-def test_oversize_tables_are_refused_before_any_work(tmp_path, capsys):
+def _machine(monkeypatch, disk, memory):
+    """A machine whose disk has ``disk`` bytes free and ``memory`` bytes available."""
+    import shutil
+    usage = shutil.disk_usage(".")
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage._replace(free=disk))
+    monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: memory)
+
+
+def test_oversize_tables_are_refused_before_any_work(tmp_path, capsys, monkeypatch):
     out = tmp_path / "big.pbsdf"
     with pytest.raises(UsageError, match="32-bit index"):
         export_pbsdf(out, rms_slope=0.3, n=1.5, resolution=(2048, 1024, 1024))
-    with pytest.raises(UsageError, match="free"):
-        check_table_size(out, (145, 37, 37), free_disk=10_000_000)
-    with pytest.raises(UsageError, match="memory"):
-        check_table_size(out, (145, 37, 37), free_disk=10**12, free_memory=50_000_000)
-    assert check_table_size(out, (145, 37, 37), free_disk=10**12, free_memory=10**12) == pytest.approx(63.5e6, rel=0.01)
+    with monkeypatch.context() as m:
+        _machine(m, 10_000_000, 10**12)
+        with pytest.raises(UsageError, match="free"):
+            check_table_size(out, (145, 37, 37))
+        _machine(m, 10**12, 50_000_000)
+        with pytest.raises(UsageError, match="memory"):
+            check_table_size(out, (145, 37, 37))
+        _machine(m, 10**12, 10**12)
+        assert check_table_size(out, (145, 37, 37)) == pytest.approx(63.5e6, rel=0.01)
     assert list(tmp_path.iterdir()) == []       # nothing written, no temporary left
     code = main(["export", str(out), "--rms-slope", "0.3", "--n", "1.5", "--resolution", "4000x2000x2000", "-q"])
     err = capsys.readouterr().err

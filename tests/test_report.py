@@ -86,7 +86,7 @@ def _fake_validation(tmp_path, monkeypatch):
 
 
 def test_interrupted_report_keeps_previous_report(tmp_path, monkeypatch):
-    """Issue 10: the report is built in a fresh folder and swapped in at the end, so a run
+    """Issue 10: the report is built in a fresh folder and moved in at the end, so a run
     interrupted half-way (Ctrl-C inside a script) leaves the previous report -- its index.html
     and its figures -- exactly as it was, with no new figure beside it and no temporary folder."""
     _fake_validation(tmp_path, monkeypatch)
@@ -94,7 +94,7 @@ def test_interrupted_report_keeps_previous_report(tmp_path, monkeypatch):
     ok, rows, _ = build_report(out, quick=True, progress=False)
     assert ok and len(rows) == 1
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    assert set(before) == {"index.html", "checks.csv", "fake.png", "fake.csv", ".hyde-report-manifest.json"}
+    assert set(before) == {"index.html", "checks.csv", "fake.png", "fake.csv"}
     assert "1 of 1 checks pass" in before["index.html"].decode()
     monkeypatch.setenv("HYDE_TEST_INTERRUPT", "1")
     try:
@@ -105,18 +105,18 @@ def test_interrupted_report_keeps_previous_report(tmp_path, monkeypatch):
         raise AssertionError("the interrupt did not reach build_report's caller")
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report", "validation"]
-    # A later complete run replaces the report's own files, and only those (issue 15).
+    # A later complete run replaces the report's files.
     monkeypatch.delenv("HYDE_TEST_INTERRUPT")
-    (out / "fake.csv").unlink()               # a report file gone: still the earlier report's folder
+    (out / "fake.csv").unlink()
     assert cli_main(["-o", str(out), "--quick"]) == 0
     assert {p.name for p in out.iterdir()} == set(before)
 
 
 def test_report_never_deletes_a_users_files(tmp_path, monkeypatch, capsys):
-    """Issue 15: ``validate -o DIR`` where DIR is a web site (index.html, no manifest) or an earlier
-    report with a user's file added is refused before any work (exit 2, one line naming the
-    folder); ``--force`` writes the report beside the user's files and keeps them all (the
-    site's index.html as index.html.orig); a report without a manifest is not adopted."""
+    """Issue 15: ``validate -o DIR`` where DIR is a web site (an index.html the report did not
+    write) is refused before any work (exit 2, one line naming the folder); ``--force`` writes the
+    report beside the user's files, replacing only those of the report's names.  A user's file
+    added to an earlier report's folder is kept by the next report."""
     _fake_validation(tmp_path, monkeypatch)
     site = tmp_path / "site"
     site.mkdir()
@@ -124,28 +124,18 @@ def test_report_never_deletes_a_users_files(tmp_path, monkeypatch, capsys):
     (site / "notes.txt").write_text("keep me")
     assert cli_main(["-o", str(site), "--quick"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"hyde-bsdf validate: error: --outdir {str(site)!r} is not a validation report (no "
-                   ".hyde-report-manifest.json) and holds 2 file(s) ('index.html', 'notes.txt'); give a new or "
-                   "empty folder, or pass --force to write the report beside them (they are kept)"]
+    assert err == [f"hyde-bsdf validate: error: --outdir {str(site)!r} is not a validation report and holds 2 "
+                   "file(s) ('index.html', 'notes.txt'); give a new or empty folder, or pass --force to write the "
+                   "report beside them (files of the report's names are replaced)"]
     assert sorted(p.name for p in site.iterdir()) == ["index.html", "notes.txt"]
     assert cli_main(["-o", str(site), "--quick", "--force"]) == 0
-    assert (site / "index.html.orig").read_text() == "<html>my thesis site</html>"
     assert (site / "notes.txt").read_text() == "keep me"
     assert "1 of 1 checks pass" in (site / "index.html").read_text()
-    # an earlier report plus a user's file: refused again without --force
     report = tmp_path / "report"
     build_report(report, quick=True, progress=False)
     (report / "my_figure.png").write_bytes(b"mine")
-    assert cli_main(["-o", str(report), "--quick"]) == 2
-    assert "holds 1 file(s) that no earlier run wrote ('my_figure.png'; its manifest does not list" \
-        in capsys.readouterr().err
-    # a report without its manifest is not adopted (its HTML naming a file does not make it ours):
-    # refused without --force, and with --force its files are kept aside, not deleted
-    (report / ".hyde-report-manifest.json").unlink()
-    assert cli_main(["-o", str(report), "--quick"]) == 2
-    assert "is not a validation report" in capsys.readouterr().err
-    assert cli_main(["-o", str(report), "--quick", "--force"]) == 0
-    assert (report / "my_figure.png").read_bytes() == b"mine" and (report / "index.html.orig").exists()
+    assert cli_main(["-o", str(report), "--quick"]) == 0
+    assert (report / "my_figure.png").read_bytes() == b"mine"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report", "site", "validation"]
 
 

@@ -17,10 +17,10 @@ What happens when things go wrong, for every sub-command (handled once here):
 * Ctrl-C -- ``hyde-bsdf COMMAND: interrupted``, exit 130 (outputs are atomic: the old files stay),
   also when Mitsuba hands it back wrapped in a RuntimeError;
 * SIGTERM / SIGHUP -- ``hyde-bsdf COMMAND: terminated (SIGTERM)``, exit 143 / 129: the signal
-  unwinds like Ctrl-C, so hidden temporary files and ``.partial`` folders are removed
-  (:func:`hyde_bsdf.io.atomic.install_signal_cleanup`; after a SIGKILL the next run removes them);
-* a failed write (disk full, quota, I/O error) -- one line naming the file, exit 2; the earlier
-  output set is unchanged (:class:`hyde_bsdf.io.atomic.OutputWriteError`);
+  unwinds like Ctrl-C, so hidden temporary files are removed (:mod:`hyde_bsdf.app.signals`;
+  after a SIGKILL the next run's output checks remove them);
+* a failed write (disk full, quota, I/O error) -- one line naming the file, exit 2; that file is
+  unchanged (:class:`hyde_bsdf.io.atomic.OutputWriteError`);
 * a closed output pipe (``hyde-bsdf fit data.csv | head``) -- quiet, exit 141 (as for SIGPIPE);
 * anything else is a bug and keeps its Python traceback (exit 1).
 
@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import importlib
 import os
-import signal
 import sys
 
 #: sub-command -> (module, one-line help)
@@ -54,7 +53,6 @@ COMMANDS = {
 
 EXIT_USAGE = 2
 EXIT_FAILED = 1
-EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141
 
 
@@ -95,14 +93,12 @@ def _usage(argv, command) -> int:
     return 0 if argv else EXIT_USAGE
 
 
-def _interrupt_in(exc) -> bool:
-    """Whether a Ctrl-C (or SIGTERM) is the cause of ``exc`` (Mitsuba wraps it in a RuntimeError)."""
+def _interrupt_in(exc):
+    """The Ctrl-C (or SIGTERM) that caused ``exc`` (Mitsuba wraps it in a RuntimeError), or None."""
     cause = exc
-    while cause is not None:
-        if isinstance(cause, KeyboardInterrupt):
-            return True
+    while cause is not None and not isinstance(cause, KeyboardInterrupt):
         cause = cause.__cause__ or cause.__context__
-    return False
+    return cause
 
 
 def _one_line_warnings(command):
@@ -140,31 +136,23 @@ def main(argv: list[str] | None = None) -> int:
     command = argv[0] if argv else ""
     if command not in COMMANDS:
         return _usage(argv, command)
-    from hyde_bsdf.io.atomic import install_signal_cleanup
+    from hyde_bsdf.app.signals import handle_signals
 
-    previous = install_signal_cleanup()
-    try:
+    with handle_signals():          # in-process callers (tests) get their handlers back
         return _convert(command, argv[1:])
-    finally:
-        for sig, handler in previous.items():   # in-process callers (tests) get their handlers back
-            signal.signal(sig, handler)
 
 
 def _convert(command: str, argv: list) -> int:
     """The one place where exceptions become messages and exit codes."""
+    from hyde_bsdf.app.signals import outcome
     from hyde_bsdf.errors import RejectedResult, UsageError, one_line
-    from hyde_bsdf.io.atomic import Terminated, remove_live_temporaries
 
     try:
         return _run(command, argv)
-    except Terminated as exc:
-        remove_live_temporaries()   # any a Python callback inside Mitsuba could not unwind
-        _error(command, f"terminated ({exc})")
-        return 128 + exc.signum
-    except KeyboardInterrupt:
-        remove_live_temporaries()
-        _error(command, "interrupted")
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as exc:          # Ctrl-C, SIGTERM, SIGHUP
+        message, code = outcome(exc)
+        _error(command, message)
+        return code
     except BrokenPipeError:
         _quiet_stdout()
         return EXIT_BROKEN_PIPE
@@ -185,11 +173,12 @@ def _convert(command: str, argv: list) -> int:
         _error(command, f"error: {exc.strerror or one_line(exc)}{where}")
         return EXIT_USAGE
     except RuntimeError as exc:
-        if not _interrupt_in(exc):
+        cause = _interrupt_in(exc)
+        if cause is None:
             raise
-        remove_live_temporaries()
-        _error(command, "interrupted")
-        return EXIT_INTERRUPTED
+        message, code = outcome(cause)
+        _error(command, message)
+        return code
 
 
 if __name__ == "__main__":

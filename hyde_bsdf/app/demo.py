@@ -16,9 +16,8 @@ and writes into the output folder:
 
 With an unpolarized ``--variant`` (``llvm_ad_rgb``, ...) only ``demo.exr`` (R, G, B) and
 ``demo_rgb.png`` are written.  The output folder and every file in it are checked before the
-render starts; the files are written as one set (:func:`hyde_bsdf.io.atomic.atomic_group`): the
-old pictures are replaced only once every new file is written, so a full disk leaves them as
-they were.  Once the picture's size is known, before the first pass, the folder's free space is
+render starts; each file replaces its old version only once it is complete
+(:mod:`hyde_bsdf.io.atomic`), so a full disk leaves the file it stopped at as it was.  Once the picture's size is known, before the first pass, the folder's free space is
 checked against an upper bound of the set's size (:func:`demo_bytes`).
 
 The default (448 x 280 pixels, 96 spp) takes ~15-20 s on 2 cores with the LLVM
@@ -38,9 +37,9 @@ from hyde_bsdf.app.pictures import (png_bytes, polarization_png_paths, save_png,
                                     save_rgb_png)
 from hyde_bsdf.app.render import output_bytes, room_for
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.io.atomic import atomic_group, check_output_dir, check_output_path
 from hyde_bsdf.io.input_gate import check_input
-from hyde_bsdf.io.output_gate import OutputLock
+from hyde_bsdf.io.output_gate import check_output_dir, check_output_path
+from hyde_bsdf.resources import OutputLock
 from hyde_bsdf.io.stokes_exr import write_stokes_exr
 from hyde_bsdf.progress import stderr_lines
 from hyde_bsdf.render.polarization import polarization_quantities, tonemap
@@ -105,14 +104,13 @@ def _render_demo(outdir, width, height, spp, variant, seed, bsdf, scene) -> dict
                                                   "free some space, choose another folder (-o) or "
                                                   "lower --width/--height"))
     meta = dict(result["meta"], bsdf=bsdf, scene=scene.name)
-    with atomic_group():      # the EXR and PNGs replace the old set together, or not at all
-        paths = {"exr": write_stokes_exr(outdir / "demo.exr", result, metadata=meta)}
-        title = f"demo ({bsdf})"
-        if meta["polarized"]:
-            paths.update(save_polarization_pngs(result, outdir / "demo", title=title))
-            paths["overview"] = _overview(result, outdir / "demo_overview.png", title)
-        else:
-            paths["rgb"] = save_rgb_png(result["RGB"], outdir / "demo_rgb.png", title)
+    paths = {"exr": write_stokes_exr(outdir / "demo.exr", result, metadata=meta)}
+    title = f"demo ({bsdf})"
+    if meta["polarized"]:
+        paths.update(save_polarization_pngs(result, outdir / "demo", title=title))
+        paths["overview"] = _overview(result, outdir / "demo_overview.png", title)
+    else:
+        paths["rgb"] = save_rgb_png(result["RGB"], outdir / "demo_rgb.png", title)
     _log(f"{meta['spp']} spp in {meta['seconds']:.1f} s; wrote " + ", ".join(str(p) for p in paths.values()))
     return paths
 

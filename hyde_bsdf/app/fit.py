@@ -35,7 +35,7 @@ from pathlib import Path
 
 from hyde_bsdf.app.accuracy import add_height_options, fit_verdict, height_wl, pbsdf_verdict_lines
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
-from hyde_bsdf.app.plots import PLOT_BYTES, PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit, plot_selection
+from hyde_bsdf.app.plots import PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit, plot_selection
 from hyde_bsdf.errors import RejectedResult, UsageError
 from hyde_bsdf.fit.adequacy import InadequateModelWarning
 from hyde_bsdf.fit.model_selection import select_model, select_model_pbsdf
@@ -48,6 +48,7 @@ from hyde_bsdf.io.measurements import read_measurements
 from hyde_bsdf.io.pbsdf_file import read_pbsdf
 from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
 from hyde_bsdf.progress import stderr_lines
+from hyde_bsdf.resources import COSTS
 
 __all__ = ["is_pbsdf", "cli_main", "csv_main", "pbsdf_main", "csv_parser", "pbsdf_parser"]
 
@@ -191,13 +192,13 @@ def csv_main(argv=None) -> int:
 
 def _output_gate(args):
     """The output gate on ``-o`` (and, when the model is chosen, its ``_models`` plot) for the whole
-    run: not the data file, one writer at a time, room for each plot (:data:`PLOT_BYTES`)."""
+    run: not the data file, one writer at a time, room for each plot (:data:`~hyde_bsdf.resources.COSTS`)."""
     if not args.output:
         return contextlib.nullcontext()
     check_plot_path(args.output)
     with user_input():
         plots = [args.output] + ([_models_path(args.output)] if _auto(args) else [])
-    return output_gate(plots, inputs=[args.data], need_bytes=PLOT_BYTES * len(plots), what="-o plot")
+    return output_gate(plots, inputs=[args.data], need_bytes=COSTS.plot_file_bytes * len(plots), what="-o plot")
 
 
 def _csv_run(args) -> int:

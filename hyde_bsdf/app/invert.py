@@ -13,10 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
-from hyde_bsdf.app.plots import PLOT_BYTES, plot_history
+from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
-from hyde_bsdf.inverse.memory import check_memory
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
 from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
 from hyde_bsdf.inverse.maps import invert_maps
@@ -24,13 +23,13 @@ from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT,
                                             map_keys, plane_scene_dict, render_stokes_np)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, invert, load_scene, parameter_keys,
                                       prepare, render_reference, write_history)
-from hyde_bsdf.io.atomic import atomic_group, atomic_open, atomic_path, check_output_path
-from hyde_bsdf.io.memory import check_memory as memory_check
+from hyde_bsdf.io.atomic import atomic_open, atomic_path
 from hyde_bsdf.io.input_gate import check_input
-from hyde_bsdf.io.output_gate import check_free_space, output_gate
+from hyde_bsdf.io.output_gate import check_free_space, check_output_path, output_gate
 from hyde_bsdf.io.stokes_exr import exr_bytes
 from hyde_bsdf.render.renderer import scene_inputs
 from hyde_bsdf.progress import stderr_lines
+from hyde_bsdf.resources import COSTS, check_memory, inversion_bytes
 
 __all__ = ["cli_main", "build_parser"]
 
@@ -206,27 +205,27 @@ def _check_tiles_args(args):
 
 #: invert_maps' default samples per pixel of the uncertainty step (its forward-mode renders; memory check)
 UNCERTAINTY_SPP = 16
-#: bytes per texel of a built-in sample's maps (float64): the truth map, and per fitted parameter
-#: its value, gradient, Adam's two moments and the running average
-MAP_BYTES_PER_TEXEL_FIXED, MAP_BYTES_PER_TEXEL_FITTED = 8, 5 * 8
-
-
 def _check_map_memory(args, fit):
     """--map-size checked against the available memory before any map is allocated."""
     if args.scene:
         return                          # a user scene's textures: their size is the scene's
-    per_texel = MAP_BYTES_PER_TEXEL_FIXED + MAP_BYTES_PER_TEXEL_FITTED * len(fit)
-    memory_check(per_texel * args.map_size ** 2, f"the {args.map_size}x{args.map_size} maps "
+    per_texel = COSTS.map_bytes_per_texel_fixed + COSTS.map_bytes_per_texel_fitted * len(fit)
+    check_memory(per_texel * args.map_size ** 2, f"the {args.map_size}x{args.map_size} maps "
                  f"({per_texel} B per texel)", "lower --map-size")
 
 
-#: upper bound of one row of a history CSV (iteration, loss terms, seconds, an error per map), bytes
-HISTORY_ROW_BYTES = 256
+def _check_step_memory(width, height, args, remedy, uncertainty_spp=0):
+    """One optimisation step on a ``width`` x ``height`` film (and the uncertainty step's renders)
+    checked against the available memory before the scenes render (:func:`~hyde_bsdf.resources.inversion_bytes`)."""
+    need = inversion_bytes(width * height, args.spp, uncertainty_spp)
+    also = f" (and the uncertainty step at {uncertainty_spp} spp)" if uncertainty_spp else ""
+    check_memory(need, f"one optimisation step on the {width}x{height} film at {args.spp} spp{also}",
+                 f"lower {remedy}")
 
 
 def _history_bytes(args) -> int:
     """Upper bound of a history CSV: a header and a row per iteration."""
-    return HISTORY_ROW_BYTES * (args.iterations + 1)
+    return COSTS.history_row_bytes * (args.iterations + 1)
 
 
 def _maps_bytes(args, fit, shape) -> int:
@@ -235,7 +234,7 @@ def _maps_bytes(args, fit, shape) -> int:
     float32 ``.npy`` (128-byte header) and a one-channel ``.exr``; the history CSV; the plot."""
     rows, cols = shape
     per_map = 4 * rows * cols + 128 + exr_bytes(cols, rows, 1)
-    return len(fit) * (2 if args.no_uncertainty else 3) * per_map + _history_bytes(args) + PLOT_BYTES
+    return len(fit) * (2 if args.no_uncertainty else 3) * per_map + _history_bytes(args) + COSTS.plot_file_bytes
 
 
 def _scene_map_shape(observations, fit, args) -> tuple[int, int]:
@@ -310,8 +309,8 @@ def _calibrated(args, fit):
         with user_input(f"--scene {shorten(args.scene[0])}"):
             map_keys(mi.traverse(o.scene), fit, args.target)
         H, W = o.reference.shape[1:]
-        check_memory(W, H, args.spp, "--tiles N (fit tiles of the map from film crops), --spp or the camera's "
-                     "width/height", uncertainty_spp=0 if args.no_uncertainty else UNCERTAINTY_SPP)
+        _check_step_memory(W, H, args, "--tiles N (fit tiles of the map from film crops), --spp or the camera's "
+                           "width/height", uncertainty_spp=0 if args.no_uncertainty else UNCERTAINTY_SPP)
         with user_input():
             check_reference_scale(o.reference, f"--reference {shorten(args.reference[k])}")
         if args.mask:
@@ -371,7 +370,7 @@ def _cli(argv):
         raise UsageError(f"--fit must list parameters from {', '.join(PARAMETERS)}, got {args.fit!r}")
     out = Path(args.output)
     paths = [_check_out(out / name) for name in ("invert_history.csv", "invert.png")]
-    with output_gate(paths, inputs=_run_inputs(args), need_bytes=_history_bytes(args) + PLOT_BYTES,
+    with output_gate(paths, inputs=_run_inputs(args), need_bytes=_history_bytes(args) + COSTS.plot_file_bytes,
                      what="-o/--output file"):
         return _scalar_run(args, truth, start, fit, paths)
 
@@ -387,7 +386,7 @@ def _scalar_run(args, truth, start, fit, paths):
     with user_input():
         parameter_keys(mi.traverse(scene), PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
     W, H = scene.sensors()[0].film().crop_size()
-    check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
+    _check_step_memory(W, H, args, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
     if args.reference:
         ref = _read_reference(args.reference[0], W, H)
         truth_known = args.truth is not None
@@ -401,10 +400,9 @@ def _scalar_run(args, truth, start, fit, paths):
         warnings.simplefilter("always")
         res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
                      seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
-    with atomic_group():      # the CSV and the plot replace the old pair together, or not at all
-        write_history(res, paths[0])
-        plot_history({args.loss: res}, paths[1],
-                     title=f"hyde-bsdf invert ({args.loss} loss, {args.iterations} it, {args.spp} spp)")
+    write_history(res, paths[0])
+    plot_history({args.loss: res}, paths[1],
+                 title=f"hyde-bsdf invert ({args.loss} loss, {args.iterations} it, {args.spp} spp)")
     print(f"loss: {args.loss}; {args.iterations} iterations, {res.seconds_per_iteration:.3f} s/iteration "
           f"(first {res.first_iteration_seconds:.1f} s incl. JIT)")
     for p in PARAMETERS:
@@ -473,7 +471,7 @@ def _preset_observations(args, fit, start):
         material["specular_reflectance"] = 1.0
     truth = {n: np.asarray(material[n], float) for n in fit}
     acq = design_acquisition(args.preset)
-    check_memory(args.res, args.res, args.spp, "--spp or --res")
+    _check_step_memory(args.res, args.res, args, "--spp or --res")
     _log(f"{args.preset} preset: {len(acq.configurations)} pictures of {args.res}x{args.res} px "
          f"({acq.polarized()} behind a polarizer), references at {args.spp_ref} spp + {100 * args.noise:g} % noise")
     observations = synthetic_observations(acq, material, start, res=args.res, spp=args.spp, spp_ref=args.spp_ref,
@@ -505,7 +503,7 @@ def _scene_observations(args, fit):
         with user_input(f"scene {i}"):
             map_keys(mi.traverse(scene), fit, args.target)
         W, H = scene.sensors()[args.sensor].film().crop_size()
-        check_memory(W, H, args.spp, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
+        _check_step_memory(W, H, args, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
         mask = _read_mask(args.mask[i], (H, W)) if args.mask else None
         if args.reference:
             observations.append(_camera_observation(scene, args, args.reference[i], W, H, mask))
@@ -577,8 +575,7 @@ def _maps_run(args, fit, start, paths):
                           truth=truth, prefix=args.target, uncertainty=not args.no_uncertainty)
     messages = list(dict.fromkeys(res.warnings + [str(w.message) for w in caught
                                                   if issubclass(w.category, UserWarning)]))
-    with atomic_group():      # history, maps and plot replace the old set together, or not at all
-        _write_map_outputs(res, paths, args)
+    _write_map_outputs(res, paths, args)
     _print_maps_result(res, args, fit, start, len(observations), paths, messages)
     return 0
 
@@ -610,8 +607,7 @@ def _tiled_run(args, fit, start, paths):
             client.close()
     messages = list(dict.fromkeys(res.warnings + [str(w.message) for w in caught
                                                   if issubclass(w.category, UserWarning)]))
-    with atomic_group():
-        _write_map_outputs(res, paths, args)
+    _write_map_outputs(res, paths, args)
     _print_maps_result(res, args, fit, start, len(args.reference), paths, messages)
     print(f"tiles: {len(res.tiles)} task(s) of {args.tile_grid[0]}x{args.tile_grid[1]}, {res.wall_seconds:.1f} s in all, "
           f"peak RSS of a task's process {max(t['peak_rss'] for t in res.tiles) / 2**30:.2f} GiB")

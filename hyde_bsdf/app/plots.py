@@ -18,22 +18,16 @@ from hyde_bsdf.fit.mueller_fit import FitResult, mueller_elements
 from hyde_bsdf.fit.pbsdf_fit import PbsdfFitResult
 from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples
 from hyde_bsdf.inverse.scalar import PARAMETERS
-from hyde_bsdf.io.atomic import atomic_path, check_output_path
+from hyde_bsdf.io.atomic import atomic_path
+from hyde_bsdf.io.output_gate import check_output_path
 from hyde_bsdf.io.measurements import Measurements
 
-__all__ = ["PLOT_FORMATS", "PLOT_POINTS", "PLOT_BYTES", "check_plot_path", "plot_fit", "plot_pbsdf_fit",
+__all__ = ["PLOT_FORMATS", "PLOT_POINTS", "check_plot_path", "plot_fit", "plot_pbsdf_fit",
            "plot_history", "plot_selection"]
 
 
 #: at most this many geometries are plotted (a random subset of larger data sets)
 PLOT_POINTS = 2000
-
-
-#: upper bound of one plot file, bytes: what the output gate's free-space check is given per plot.
-#: The largest raster figure (a 16-element fit, 14.4 x 12.8 in at 120 dpi) is 10.6 MB of
-#: uncompressed RGBA; the largest vector one (the .pbsdf fit: 16 panels of 1500 geometries times
-#: the bands, a few hundred bytes a marker) some 30 MB.
-PLOT_BYTES = 64 * 2**20
 
 
 #: plot formats matplotlib writes without extra packages

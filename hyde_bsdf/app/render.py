@@ -11,10 +11,10 @@ writes ``OUT.exr`` (channels R, G, B, S0.R ... S3.B, float32) and
 Every output path is checked before the render starts (a name too long for the file system
 included), and once the scene is loaded, before the first pass, the folder's free space against
 an upper bound of what the set takes (:func:`output_bytes`): a full disk is refused with one line
-naming -o and the bytes needed and free, not after the render.  The files are written as one set
-(:func:`hyde_bsdf.io.atomic.atomic_group`): each to a hidden temporary, renamed only when every
-write has succeeded, so a full disk or a failed write leaves the previous EXR and PNGs complete
-and consistent and ends in one line naming the file (exit 2).
+naming -o and the bytes needed and free, not after the render.  Each file is written to a hidden
+temporary and renamed over the old one when complete (:mod:`hyde_bsdf.io.atomic`), the EXR first:
+a full disk or a failed write leaves that file as it was, no temporary, and ends in one line
+naming the file (exit 2).
 """
 from __future__ import annotations
 
@@ -24,9 +24,8 @@ from pathlib import Path
 from hyde_bsdf.app.args import Parser, positive_int, quiet_option
 from hyde_bsdf.app.pictures import chart_bytes, polarization_png_paths, save_polarization_pngs, save_rgb_png
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.io.atomic import atomic_group, check_output_path
 from hyde_bsdf.io.input_gate import check_input
-from hyde_bsdf.io.output_gate import check_free_space, output_gate
+from hyde_bsdf.io.output_gate import check_free_space, check_output_path, output_gate
 from hyde_bsdf.io.stokes_exr import COLOURS, exr_bytes, exr_channel_names, write_stokes_exr
 from hyde_bsdf.progress import stderr_lines
 from hyde_bsdf.render.renderer import DEFAULT_VARIANT, MAX_SEED, render_stokes, scene_inputs
@@ -83,8 +82,7 @@ def check_outputs(out, polarized: bool, png: bool = True) -> list[Path]:
 def output_bytes(width: int, height: int, polarized: bool, png: bool = True) -> int:
     """Upper bound of the bytes ``render`` writes for a ``width`` x ``height`` film: the EXR
     (float32 channels, :func:`~hyde_bsdf.io.stokes_exr.exr_bytes`) and, with ``png``, each chart
-    (:func:`~hyde_bsdf.app.pictures.chart_bytes`).  The new set is complete beside the old one
-    before the renames, so this is what the folder must have free."""
+    (:func:`~hyde_bsdf.app.pictures.chart_bytes`): what the folder must have free."""
     channels = len(exr_channel_names()) if polarized else len(COLOURS)
     charts = len(polarization_png_paths("out", polarized)) if png else 0
     return exr_bytes(width, height, channels) + charts * chart_bytes(width, height)
@@ -116,16 +114,15 @@ def _render_and_write(args, out: Path) -> int:
                            before_passes=room_for(out.parent, f"-o {shorten(str(out))}",
                                                   lambda w, h, pol: output_bytes(w, h, pol, not args.no_png)))
     meta = result["meta"]
-    with atomic_group():      # the EXR and its PNGs replace the old set together, or not at all
-        write_stokes_exr(out, result, metadata=meta)
-        written = [out]
-        if not args.no_png:
-            stem = out.with_suffix("")
-            title = Path(args.scene).stem
-            if meta["polarized"]:
-                written += list(save_polarization_pngs(result, stem, title=title).values())
-            else:
-                written.append(save_rgb_png(result["RGB"], polarization_png_paths(stem, False)["rgb"], title))
+    write_stokes_exr(out, result, metadata=meta)
+    written = [out]
+    if not args.no_png:
+        stem = out.with_suffix("")
+        title = Path(args.scene).stem
+        if meta["polarized"]:
+            written += list(save_polarization_pngs(result, stem, title=title).values())
+        else:
+            written.append(save_rgb_png(result["RGB"], polarization_png_paths(stem, False)["rgb"], title))
     _log(f"{meta['spp']} spp in {meta['seconds']:.1f} s ({meta['variant']}); wrote "
          + ", ".join(str(p) for p in written))
     return 0

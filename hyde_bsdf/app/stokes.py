@@ -106,7 +106,7 @@ def cli_main(argv=None) -> int:
 
 def _outputs(args) -> tuple[Path, Path]:
     """(-o, the charts' stem), every output path checked before any frame is read."""
-    from hyde_bsdf.io.atomic import check_output_path
+    from hyde_bsdf.io.output_gate import check_output_path
 
     out = check_output_path(args.output, "-o/--output file")
     if out.suffix.lower() != ".exr":
@@ -163,14 +163,12 @@ def _estimate(args):
 
 
 def _write(est, out: Path, stem: Path, dn_per_unit: float) -> dict:
-    """The EXR and its charts, as one set (the old set stays if any write fails)."""
+    """The EXR, then its charts (each file replaces its old version once complete)."""
     from hyde_bsdf.app.pictures import save_polarization_pngs
     from hyde_bsdf.inverse.analyzer import chart_stokes, write_stokes_estimate
-    from hyde_bsdf.io.atomic import atomic_group
 
-    with atomic_group():          # the EXR and its charts replace the old set together, or not at all
-        paths = {"exr": write_stokes_estimate(est, out, metadata={"dn_per_unit": f"{dn_per_unit:g}"})}
-        paths.update(save_polarization_pngs(chart_stokes(est), stem, out.stem, charts=CHARTS))
+    paths = {"exr": write_stokes_estimate(est, out, metadata={"dn_per_unit": f"{dn_per_unit:g}"})}
+    paths.update(save_polarization_pngs(chart_stokes(est), stem, out.stem, charts=CHARTS))
     return paths
 
 

@@ -51,12 +51,11 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.io.atomic import atomic_path, check_output_path
+from hyde_bsdf.io.atomic import atomic_path
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
 from hyde_bsdf.io.ior import material_files
-from hyde_bsdf.io.memory import check_memory, format_bytes
-from hyde_bsdf.io.output_gate import OutputLock, check_free_space
+from hyde_bsdf.io.output_gate import check_free_space, check_output_path
 from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, read_pbsdf,
                                      rusinkiewicz_to_directions, table_frame_x, table_nbytes)
 from hyde_bsdf.model.evaluator import pbrdf
@@ -64,6 +63,7 @@ from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N, RMS_SLOPE
 from hyde_bsdf.model.terms import check_pair
 from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
+from hyde_bsdf.resources import COSTS, OutputLock, check_memory, format_bytes
 
 __all__ = ["DEFAULT_RESOLUTION", "edge_deg", "ALPHA_CANDIDATES", "ExportReport", "grids",
            "band_index", "check_table_size", "interpolation_error", "suggest_alpha_sample",
@@ -78,8 +78,6 @@ DEFAULT_RESOLUTION = (37, 55, 55)
 ALPHA_CANDIDATES = tuple(float(a) for a in np.round(np.geomspace(0.005, 1.0, 24), 4))
 #: Mitsuba's Marginal2D indexes the table with 32-bit integers
 MAX_ELEMENTS = 2 ** 32 - 1
-#: Mitsuba's loader: the mapped file plus its own copy of M
-LOADER_COPIES = 2
 _JSON_BYTES = 4096
 RESOLUTION_RANGE = (2, 4097)
 
@@ -149,12 +147,11 @@ def band_index(wavelengths=KAIST_WAVELENGTHS, n=None, k=None, material=None):
 # ---------------------------------------------------------------------------------------------
 # size checks
 
-def check_table_size(path, resolution, bands: int = len(KAIST_WAVELENGTHS), free_disk=None,
-                     free_memory=None) -> int:
+def check_table_size(path, resolution, bands: int = len(KAIST_WAVELENGTHS)) -> int:
     """Refuse (UsageError, before any work) a table that Mitsuba cannot index (>= 2^32 floats), that
     does not fit on the disk of ``path``'s folder, or whose loading (about 2x the file size: the
-    mapped file and the loader's copy) exceeds the available memory.  Returns the file size in
-    bytes.  ``free_disk`` / ``free_memory`` (bytes) override the measured values (for tests)."""
+    mapped file and the loader's copy, :data:`~hyde_bsdf.resources.COSTS`) exceeds the available memory.
+    Returns the file size in bytes."""
     n_pd, n_td, n_th = _check_resolution(resolution)
     elements = n_pd * n_td * n_th * bands * 16
     nbytes = table_nbytes(n_pd, n_td, n_th, bands) + _JSON_BYTES
@@ -164,9 +161,9 @@ def check_table_size(path, resolution, bands: int = len(KAIST_WAVELENGTHS), free
                          f"limit ({MAX_ELEMENTS}); choose a smaller resolution")
     folder = Path(path).parent if str(Path(path).parent) else Path(".")
     check_free_space(folder, nbytes, f"pBSDF file {shorten(str(path))} (resolution {res})",
-                     "choose a smaller resolution or another folder", free=free_disk)
-    check_memory(LOADER_COPIES * nbytes, f"loading the {res} table ({format_bytes(nbytes)}) in Mitsuba",
-                 "choose a smaller resolution", available=free_memory)
+                     "choose a smaller resolution or another folder")
+    check_memory(COSTS.pbsdf_loader_copies * nbytes, f"loading the {res} table ({format_bytes(nbytes)}) in "
+                 "Mitsuba", "choose a smaller resolution")
     return nbytes
 
 

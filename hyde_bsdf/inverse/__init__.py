@@ -59,8 +59,6 @@ NAME_seen.npy/.exr (1 where a picture sees the texel) and OUTDIR/invert_maps.png
 """
 
 from hyde_bsdf.inverse._common import Y_WEIGHTS, NotConvergedWarning
-from hyde_bsdf.inverse.memory import (AD_BYTES_FIXED, AD_BYTES_PER_SAMPLE, AD_FORWARD_BYTES_PER_SAMPLE, check_memory,
-                                     estimate_memory, tiles_memory_check)
 from hyde_bsdf.inverse.loss import (REFERENCE_RANGE, StokesLoss, channel_names, check_reference_scale,
                                     interior_mask, smoothness, stokes_images)
 from hyde_bsdf.inverse.acquisition import (Acquisition, Configuration, acquisition_scene_dict,
@@ -99,6 +97,4 @@ __all__ = ["CameraNoise", "StokesEstimate", "analysis_matrix", "retarder_mueller
            "MapInversionResult", "invert_maps", "MapProblem", "map_loss", "map_step", "LogAdam", "map_uncertainty",
            "Uncertainty", "UnidentifiedParameterWarning", "STDERR_THRESHOLD", "NotConvergedWarning",
            "BilinearFilterWarning", "CONVERGENCE_THRESHOLD", "MISFIT_P", "trajectory_converged", "filters_bilinearly", "pixel_texels", "Configuration",
-           "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition", "predicted_stderr", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS",
-           "estimate_memory", "check_memory", "tiles_memory_check", "AD_BYTES_FIXED", "AD_BYTES_PER_SAMPLE",
-           "AD_FORWARD_BYTES_PER_SAMPLE", "Y_WEIGHTS"]
+           "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition", "predicted_stderr", "example_maps", "plane_scene_dict", "VIEW_AZIMUTHS", "LIGHTS", "Y_WEIGHTS"]

@@ -28,9 +28,9 @@ of a tile does not depend on the executor that ran it (tests/test_inverse_tiles.
 agree to float noise).  Against the untiled run the sample pattern differs (a crop renders other
 random numbers), so the tiled maps agree with it within the standard errors, not bit for bit.
 
-Memory: each task holds one differentiable render of its crops; :func:`check_tiles_memory` checks
-the largest tile's estimate (:func:`~hyde_bsdf.inverse.memory.estimate_memory`) times the workers
-that run at once against the available memory before any task starts.
+Memory: each task holds one differentiable render of its crops; the largest tile's estimate
+(:func:`~hyde_bsdf.resources.inversion_bytes`) times the workers that run at once is checked against
+the available memory before any task starts.
 """
 from __future__ import annotations
 
@@ -47,10 +47,10 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError, UsageTypeError
 from hyde_bsdf.inverse.maps import MapInversionResult, invert_maps
-from hyde_bsdf.inverse.memory import tiles_memory_check
 from hyde_bsdf.inverse.observations import MAP_VARIANT, Observation, map_keys, pixel_texels
 from hyde_bsdf.inverse.uncertainty import CONVERGENCE_THRESHOLD, STDERR_THRESHOLD, identification_warnings
 from hyde_bsdf.progress import as_callback
+from hyde_bsdf.resources import check_memory, inversion_bytes
 
 __all__ = ["Capture", "Tile", "tile_bounds", "pixel_tiles", "plan_tiles", "run_tile", "invert_maps_tiled", "stitch_tiles"]
 
@@ -314,8 +314,10 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
                          "--camera/--light files and the references' masks)")
     spp = int(options.get("spp", 4))
     unc_spp = int(options.get("uncertainty_spp", 16)) if options.get("uncertainty", True) else 0
-    estimate = tiles_memory_check(max(t.pixels for t in tasks), spp, _concurrency(executor, workers),
-                                  uncertainty_spp=unc_spp)
+    largest, concurrent = max(t.pixels for t in tasks), _concurrency(executor, workers)
+    estimate = check_memory(inversion_bytes(largest, spp, unc_spp) * concurrent,
+                            f"{concurrent} tile(s) at once, the largest with {largest} px of film crops at {spp} spp",
+                            "use more --tiles (smaller crops), a lower --spp or fewer --workers")
     own = executor is None
     # spawned, not forked: a fork copies this process mid-work in Dr.Jit's (and a dask client's) threads,
     # and the children deadlock (measured: a forked pool after a dask LocalCluster in the same process)

@@ -30,7 +30,7 @@ import sys
 from pathlib import Path
 
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.io.memory import check_memory, format_bytes
+from hyde_bsdf.resources import check_memory, format_bytes
 
 __all__ = ["STDIN", "DEFAULT_LIMIT", "CSV_FIELD_LIMIT", "is_stdin", "file_kind", "check_input",
            "read_input", "read_text", "csv_rows", "check_dimensions"]
@@ -145,7 +145,7 @@ def check_dimensions(dims, itemsize: int, what: str, *, available_in_file: int |
                      option: str = "give a smaller table", max_elements: int | None = None) -> int:
     """The byte size of an array of shape ``dims`` (each a non-negative integer), computed without
     overflow, after checking it against ``available_in_file`` (the bytes the file holds for it),
-    ``max_elements`` and the available memory (:func:`hyde_bsdf.io.memory.check_memory`)."""
+    ``max_elements`` and the available memory (:func:`hyde_bsdf.resources.check_memory`)."""
     dims = [int(d) for d in dims]
     if any(d < 0 for d in dims):
         raise UsageError(f"{what}: negative dimension in {dims}")

@@ -51,8 +51,9 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.errors import InputFileError, UsageError
-from hyde_bsdf.io.atomic import atomic_open, check_output_path
+from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf.io.input_gate import STDIN, check_input, csv_rows, read_input
+from hyde_bsdf.io.output_gate import check_output_path
 from hyde_bsdf.progress import as_callback
 
 __all__ = ["ELEMENT_NAMES", "ANGLE_COLUMNS", "SIGMA_RANGE", "ELEMENT_LIMIT", "MeasurementFileError", "Measurements",

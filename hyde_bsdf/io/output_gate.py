@@ -1,82 +1,93 @@
-"""The output gate: every file the package writes for a user passes here before the work starts.
+"""The output gate: every file the package writes for a user is checked here before the work starts.
 
-Rules (``docs/troubleshooting.md``, "The file gates"):
+Rules (``docs/troubleshooting.md``, "The file gates"), each refusal one
+:class:`~hyde_bsdf.errors.UsageError` naming the file and the reason:
 
-* an existing target must be a regular file: a FIFO, a device (``/dev/null``), a socket or a
-  folder is refused, never replaced; a symlink is followed only while it stays inside the output
-  folder (then the file it names is written, and the link kept); one that leaves the folder
-  (``/proc/self/fd/1``, ``../elsewhere``) is refused;
-* no output may be an input of the same run (same file, whatever the spelling: compared by
-  device and inode, and by resolved path for files not yet written);
-* a replaced file keeps its mode, and its owner where the user may set it
-  (:func:`hyde_bsdf.io.atomic.atomic_path`);
-* the folder must be writable, a target in a sticky folder (``/tmp``) must be the user's own,
-  a target that is a mount point cannot be renamed over, and the folder's file system must have
-  the free space the outputs need -- all checked before any work;
-* a run holds a lock on each of its outputs (:class:`OutputLock`) from the checks to the last
-  rename, so a second run writing the same outputs fails at once with one line instead of mixing
-  its files with the first run's.
+* the folder exists (or can be created) and is writable; the name fits the file system;
+* an existing target is a regular file: a FIFO, a device (``/dev/null``), a socket or a folder is
+  never replaced; a symlink is followed while it stays inside its folder (the file it names is
+  written, the link kept) and refused where it leaves it (``/proc/self/fd/1``, ``../elsewhere``);
+  a mount point, or someone else's file in a sticky folder (``/tmp``), cannot be renamed over;
+* no output is a file the same run reads (:func:`output_gate`'s ``inputs``: same inode, or the
+  same resolved path), and each folder has the free space the outputs need;
+* one run at a time writes an output (:class:`~hyde_bsdf.resources.OutputLock`, held for the block).
 
-Every refusal is a :class:`~hyde_bsdf.errors.UsageError` naming the file (cut to a readable
-length) and the reason.
+The writes themselves are :mod:`hyde_bsdf.io.atomic`'s.
 """
 from __future__ import annotations
 
 import contextlib
-import errno
-import fcntl
-import hashlib
 import os
 import shutil
 import stat
-import tempfile
 from pathlib import Path
 
 from hyde_bsdf.errors import UsageError, shorten
+from hyde_bsdf.io.atomic import remove_stale_temporaries
 from hyde_bsdf.io.input_gate import file_kind, is_stdin
-from hyde_bsdf.io.memory import format_bytes
-from hyde_bsdf.io.trust import UntrustedFileError, make_private_dir
+from hyde_bsdf.resources import OutputLock, format_bytes
 
-__all__ = ["check_target", "check_not_input", "check_free_space", "check_folder", "OutputLock", "output_gate"]
-
-
+__all__ = ["check_output_path", "check_output_dir", "check_target", "check_not_input", "check_free_space",
+           "output_gate"]
 
 
-def _mount_points() -> set:
-    """Mount points of this process (``/proc/self/mountinfo``; bind mounts of single files too)."""
+def _fits(path: Path, what: str) -> Path:
+    """UsageError when a part of ``path`` is longer than NAME_MAX, or the path than PATH_MAX."""
+    probe = next((p for p in (path.parent, *path.parent.parents) if os.path.isdir(p)), Path("."))
+    name_max, path_max = os.pathconf(probe, "PC_NAME_MAX"), os.pathconf(probe, "PC_PATH_MAX")
+    for part in path.parts:
+        if len(os.fsencode(part)) > name_max:
+            which = "the name" if part == path.name else f"the folder name {part[:30]!r}..."
+            raise UsageError(f"{what} {str(path)!r}: {which} is {len(os.fsencode(part))} bytes, longer than "
+                             f"the {name_max} bytes the file system allows; give a shorter name")
+    if len(os.fsencode(str(path))) > path_max - 1 - 40:      # room for a temporary's tail
+        raise UsageError(f"{what} {str(path)[:60]!r}...: the path is {len(os.fsencode(str(path)))} bytes, longer "
+                         f"than the {path_max - 41} bytes the file system allows; give a shorter path")
+    return path
+
+
+def _writable_folder(folder: Path, what: str, path: Path, create: bool = True) -> None:
+    """Create ``folder`` if missing; UsageError unless it is a folder one can write in.  Temporaries
+    a killed run of this package left there are removed."""
     try:
-        with open("/proc/self/mountinfo", "rb") as fh:
-            lines = fh.read(1 << 22).decode("utf-8", "replace").splitlines()
-    except OSError:
-        return set()
-    points = set()
-    for line in lines:
-        parts = line.split(" ")
-        if len(parts) > 4:     # octal escapes: \040 space, \011 tab, \012 newline, \134 backslash
-            points.add(parts[4].replace("\\040", " ").replace("\\011", "\t").replace("\\012", "\n")
-                       .replace("\\134", "\\"))
-    return points
-
-
-def _is_mount_point(path: Path, st, parent) -> bool:
-    return st.st_dev != parent.st_dev or os.path.realpath(path) in _mount_points()
-
-
-def _inside(path: Path, folder: Path) -> bool:
+        if create:
+            folder.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise UsageError(f"{what} {str(path)!r}: {str(folder)!r} is not a directory") from None
+    except OSError as exc:
+        raise UsageError(f"{what} {str(path)!r}: cannot create the folder {str(folder)!r} "
+                         f"({exc.strerror or exc})") from None
+    if not folder.is_dir():
+        raise UsageError(f"{what} {str(path)!r}: " + (f"{str(folder)!r} is not a directory" if folder.exists() else
+                                                      f"the folder {str(folder)!r} does not exist"))
+    probe = folder / f".hyde-bsdf-probe-{os.getpid()}"
     try:
-        path.relative_to(folder)
-    except ValueError:
-        return False
-    return True
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        os.unlink(probe)
+    except OSError as exc:
+        raise UsageError(f"{what} {str(path)!r}: cannot write in {str(folder)!r} ({exc.strerror or exc})") from None
+    remove_stale_temporaries(folder)
 
 
-def _follow_link(path: Path, folder: Path, what: str) -> Path:
-    """The file a symlink ``path`` names, if it stays inside ``folder``; UsageError otherwise."""
-    real = Path(os.path.realpath(path))
-    if not _inside(real, Path(os.path.realpath(folder))):
-        raise UsageError(f"{what} {shorten(path)} is a symbolic link to {shorten(real)}, outside its folder: "
-                         f"not replaced; remove the link or give another name")
-    return real
+def check_output_path(path, what: str = "output file", create_parent: bool = True) -> Path:
+    """The file ``path`` after the gate's checks (a symlink inside its folder resolved), before any
+    long work; with ``create_parent`` a missing folder is created.  UsageError otherwise."""
+    path = _fits(Path(path), what)
+    if path.is_dir():
+        raise UsageError(f"{what} {str(path)!r} is a directory; give a file name")
+    if os.path.lexists(path):
+        path = check_target(path, what)
+    _writable_folder(path.parent, what, path, create_parent)
+    return path
+
+
+def check_output_dir(path, what: str = "output folder", create: bool = True) -> Path:
+    """The folder ``path`` after the gate's checks (created when missing and ``create``)."""
+    path = _fits(Path(path), what)
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"{what} {str(path)!r} is a regular file, not a folder")
+    _writable_folder(path, what, path, create)
+    return path
 
 
 def check_target(path, what: str = "output file") -> Path:
@@ -92,136 +103,62 @@ def check_target(path, what: str = "output file") -> Path:
     except OSError as exc:
         raise UsageError(f"{what} {shorten(path)}: cannot be checked ({exc.strerror or exc})") from None
     if stat.S_ISLNK(st.st_mode):
-        real = _follow_link(path, folder, what)
-        return check_target(real, what) if real != path else path
+        real = Path(os.path.realpath(path))
+        if Path(os.path.realpath(folder)) not in real.parents:
+            raise UsageError(f"{what} {shorten(path)} is a symbolic link to {shorten(real)}, outside its folder: "
+                             "not replaced; remove the link or give another name")
+        return check_target(real, what)
     if not stat.S_ISREG(st.st_mode):
         raise UsageError(f"{what} {shorten(path)} exists and is {file_kind(st.st_mode)}, not a regular file: "
-                         f"not replaced; give a file name")
+                         "not replaced; give a file name")
     parent = os.stat(folder)
-    if _is_mount_point(path, st, parent):
+    if st.st_dev != parent.st_dev:
         raise UsageError(f"{what} {shorten(path)} is a mount point: it cannot be replaced; give another name")
     if parent.st_mode & stat.S_ISVTX and os.geteuid() not in (0, st.st_uid, parent.st_uid):
         raise UsageError(f"{what} {shorten(path)} belongs to uid {st.st_uid} in a sticky folder (like /tmp): "
-                         f"it cannot be replaced; give another name")
+                         "it cannot be replaced; give another name")
     return path
 
 
-def _identity(path: Path):
+def _identities(path) -> list:
+    keys = [os.path.realpath(path)]
     with contextlib.suppress(OSError):
         st = os.stat(path)
-        return (st.st_dev, st.st_ino)
-    return None
+        keys.append((st.st_dev, st.st_ino))
+    return keys
 
 
 def check_not_input(outputs, inputs, what: str = "output file") -> None:
     """UsageError if any output is one of ``inputs`` (same inode, or the same resolved path)."""
-    seen = {}
-    for p in inputs:
-        if p is None or is_stdin(p):
-            continue
-        seen[os.path.realpath(p)] = p
-        ident = _identity(Path(p))
-        if ident is not None:
-            seen[ident] = p
+    seen = {key: p for p in inputs if p is not None and not is_stdin(p) for key in _identities(p)}
     for out in outputs:
-        for key in (os.path.realpath(out), _identity(Path(out))):
-            if key is not None and key in seen:
-                raise UsageError(f"{what} {shorten(out)} is the input {shorten(seen[key])} of this run: it would be "
-                                 f"overwritten; write the outputs to another folder or name (-o)")
+        hit = next((seen[key] for key in _identities(out) if key in seen), None)
+        if hit is not None:
+            raise UsageError(f"{what} {shorten(out)} is the input {shorten(hit)} of this run: it would be "
+                             "overwritten; write the outputs to another folder or name")
 
 
-def check_free_space(folder, need_bytes: int, what: str = "the outputs", option: str = "free some space or "
-                     "choose another folder (-o)", free: int | None = None) -> None:
+def check_free_space(folder, need_bytes: int, what: str = "the outputs",
+                     remedy: str = "free some space or choose another folder") -> None:
     """UsageError if ``folder``'s file system (its nearest existing folder) has less than
-    ``need_bytes`` free (``free``: the free bytes, measured when None); checked before the work."""
-    folder = Path(folder)
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent
-    free = shutil.disk_usage(folder).free if free is None else int(free)
+    ``need_bytes`` free; checked before the work."""
+    folder = next((p for p in (Path(folder), *Path(folder).parents) if p.exists()), Path("."))
+    free = shutil.disk_usage(folder).free
     if need_bytes > free:
         raise UsageError(f"{what}: about {format_bytes(need_bytes)} needed, but {shorten(folder)} has "
-                         f"{format_bytes(free)} free; {option}")
-
-
-def check_folder(folder, what: str = "output folder") -> Path:
-    """UsageError if the existing ``folder`` is a mount point (it could not be swapped by rename)
-    or lies in a sticky folder (``/tmp``) that is someone else's while the folder is not the user's."""
-    folder = Path(folder)
-    try:
-        st, up = os.lstat(folder), os.stat(folder.resolve().parent)
-    except OSError:
-        return folder
-    if stat.S_ISDIR(st.st_mode) and _is_mount_point(folder, st, up):
-        raise UsageError(f"{what} {shorten(folder)} is a mount point: its content cannot be replaced as a whole; "
-                         f"give a folder inside it")
-    if up.st_mode & stat.S_ISVTX and os.geteuid() not in (0, st.st_uid, up.st_uid):
-        raise UsageError(f"{what} {shorten(folder)} belongs to uid {st.st_uid} in a sticky folder (like /tmp): "
-                         f"it cannot be replaced; give another folder")
-    return folder
-
-
-def _lock_dir() -> Path:
-    base = os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir()
-    try:
-        return make_private_dir(Path(base) / f"hyde-bsdf-locks-{os.geteuid()}")
-    except (UntrustedFileError, OSError) as exc:
-        raise UsageError(f"the lock folder cannot be used: {exc}") from None
-
-
-class OutputLock:
-    """Exclusive, non-blocking locks (``flock``) on each output path, in a private lock folder;
-    released when the block ends or the process dies.  A path held by another run: UsageError."""
-
-    def __init__(self, paths, what: str = "output"):
-        self.paths = sorted({os.path.realpath(p) for p in paths})
-        self.what = what
-        self.fds = []
-
-    def __enter__(self):
-        folder = _lock_dir()
-        try:
-            for p in self.paths:
-                self._lock(folder / (hashlib.sha256(os.fsencode(p)).hexdigest()[:32] + ".lock"), p)
-        except BaseException:
-            self.__exit__(None, None, None)
-            raise
-        return self
-
-    def _lock(self, lock_path: Path, target: str) -> None:
-        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | os.O_CLOEXEC, 0o600)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError as exc:
-            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "?"
-            os.close(fd)
-            if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-                raise UsageError(f"{self.what} {shorten(target)} is being written by another run (pid {holder}); "
-                                 f"wait for it to finish or write elsewhere (-o)") from None
-            raise
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, str(os.getpid()).encode(), 0)
-        self.fds.append(fd)
-
-    def __exit__(self, *exc):
-        for fd in self.fds:
-            with contextlib.suppress(OSError):
-                os.close(fd)               # closing releases the flock
-        self.fds = []
-        return False
+                         f"{format_bytes(free)} free; {remedy}")
 
 
 @contextlib.contextmanager
 def output_gate(outputs, *, inputs=(), need_bytes: int = 0, what: str = "output file"):
-    """Check every output (:func:`check_target`, :func:`check_not_input`, :func:`check_free_space`)
-    and hold :class:`OutputLock` on them for the block; yields the paths to write (symlinks inside
-    their folder resolved).  ``need_bytes``: an upper bound of what the outputs take, which each
-    of their folders must have free (the command estimates it from its options before the work)."""
+    """Check every output (:func:`check_target`), that none is one of ``inputs`` (every file the run
+    reads), that each folder has ``need_bytes`` free (an upper bound of what the outputs take), and
+    hold :class:`~hyde_bsdf.resources.OutputLock` on them for the block; yields the paths to write."""
     targets = [check_target(p, what) for p in outputs]
     check_not_input(targets, inputs, what)
-    folders = {str(Path(p).parent) if str(Path(p).parent) else "." for p in targets}
     more = f" and {len(targets) - 1} more" if len(targets) > 1 else ""
     named = f"{what} {shorten(targets[0])}{more}" if targets else what
-    for folder in sorted(folders):
+    for folder in sorted({str(Path(p).parent) for p in targets}):
         check_free_space(folder, need_bytes, named)
     with OutputLock(targets, what):
         yield targets

@@ -54,9 +54,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.io.atomic import atomic_path, check_output_path
+from hyde_bsdf.io.atomic import atomic_path
 from hyde_bsdf.errors import InputFileError, UsageError, shorten
 from hyde_bsdf.io.input_gate import check_dimensions, check_input
+from hyde_bsdf.io.output_gate import check_output_path
 
 __all__ = ["PbsdfFileError", "PbsdfTable", "KAIST_WAVELENGTHS", "MITSUBA_BANDS", "read_pbsdf", "write_pbsdf",
            "read_tensor_file", "table_nbytes", "rusinkiewicz_to_directions", "directions_to_rusinkiewicz",

@@ -673,8 +673,8 @@ def _make_class():
                 return None
             # ratio of the lobe albedos rho F : (1 - rho) F (F common to both), with rho averaged
             # over the incidence angle: a 1-D lookup (4.6 kB, in cache) in place of a 2-D one into the
-            # 4.7 MB texture, which with the diffuse factor's own lookup made the default model's
-            # kernels ~25 % slower than roughconductor's.  Any p_spec in (0, 1) is unbiased (the
+            # 4.7 MB texture, which with the diffuse factor's own lookup slowed the default model's
+            # kernels (benchmarks/bench_render.py measures the ratio).  Any p_spec in (0, 1) is unbiased (the
             # same p_spec is in the sampled pdf); this one only gives less variance-optimal
             # choices near grazing incidence, where rho departs from its average
             return dr.clip(1.0 - self.m_dhr.one_minus_rho_avg(rough[2]), 0.05, 0.95)

@@ -14,9 +14,9 @@ index), n_rhs = incidence angles x polarisations and n_far observation angles (a
     solve      N n_rhs (3B a_band + Q a_sweep) R
     far field  N n_far n_rhs a_far
 
-with the constants of :data:`FAST_CONSTANTS` fitted to measured runs on one core
-(``benchmarks/bench_mom_estimate.py`` measures them and prints measured / estimated; rerun it after a change
-to the solver and copy what it prints).  Iteration counts vary with the surface (a steep one can fall back to
+with the constants of :data:`hyde_bsdf.resources.COSTS` (``fast_fill_seconds_per_entry`` ... ``far_field_seconds``)
+fitted to measured runs on one core (``benchmarks/bench_mom_estimate.py --fit`` measures them and prints measured
+/ estimated; rerun it after a change to the solver and copy what it prints).  Iteration counts vary with the surface (a steep one can fall back to
 GMRES): the estimate is good to about a factor of 2, which is what a "this will take ~20 minutes" line needs.
 """
 from __future__ import annotations
@@ -26,12 +26,19 @@ import math
 from hyde_bsdf.mom.fast import NEAR_WL, FastSolverUnsuitable, plan_blocks
 from hyde_bsdf.mom.kernels import K0
 
-__all__ = ["FAST_CONSTANTS", "REPORT_SECONDS", "partition_features", "fast_seconds", "describe"]
+__all__ = ["REPORT_SECONDS", "constants", "partition_features", "fast_seconds", "describe"]
 
 #: a run expected to take longer than this (wall seconds) says so before it starts
 REPORT_SECONDS = 60.0
-#: seconds per unit of each term of the fast solver's time (module docstring); benchmarks/bench_mom_estimate.py
-FAST_CONSTANTS = dict(a_fill=6.76e-7, a_panel=7.72e-7, a_wave=0.0, a_band=1.37e-9, a_sweep=2.9e-8, a_far=5.65e-10)
+
+
+def constants():
+    """The model's constants (module docstring) from the one table of costs, :data:`hyde_bsdf.resources.COSTS`."""
+    from hyde_bsdf.resources import COSTS
+
+    return dict(a_fill=COSTS.fast_fill_seconds_per_entry, a_panel=COSTS.fast_panel_seconds_per_entry,
+                a_wave=COSTS.fast_wave_seconds, a_band=COSTS.fast_band_seconds, a_sweep=COSTS.fast_sweep_seconds,
+                a_far=COSTS.far_field_seconds)
 
 
 def partition_features(n, dx, height_wl, partition_wl, eta, stretch, method):
@@ -52,7 +59,7 @@ def partition_features(n, dx, height_wl, partition_wl, eta, stretch, method):
 
 def fast_seconds(f, n_rhs, n_far, c=None):
     """(set-up, solve, far field) CPU seconds of one fast partition with features ``f``."""
-    c = FAST_CONSTANTS if c is None else c
+    c = constants() if c is None else c
     n, strong = f["n"], 3 * f["block"]
     setup = n * (strong * (c["a_fill"] * f["regions"] + c["a_panel"] * f["panels"]) + c["a_wave"] * f["waves"])
     solve = n * n_rhs * (strong * c["a_band"] + f["waves"] * c["a_sweep"]) * f["regions"]

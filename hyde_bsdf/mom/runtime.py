@@ -1,16 +1,14 @@
-"""The process's run-time tuning for MoM workers: OpenBLAS threads, glibc's heap, available memory.
+"""The process's run-time tuning for MoM workers: OpenBLAS threads and glibc's heap.
 
 Not physics: the paper's equations live in :mod:`hyde_bsdf.mom.solver` and its solvers.  A pool worker runs
 single-threaded BLAS (the partitions already keep every core busy; a 2-thread LU of a 500-unknown partition is
-10x slower here) and keeps freed heap blocks (:func:`keep_freed_memory`); :func:`memory_available` is the one
-place the MoM asks how much memory it may allocate (set-up refusals and the dense fallback's check).
+10x slower here) and keeps freed heap blocks (:func:`keep_freed_memory`).
 """
 from __future__ import annotations
 
 import ctypes
 
-__all__ = ["openblas_libs", "limit_blas_threads", "restore_blas_threads", "keep_freed_memory", "worker_init",
-           "memory_available"]
+__all__ = ["openblas_libs", "limit_blas_threads", "restore_blas_threads", "keep_freed_memory", "worker_init"]
 
 
 def openblas_libs():
@@ -74,11 +72,3 @@ def keep_freed_memory():
 def worker_init():
     limit_blas_threads(1)
     keep_freed_memory()
-
-
-def memory_available():
-    """Bytes of memory available to new allocations (:func:`hyde_bsdf.io.memory.available_bytes`, the
-    package's one reader of the kernel's memory figures), or 8 GiB if unknown."""
-    from hyde_bsdf.io.memory import available_bytes
-    value = available_bytes()
-    return 8 * 2**30 if value is None else value

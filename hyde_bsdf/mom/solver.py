@@ -142,7 +142,7 @@ and it refuses (ValueError naming the parameter) before allocating when
   resampled finer (``params["pts_per_wl"]``), and refused if that needs more than
   ``MAX_UNKNOWNS`` = 10000 unknowns per partition for the dense solver (``MAX_FAST_UNKNOWNS``
   = 200000 for the fast one, which also needs the surface's height range to fit its
-  blocks) or more memory than is available (:func:`hyde_bsdf.mom.runtime.memory_available`);
+  blocks) or more memory than is available (:func:`hyde_bsdf.resources.available_memory`);
 * the fast solver misses its tolerance (after GMRES) and the dense fallback would not fit in
   memory or would cost more than ``DENSE_FALLBACK_RATIO`` = 10 x the fast solve: the result keeps
   the residual reached, with a warning naming ``tol`` (or, where the fast solver cannot take the
@@ -195,8 +195,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hyde_bsdf import resources
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.io.memory import check_memory, format_bytes
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import NATURAL_INDEX
 from hyde_bsdf.progress import Throttle, as_callback
@@ -207,7 +207,7 @@ from hyde_bsdf.mom.fast import FAST_TOL, NEAR_WL, FastSolverUnsuitable, block_le
 from hyde_bsdf.mom.floor import FLOOR_MARGIN, floor_reason, partition_floor
 from hyde_bsdf.mom.gather import ExecutorError, check_executor, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
-from hyde_bsdf.mom.runtime import limit_blas_threads, memory_available, restore_blas_threads, worker_init
+from hyde_bsdf.mom.runtime import limit_blas_threads, restore_blas_threads, worker_init
 
 __all__ = [
     "scatter",
@@ -427,14 +427,15 @@ def check_partition(partition_length, corr_length_wl, rough=True):
 DENSE_FALLBACK_RATIO = 10.0
 
 
+def _memory_available():
+    """Bytes the MoM may plan with: :func:`hyde_bsdf.resources.available_memory`, or 8 GiB if unknown."""
+    return resources.available_memory() or 8 * 2**30
+
+
 def _dense_cost(n, pols, eta):
-    """(bytes, CPU seconds) of a dense solve of n unknowns (:mod:`hyde_bsdf.mom.dense`), measured on one core:
-    fill 2.2e-7 s per matrix entry and region, LU 3.9e-11 s n^3 per polarisation, and a lossless interior's
-    full (1/2 + D1)^-1 S1 5.5e-10 s n^3 (3000 unknowns: PEC s 3.0 s, glass s and p 16.9 s)."""
-    regions = 1 if eta is None else 2
-    seconds = 2.2e-7 * regions * n * n + 3.9e-11 * len(pols) * n ** 3
-    if eta is not None and eta.imag == 0:
-        seconds += 5.5e-10 * n ** 3
+    """(bytes, CPU seconds) of a dense solve of n unknowns (:mod:`hyde_bsdf.mom.dense`; the time model is
+    :func:`hyde_bsdf.resources.dense_solve_cost`)."""
+    seconds = resources.dense_solve_cost(n, len(pols), 1 if eta is None else 2, eta is not None and eta.imag == 0)
     return _matrices_per_partition(pols, eta) * 16.0 * n * n, seconds
 
 
@@ -442,10 +443,10 @@ def _dense_refusal(n, pols, eta, fast_seconds):
     """Why a dense fallback of n unknowns is refused (memory, or more than DENSE_FALLBACK_RATIO x the fast
     solver's cost), or None where it may run."""
     need, seconds = _dense_cost(n, pols, eta)
-    free = memory_available()
+    free = _memory_available()
     if need > 0.8 * free:
-        return (f"a dense LU of {n} unknowns needs {format_bytes(need)}, more than the {format_bytes(free)} "
-                "available")
+        return (f"a dense LU of {n} unknowns needs {resources.format_bytes(need)}, more than the "
+                f"{resources.format_bytes(free)} available")
     if seconds > DENSE_FALLBACK_RATIO * fast_seconds:
         return (f"a dense LU of {n} unknowns would take ~{seconds:.0f} CPU s, more than {DENSE_FALLBACK_RATIO:g}x "
                 f"the fast solver's ~{fast_seconds:.1f} s")
@@ -472,7 +473,7 @@ def _solve_fields(task, psi, clock):
         sol = solve_fast(x, y, fp, fpp, dx, psi, pols, eta, tol=tol, method=task.get("fast_method", "fb"))
     except FastSolverUnsuitable as exc:
         why = None if task.get("dense_ok", True) else "the memory available"
-        why = why or _dense_refusal(x.size, pols, eta, FAST_SECONDS_PER_UNKNOWN * x.size)
+        why = why or _dense_refusal(x.size, pols, eta, resources.COSTS.fast_seconds_per_unknown * x.size)
         if why:
             raise UsageError(f"the fast solver cannot take this surface ({exc}) and {why}: use shorter partitions "
                              "(more `partitions`) or a smoother surface") from None
@@ -484,7 +485,7 @@ def _solve_fields(task, psi, clock):
         spent = clock() - t0
         why = None if info["converged"] else (
             "the memory available" if not task.get("dense_ok", True) else
-            _dense_refusal(x.size, pols, eta, max(spent, FAST_SECONDS_PER_UNKNOWN * x.size)))
+            _dense_refusal(x.size, pols, eta, max(spent, resources.COSTS.fast_seconds_per_unknown * x.size)))
         if info["converged"] or why:
             if not info["converged"]:
                 reasons.append(f"fast solver stopped at residual {worst:.2g} > tolerance {tol:g} and {why}: the "
@@ -791,9 +792,6 @@ ARC_PTS_MIN = 5.0
 TURN_MAX = 0.3
 #: most unknowns per partition: a dense 10,000 x 10,000 LU is ~10 CPU minutes per partition and 1.6 GB
 MAX_UNKNOWNS = 10000
-#: peak bytes per surface point while the surface is drawn: gaussian_surface measured 45 B/point
-#: (tracemalloc, 2^18 and 2^20 points, second derivative on); 64 leaves room for the resampling
-SURFACE_BYTES_PER_POINT = 64
 #: most quadrature panels per cell for the interior Green's function (one per decay length)
 MAX_PANELS = 64
 
@@ -942,9 +940,9 @@ def _estimate(cfg, surf, workers):
         need, per = _dense_cost(n, pols, eta)
         per += _cost.fast_seconds(dict(feats, block=0, waves=0, panels=0), n_rhs, n_far)[2]
     total = per * cfg["partitions"]
-    memory = need * workers + SURFACE_BYTES_PER_POINT * n * cfg["partitions"]
-    est = dict(cpu_seconds=total, wall_seconds=per * math.ceil(cfg["partitions"] / workers), memory_bytes=memory, memory_text=format_bytes(memory), unknowns=n,
-               method=feats["method"], partitions=cfg["partitions"], workers=workers, n_rhs=n_rhs, n_far=n_far,
+    memory = need * workers + resources.COSTS.surface_bytes_per_point * n * cfg["partitions"]
+    est = dict(cpu_seconds=total, wall_seconds=per * math.ceil(cfg["partitions"] / workers), memory_bytes=memory,
+               memory_text=resources.format_bytes(memory), unknowns=n, method=feats["method"], partitions=cfg["partitions"], workers=workers, n_rhs=n_rhs, n_far=n_far,
                features=feats)
     est["line"] = _cost.describe(est)
     return est
@@ -977,9 +975,6 @@ def _report_estimate(cfg, surf, workers, progress):
 # The stages of scatter: checks, surface, per-partition solve, statistics, energy
 # ---------------------------------------------------------------------------
 
-#: the fast solver's CPU seconds per unknown, for the dense fallback's cost limit where it has not run (glass,
-#: sigma_h = 2 lambda, 7728 unknowns: ~15 s; a Fig. 6 partition, 1500 unknowns: ~0.5 s)
-FAST_SECONDS_PER_UNKNOWN = 2e-3
 #: "auto" takes the fast solver from this many unknowns per partition on (the Fig. 6 partitions have 1500)
 AUTO_FAST_UNKNOWNS = 1000
 #: most unknowns per partition for the fast solver
@@ -1088,8 +1083,8 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
                              + ": use shorter partitions (more `partitions`)" + hint)
         if need_dense > budget:
             raise UsageError(f"pts_per_wl={cfg['pts_per_wl']:g}{why} needs {npart} unknowns per partition of "
-                             f"{part_len:g} wavelengths, {format_bytes(need_dense)} for {workers} worker(s), more "
-                             f"than the {format_bytes(budget)} available: use shorter partitions (more "
+                             f"{part_len:g} wavelengths, {resources.format_bytes(need_dense)} for {workers} worker(s), more "
+                             f"than the {resources.format_bytes(budget)} available: use shorter partitions (more "
                              "`partitions`)" + hint)
         return "dense", dense_ok
     if cfg["solver"] == "fast" and not fast_ok:
@@ -1099,8 +1094,8 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
                          f"{why}: " + (f"the height range {height:.3g} wavelengths needs blocks of {block:.3g}, more "
                                        "than a third of the partition" if not fast_fit else
                                        f"more than {MAX_FAST_UNKNOWNS} unknowns" if npart > MAX_FAST_UNKNOWNS else
-                                       f"{format_bytes(need_fast)} for {workers} worker(s), more than the "
-                                       f"{format_bytes(budget)} available")
+                                       f"{resources.format_bytes(need_fast)} for {workers} worker(s), more than the "
+                                       f"{resources.format_bytes(budget)} available")
                          + "; use shorter partitions (more `partitions`)" + hint)
     if cfg["solver"] == "auto" and npart < AUTO_FAST_UNKNOWNS and dense_ok:
         return "dense", dense_ok
@@ -1109,8 +1104,9 @@ def _choose_solver(cfg, npart, dx, height, workers, budget, why):
 
 def _check_surface_memory(points: int) -> None:
     """The surface itself, before it is drawn: a long surface alone can exceed the memory."""
-    check_memory(SURFACE_BYTES_PER_POINT * points, f"the MoM surface ({points} points, {SURFACE_BYTES_PER_POINT} "
-                 f"B each)", "use a shorter length_wl or a lower pts_per_wl", fraction=0.8)
+    per_point = resources.COSTS.surface_bytes_per_point
+    resources.check_memory(per_point * points, f"the MoM surface ({points} points, {per_point} B each)",
+                           "use a shorter length_wl or a lower pts_per_wl", fraction=0.8)
 
 
 def _realise_surface(cfg, workers):
@@ -1137,7 +1133,7 @@ def _realise_surface(cfg, workers):
     def height_range(f, npart):
         return float(np.max(np.ptp(f.reshape(partitions, npart), axis=1)))
 
-    budget = 0.8 * memory_available()
+    budget = 0.8 * _memory_available()
     # a first bound before any allocation: the dense path's size (or the fast path's for long partitions)
     if n_part > MAX_FAST_UNKNOWNS or (cfg["solver"] == "dense" and n_part > MAX_UNKNOWNS):
         _choose_solver(cfg, n_part, part_len / n_part, 0.0, workers, budget, "")

@@ -16,13 +16,12 @@ the paper's (s, p, k) basis of a surface.
 Checked before rendering (a :class:`~hyde_bsdf.errors.UsageError`, exit 2 on the command line):
 the scene has a sensor and a *sampling* integrator (not ``ptracer``), the sampler's
 ``sample_count`` and ``spp`` are >= 1, the film is at least 1 x 1 and holds fewer than 2^32
-values (Dr.Jit's array limit), and the estimated memory (:func:`estimate_memory`) fits in
-``MemAvailable``.  A render of more than :data:`MAX_SAMPLES_PER_PASS` samples is split into
+values (Dr.Jit's array limit), and the estimated memory (:func:`~hyde_bsdf.resources.render_bytes`)
+fits in ``MemAvailable``.  A render of more than :data:`MAX_SAMPLES_PER_PASS` samples is split into
 passes (Mitsuba's own limit is 2^32 samples per pass, src/render/integrator.cpp, and a pass of
 that size does not fit in memory).
 
-The command line (``hyde-bsdf render SCENE.xml -o OUT.exr``: the EXR and its PNG charts, written
-as one set) is :mod:`hyde_bsdf.app.render`.
+The command line (``hyde-bsdf render SCENE.xml -o OUT.exr``: the EXR and its PNG charts) is :mod:`hyde_bsdf.app.render`.
 """
 from __future__ import annotations
 
@@ -41,11 +40,11 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError, one_line
 from hyde_bsdf.io.input_gate import check_input
-from hyde_bsdf.io.memory import available_bytes, check_memory
 from hyde_bsdf.io.stokes_exr import STOKES_NAMES
 from hyde_bsdf.progress import as_callback
+from hyde_bsdf.resources import COSTS, check_memory, render_bytes
 
-__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "load_scene_nearest", "scene_inputs", "render_stokes", "estimate_memory",
+__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "load_scene_nearest", "scene_inputs", "render_stokes",
            "plan_passes", "sensor_to_paper_rotation", "rotate_stokes"]
 
 DEFAULT_VARIANT = "llvm_ad_spectral_polarized"
@@ -60,18 +59,6 @@ MAX_PASSES = 2**16
 MAX_SEED = 2**15 - 1
 #: Dr.Jit arrays hold fewer than 2^32 entries; the film holds pixels x channels floats.
 MAX_FILM_VALUES = 2**32 - 1
-#: Memory model of a whole ``hyde-bsdf render`` (peak RSS, ``/usr/bin/time -f %M``, on
-#: ``scenes/inverse.xml`` at res 300, 900 and 1800, 1-2 spp, EXR and PNGs written): a Stokes render
-#: (llvm_ad_spectral_polarized: 17 film channels in Mitsuba's film and image block, the float64
-#: accumulators, the output arrays, the EXR and PNG writers) took 495 B per film pixel between
-#: res 300 and 900 and 676 B/px between 300 and 1800 (Dr.Jit's allocator rounds blocks up to
-#: powers of two, so the cost per pixel steps between ~1x and ~2x); llvm_ad_rgb 160 B/px;
-#: ~310 MB fixed (Python, Mitsuba, LLVM).  The model takes the upper end with a margin.  Samples
-#: per pixel add next to nothing (Mitsuba traces each pass in one fused kernel: 400^2 px at 16 spp
-#: and at 1 spp peaked within 1 %).
-BYTES_PER_PIXEL_STOKES = 800
-BYTES_PER_PIXEL_COLOUR = 250
-BYTES_FIXED = 400 * 2**20
 
 
 def prepare_variant(variant: str = DEFAULT_VARIANT, fallback: bool = True) -> str:
@@ -314,21 +301,6 @@ def _stokes_integrator(scene):
     return mi.load_dict({"type": "stokes", "integrator": integrator})
 
 
-def mem_available() -> int | None:
-    """Memory available to new allocations, bytes (:func:`hyde_bsdf.io.memory.available_bytes`)."""
-    return available_bytes()
-
-
-def estimate_memory(width: int, height: int, polarized: bool = True) -> int:
-    """Estimated peak memory (bytes) of rendering and writing a ``width`` x ``height`` film.
-
-    Linear model measured on this project's scenes (see :data:`BYTES_PER_PIXEL_STOKES`):
-    a fixed part plus a cost per pixel; samples per pixel barely count.
-    """
-    per_px = BYTES_PER_PIXEL_STOKES if polarized else BYTES_PER_PIXEL_COLOUR
-    return BYTES_FIXED + int(width) * int(height) * per_px
-
-
 def plan_passes(width: int, height: int, spp: int, chunks: int | None = None) -> list[int]:
     """spp of each ``mi.render`` pass: ``chunks`` (default ``min(spp, 8)``) equal parts, or more
     so that a pass has at most :data:`MAX_SAMPLES_PER_PASS` samples.  UsageError beyond
@@ -357,12 +329,9 @@ def _check_film(scene, polarized: bool, info=None) -> tuple[int, int]:
         raise UsageError(f"the {width}x{height} film is too large: {width * height * channels:.3g} values, "
                          f"Dr.Jit arrays hold at most 2^32 = {MAX_FILM_VALUES + 1:.3g}; at most "
                          f"{MAX_FILM_VALUES // channels:.3g} pixels{hint}")
-    per_px = BYTES_PER_PIXEL_STOKES if polarized else BYTES_PER_PIXEL_COLOUR
-    avail = mem_available()
-    if avail is not None:
-        check_memory(estimate_memory(width, height, polarized), f"rendering the {width}x{height} film "
-                     f"(~{per_px} B/pixel)", f"lower the film's width and height"
-                     f"{hint or ' (its <film> width/height, or -D)'}", available=avail)
+    per_px = COSTS.render_stokes_bytes_per_pixel if polarized else COSTS.render_colour_bytes_per_pixel
+    check_memory(render_bytes(width, height, polarized), f"rendering the {width}x{height} film (~{per_px} B/pixel)",
+                 f"lower the film's width and height{hint or ' (its <film> width/height, or -D)'}")
     return width, height
 
 

@@ -12,8 +12,8 @@ last lines of its stderr); the report still completes.  A script's own output is
 it alone to see it: ``python validation/STEM.py --quick``).  Ctrl-C (or SIGTERM) ends the
 running script (SIGTERM, then SIGKILL) and the report, which leaves the previous report as it was.
 Exit status: 0 when every check passes, 1 otherwise, 2 for a usage error (an output folder that
-cannot be written or holds files an earlier report did not write, no ``validation/`` scripts:
-not a source checkout and no ``--scripts DIR``).
+cannot be written or is not a report's, no ``validation/`` scripts: not a source checkout and no
+``--scripts DIR``).
 
 Why child processes: **isolation** -- one script's Dr.Jit/Mitsuba state (the variant, JIT
 caches, registered plugins) and its memory cannot leak into the next, so a check cannot pass or
@@ -23,19 +23,12 @@ files it runs, not modules it loads, so ``hyde_bsdf`` installs and imports witho
 The price is one interpreter start and its imports per script (1.2-1.3 CPU s each: +22 % CPU
 on the quick report, its wall time within the machine's load noise; docs/validation.md).
 
-Nothing but an earlier report's own files is ever deleted.  The report is built in a fresh hidden
-folder beside ``DIR`` and moved in at the end (:func:`hyde_bsdf.io.atomic.atomic_dir`), with a
-manifest ``DIR/.hyde-report-manifest.json`` listing every file it wrote, with its SHA-256, and
-every folder it created: an interrupted run
-(Ctrl-C, SIGTERM, a kill) leaves the previous report as it was, never an old ``index.html``
-beside new figures.  ``DIR`` must be new, empty, or hold only an earlier report's files (those its
-manifest lists, unchanged since: same SHA-256, reached without a symlink); a folder with any other
-file or folder -- a web site's ``index.html``, a thesis, an empty folder tree, a file edited since
--- is refused before any work, unless ``--force``: then the unchanged files of the earlier report
-are replaced and everything else is kept (one whose name the report takes, such as
-``index.html``, is renamed ``index.html.orig``).  Symlinks are never followed and no folder the
-report did not create is removed.  A report without a manifest (or from before manifests had
-hashes) is not adopted: that its HTML names a file does not prove the report wrote it.
+Nothing is ever deleted.  The report is built in a fresh hidden folder beside ``DIR`` and its
+files are moved into ``DIR`` at the end, one rename each (:func:`hyde_bsdf.io.atomic.atomic_folder`):
+an interrupted run (Ctrl-C, SIGTERM) leaves the previous report as it was.  ``DIR`` must be new,
+empty, or an earlier report (its ``index.html`` carries the report's generator tag); any other
+folder -- a web site's, a thesis's -- is refused before any work, unless ``--force``: then the
+report's files are written beside the others, replacing those of the same names.
 """
 from __future__ import annotations
 
@@ -51,17 +44,16 @@ import subprocess
 import sys
 import tempfile
 import time
-import warnings
 from pathlib import Path
 
-from hyde_bsdf.io.atomic import (TEMP_NAME_RE, atomic_dir, atomic_open, check_dir_owned, folder_target,
-                                 check_output_dir, read_manifest)
 from hyde_bsdf.app.args import Parser, quiet_option
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.io.memory import format_bytes, total_bytes
+from hyde_bsdf.io.atomic import TEMP_NAME_RE, atomic_folder, atomic_open
+from hyde_bsdf.io.output_gate import check_output_dir
 from hyde_bsdf.progress import as_callback
+from hyde_bsdf.resources import OutputLock, format_bytes, total_memory
 
-__all__ = ["SECTIONS", "MANIFEST", "build_report", "check_report_dir", "cli_main"]
+__all__ = ["SECTIONS", "GENERATOR", "build_report", "check_report_dir", "cli_main"]
 
 #: (section title, [validation script stems]) in report order
 SECTIONS = [
@@ -100,31 +92,37 @@ def validation_dir(scripts=None) -> Path:
     return here.resolve()
 
 
-#: the manifest of a report folder: every file the report wrote (a rerun removes only these)
-MANIFEST = ".hyde-report-manifest.json"
+#: the tag in a report's index.html by which a rerun knows the folder is a report's
+GENERATOR = '<meta name="generator" content="hyde-bsdf validate">'
+
+
+def _is_report(folder: Path) -> bool:
+    try:
+        with open(folder / "index.html", "rb") as fh:
+            return GENERATOR.encode() in fh.read(4096)
+    except OSError:
+        return False
 
 
 def check_report_dir(outdir, force: bool = False) -> Path:
     """Check before any work that ``outdir`` can take a report (UsageError otherwise).
 
     Refused: a regular file, the current folder or one above it, and -- unless ``force`` -- a
-    folder holding files that no earlier report wrote (see the module docstring).
+    folder that holds files and is not an earlier report (see the module docstring).
     """
-    out = folder_target(outdir, "--outdir", follow_link=True)
+    out = Path(outdir).resolve()
     here = Path.cwd().resolve()
-    if out.resolve() == here or out.resolve() in here.parents:
+    if out == here or out in here.parents:
         raise UsageError(f"--outdir {str(outdir)!r} is the current folder or one above it: give the report "
                          "a folder of its own (default out/report)")
-    # a report written before manifests (or one whose manifest has no hashes) is not adopted: that
-    # its HTML names a file does not prove this program wrote it (it may be the user's image)
-    if out.is_dir():
-        others = [f for f in (p.name for p in out.iterdir()) if f != MANIFEST and not TEMP_NAME_RE.match(f)]
-        if others and read_manifest(out, MANIFEST) is None and not force:
-            shown = ", ".join(repr(f) for f in sorted(others)[:3]) + (" ..." if len(others) > 3 else "")
-            raise UsageError(f"--outdir {str(out)!r} is not a validation report (no {MANIFEST}) and holds "
-                             f"{len(others)} file(s) ({shown}); give a new or empty folder, or pass --force to "
-                             "write the report beside them (they are kept)")
-        check_dir_owned(out, MANIFEST, force, "--outdir")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--outdir {str(outdir)!r} is a regular file, not a folder")
+    others = sorted(p.name for p in out.iterdir() if not TEMP_NAME_RE.match(p.name)) if out.is_dir() else []
+    if others and not force and not _is_report(out):
+        shown = ", ".join(repr(f) for f in others[:3]) + (" ..." if len(others) > 3 else "")
+        raise UsageError(f"--outdir {str(outdir)!r} is not a validation report and holds {len(others)} file(s) "
+                         f"({shown}); give a new or empty folder, or pass --force to write the report beside them "
+                         "(files of the report's names are replaced)")
     check_output_dir(out.parent, "--outdir's parent folder")
     return out
 
@@ -138,8 +136,8 @@ def machine_info() -> dict:
         info["CPU"] = cpu
     except (OSError, StopIteration):
         info["CPU"] = platform.processor() or platform.machine()
-    if total_bytes() is not None:
-        info["memory"] = format_bytes(total_bytes())
+    if total_memory() is not None:
+        info["memory"] = format_bytes(total_memory())
     info["load average at start"] = f"{os.getloadavg()[0]:.2f}"
     for mod in ("numpy", "scipy", "matplotlib", "mitsuba", "drjit"):
         try:
@@ -174,7 +172,7 @@ def _child_env() -> dict:
 def _wait(cmd: list, stderr) -> int:
     """Run ``cmd`` to its end (stdout discarded, stderr into the file ``stderr``); its exit status.
 
-    On any interruption of the report (Ctrl-C, SIGTERM as :class:`~hyde_bsdf.io.atomic.Terminated`)
+    On any interruption of the report (Ctrl-C, SIGTERM as :class:`~hyde_bsdf.app.signals.Terminated`)
     the child is terminated -- SIGTERM, then SIGKILL after :data:`TERMINATE_WAIT` s -- and reaped
     before the interruption goes on; a child that itself died of SIGINT (Ctrl-C reached it
     first) interrupts the report the same way."""
@@ -251,20 +249,13 @@ def build_report(outdir, quick=False, progress=True, force=False, scripts=None):
     """Run all scripts into ``outdir``; return (all_passed, rows, seconds).
 
     The report is built in a fresh folder and moved into ``outdir`` only once complete (see the
-    module docstring); UsageError before any work for an unusable ``outdir`` (one holding files
-    an earlier report did not write, unless ``force``) or no scripts (in ``scripts``, default the
-    checkout's ``validation/``).
+    module docstring); UsageError before any work for an unusable ``outdir`` (a folder that is not
+    a report's, unless ``force``) or no scripts (in ``scripts``, default the checkout's ``validation/``).
     """
     final = check_report_dir(outdir, force)
     vdir = validation_dir(scripts)
-
-    def kept(paths):
-        warnings.warn("kept your file(s) the report's names would replace as: " + ", ".join(str(p) for p in paths),
-                      UserWarning, stacklevel=2)
-
-    with atomic_dir(final, manifest=MANIFEST, force=force, on_kept=kept) as out:
-        result = _build(out, vdir, quick, as_callback(progress, "[validate]"))
-    return result
+    with OutputLock([final], "--outdir"), atomic_folder(final) as out:     # one report run per folder
+        return _build(out, vdir, quick, as_callback(progress, "[validate]"))
 
 
 def _build(out: Path, vdir: Path, quick: bool, progress: bool):
@@ -303,7 +294,7 @@ def _build(out: Path, vdir: Path, quick: bool, progress: bool):
 def _write_html(out, info, sections, rows, all_passed, quick):
     n_fail = sum(not r["passed"] for r in rows)
     parts = [
-        "<!doctype html><html><head><meta charset='utf-8'><title>hyde-bsdf validation report</title>",
+        f"<!doctype html><html><head><meta charset='utf-8'>{GENERATOR}<title>hyde-bsdf validation report</title>",
         "<style>body{font-family:sans-serif;max-width:1100px;margin:auto;padding:1em}"
         "table{border-collapse:collapse;font-size:13px}td,th{border:1px solid #ccc;padding:3px 6px}"
         ".pass{color:#1a7f1a;font-weight:bold}.fail{color:#c00;font-weight:bold}"
@@ -346,8 +337,8 @@ def build_parser() -> Parser:
                     help="folder of the validation scripts (default: validation/ of the source checkout this "
                          "package runs from; an installed package has none: give a clone's validation/ folder)")
     ap.add_argument("--force", action="store_true",
-                    help="write into a folder that holds files no earlier report wrote; they are kept "
-                         "(a file whose name the report takes is renamed NAME.orig)")
+                    help="write into a folder that is not an earlier report; its files are kept, except "
+                         "those of the report's names (index.html, checks.csv, the figures), which are replaced")
     quiet_option(ap)
     return ap
 
