@@ -6,7 +6,7 @@ estimate, and the ratio measured / estimated of the total.  ``--fit`` also print
 of the cost model (copy them into hyde_bsdf/resources.py's COSTS, fast_fill_seconds_per_entry ...
 far_field_seconds, after a change to the solver).
 
-    .venv/bin/python benchmarks/bench_mom_estimate.py [--fit] [--quick]
+    .venv/bin/python benchmarks/bench_mom_estimate.py [--fit] [--quick] [--atlas out/atlas_runs]
 """
 from __future__ import annotations
 
@@ -74,11 +74,40 @@ def fit(rows):
     return out
 
 
+def against_atlas(folder):
+    """Out of sample: the estimate of each atlas run's pilot partition (its surface, index, angles, sampling)
+    against the CPU seconds it took (checkpoints of validation/build_accuracy_atlas.py run)."""
+    import json
+
+    from hyde_bsdf import mom
+    from hyde_bsdf.mom import atlas
+
+    ratios = {}
+    for key, ck in atlas.load_checkpoints(folder).items():
+        t = json.loads(ck["task"])
+        tr = atlas.Grid(theta_r_step_deg=t["theta_r_step_deg"]).theta_r_deg()
+        est = mom.estimate(t["partition_wl"], 1, t["height_wl"], t["corr_length_wl"], t["theta_i_deg"], tr,
+                           pts_per_wl=t["pts_per_wl"], seed=t["seed"], workers=1, polarization=("s", "p"),
+                           n=t["n"], k=t["k"])
+        ratios.setdefault(t["material"], []).append(float(ck["cpu_per_partition"]) / est["cpu_seconds"])
+    every = np.concatenate([np.array(v) for v in ratios.values()])
+    for name, v in ratios.items():
+        v = np.array(v)
+        print(f"atlas pilots, {name:10s} {v.size:3d} runs: measured / estimated median {np.median(v):.2f}, "
+              f"10-90 % {np.percentile(v, 10):.2f}-{np.percentile(v, 90):.2f}")
+    print(f"atlas pilots, all {every.size} runs: median {np.median(every):.2f}, 10-90 % {np.percentile(every, 10):.2f}-"
+          f"{np.percentile(every, 90):.2f}, within a factor 2: {100 * np.mean(np.abs(np.log2(every)) <= 1):.0f} %")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--fit", action="store_true", help="print the fitted constants of the cost model")
     ap.add_argument("--quick", action="store_true", help="four cases only")
+    ap.add_argument("--atlas", metavar="DIR", help="also compare with the pilot partitions of the atlas's "
+                    "checkpoints in DIR (out of sample)")
     args = ap.parse_args(argv)
+    if args.atlas:
+        against_atlas(args.atlas)
     from hyde_bsdf.mom import cost
 
     cases = [CASES[i] for i in QUICK] if args.quick else CASES
