@@ -76,7 +76,7 @@ def fit(rows):
 
 def against_atlas(folder):
     """Out of sample: the estimate of each atlas run's pilot partition (its surface, index, angles, sampling)
-    against the CPU seconds it took (checkpoints of validation/build_accuracy_atlas.py run)."""
+    against the CPU seconds it took (checkpoints of validation/accuracy_atlas.py run)."""
     import json
 
     from hyde_bsdf import mom

@@ -1,6 +1,6 @@
 """Where the model holds: the accuracy atlas's verdict for a geometry, roughness, height and index (issue 32).
 
-The atlas (``hyde_bsdf/data/accuracy_atlas.npz``, made by ``validation/build_accuracy_atlas.py`` from
+The atlas (``hyde_bsdf/data/accuracy_atlas.npz``, made by ``validation/accuracy_atlas.py`` (``run``, ``table``) from
 :mod:`hyde_bsdf.mom.atlas` runs) holds, for 1-D Gaussian rough surfaces, the error of every model
 variant (shadowing x diffuse) against the exact MoM, per Mueller element and region of theta_r, with the
 MoM's own standard error; this module reads it with NumPy alone and answers :func:`accuracy`.
@@ -69,7 +69,7 @@ class Atlas:
                 self.arrays = {k: data[k] for k in data.files}
         except (OSError, ValueError) as exc:
             raise UsageError(f"cannot read the accuracy atlas {shorten(str(path))} ({exc}); rebuild it with "
-                             "validation/build_accuracy_atlas.py") from None
+                             "python validation/accuracy_atlas.py table") from None
         a = self.arrays
         self.path = path
         self.provenance = json.loads(str(a["provenance"]))
@@ -227,9 +227,11 @@ def _check_query(theta_i, theta_r, rms_slope, n, k, sigma_h_wl, shadowing, diffu
             raise UsageError(f"{name} must be finite and in {'(' if lo_open else '['}{lo:g}, {hi:g}], got {shorten(v)}")
         return x
 
-    out = dict(theta_i_deg=math.degrees(real("theta_i", theta_i, 0.0, math.pi / 2)),
-               theta_r_deg=None if theta_r is None else math.degrees(real("theta_r", theta_r, -math.pi / 2,
-                                                                          math.pi / 2)),
+    def degrees(x):                         # the answer's angles in degrees, without the radians' round-off
+        return round(math.degrees(x), 9)
+
+    out = dict(theta_i_deg=degrees(real("theta_i", theta_i, 0.0, math.pi / 2)),
+               theta_r_deg=None if theta_r is None else degrees(real("theta_r", theta_r, -math.pi / 2, math.pi / 2)),
                rms_slope=real("rms_slope", rms_slope, 0.0, math.inf, True),
                n=None if n is None else real("n", n, 0.0, math.inf, True),
                k=None if n is None and k is None else real("k", 0.0 if k is None else k, 0.0),

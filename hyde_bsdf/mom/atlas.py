@@ -63,6 +63,8 @@ TASK_CPU_CAP_S = 60.0
 #: shortest partition (wavelengths) and the least correlation lengths per partition
 PARTITION_WL = 300.0
 ELLS_PER_PARTITION = 10.0
+#: from this rms slope on, 15 points per wavelength (the steep flanks; the solver resamples further as needed)
+STEEP_SLOPE = 0.5
 
 
 @dataclass(frozen=True)
@@ -129,7 +131,7 @@ def plan(rms_slope, height_wl, index=0, seed_base=10000):
     ell = math.sqrt(2.0) * height_wl / rms_slope
     partition = max(PARTITION_WL, math.ceil(ELLS_PER_PARTITION * ell))
     # the spectrum needs > 3.9 / ell points per wavelength and check_sampling 5 per ell; steep surfaces 15
-    ppw = max(10.0 if rms_slope < 0.5 else 15.0, math.ceil(6.0 / ell))
+    ppw = max(10.0 if rms_slope < STEEP_SLOPE else 15.0, math.ceil(6.0 / ell))
     # seeds 100 apart: the pilot takes seed, the other partitions seed + 1 (no surface shares a draw)
     return dict(corr_length_wl=ell, partition_wl=float(partition), pts_per_wl=float(ppw), seed=seed_base + 100 * index)
 

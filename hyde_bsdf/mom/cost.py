@@ -3,7 +3,8 @@
 Why: a run of ten 4000-lambda partitions at 15 points per wavelength used to say nothing but "0/10 partitions
 done" for a minute; :func:`hyde_bsdf.mom.scatter` now prints this estimate first wherever the run is
 expected to take more than a minute (:data:`REPORT_SECONDS`), and :func:`hyde_bsdf.mom.estimate` answers it
-without running.
+without running.  The wall time divides the CPU time over the workers, each at the share of a core the
+machine's load average leaves it (:func:`core_share`: on two cores at load 3, two workers get 0.4 each).
 
 The fast solver's time (:mod:`hyde_bsdf.mom.fast`) per partition of N unknowns, with B samples per block
 (the strong part holds 3B entries per row), Q plane waves (summed over the regions with a far part),
@@ -26,7 +27,7 @@ import math
 from hyde_bsdf.mom.fast import NEAR_WL, FastSolverUnsuitable, plan_blocks
 from hyde_bsdf.mom.kernels import K0
 
-__all__ = ["REPORT_SECONDS", "constants", "partition_features", "fast_seconds", "describe"]
+__all__ = ["REPORT_SECONDS", "constants", "partition_features", "fast_seconds", "core_share", "describe"]
 
 #: a run expected to take longer than this (wall seconds) says so before it starts
 REPORT_SECONDS = 60.0
@@ -67,11 +68,25 @@ def fast_seconds(f, n_rhs, n_far, c=None):
     return setup, solve, far
 
 
+def core_share(workers) -> float:
+    """The share of a core each worker can expect now: 1 on an idle machine, cores / (load + workers) when the
+    load average and the workers together exceed the cores (a shared machine makes a long run longer)."""
+    import os
+
+    cores = os.cpu_count() or 1
+    try:
+        load = os.getloadavg()[0]
+    except (OSError, AttributeError):         # no load average on this platform: assume an idle machine
+        load = 0.0
+    return min(1.0, cores / max(float(cores), load + workers))
+
+
 def describe(est) -> str:
     """One line for a run's estimate (``scatter``'s report before it starts)."""
     minutes = est["wall_seconds"] / 60.0
     wall = f"~{minutes:.0f} min" if minutes >= 2 else f"~{est['wall_seconds']:.0f} s"
-    return (f"estimated {wall} wall ({est['cpu_seconds'] / 60.0:.1f} CPU min over {est['workers']} worker(s)), "
+    load = "" if est["core_share"] >= 1.0 else f" at {est['core_share']:.2g} of a core each (the machine's load)"
+    return (f"estimated {wall} wall ({est['cpu_seconds'] / 60.0:.1f} CPU min over {est['workers']} worker(s){load}), "
             f"peak memory ~{est['memory_text']}: {est['partitions']} partition(s) of {est['unknowns']} unknowns, "
             f"{est['method']} solver, {est['n_rhs']} incidence x polarisation, {est['n_far']} far-field angles "
             "(the estimate is good to about a factor of 2)")

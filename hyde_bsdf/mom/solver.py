@@ -941,7 +941,9 @@ def _estimate(cfg, surf, workers):
         per += _cost.fast_seconds(dict(feats, block=0, waves=0, panels=0), n_rhs, n_far)[2]
     total = per * cfg["partitions"]
     memory = need * workers + resources.COSTS.surface_bytes_per_point * n * cfg["partitions"]
-    est = dict(cpu_seconds=total, wall_seconds=per * math.ceil(cfg["partitions"] / workers), memory_bytes=memory,
+    share = _cost.core_share(workers)
+    est = dict(cpu_seconds=total, wall_seconds=per * math.ceil(cfg["partitions"] / workers) / share,
+               core_share=share, memory_bytes=memory,
                memory_text=resources.format_bytes(memory), unknowns=n, method=feats["method"], partitions=cfg["partitions"], workers=workers, n_rhs=n_rhs, n_far=n_far,
                features=feats)
     est["line"] = _cost.describe(est)
