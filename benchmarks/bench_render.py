@@ -21,13 +21,27 @@ threads) -- on a machine shared with other jobs the CPU-time ratio is the steadi
 out/bench/bench_render.csv).
 
     python benchmarks/bench_render.py [--spp 16] [--width 256 --height 160] [--repeats 7]
+
+**Cold load** (``--cold``, issue 31): a fresh Python process with an empty home folder (no Dr.Jit
+kernel cache, nothing of hyde-bsdf's) imports Mitsuba, sets the variant, registers ``hyde`` (hyde
+only) and loads a default scene (a sphere with the BSDF at its defaults, a constant emitter, a
+32 x 32 camera).  One BSDF per process; the BSDFs run side by side in rounds, the order reversed
+every round; per BSDF the median over rounds of the process's CPU time (user + system, all threads,
+from interpreter start to the loaded scene), of the same after ``mi.set_variant`` (registration and
+load), and of its peak RSS; the ratios (CPU) and differences (RSS) to roughconductor are the medians
+of the per-round ones.  Targets: CPU <= 2x roughconductor's, peak RSS <= +25 MB.  The child's code is
+``COLD_CHILD`` below (it imports nothing of this script).
+
+    python benchmarks/bench_render.py --cold [--cold-rounds 6] [--cold-variants llvm_ad_rgb,...]
 """
 from __future__ import annotations
 
 import argparse
 import csv
 import math
+import os
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -210,6 +224,96 @@ def micro(n_log2: int = 20, repeats: int = 7) -> list[dict]:
     return rows
 
 
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    print(f"[bench_render] wrote {path}", file=sys.stderr)
+
+
+# ----------------------------------------------------------------------------- cold load
+#: run as ``python -c COLD_CHILD BSDF VARIANT`` in a fresh process: prints one JSON line
+COLD_CHILD = r"""
+import json, resource, sys
+
+def cpu():
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+config, variant = sys.argv[1], sys.argv[2]
+import mitsuba as mi
+mi.set_variant(variant)
+after_variant = cpu()
+bsdf = {"type": "roughconductor"} if config == "roughconductor" else {"type": "hyde"}
+if config != "roughconductor":
+    import hyde_bsdf
+    hyde_bsdf.register(variant)
+    if config == "hyde smith/none":
+        bsdf.update(shadowing="smith", diffuse="none")
+scene = mi.load_dict({"type": "scene", "integrator": {"type": "path"},
+                      "sensor": {"type": "perspective",
+                                 "film": {"type": "hdrfilm", "width": 32, "height": 32}},
+                      "emitter": {"type": "constant"},
+                      "shape": {"type": "sphere", "bsdf": bsdf,
+                                "to_world": mi.ScalarTransform4f().translate([0, 0, 4])}})
+end = cpu()
+print(json.dumps({"cpu_s": end, "load_cpu_s": end - after_variant,
+                  "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+                  "scipy": any(m.split(".")[0] == "scipy" for m in sys.modules)}))
+"""
+COLD_CONFIGS = ("roughconductor", "hyde default", "hyde smith/none")
+
+
+def _cold_child(config: str, variant: str) -> dict:
+    """One fresh process with an empty home folder (its own temporary one)."""
+    import json
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="hyde-cold-home-") as home:
+        env = {k: v for k, v in os.environ.items() if not k.startswith(("XDG_", "HYDE_BSDF_"))}
+        env["HOME"] = home
+        out = subprocess.run([sys.executable, "-c", COLD_CHILD, config, variant], capture_output=True,
+                             text=True, env=env, timeout=600)
+    if out.returncode != 0:
+        raise RuntimeError(f"cold-load child ({config}, {variant}) failed: {out.stderr.strip()[-2000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def cold(rounds: int = 6, variants=("llvm_ad_rgb",)) -> list[dict]:
+    """Rows of the cold-load benchmark (module docstring), one per (variant, configuration)."""
+    rows = []
+    for variant in variants:
+        per = {c: [] for c in COLD_CONFIGS}
+        for r in range(rounds):
+            for c in (COLD_CONFIGS if r % 2 == 0 else COLD_CONFIGS[::-1]):
+                per[c].append(_cold_child(c, variant))
+        base = per["roughconductor"]
+        for c in COLD_CONFIGS:
+            runs = per[c]
+            rows.append({
+                "variant": variant, "config": c, "rounds": rounds,
+                "cpu_s": statistics.median(x["cpu_s"] for x in runs),
+                "load_cpu_s": statistics.median(x["load_cpu_s"] for x in runs),
+                "peak_rss_mb": statistics.median(x["peak_rss_mb"] for x in runs),
+                "cpu_ratio": statistics.median(x["cpu_s"] / b["cpu_s"] for x, b in zip(runs, base)),
+                "rss_excess_mb": statistics.median(x["peak_rss_mb"] - b["peak_rss_mb"] for x, b in zip(runs, base)),
+                "scipy_imported": any(x["scipy"] for x in runs)})
+    return rows
+
+
+def print_cold(rows: list[dict]) -> None:
+    print(f"\ncold load (empty home folder, one BSDF per process, median of {rows[0]['rounds']} rounds, "
+          f"alternating order; targets: CPU <= 2x, peak RSS <= +25 MB)")
+    print(f"{'variant':28s} {'BSDF':16s} {'CPU s':>7s} {'(load)':>7s} {'ratio':>6s} {'peak MB':>8s} "
+          f"{'excess MB':>9s}  SciPy")
+    for r in rows:
+        print(f"{r['variant']:28s} {r['config']:16s} {r['cpu_s']:7.3f} {r['load_cpu_s']:7.3f} {r['cpu_ratio']:6.2f} "
+              f"{r['peak_rss_mb']:8.1f} {r['rss_excess_mb']:+9.1f}  {'yes' if r['scipy_imported'] else 'no'}")
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("-o", "--out", default="out/bench/bench_render.csv")
@@ -220,7 +324,17 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--variant", default="llvm_ad_spectral_polarized")
     p.add_argument("--no-micro", action="store_true", help="skip the per-method BSDF timing")
+    p.add_argument("--cold", action="store_true", help="only the cold-load benchmark (issue 31)")
+    p.add_argument("--cold-rounds", type=int, default=6, help="--cold: rounds of fresh processes (default 6)")
+    p.add_argument("--cold-variants", default="llvm_ad_rgb,llvm_ad_spectral_polarized",
+                   help="--cold: variants, comma-separated (default %(default)s)")
     args = p.parse_args(argv)
+    if args.cold:
+        rows = cold(args.cold_rounds, tuple(v for v in args.cold_variants.split(",") if v))
+        print_cold(rows)
+        out = Path(args.out)
+        _write_csv(out.with_name(out.stem + "_cold.csv"), rows)
+        return 0
     rows = run(args.width, args.height, args.spp, args.ad_spp, args.repeats, variant=args.variant)
     by = {r["config"]: r for r in rows}
     # Same model, same paths: d/d rms_slope (hyde smith) = sqrt(2) d/d alpha (roughconductor).
@@ -236,15 +350,9 @@ def main(argv=None) -> int:
               f"{r['ad_wall_ms']:16.1f} {r['ad_cpu_ms']:8.1f} {r['ad_ratio_wall']:10.3f} "
               f"{r['ad_ratio_cpu']:9.3f} {ta:>7s}")
     out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    with open(out, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+    _write_csv(out, rows)
     print(f"gradient check: d loss/d rms_slope (hyde smith) / (sqrt 2 * d loss/d alpha (roughconductor)) "
           f"on the gold sphere = {gratio:.4f} (1 = same model, same gradient)")
-    print(f"[bench_render] wrote {out}", file=sys.stderr)
     if not args.no_micro:
         mrows = micro()
         print(f"\nper-method BSDF cost (gold, rms_slope 0.15, {mrows[0]['queries']} random queries, "
@@ -253,13 +361,7 @@ def main(argv=None) -> int:
         for op in ("eval", "pdf", "eval_pdf", "sample"):
             cells = [r for r in mrows if r["method"] == op]
             print(f"{op:10s} " + " ".join(f"{r['ns_per_query']:12.1f} ({r['ratio']:5.2f}x)" for r in cells))
-        mout = out.with_name(out.stem + "_micro.csv")
-        with open(mout, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(mrows[0]))
-            w.writeheader()
-            for r in mrows:
-                w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-        print(f"[bench_render] wrote {mout}", file=sys.stderr)
+        _write_csv(out.with_name(out.stem + "_micro.csv"), mrows)
     return 0
 
 

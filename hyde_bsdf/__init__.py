@@ -55,8 +55,8 @@ def _version() -> str:
         return found.group(1) if found else "unknown"
 
 
-__version__ = _version()
-
+#: the package's version (pyproject.toml's, from the package metadata): read on first use
+__version__: str
 
 _SUBPACKAGES = ("io", "model", "mitsuba", "mom", "fit", "render", "inverse", "app")
 #: public functions, imported on first use: ``import hyde_bsdf`` (and so the command line's
@@ -70,6 +70,9 @@ _FUNCTIONS = {"pbrdf": "hyde_bsdf.model.evaluator", "dhr_specular_pec": "hyde_bs
 def __getattr__(name):
     import importlib
 
+    if name == "__version__":      # read on first use: the metadata lookup costs a plugin's cold load ~60 ms
+        globals()[name] = _version()
+        return globals()[name]
     if name in _SUBPACKAGES:
         return importlib.import_module(f"hyde_bsdf.{name}")
     if name in _FUNCTIONS:
@@ -80,7 +83,7 @@ def __getattr__(name):
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_SUBPACKAGES) | set(_FUNCTIONS))
+    return sorted(set(globals()) | set(_SUBPACKAGES) | set(_FUNCTIONS) | {"__version__"})
 
 
 def register(variant: str | None = None) -> list:

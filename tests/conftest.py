@@ -1,5 +1,4 @@
-"""Shared test set-up: a per-session DHR cache folder (tests never touch ~/.cache) and the
-Hypothesis settings profile.
+"""Shared test set-up: the Hypothesis settings profile.
 
 Hypothesis profiles (``HYPOTHESIS_PROFILE``):
 
@@ -15,10 +14,7 @@ Hypothesis profiles (``HYPOTHESIS_PROFILE``):
 Tests set their own count with ``max_examples=examples(N)``: N in ``ci``, 10 N in ``thorough``.
 """
 import os
-import tempfile
 
-# Set before any hyde_bsdf import builds or reads a DHR table.
-os.environ.setdefault("HYDE_BSDF_CACHE", os.path.join(tempfile.gettempdir(), "hyde-bsdf-test-cache"))
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 import pytest  # noqa: E402

@@ -135,8 +135,9 @@ CLI_ROWS = [
      "crlines.csv, line 4, column 'M01': 'x' is not a number", "in"),
     ("fit: 1000 copies of 3 rows (errors of 3 rows)", ["fit", "{copies}", "-q"], 0,
      "2997 of 3000 rows repeat another row's geometry", "in"),
-    ("fit: impossible data, |M22/M00| > 1 beyond noise", ["fit", "{impossible}", "-q"], 0,
-     "warning: impossible data: |M22/M00| > 1 in 1 row(s) beyond 3 sigma", "in"),
+    # issue 30: a value is judged against its own sigma; -1.3 +- 0.0018 is impossible: refused, naming the line
+    ("fit: impossible data, |M22/M00| > 1 far beyond its sigma", ["fit", "{impossible}", "-q"], 2,
+     "impossible.csv, line 3, column 'M22': -1.3 is not a normalized element", "in"),
     # --- invert (issue 15: a reference scaled by 1e30 ended in a drjit.backward traceback) ---
     ("invert: reference scaled by 1e30", ["invert", "--reference", "{ref1e30}", "--res", "16", "-o", "{tmp}/kept"], 2,
      "ref1e30.exr' has peak |S0| = 1e+30, outside the accepted range [1e-10, 1e+10]", "in"),

@@ -59,7 +59,7 @@ def test_limits_smooth_and_rough():
 
 
 def test_table_interpolation_error_below_2e_4():
-    """Bicubic interpolation of the cached table vs direct quadrature at random points."""
+    """Bicubic interpolation of the shipped table vs direct quadrature at random points."""
     table = dhr.load_table("vgroove")
     t = rng.uniform(0, math.radians(89.9), 400)
     s = np.exp(rng.uniform(math.log(0.01), math.log(3), 400))
@@ -103,18 +103,6 @@ def test_table_ends_near_mirror_and_very_rough():
         exact = dhr.dhr_quadrature(t, s)
         assert exact[0] * s * s == pytest.approx(0.3109, abs=2e-4)
         assert np.abs(table(t, s) / exact - 1).max() < 1e-5
-
-
-def test_table_is_cached_on_disk_and_reloaded(tmp_path, monkeypatch):
-    monkeypatch.setenv("HYDE_BSDF_CACHE", str(tmp_path))
-    monkeypatch.setattr(dhr, "_TABLES", {})
-    first = dhr.load_table("vgroove")
-    assert list(tmp_path.glob("dhr_vgroove_*.npz"))
-    monkeypatch.setattr(dhr, "_TABLES", {})
-    monkeypatch.setattr(dhr, "build_table", lambda *a, **k: pytest.fail("rebuilt instead of loading"))
-    second = dhr.load_table("vgroove")
-    np.testing.assert_array_equal(first.rho, second.rho)
-    assert first.rho.shape == (dhr.TABLE_THETA_POINTS, dhr.TABLE_SLOPE_POINTS)
 
 
 def test_rho_avg_is_the_cosine_weighted_mean():

@@ -20,7 +20,7 @@
 * The front page stays a front page (<= 200 lines, picture < 300 kB), and the plugin
   reference lists every parameter the plugin accepts and the CLI page every sub-command.
 
-Budget: <= 90 s on 2 cores with warm Dr.Jit kernel and DHR caches (all pages share one variant;
+Budget: <= 90 s on 2 cores with a warm Dr.Jit kernel cache (all pages share one variant;
 measured 42 s wall, 41 s CPU, at a load average of 1.4 on the shared 2-core machine).
 """
 from __future__ import annotations

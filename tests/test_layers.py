@@ -130,7 +130,7 @@ def test_the_checker_sees_lazy_imports_and_names_imported_from_the_package(tmp_p
 #: the infrastructure (issue 34): atomic writes, gates, locks, trust, memory and resources, gather,
 #: runtime, signals, errors, progress -- not the file-format readers.  A module that joins it is listed here.
 INFRASTRUCTURE = ["errors.py", "progress.py", "resources.py", "io/atomic.py", "io/input_gate.py", "io/output_gate.py",
-                  "io/trust.py", "mom/gather.py", "mom/runtime.py", "app/signals.py"]
+                  "mom/gather.py", "mom/runtime.py", "app/signals.py"]
 
 
 def _lines(paths) -> int:

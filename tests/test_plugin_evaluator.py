@@ -82,7 +82,8 @@ def _compare(mi, params, n_dirs, seed, mode="radiance", wavelength=633.0):
     n, k = _index_at(mi, index, wavelength)
     F_eval = hyde_bsdf.pbrdf(ti, tr, ph, rms_slope=params["rms_slope"], n=n, k=k,
                              shadowing=params.get("shadowing", "vgroove"),
-                             diffuse=params.get("diffuse", "paper"))
+                             diffuse=params.get("diffuse", "paper"),
+                             diffuse_reflectance=params.get("diffuse_reflectance"))
     return F_plugin, F_eval
 
 
@@ -115,7 +116,12 @@ LLVM_CASES = [
     ("large-k", "none", "none", 0.44, "radiance"),
     ("large-k", "vgroove", "paper", 1.0, "radiance"),
     ("large-k", "vgroove", "reciprocal", 0.3, "radiance"),
+    # issue 30: the Lambertian term with its own albedo (ALBEDO), in both transport modes
+    ("Au", "smith", "lambertian", 0.3, "radiance"),
+    ("glass", "vgroove", "lambertian", 0.44, "importance"),
 ]
+#: the Lambertian cases' diffuse_reflectance
+ALBEDO = 0.2
 
 
 @pytest.mark.parametrize("label,shadowing,diffuse,rms,mode", LLVM_CASES)
@@ -123,9 +129,11 @@ def test_llvm_polarized_matches_evaluator(label, shadowing, diffuse, rms, mode):
     mi = _setup("llvm_ad_spectral_polarized")
     index = dict(INDICES)[label]
     params = {"rms_slope": rms, "shadowing": shadowing, "diffuse": diffuse, **index}
+    if diffuse == "lambertian":
+        params["diffuse_reflectance"] = ALBEDO
     F_plugin, F_eval = _compare(mi, params, 10_000, seed=zlib.crc32(f"{label}-{shadowing}-{diffuse}".encode()),
                                 mode=mode)
-    _check(F_plugin, F_eval, diffuse, shadowing)
+    _check(F_plugin, F_eval, diffuse, shadowing, rtol=SMITH_RTOL if shadowing == "smith" else RTOL)
 
 
 @pytest.mark.parametrize("label,shadowing,diffuse,rms,mode", [

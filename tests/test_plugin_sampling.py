@@ -26,6 +26,8 @@ MODELS = {  # (shadowing, diffuse, sample_visible)
                                    ("smith", "paper", True)],
 }
 CASES = [(v, m, c) for v, ms in MODELS.items() for m in ms for c in CONFIGS]
+#: issue 30: the Lambertian term (albedo 0.3), its own choice of lobe (p_spec from the albedo), at 3 configurations
+CASES += [("llvm_ad_rgb", ("smith", "lambertian", True), c) for c in ((0.02, 30), (0.3, 80), (1.0, 30))]
 
 
 def _setup(variant):
@@ -47,7 +49,8 @@ def test_chi2(variant, model, config):
     shadowing, diffuse, visible = model
     rms, theta_deg = config
     bsdf = mi.load_dict({"type": "hyde", "rms_slope": rms, "material": "Au", "shadowing": shadowing,
-                         "diffuse": diffuse, "sample_visible": visible})
+                         "diffuse": diffuse, "sample_visible": visible,
+                         **({"diffuse_reflectance": 0.3} if diffuse == "lambertian" else {})})
     passed, p_value, messages = chi2_test(bsdf, math.radians(theta_deg), sample_count=1_000_000,
                                           res=128, ires=8, test_count=len(CASES))
     assert passed, messages

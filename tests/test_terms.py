@@ -19,7 +19,8 @@ from hyde_bsdf.mom import model1d
 
 
 def test_names_and_defaults_come_from_the_records():
-    assert terms.SHADOWING == ("vgroove", "smith", "none") and terms.DIFFUSE == ("paper", "reciprocal", "none")
+    assert terms.SHADOWING == ("vgroove", "smith", "none")
+    assert terms.DIFFUSE == ("paper", "reciprocal", "none", "lambertian")          # lambertian: issue 30
     assert [t.name for t in terms.SHADOWING_TERMS if not t.dhr_bounded] == ["none"]
     assert [t.name for t in terms.DIFFUSE_TERMS if t.needs_bounded_dhr] == ["reciprocal"]
     assert terms.diffuse_term(True).name == "paper" and terms.diffuse_term(None).name == "none"
@@ -85,6 +86,24 @@ def test_a_new_record_plugs_into_the_evaluator_and_the_1d_model_unchanged():
     assert F[0, 0] - spec[0, 0] == pytest.approx(0.25 / math.pi, rel=1e-15)
     f = model1d.brdf(0.4, 0.7, 0.3, diffuse=lam) - model1d.brdf(0.4, 0.7, 0.3, diffuse=False)
     assert f == pytest.approx(0.125, rel=1e-15)
+
+
+def test_the_lambertian_record_is_its_albedo_on_the_surface_and_in_the_plane():
+    """Issue 30's free diffuse part: F00 += diffuse_reflectance / pi on the surface, f_d = albedo / 2 in
+    the plane (hemispherical integral = the albedo either way), unpolarized, independent of the
+    roughness and the index; the albedo is the record's own parameter (registry range [0, 1]) and a
+    term without it refuses it."""
+    base = pbrdf(0.4, 0.7, 1.0, rms_slope=0.3, n=0.18, k=3.0, diffuse="none")
+    F = pbrdf(0.4, 0.7, 1.0, rms_slope=0.3, n=0.18, k=3.0, diffuse="lambertian", diffuse_reflectance=0.2)
+    assert F[0, 0] - base[0, 0] == pytest.approx(0.2 / math.pi, rel=1e-14)
+    np.testing.assert_array_equal(F.ravel()[1:], base.ravel()[1:])
+    f = model1d.brdf(0.4, 0.7, 0.3, diffuse="lambertian", diffuse_reflectance=0.2) - model1d.brdf(0.4, 0.7, 0.3,
+                                                                                                 diffuse=False)
+    assert f == pytest.approx(0.1, rel=1e-14)
+    with pytest.raises(UsageError, match=r"diffuse_reflectance must be a finite number in \[0, 1\], got 1.5"):
+        pbrdf(0.4, 0.7, 1.0, rms_slope=0.3, pec=True, diffuse="lambertian", diffuse_reflectance=1.5)
+    with pytest.raises(UsageError, match="diffuse_reflectance is a parameter of diffuse='lambertian'"):
+        pbrdf(0.4, 0.7, 1.0, rms_slope=0.3, pec=True, diffuse="paper", diffuse_reflectance=0.2)
 
 
 def test_the_plugin_refuses_a_record_it_has_no_implementation_for(monkeypatch):

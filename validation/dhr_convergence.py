@@ -1,4 +1,4 @@
-"""Convergence of the specular DHR (paper Eqs. 14-16) and accuracy of its cached table.
+"""Convergence of the specular DHR (paper Eqs. 14-16) and accuracy of its shipped table.
 
 1. Quadrature error against Gauss-Legendre nodes per piece, and against run time, for the
    three shadowing models at hard points (narrow lobes, grazing incidence).
@@ -70,7 +70,7 @@ def convergence(out, quick):
 
 
 def table_error(out, quick):
-    """Interpolation error of the cached table over its whole range, rms_slope 1e-4 .. 100 and
+    """Interpolation error of the shipped table over its whole range, rms_slope 1e-4 .. 100 and
     theta_i 0 .. 90 deg, on a grid uniform in the table's x = 1 - sqrt(cos theta_i) (so that
     the grazing layer, where near-mirror surfaces lose light to shadowing, is sampled densely)."""
     table = dhr.load_table("vgroove")
@@ -136,8 +136,8 @@ def table_error(out, quick):
 
 
 def build_check():
-    """A fresh build of the V-groove table, timed now (the cached table's build_seconds may come
-    from a busy machine); the load average goes into the check's name."""
+    """A fresh build of the V-groove table, timed now (what tools/make_dhr_tables.py pays per
+    shadowing; the package ships the result); the load average goes into the check's name."""
     import os
     t0 = time.perf_counter()
     dhr.build_table("vgroove", progress=False)

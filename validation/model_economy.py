@@ -69,7 +69,9 @@ def _compare(a, b):
 def validate(outdir="out/validation", quick=False):
     import mitsuba as mi
     import hyde_bsdf
-    from hyde_bsdf.mitsuba import plugin, optics as plugin_optics
+    from hyde_bsdf.mitsuba import plugin
+    from hyde_bsdf.model import dhr
+    from hyde_bsdf.model.terms import SHADOWING
     from hyde_bsdf.mitsuba.variants import set_variant
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
@@ -95,15 +97,15 @@ def validate(outdir="out/validation", quick=False):
         without = _renders(load(True, surfaces=surf, diffuse="none"), True)
         rows.append(["diffuse none vs paper", s, *_compare(with_d, without)])
     # 3. DHR texture resolution
-    saved = plugin_optics.DHR_X_POINTS, plugin_optics.DHR_SLOPE_PER_DECADE
-    try:
-        plugin_optics.DHR_X_POINTS, plugin_optics.DHR_SLOPE_PER_DECADE = 129, 20
-        plugin_optics._FINE_CACHE.clear()
+    saved = dict(dhr._TEXTURES)
+    try:   # the shipped textures replaced by coarse ones resampled from the same tables
+        for name in SHADOWING:
+            dhr._TEXTURES[name] = dhr.texture_from_table(dhr.load_table(name), x_points=129, per_decade=20)
         plugin._DHR_CACHE.clear()
         coarse = _renders(load(True), True)
     finally:
-        plugin_optics.DHR_X_POINTS, plugin_optics.DHR_SLOPE_PER_DECADE = saved
-        plugin_optics._FINE_CACHE.clear()
+        dhr._TEXTURES.clear()
+        dhr._TEXTURES.update(saved)
         plugin._DHR_CACHE.clear()
     rows.append(["coarse DHR texture (129 x 20/decade) vs fine", "scene", *_compare(full, coarse)])
 

@@ -129,24 +129,32 @@ def add_height_options(ap) -> None:
                     help="the measurement's wavelength in nm (with --sigma-h-um)")
 
 
-def height_wl(args, wavelength_nm=None):
-    """sigma_h / lambda from the height options (None if not given; ``wavelength_nm``: the data's own, where
-    ``--wavelength-nm`` may be left out); UsageError naming the option otherwise."""
+def check_height_options(args) -> None:
+    """The height options' own mistakes (both given, a value not positive): UsageError naming the option, before
+    the data are read."""
     from hyde_bsdf.errors import UsageError
 
     if args.sigma_h_wl is not None and args.sigma_h_um is not None:
         raise UsageError("give --sigma-h-wl or --sigma-h-um (with --wavelength-nm), not both")
-    if args.sigma_h_um is not None:
-        if args.wavelength_nm is None and wavelength_nm is None:
-            raise UsageError("--sigma-h-um needs --wavelength-nm (the height in wavelengths is what the atlas reads)")
-        args = argparse.Namespace(**{**vars(args), "wavelength_nm": args.wavelength_nm or wavelength_nm})
-        for name, v in (("--sigma-h-um", args.sigma_h_um), ("--wavelength-nm", args.wavelength_nm)):
-            if not (math.isfinite(v) and v > 0):
-                raise UsageError(f"{name} must be a positive number, got {v:g}")
-        return 1000.0 * args.sigma_h_um / args.wavelength_nm
-    if args.sigma_h_wl is not None and not (math.isfinite(args.sigma_h_wl) and args.sigma_h_wl > 0):
-        raise UsageError(f"--sigma-h-wl must be a positive number, got {args.sigma_h_wl:g}")
-    return args.sigma_h_wl
+    for name, v in (("--sigma-h-wl", args.sigma_h_wl), ("--sigma-h-um", args.sigma_h_um),
+                    ("--wavelength-nm", args.wavelength_nm)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise UsageError(f"{name} must be a positive number, got {v:g}")
+
+
+def height_wl(args, wavelength_nm=None):
+    """sigma_h / lambda from the height options at one wavelength (``wavelength_nm``: the data's own, else
+    ``--wavelength-nm``); None without a height; UsageError where --sigma-h-um has no wavelength."""
+    from hyde_bsdf.errors import UsageError
+
+    check_height_options(args)
+    if args.sigma_h_um is None:
+        return args.sigma_h_wl
+    wl = wavelength_nm if wavelength_nm is not None else args.wavelength_nm
+    if wl is None:
+        raise UsageError("--sigma-h-um needs the wavelength: a wavelength_nm column in the data or --wavelength-nm "
+                         "(the height in wavelengths is what the accuracy atlas reads)")
+    return 1000.0 * args.sigma_h_um / wl
 
 
 def fit_verdict(theta_i, params, shadowing, diffuse, sigma_h_wl) -> str:
@@ -163,15 +171,29 @@ def pbsdf_verdict_lines(theta_i, result, args) -> list:
     """The atlas's verdict per band of a table fit (``result``: rms_slope, n and k per band, ``wavelengths`` in
     nm), at the atlas's incidence angles within the data's range: ``--sigma-h-um`` gives each band its own
     sigma_h / lambda; ``--sigma-h-wl`` the same for every band.  [] when no height was given."""
-    h = height_wl(args, wavelength_nm=1000.0)      # a table carries its wavelengths (each band's below)
-    if h is None:
+    if args.sigma_h_wl is None and args.sigma_h_um is None:
         return []
     lo, hi = float(np.min(theta_i)), float(np.max(theta_i))
     grid = np.radians([t for t in range(0, 90, 10) if math.radians(t) >= lo - 1e-9 and math.radians(t) <= hi + 1e-9])
     lines = []
     for w, n, k in zip(result.wavelengths, result.n, result.k):
-        band_h = 1000.0 * args.sigma_h_um / w if args.sigma_h_um is not None else h
         line = fit_verdict(grid if grid.size else [lo], {"rms_slope": result.rms_slope, "n": n, "k": k},
-                           result.shadowing, result.diffuse, band_h)
+                           result.shadowing, result.diffuse, height_wl(args, w))
         lines.append(f"{w:g} nm: {line}")
+    return lines
+
+
+def lab_verdict_lines(meas, result, args) -> list:
+    """The atlas's verdict for a CSV fit (:func:`hyde_bsdf.fit.lab.fit_lab`), one line per wavelength of the data
+    (each its own sigma_h / lambda with ``--sigma-h-um``), at the data's incidence angles there.  [] without a
+    height."""
+    if args.sigma_h_wl is None and args.sigma_h_um is None:
+        return []
+    lines = []
+    for w in result.wavelengths:
+        rows = np.ones(len(meas), bool) if w is None or meas.wavelength_nm is None else \
+            np.abs(meas.wavelength_nm - w) < 1e-9
+        line = fit_verdict(meas.theta_i[rows], result.params(w), result.model.shadowing, result.model.diffuse,
+                           height_wl(args, w))
+        lines.append(line if w is None else f"{w:g} nm: {line}")
     return lines

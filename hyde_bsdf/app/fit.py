@@ -3,22 +3,26 @@
 
 Command lines::
 
-    hyde-bsdf fit DATA.csv [--fit n,k,rms_slope] [--rms-slope X] [--n0 N] [--k0 K]
-                  [--model auto|fixed] [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
-                  [--sigma-h-wl H | --sigma-h-um UM --wavelength-nm NM] [--strict] [-o plot.png] [-q]
+    hyde-bsdf fit DATA.csv [--fit rms_slope,n,k,diffuse_reflectance] [--rms-slope X] [--n0 N] [--k0 K]
+                  [--diffuse-reflectance A] [--model auto|fixed] [--shadowing vgroove|smith|none]
+                  [--diffuse paper|reciprocal|none|lambertian] [--albedo shared|per-wavelength]
+                  [--sigma-h-wl H | --sigma-h-um UM [--wavelength-nm NM]] [--json FILE] [--strict] [-o plot.png] [-q]
     hyde-bsdf fit FILE.pbsdf [--fit n,k,rms_slope] [--rms-slope 0.3] [--n0 N] [--k0 K]
                   [--model auto|fixed] [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
                   [--max-points 3000] [--theta-max 80] [--tolerance 0.05] [--seed 0]
-                  [--strict] [-o fit.png] [-q]
+                  [--sigma-h-um UM | --sigma-h-wl H] [--strict] [-o fit.png] [-q]
 
-Without ``--shadowing`` and ``--diffuse`` the model is chosen (``--model auto``,
+A CSV (M00 in 1/sr optional, several wavelengths in one file) is fitted by
+:func:`hyde_bsdf.fit.lab.fit_lab`: everything the data determine unless ``--fit`` names fewer,
+one joint fit over the wavelengths; ``--json FILE`` writes the machine-readable result
+(``-``: to stdout, the summary then on stderr).  Without ``--shadowing`` and ``--diffuse`` the model is chosen (``--model auto``,
 :mod:`hyde_bsdf.fit.model_selection`): every shadowing x diffuse model is fitted and the smallest
 adequate one kept; the table of models is printed and, with ``-o``, plotted (misfit against model
 size) beside the fit as ``NAME_models.EXT``.  Every fit prints its verdict
 (:mod:`hyde_bsdf.fit.adequacy`); an inadequate model is a ``WARNING:`` line in the summary and on
-stderr.  Told the surface height (``--sigma-h-wl``, or ``--sigma-h-um`` and ``--wavelength-nm``), a CSV fit also
-states the accuracy atlas's verdict on the fitted model at the data's incidence angles
-(:func:`hyde_bsdf.model.accuracy.verdict`: how far the model may be from exact EM there).
+stderr.  Told the surface height (``--sigma-h-wl``, or ``--sigma-h-um`` with the data's wavelength column
+or ``--wavelength-nm``), a fit also states the accuracy atlas's verdict on the fitted model at the data's
+incidence angles, per wavelength (:func:`hyde_bsdf.model.accuracy.verdict`).
 
 (CSV format: :mod:`hyde_bsdf.io.measurements`; the fits: :mod:`hyde_bsdf.fit.mueller_fit`,
 :mod:`hyde_bsdf.fit.pbsdf_fit`.)  Options and the ``-o`` path are checked before the file is
@@ -29,24 +33,31 @@ every few seconds (``-q``: none).
 from __future__ import annotations
 
 import contextlib
+import json
 import math
+import sys
 import warnings
 from pathlib import Path
 
-from hyde_bsdf.app.accuracy import add_height_options, fit_verdict, height_wl, pbsdf_verdict_lines
+from hyde_bsdf.app.accuracy import (add_height_options, check_height_options, height_wl, lab_verdict_lines,
+                                    pbsdf_verdict_lines)
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
-from hyde_bsdf.app.plots import PLOT_FORMATS, check_plot_path, plot_fit, plot_pbsdf_fit, plot_selection
+from hyde_bsdf.app.plots import (PLOT_FORMATS, check_plot_path, plot_lab_fit, plot_lab_selection, plot_pbsdf_fit,
+                                 plot_selection)
 from hyde_bsdf.errors import RejectedResult, UsageError
 from hyde_bsdf.fit.adequacy import InadequateModelWarning
 from hyde_bsdf.fit.model_selection import select_model, select_model_pbsdf
-from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitWarning, check_options, fit_measurements
+from hyde_bsdf.fit.lab import DIFFUSE_CHOICES, check_lab_options, extrapolation_warning, fit_lab
+from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitWarning
+from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf.io.input_gate import STDIN, check_input
 from hyde_bsdf.io.output_gate import output_gate
 from hyde_bsdf.fit.pbsdf_fit import _check, fit_pbsdf
 from hyde_bsdf.fit.pbsdf_samples import pbsdf_samples
 from hyde_bsdf.io.measurements import read_measurements
 from hyde_bsdf.io.pbsdf_file import read_pbsdf
-from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
+from hyde_bsdf.model.parameters import DIFFUSE_REFLECTANCE
+from hyde_bsdf.model.terms import DIFFUSE, DIFFUSE_TERMS, SHADOWING
 from hyde_bsdf.progress import stderr_lines
 from hyde_bsdf.resources import COSTS
 
@@ -108,10 +119,14 @@ MODEL_HELP = ("auto (the default unless --shadowing or --diffuse is given): fit 
 STRICT_HELP = "fail (exit 1, after the summary) when the model does not describe the data or the fit is ill-posed"
 
 
+#: the diffuse terms a table fit takes: those without parameters of their own (the CSV fit takes every one)
+TABLE_DIFFUSE = tuple(t.name for t in DIFFUSE_TERMS if not t.parameters)
+
+
 def _add_model_options(ap):
     ap.add_argument("--model", default=None, choices=("auto", "fixed"), help=MODEL_HELP)
     ap.add_argument("--shadowing", default=None, choices=SHADOWING, help=f"one shadowing model (default {SHADOWING[0]})")
-    ap.add_argument("--diffuse", default=None, choices=DIFFUSE, help=f"one diffuse term (default {DIFFUSE[0]})")
+    ap.add_argument("--diffuse", default=None, choices=TABLE_DIFFUSE, help=f"one diffuse term (default {DIFFUSE[0]})")
 
 
 def _auto(args) -> bool:
@@ -148,8 +163,9 @@ def _warn_verdict(result):
 def _finish(result, strict) -> int:
     """Exit status after the summary: 1 for --strict failures (said on stderr) or no convergence."""
     v = result.verdict
-    if strict and (not v.adequate or result.warnings):
-        why = v.message if not v.adequate else "ill-posed fit: " + "; ".join(result.warnings)
+    ill = getattr(result, "ill_posed_notes", result.warnings)
+    if strict and (not v.adequate or ill):
+        why = v.message if not v.adequate else "ill-posed fit: " + "; ".join(ill)
         raise RejectedResult(f"--strict: {why}")
     return 0 if result.success else 1
 
@@ -157,19 +173,33 @@ def _finish(result, strict) -> int:
 def csv_parser() -> Parser:
     ap = Parser(
         prog="hyde-bsdf fit",
-        description="Fit the Hyde-Schmidt-Havrilla pBRDF (n, k, rms_slope) to normalized Mueller-matrix "
-                    "measurements in a CSV file (format: python -m pydoc hyde_bsdf.io.measurements). "
-                    "The index is the paper's eta = n - jk (the plugin's eta = n, k = k). "
+        description="Fit the Hyde-Schmidt-Havrilla pBRDF to Mueller-matrix measurements in a CSV file: the "
+                    "normalized elements M_jk/M_00, optionally the BRDF M00 (1/sr) and a wavelength_nm column "
+                    "(format: python -m pydoc hyde_bsdf.io.measurements). By default everything the data "
+                    "determine is fitted -- rms_slope, n and k per wavelength, the Lambertian albedo -- and the "
+                    "model chosen. The index is the paper's eta = n - jk (the plugin's eta = n, k = k). "
                     "Exit status: 0 fitted, 1 not converged, or with --strict an inadequate model or an ill-posed "
                     "fit, 2 bad input.")
-    ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M01, M01_sigma, ...)")
-    ap.add_argument("--fit", default="n,k", help="comma-separated parameters to fit, from n,k,rms_slope "
-                    "(default n,k)")
-    ap.add_argument("--rms-slope", type=float, default=0.3,
-                    help="rms_slope = sqrt(2) sigma_h/ell: start value if fitted, else held fixed (default 0.3)")
-    ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n; default: several starts")
-    ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k; default: several starts")
-    _add_model_options(ap)
+    ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M00, M00_sigma, M01, ...)")
+    ap.add_argument("--fit", default=None, help="comma-separated parameters to fit, from rms_slope,n,k,"
+                    "diffuse_reflectance (default: all the data determine); the others are held at their values")
+    ap.add_argument("--rms-slope", type=float, default=None,
+                    help="rms_slope = sqrt(2) sigma_h/ell: start value if fitted (default: a grid), else held fixed")
+    ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n at every wavelength; default: a grid")
+    ap.add_argument("--k0", type=float, default=None, help="start (or fixed) k at every wavelength; default: a grid")
+    ap.add_argument("--diffuse-reflectance", type=float, default=None,
+                    help=f"start (or fixed) albedo of the Lambertian diffuse term, in {DIFFUSE_REFLECTANCE.text()}")
+    ap.add_argument("--model", default=None, choices=("auto", "fixed"), help=MODEL_HELP)
+    ap.add_argument("--shadowing", default=None, choices=SHADOWING, help="one shadowing model (default vgroove)")
+    ap.add_argument("--diffuse", default=None, choices=DIFFUSE_CHOICES,
+                    help="one diffuse term (default paper): the paper's Eq. 17, its reciprocal variant, none, or a "
+                         "Lambertian term with a free albedo (diffuse_reflectance)")
+    ap.add_argument("--albedo", default=None, choices=("shared", "per-wavelength"),
+                    help="the Lambertian albedo: one for every wavelength, or one per wavelength (default: as the "
+                         "data decide with --model auto, else shared)")
+    ap.add_argument("--json", default=None, metavar="FILE",
+                    help="write the result as JSON (values, standard errors, covariance, verdict, the table of "
+                         "models); '-' for stdout (the summary then goes to stderr)")
     add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
     ap.add_argument("-o", "--output", default=None,
@@ -180,9 +210,9 @@ def csv_parser() -> Parser:
 
 
 def csv_main(argv=None) -> int:
-    """``hyde-bsdf fit DATA.csv``: read, fit, print the result and the plugin snippet, plot.
+    """``hyde-bsdf fit DATA.csv``: read, fit, print the result and the plugin snippet, plot, JSON.
 
-    Options and the output path are checked before the file is read.  Exit status 0 fitted, 1 not
+    Options and the output paths are checked before the file is read.  Exit status 0 fitted, 1 not
     converged (an ill-posed fit with ``--strict`` raises, 1 too); user errors raise UsageError.
     """
     args = csv_parser().parse_args(argv)
@@ -191,54 +221,78 @@ def csv_main(argv=None) -> int:
 
 
 def _output_gate(args):
-    """The output gate on ``-o`` (and, when the model is chosen, its ``_models`` plot) for the whole
-    run: not the data file, one writer at a time, room for each plot (:data:`~hyde_bsdf.resources.COSTS`)."""
-    if not args.output:
+    """The output gate on ``-o`` (and, when the model is chosen, its ``_models`` plot) and on
+    ``--json FILE`` for the whole run: not the data file, one writer at a time, room for each
+    (:data:`~hyde_bsdf.resources.COSTS`)."""
+    plots, json_file = [], getattr(args, "json", None)
+    if args.output:
+        check_plot_path(args.output)
+        with user_input():
+            plots = [args.output] + ([_models_path(args.output)] if _auto(args) else [])
+    outputs = plots + ([json_file] if json_file and json_file != "-" else [])
+    if not outputs:
         return contextlib.nullcontext()
-    check_plot_path(args.output)
-    with user_input():
-        plots = [args.output] + ([_models_path(args.output)] if _auto(args) else [])
-    return output_gate(plots, inputs=[args.data], need_bytes=COSTS.plot_file_bytes * len(plots), what="-o plot")
+    return output_gate(outputs, inputs=[args.data], need_bytes=COSTS.plot_file_bytes * max(len(outputs), 1),
+                       what="-o plot" if plots else "--json file")
+
+
+def _csv_options(args) -> dict:
+    """fit_lab's keywords from the command line, checked (before the data file is read)."""
+    auto = _auto(args)
+    opts = dict(fit=args.fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
+                diffuse_reflectance=args.diffuse_reflectance,
+                albedo=None if args.albedo is None else args.albedo.replace("-", "_"),
+                shadowing=None if auto else (args.shadowing or SHADOWING[0]),
+                diffuse=None if auto else (args.diffuse or DIFFUSE[0]))
+    check_lab_options(**opts)
+    check_height_options(args)
+    return opts
 
 
 def _csv_run(args) -> int:
-    opts = dict(fit=args.fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0,
-                shadowing=args.shadowing or SHADOWING[0], diffuse=args.diffuse or DIFFUSE[0])
-    sel = None
     with user_input():
-        auto = _auto(args)
-        check_options(**opts)
-        sigma_h_wl = height_wl(args)
-    if args.output:
-        check_plot_path(args.output)
+        opts = _csv_options(args)
     meas = read_measurements(args.data, progress=_progress(args))
+    if args.sigma_h_um is not None and meas.wavelength_nm is None:
+        height_wl(args)                            # --sigma-h-um needs a wavelength: said before the fit
     with user_input(f"data file {args.data!r}", library=True):
-        if auto:
-            sel = _quiet_fit(select_model, meas.theta_i, meas.theta_r, meas.phi, meas.values,
-                             sigma=meas.uncertainty(), fit=args.fit, rms_slope=args.rms_slope, n0=args.n0,
-                             k0=args.k0, progress=_progress(args, auto=True))
-            result = sel.result
-        else:
-            result = _quiet_fit(fit_measurements, meas, **opts, progress=_progress(args, auto=True))
-    print(f"data: {meas.source} ({len(meas)} rows, elements {', '.join(meas.elements)}"
-          + (", sigma / sqrt(n_samples)" if meas.n_samples is not None else "") + ")")
-    if sel is not None:
-        print(sel.summary())
-    print(result.summary())
-    if sigma_h_wl is not None:
-        print(fit_verdict(meas.theta_i, result.params, result.shadowing, result.diffuse, sigma_h_wl))
+        result = _quiet_fit(fit_lab, meas, **opts, progress=_progress(args, auto=True))
+    out = sys.stderr if args.json == "-" else sys.stdout
+    print(f"data: {meas.source} ({len(meas)} rows, {', '.join(result.fit.data.columns)}"
+          + (", sigma / sqrt(n_samples)" if meas.n_samples is not None else "") + ")", file=out)
+    print(result.summary(), file=out)
+    for line in lab_verdict_lines(meas, result, args):
+        print(line, file=out)
     _warn_verdict(result)
-    for text in result.data_warnings:          # also on stderr, where a script's log sees them
-        warnings.warn(text, FitDataWarning, stacklevel=1)
-    print("\nMitsuba material (hyde plugin):")
-    print(result.plugin_xml(indent="    "))
+    for text in result.warnings:               # also on stderr, where a script's log sees them
+        if text != result.verdict.message and not text.startswith("NO candidate"):
+            warnings.warn(text, FitDataWarning, stacklevel=1)
+    print("\nMitsuba material (hyde plugin):", file=out)
+    print(result.plugin_xml(indent="    "), file=out)
+    caveat = extrapolation_warning(result.wavelengths)
+    if caveat and result.wavelengths != [None]:       # without a wavelength column: the XML comment says it
+        warnings.warn(caveat, UserWarning, stacklevel=1)
+    if args.json:
+        _write_json(result.to_dict(), args.json)
     if args.output:
         with user_input("cannot write the plot"):
-            plot_fit(result, meas, args.output, title=str(meas.source))
-            if sel is not None:
-                print(f"\nmodels plot: {plot_selection(sel, _models_path(args.output), title=str(meas.source))}")
-        print(f"\nplot: {args.output}")
+            plot_lab_fit(result, args.output, title=str(meas.source))
+            if result.selection is not None:
+                models = plot_lab_selection(result, _models_path(args.output), title=str(meas.source))
+                print(f"\nmodels plot: {models}", file=out)
+        print(f"\nplot: {args.output}", file=out)
     return _finish(result, args.strict)
+
+
+def _write_json(data: dict, path):
+    """The result as JSON: to stdout for '-', else atomically to ``path``."""
+    text = json.dumps(data, indent=1, allow_nan=False)
+    if path == "-":
+        print(text)
+        return
+    with user_input("cannot write the --json file"):
+        with atomic_open(path, "w", encoding="utf-8") as fh:
+            fh.write(text + "\n")
 
 
 def pbsdf_parser() -> Parser:
@@ -280,7 +334,7 @@ def _pbsdf_run(args) -> int:
         auto = _auto(args)
         shadowing, diffuse = args.shadowing or SHADOWING[0], args.diffuse or DIFFUSE[0]
         fit = _check(args.fit, args.rms_slope, args.n0, args.k0, shadowing, diffuse)
-        height_wl(args, wavelength_nm=1000.0)             # the height options checked before the table is read
+        check_height_options(args)                  # a table carries its wavelengths: --sigma-h-um needs no other
     if not 0 <= args.seed < 2**32:
         raise UsageError(f"--seed must be an integer in [0, 2^32), got {args.seed}")
     if not 0 < args.theta_max <= 90:

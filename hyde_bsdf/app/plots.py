@@ -23,7 +23,7 @@ from hyde_bsdf.io.output_gate import check_output_path
 from hyde_bsdf.io.measurements import Measurements
 
 __all__ = ["PLOT_FORMATS", "PLOT_POINTS", "check_plot_path", "plot_fit", "plot_pbsdf_fit",
-           "plot_history", "plot_selection"]
+           "plot_history", "plot_selection", "plot_lab_fit", "plot_lab_selection"]
 
 
 #: at most this many geometries are plotted (a random subset of larger data sets)
@@ -253,6 +253,65 @@ def plot_selection(sel: ModelSelection, path, title: str = ""):
     ax.set_xlabel("model size (free parameters + terms)")
     ax.set_ylabel({"reduced_chi2": "reduced chi^2", "M00": "M00 rms misfit (%)",
                    "elements": "normalized-element rms misfit"}[key])
+    ax.set_title((title + "\n" if title else "") + "green: adequate, red: inadequate", fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return _save(fig, path, 110)
+
+
+def plot_lab_fit(result, path, title: str = ""):
+    """Measured values (+-1 sigma) against the fitted model, one panel per value column (M00 in 1/sr,
+    the normalized elements), one colour per wavelength: points on the diagonal fit."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    f = result.fit
+    d = f.data
+    model = f.prediction()
+    cols = d.columns
+    ncol = min(len(cols), 4)
+    nrow = math.ceil(len(cols) / ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.4 * ncol, 3.1 * nrow), squeeze=False)
+    for a, name in zip(axes.ravel(), cols):
+        for g, group in enumerate(d.groups):
+            y, m = d.column(d.y, name, g), d.column(model, name, g)
+            err = None if d.w is None else d.column(d.w, name, g)
+            a.errorbar(m, y, yerr=err, fmt=".", ms=3, lw=0.6, alpha=0.7, label=group.label)
+        lo = min(a.get_xlim()[0], a.get_ylim()[0])
+        hi = max(a.get_xlim()[1], a.get_ylim()[1])
+        a.plot([lo, hi], [lo, hi], "k-", lw=0.7)
+        a.set_title(name + (" (1/sr)" if name == "M00" or d.absolute else "/M00"), fontsize=9)
+        a.set_xlabel("model", fontsize=8)
+        a.set_ylabel("measured", fontsize=8)
+        a.grid(alpha=0.3)
+    for a in axes.ravel()[len(cols):]:
+        a.axis("off")
+    axes.ravel()[0].legend(fontsize=7)
+    pr = f.values[("rms_slope", None)]
+    fig.suptitle((title + "\n" if title else "") + f"{result.model.label}: rms_slope = {pr:.4g}; "
+                 rf"$\chi^2_\nu$ = {f.reduced_chi2:.3g}; " + ("adequate" if f.verdict.adequate else "INADEQUATE"),
+                 fontsize=9)
+    fig.tight_layout()
+    return _save(fig, path, 110)
+
+
+def plot_lab_selection(result, path, title: str = ""):
+    """The lab fit's candidates: reduced chi^2 against model size (the chosen one ringed)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for r in result.selection.rows:
+        x, y = r.size + (0.15 if r.model.dielectric else 0), r.fit.reduced_chi2
+        ax.semilogy(x, y, "o", color="C2" if r.adequate else "C3", ms=7)
+        ax.annotate(r.model.label, (x, y), fontsize=7, xytext=(4, 2), textcoords="offset points")
+        if r.chosen:
+            ax.semilogy(x, y, "o", mfc="none", mec="k", ms=14, label=f"chosen: {r.model.label}")
+    ax.set_xlabel("model size (free parameters + terms)")
+    ax.set_ylabel("reduced chi^2")
     ax.set_title((title + "\n" if title else "") + "green: adequate, red: inadequate", fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)

@@ -37,7 +37,7 @@ from hyde_bsdf.errors import RejectedResult
 
 __all__ = ["Verdict", "InadequateModelWarning", "InadequateModelError", "ERRORS_NOTE", "P_LIMIT",
            "M00_TOLERANCE", "ELEMENT_TOLERANCE", "Z_LIMIT", "NEIGHBOURS",
-           "half_angles", "residual_structure", "angle_trends", "geometry_clusters", "cluster_covariance",
+           "half_angles", "neighbour_index", "residual_structure", "angle_trends", "geometry_clusters", "cluster_covariance",
            "correlation", "larger_errors",
            "chi2_verdict", "floor_verdict"]
 
@@ -109,7 +109,9 @@ def _directions(theta_i, theta_r, phi):
     return oi, orr
 
 
-def _neighbour_index(theta_i, theta_r, phi, k=NEIGHBOURS):
+def neighbour_index(theta_i, theta_r, phi, k=NEIGHBOURS):
+    """(N, k) indices of each geometry's k nearest geometries (by the directions omega_i, omega_r);
+    None for fewer than 2 geometries."""
     from scipy.spatial import cKDTree
 
     pts = np.concatenate(_directions(theta_i, theta_r, phi), axis=1)
@@ -225,8 +227,9 @@ def _cause(trends, elements_bad, m00_bad):
     return "the model does not fit"
 
 
-def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi):
-    """Verdict from chi^2 with error bars; ``r`` (E, N) weighted residuals of E elements."""
+def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi, neighbours=None):
+    """Verdict from chi^2 with error bars; ``r`` (E, N) weighted residuals of E elements.
+    ``neighbours``: the geometries' neighbour index when already known (:func:`neighbour_index`)."""
     from scipy.stats import chi2 as chi2_dist
 
     if dof <= 0:
@@ -234,7 +237,8 @@ def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi):
                        "no degrees of freedom: the fit cannot be checked")
     p = float(chi2_dist.sf(chi2, dof))
     red = chi2 / dof
-    st = residual_structure(np.asarray(r, float)[None], _neighbour_index(theta_i, theta_r, phi))   # one band
+    nb = neighbour_index(theta_i, theta_r, phi) if neighbours is None else neighbours
+    st = residual_structure(np.asarray(r, float)[None], nb)   # one band
     th, td = half_angles(theta_i, theta_r, phi)
     trends = angle_trends(r, th, td)
     figs = {"chi2": chi2, "dof": dof, "reduced_chi2": red, "p_value": p, "systematic_sigmas": st["systematic"],
@@ -251,10 +255,11 @@ def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi):
     return Verdict(False, "chi2", "lower bounds", figs, msg, cause)
 
 
-def floor_verdict(m00, elements, theta_i, theta_r, phi):
+def floor_verdict(m00, elements, theta_i, theta_r, phi, neighbours=None):
     """Verdict without error bars.  ``m00``: log residuals of M00 (B, N) (None: not fitted, as
-    for a CSV); ``elements``: residuals of the normalized elements (B, E, N); B bands, N geometries."""
-    nb = _neighbour_index(theta_i, theta_r, phi)
+    for a CSV); ``elements``: residuals of the normalized elements (B, E, N); B bands, N geometries.
+    ``neighbours``: the geometries' neighbour index when already known (:func:`neighbour_index`)."""
+    nb = neighbour_index(theta_i, theta_r, phi) if neighbours is None else neighbours
     th, td = half_angles(theta_i, theta_r, phi)
     figs, bad, trends = {}, [], {}
     parts = ([("M00", m00, M00_TOLERANCE)] if m00 is not None else []) + [("elements", elements, ELEMENT_TOLERANCE)]

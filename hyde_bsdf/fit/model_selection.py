@@ -37,9 +37,11 @@ from hyde_bsdf.model.terms import DIFFUSE_TERMS, SHADOWING_TERMS, allowed, model
 __all__ = ["CANDIDATES", "ModelRow", "ModelSelection", "select_model", "select_model_pbsdf"]
 
 #: every combination of the terms of model/terms.py, simplest first (each record's rank); a pair
-#: the terms' rule refuses (none x reciprocal: no shadowing, rho > 1) is listed as undefined
+#: the terms' rule refuses (none x reciprocal: no shadowing, rho > 1) is listed as undefined.  A
+#: term with parameters of its own (the Lambertian albedo) is fitted by :mod:`hyde_bsdf.fit.lab`,
+#: not here
 CANDIDATES = tuple((s.name, d.name) for s in sorted(SHADOWING_TERMS, key=lambda t: t.rank)
-                   for d in sorted(DIFFUSE_TERMS, key=lambda t: t.rank))
+                   for d in sorted(DIFFUSE_TERMS, key=lambda t: t.rank) if not d.parameters)
 #: a k = 0 variant is tried for models whose fitted k (middle band) is below this
 DIELECTRIC_K = 0.5
 #: geometries of the screen (tables)

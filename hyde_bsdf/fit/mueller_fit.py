@@ -80,7 +80,8 @@ from hyde_bsdf.model.terms import check_pair
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
                                     chi2_verdict, cluster_covariance, correlation, floor_verdict,
                                     geometry_clusters, half_angles, larger_errors)
-from hyde_bsdf.io.measurements import ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index
+from hyde_bsdf.io.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index,
+                                       impossible_limit)
 
 __all__ = ["PARAMETERS", "FIT_PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning",
            "IllPosedFitError", "FitDataWarning", "InadequateModelWarning", "InadequateModelError",
@@ -392,7 +393,7 @@ def _as_arrays(theta_i, theta_r, phi, measured, sigma):
         except ValueError:
             raise UsageError(f"measured[{name!r}] has shape {v.shape}, which does not broadcast with "
                              f"the angles' shape {shape}") from None
-        if np.any(np.abs(v) > ELEMENT_LIMIT):
+        if sigma is None and np.any(np.abs(v) > ELEMENT_LIMIT):
             worst = float(v.flat[np.argmax(np.abs(v))])
             raise UsageError(f"measured[{name!r}] must be normalized by M00 (|M_jk/M_00| <= {ELEMENT_LIMIT:g}; "
                              f"<= 1 for a physical Mueller matrix), got {worst:g}: divide the elements by M00")
@@ -413,6 +414,7 @@ def _as_arrays(theta_i, theta_r, phi, measured, sigma):
                 raise UsageError(f"sigma[{name!r}] has shape {s.shape}, which does not broadcast with "
                                  f"the data's shape {shape}") from None
             sig[name] = s
+            _judge_by_sigma(name, v, s)
     if sigma is not None:
         extra = set(sigma) - set(measured)
         if extra:
@@ -422,6 +424,21 @@ def _as_arrays(theta_i, theta_r, phi, measured, sigma):
     w = {n: np.broadcast_to(sig[n], shape).ravel() if sigma is not None else np.ones(ti.size)
          for n in values}
     return ti, tr, ph, y, w, shape
+
+
+def _judge_by_sigma(name, v, s):
+    """A normalized value with a sigma is judged against it, as the CSV reader does
+    (:func:`hyde_bsdf.io.measurements.impossible_limit`): within the limit of the range |M_jk/M00| <= 1
+    it is data; beyond, impossible at its stated error: refused, naming the worst."""
+    v, s = np.broadcast_arrays(v, s)
+    excess = (np.abs(v) - 1.0) / s
+    limit = impossible_limit(v.size)
+    if np.any(excess > limit):
+        i = int(np.argmax(excess))
+        raise UsageError(f"measured[{name!r}] = {float(v.flat[i]):g} +- {float(s.flat[i]):.3g} is not a normalized "
+                         f"element: |M_jk/M_00| <= 1 for a physical Mueller matrix, and it lies {float(excess.flat[i]):.3g} "
+                         f"standard deviations beyond (values within {limit:.3g} are kept as data): divide the elements "
+                         "by M00, or check the sigma")
 
 
 def _check_fit_names(fit):
@@ -457,7 +474,11 @@ def check_options(fit=("n", "k"), rms_slope=0.3, n0=None, k0=None, shadowing="vg
     """Check :func:`fit_mueller`'s options without data (the command line does so before it
     reads a large file); returns (fitted names, diffuse mode, start/fixed values)."""
     fitted = _check_fit_names(fit)
-    mode = check_pair(shadowing, diffuse)[1].name       # the rules of model/terms.py
+    term = check_pair(shadowing, diffuse)[1]       # the rules of model/terms.py
+    if term.parameters:
+        raise UsageError(f"diffuse={term.name!r} has a free {', '.join(term.parameters)}: fit it with "
+                         "hyde_bsdf.fit.lab.fit_lab (fit_mueller fits n, k, rms_slope)")
+    mode = term.name
     if isinstance(corr_limit, bool) or not (isinstance(corr_limit, (int, float)) and 0 < corr_limit <= 1):
         raise UsageError(f"corr_limit must be in (0, 1], got {corr_limit!r}")
     given = {"n": _start_value("n", n0, fitted), "k": _start_value("k", k0, fitted),
@@ -691,7 +712,7 @@ def _linear_covariance(J, fitted, sigma_given, chi2, dof):
     without sigmas), its correlation, the condition number, and a note when J is singular."""
     p = len(fitted)
     diag = []
-    sv = np.linalg.svd(J, compute_uv=False)
+    _, sv, Vt = np.linalg.svd(J, full_matrices=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
     if not math.isfinite(cond) or cond > 1e10:
         cov = np.full((p, p), np.inf)
@@ -700,7 +721,7 @@ def _linear_covariance(J, fitted, sigma_given, chi2, dof):
         diag.append(f"the Jacobian is singular (condition number {cond:.3g}): the data do not "
                     f"constrain {', '.join(fitted)} separately; standard errors are infinite")
         return cov, corr, cond, diag
-    cov = np.linalg.inv(J.T @ J)
+    cov = (Vt.T / sv ** 2) @ Vt      # (J^T J)^-1 from the SVD: J^T J squares the condition number
     if not sigma_given and dof > 0:
         cov *= chi2 / dof      # noise level estimated from the residual scatter
     se = np.sqrt(np.diag(cov))

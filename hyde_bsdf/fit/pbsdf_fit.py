@@ -46,7 +46,7 @@ from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import NATURAL_INDEX, RMS_SLOPE
-from hyde_bsdf.model.terms import check_pair
+from hyde_bsdf.model.terms import DIFFUSE_TERMS, check_pair
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 
 __all__ = ["PbsdfFitResult", "fit_pbsdf"]
@@ -157,7 +157,11 @@ def _check(fit, rms_slope, n0, k0, shadowing, diffuse):
             raise UsageError(f"{name} must be in [0, {BOUNDS[name[0]][1]:g}], got {v!r}")
     if ("n" not in fit and n0 is None) or ("k" not in fit and k0 is None):
         raise UsageError("a parameter held fixed needs its value: --n0 for n, --k0 for k")
-    check_pair(shadowing, diffuse, booleans=False)      # names only: the table interfaces take no True/False
+    term = check_pair(shadowing, diffuse, booleans=False)[1]   # names only: the table interfaces take no True/False
+    if term.parameters:
+        raise UsageError(f"diffuse={term.name!r} has a free {', '.join(term.parameters)}: the table fit takes "
+                         f"{', '.join(t.name for t in DIFFUSE_TERMS if not t.parameters)}; the CSV fit "
+                         "(hyde_bsdf.fit.lab.fit_lab) fits it")
     return fit
 
 

@@ -4,8 +4,6 @@
                   table dimensions checked before allocation
 ``output_gate``   every output: no special files, no input overwritten, locks, folder checks
 ``memory``        the one memory check (the only reader of the kernel's memory figures)
-``trust``         caches the package reads back: ownership, permissions and file type checked as
-                  ssh does; the per-user secret that seals them
 ``ior``           Mitsuba's ``data/ior`` material names and files
 ``atomic``        atomic writes (temporary file + rename), output-path checks, signal clean-up
 ``stokes_exr``    Stokes images as OpenEXR files

@@ -20,7 +20,6 @@ Conventions used here
 """
 from __future__ import annotations
 
-import math
 
 import drjit as dr
 import mitsuba as mi
@@ -36,7 +35,6 @@ __all__ = [
     "fresnel_average",
     "vgroove_g",
     "DHRLookup",
-    "dhr_rms_range",
 ]
 
 
@@ -200,55 +198,24 @@ def vgroove_g(wi, wo, h):
     return dr.select(valid, g, 0.0)
 
 
-#: texture nodes along x = 1 - sqrt(cos theta) on [0, 1] (error and size: plugin.DOC, "DHR lookup")
-DHR_X_POINTS = 1025
-#: texture nodes per decade of rms_slope (over the DHR table's whole range, parameters.DHR_TABLE_RMS_SLOPE)
-DHR_SLOPE_PER_DECADE = 192
-
-
-def dhr_rms_range(table):
-    """rms_slope range of the plugin's DHR texture: the table's whole range (data from the model)."""
-    return float(math.exp(table.log_slope[0])), float(math.exp(table.log_slope[-1]))
-
-
-_FINE_CACHE: dict = {}
 _LOOKUP_CLASSES: dict = {}
-
-
-def _fine_grid(table):
-    """1 - rho of ``table`` resampled through its own ``__call__`` (cached per table)."""
-    import numpy as np
-
-    key = id(table)
-    if key not in _FINE_CACHE:
-        lo, hi = (math.log(v) for v in dhr_rms_range(table))
-        ns = int(round((hi - lo) / math.log(10.0) * DHR_SLOPE_PER_DECADE)) + 1
-        x = np.linspace(0.0, 1.0, DHR_X_POINTS)
-        ls = np.linspace(lo, hi, ns)
-        one_minus = 1.0 - table.on_grid(x, ls)      # = table(arccos((1 - x)^2), exp(ls)) on the grid
-        one_minus_avg = 1.0 - np.asarray(table.average(np.exp(ls)), dtype=float)
-        _FINE_CACHE[key] = (lo, hi, one_minus, one_minus_avg, table)
-    return _FINE_CACHE[key]
 
 
 class DHRLookup:
     """1 - rho^{s,PEC}(theta_i, rms_slope) (paper Eqs. 14-16) read through a Dr.Jit texture.
 
-    The lead's table (:func:`hyde_bsdf.model.dhr.load_table`) is resampled, through its
-    own ``__call__`` (a bicubic spline), onto a fine grid: ``DHR_X_POINTS`` nodes
-    uniform in x = 1 - sqrt(cos theta) (dense near grazing, where rho varies most)
-    times ``DHR_SLOPE_PER_DECADE`` nodes per decade of rms_slope over the
-    table's whole range (:func:`dhr_rms_range`, ``parameters.DHR_TABLE_RMS_SLOPE``).  It is stored as 1 - rho (so that the small diffuse
-    weights of smooth surfaces keep their float32 relative precision) in an
-    ``mi.Texture2f`` with linear filtering and clamped borders.  Linear filtering
-    keeps the lookup differentiable w.r.t. rms_slope.  1 - rho_avg(rms_slope)
-    (for the reciprocal diffuse term), resampled through the table's
-    ``average``, is an ``mi.Texture1f``.  ``use_accel=False`` keeps positional
-    gradients on CUDA as well.  Interpolation error against the table's
-    ``__call__``: ``validation/plugin_checks.py`` ("DHR texture interpolation error").
+    The data is the model's shipped texture (:func:`hyde_bsdf.model.dhr.load_texture`, a
+    :class:`~hyde_bsdf.model.dhr.DHRTexture`): 1 - rho resampled from the DHR table's bicubic
+    spline onto nodes uniform in x = 1 - sqrt(cos theta) (dense near grazing, where rho varies
+    most) and in ln(rms_slope) over the table's whole range (``parameters.DHR_TABLE_RMS_SLOPE``),
+    float32.  It is held in an ``mi.Texture2f`` with linear filtering and clamped borders.  Linear
+    filtering keeps the lookup differentiable w.r.t. rms_slope.  1 - rho_avg(rms_slope) (for the
+    reciprocal diffuse term and the lobe choice) is an ``mi.Texture1f``.  ``use_accel=False`` keeps
+    positional gradients on CUDA as well.  Interpolation error against the table's ``__call__``:
+    ``validation/plugin_checks.py`` ("DHR texture interpolation error").
     """
 
-    def __new__(cls, table=None):
+    def __new__(cls, texture=None):
         # Each variant gets a subclass whose DRJIT_STRUCT names that variant's texture types:
         # it makes the textures visible to Dr.Jit's traversal, so dr.freeze collects them as
         # inputs of a frozen function (without it: "virtual function call ... no such object
@@ -262,20 +229,15 @@ class DHRLookup:
             cls = _LOOKUP_CLASSES[variant]
         return object.__new__(cls)
 
-    def __init__(self, table=None):
-        import numpy as np
-
-        if table is None:   # Dr.Jit's traversal may construct an empty instance
+    def __init__(self, texture=None):
+        if texture is None:   # Dr.Jit's traversal may construct an empty instance
             return
-        lo, hi, one_minus, one_minus_avg, _ = _fine_grid(table)
-        self.log_lo, self.log_hi = lo, hi
-        self.rms_lo, self.rms_hi = dhr_rms_range(table)
-        self.nt, self.ns = one_minus.shape
-        self.tex = mi.Texture2f(mi.TensorXf(one_minus.astype(np.float32).ravel(),
-                                            shape=(self.nt, self.ns, 1)),
+        self.log_lo, self.log_hi = texture.log_lo, texture.log_hi
+        self.nt, self.ns = texture.one_minus.shape
+        self.tex = mi.Texture2f(mi.TensorXf(texture.one_minus.ravel(), shape=(self.nt, self.ns, 1)),
                                 use_accel=False, filter_mode=dr.FilterMode.Linear,
                                 wrap_mode=dr.WrapMode.Clamp)
-        self.tex_avg = mi.Texture1f(mi.TensorXf(one_minus_avg.astype(np.float32), shape=(self.ns, 1)),
+        self.tex_avg = mi.Texture1f(mi.TensorXf(texture.one_minus_avg, shape=(self.ns, 1)),
                                     use_accel=False, filter_mode=dr.FilterMode.Linear,
                                     wrap_mode=dr.WrapMode.Clamp)
 

@@ -100,6 +100,11 @@ def probe(tex, one=False):
     """
     if not _is_constant(tex):
         return None
+    if tex.class_name() == "UniformSpectrum":
+        # eval returns the stored value at every point and wavelength: read it, no kernel (a
+        # scene of constants then loads without compiling one: its cold load, issue 31)
+        value = float(np.asarray(mi.traverse(tex)["value"], dtype=float).ravel()[0])
+        return np.full(1 if one or mi.is_monochromatic else _WAVELENGTHS.size if mi.is_spectral else 3, value)
     return _eval_at(tex, np.array([0.5]), np.array([0.5]), one)
 
 
@@ -335,18 +340,22 @@ def _runs(wl):
     return ", ".join(runs)
 
 
-def check_reflectance(tex, reader=None):
+def check_reflectance(tex, reader=None, name="specular_reflectance", hi=None):
     """specular_reflectance finite and >= 0 wherever it can be read (values > 1 are the user's
-    choice, as in roughconductor: not physical).  ``reader``: a :class:`Reader`."""
+    choice, as in roughconductor: not physical); ``name``/``hi``: another reflectance with an upper
+    bound (diffuse_reflectance, an albedo: <= 1).  ``reader``: a :class:`Reader`.  Returns the
+    mean of the values read (None when not readable)."""
     reader = reader or Reader()
-    _raw_finite("specular_reflectance", tex, reader=reader)
+    _raw_finite(name, tex, reader=reader)
     values = reader(tex)
     if values is None:
-        return
-    bad = ~np.isfinite(values) | (values < 0)
+        return None
+    bad = ~np.isfinite(values) | (values < 0) | ((values > hi) if hi is not None else False)
     if bad.any():
-        raise UsageError("hyde: parameter 'specular_reflectance' must be finite and >= 0, got "
-                         + _where("specular_reflectance", tex, values, bad))
+        accepted = ">= 0" if hi is None else f"in [0, {hi:g}]"
+        raise UsageError(f"hyde: parameter '{name}' must be finite and {accepted}, got "
+                         + _where(name, tex, values, bad))
+    return float(np.mean(values))
 
 
 class Snapshot:

@@ -20,7 +20,7 @@ from hyde_bsdf.mitsuba import optics as po
 from hyde_bsdf.mitsuba import param_checks as pc
 from hyde_bsdf.mitsuba import stokes as ps
 from hyde_bsdf.model import terms
-from hyde_bsdf.model.parameters import ALPHA, DHR_TABLE_RMS_SLOPE, ETA, INDEX_MIN, RMS_SLOPE, SQRT2
+from hyde_bsdf.model.parameters import ALPHA, DHR_TABLE_RMS_SLOPE, DIFFUSE_REFLECTANCE, ETA, INDEX_MIN, RMS_SLOPE, SQRT2
 
 __all__ = ["register", "plugin_class", "DOC"]
 
@@ -78,9 +78,16 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
  * - specular_reflectance
    - float, spectrum or texture
    - 1.0
-   - multiplier of the whole BSDF (specular lobe and diffuse term), as roughconductor's;
+   - multiplier of the specular lobe and the paper's diffuse term, as roughconductor's;
      not physical: keep it 1 for the paper's model
    - ``specular_reflectance.value`` / ``.data``; differentiable
+ * - diffuse_reflectance
+   - float, spectrum or texture (only with ``diffuse="lambertian"``)
+   - 0.5 (Mitsuba's)
+   - albedo of the Lambertian diffuse term: f_00 += diffuse_reflectance / pi, unpolarized, its
+     size free (not the paper's term, whose size the roughness fixes), as in Mitsuba's
+     plastic-like BSDFs; in @ALBEDO@
+   - ``diffuse_reflectance.value`` / ``.data``; differentiable
  * - distribution
    - string
    - "beckmann"
@@ -99,7 +106,7 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
    - "paper"
    - the unpolarized diffuse term: "paper" = Eq. 17, (1/pi) (1 - rho(theta_in)) M00(beta);
      "reciprocal" = (1 - rho(theta_i))(1 - rho(theta_o)) M00(beta) / (pi (1 - rho_avg));
-     "none" = specular lobe only
+     "none" = specular lobe only; "lambertian" = diffuse_reflectance / pi (its own albedo)
    - no
  * - sample_visible
    - bool ("true"/"false" strings are parsed)
@@ -112,12 +119,13 @@ Validation (:mod:`hyde_bsdf.mitsuba.param_checks`).  The constructor and every
 optimisation loop over a roughness map pays one small check kernel per update) apply the same
 checks, on the values the textures' own ``eval`` returns (an 8-bit PNG is read as 0-1, not as its stored 0-255): the roughness
 finite and in range (values in [0, lower bound) floored with a warning), eta and k finite and
-in @INDEX@ and not both 0 for a constant, specular_reflectance finite and >= 0; constants at
+in @INDEX@ and not both 0 for a constant, specular_reflectance finite and >= 0,
+diffuse_reflectance finite and in @ALBEDO@; constants at
 48 wavelengths 360-830 nm (spectral), every texel of a bitmap and both colours of a
 checkerboard.  A refused update restores the last accepted values (the update is atomic).
 Values that cannot be read at load (a ``mesh_attribute`` or procedural texture) get one
 warning and are clamped at eval (roughness to its range, eta and k to @INDEX@,
-specular_reflectance to [0, 1], NaN: no reflection).  Where a spectrum is 0 (outside the
+specular_reflectance and diffuse_reflectance to [0, 1], NaN: no reflection).  Where a spectrum is 0 (outside the
 wavelength range it is defined on, Mitsuba's rule) and k is 0 as well, the index is taken as 1
 (no reflection) rather than producing 0/0, with a warning at load (spectral variants: give eta
 over 360-830 nm).
@@ -130,7 +138,8 @@ Mueller matrix rotated from the facet s/p bases into Mitsuba's Stokes bases.
 ``eval`` returns f cos(theta_o) (Mitsuba's convention); the BSDF is one-sided.
 rho = rho^{s,PEC}(theta, rms_slope) is the directional-hemispherical reflectance
 of the specular lobe of a perfect conductor (Eqs. 14-16) for the chosen
-shadowing, read from :func:`hyde_bsdf.model.dhr.load_table` through a Dr.Jit texture.
+shadowing, read from the package's shipped table (:func:`hyde_bsdf.model.dhr.load_texture`)
+through a Dr.Jit texture.
 
 Frames (as ``roughconductor``).  All vectors are in the local shading frame
 (normal +z).  Light arrives along ``-wo_hat`` and leaves along ``+wi_hat``, where
@@ -172,9 +181,10 @@ channel (unbounded sRGB) or as luminance (mono); like Mitsuba, |k| is used.
 Roughness textures are evaluated once per call (``eval_1``) and the DHR lookup of
 the diffuse term is done at that per-point roughness.
 
-DHR lookup.  1 - rho^{s,PEC} is resampled from the table's bicubic ``__call__``
+DHR lookup.  1 - rho^{s,PEC}, resampled from the table's bicubic ``__call__``
 onto 1025 nodes in x = 1 - sqrt(cos theta) times 192 per decade of rms_slope over
-the table's whole range @DHR_TABLE@ (4.7 MB, float32) and read with a linear
+the table's whole range @DHR_TABLE@ (4.7 MB, float32), is shipped with the package
+(``hyde_bsdf/data/dhr_texture_{vgroove,smith,none}.npz``: nothing is computed at load) and read with a linear
 ``mi.Texture2f`` (differentiable in rms_slope), at each shading point's own roughness.
 Its deviation from the table, 1 - rho clipped at 0, for rms_slope in @RMS_SLOPE@ and
 theta <= 89 deg is <= 1.9e-5 (vgroove), 2.6e-5 (smith), 1.3e-4 (none), target 2e-4
@@ -197,7 +207,7 @@ Components: 0 = glossy reflection (specular lobe), 1 = diffuse reflection.
 for _token, _text in (("@RMS_SLOPE@", RMS_SLOPE.text()), ("@RMS_LO@", f"{RMS_SLOPE.lo:.7g}"),
                       ("@ALPHA@", ALPHA.text()), ("@ALPHA_LO@", f"{ALPHA.lo:.7g}"),
                       ("@INDEX@", f"[0, {ETA.hi:.0e}]".replace("e+0", "e")),
-                      ("@DHR_TABLE@", DHR_TABLE_RMS_SLOPE.text())):
+                      ("@DHR_TABLE@", DHR_TABLE_RMS_SLOPE.text()), ("@ALBEDO@", DIFFUSE_REFLECTANCE.text())):
     DOC = DOC.replace(_token, _text)
 
 
@@ -276,12 +286,13 @@ _DHR_CACHE: dict = {}
 
 
 def _dhr_lookup(shadowing):
-    """One DHRLookup per (variant, shadowing), shared by all instances."""
+    """One DHRLookup per (variant, shadowing), shared by all instances: the shipped texture
+    (:func:`hyde_bsdf.model.dhr.load_texture`), nothing computed at load."""
     key = (mi.variant(), shadowing)
     if key not in _DHR_CACHE:
-        from hyde_bsdf.model.dhr import load_table
+        from hyde_bsdf.model.dhr import load_texture
 
-        _DHR_CACHE[key] = po.DHRLookup(load_table(shadowing))
+        _DHR_CACHE[key] = po.DHRLookup(load_texture(shadowing))
     return _DHR_CACHE[key]
 
 
@@ -301,7 +312,7 @@ def _pos(x):
 
 
 _PARAMS = ("rms_slope", "alpha", "sigma_h", "ell", "eta", "k", "material", "specular_reflectance",
-           "distribution", "shadowing", "diffuse", "sample_visible")
+           "diffuse_reflectance", "distribution", "shadowing", "diffuse", "sample_visible")
 
 
 # ---------------------------------------------------------------- constructor: reading the properties
@@ -431,8 +442,22 @@ def _diffuse_reciprocal(dhr, cos_in, cos_i, cos_o, u):
 
 
 #: diffuse name -> its factor (dhr, cos theta_in, cos theta_i, cos theta_o, slope coordinate): the
-#: term without M00 and without cos theta_o ("none": no diffuse lobe)
-_DIFFUSE = {"paper": _diffuse_paper, "reciprocal": _diffuse_reciprocal, "none": None}
+#: term without M00 and without cos theta_o ("none": no diffuse lobe; "lambertian": no factor of the
+#: facet M00 -- its albedo texture, diffuse_reflectance / pi, is added unpolarized in ``_value``)
+_DIFFUSE = {"paper": _diffuse_paper, "reciprocal": _diffuse_reciprocal, "none": None, "lambertian": None}
+
+
+def _read_albedo(props, term):
+    """The ``diffuse_reflectance`` texture of a term that has it (default 0.5, Mitsuba's), else None;
+    given with another diffuse term it is refused, naming the term that takes it."""
+    if "diffuse_reflectance" in term.parameters:
+        if "diffuse_reflectance" in props and props.type("diffuse_reflectance") == mi.Properties.Type.Float:
+            _read_float(props, "diffuse_reflectance")
+        return props.get_texture("diffuse_reflectance", terms.PARAMETER_DEFAULTS["diffuse_reflectance"])
+    if "diffuse_reflectance" in props:
+        raise UsageError(f"hyde: diffuse_reflectance is the albedo of diffuse='lambertian', not of "
+                         f"diffuse={term.name!r}")
+    return None
 
 
 def _refuse_unknown(props):
@@ -470,14 +495,17 @@ def _make_class():
             self.m_rough_range = (ALPHA if key == "alpha" else RMS_SLOPE).bounds
             self.m_eta, self.m_k, self.m_material = _read_index(props)
             self.m_specular_reflectance = props.get_texture("specular_reflectance", 1.0)
-            self.m_snapshots, self.m_reader = {}, pc.Reader()
-            self._validate()
-            self._warn_unreadable_textures()
             # ---- model switches (Python constants: branching on them is fine)
             shadow, term = _read_terms(props)
             self.m_shadowing, self.m_diffuse = shadow.name, term.name
             self.m_g, self.m_visible_ratio = _SHADOWING[shadow.name]
             self.m_diffuse_factor = _DIFFUSE[term.name]
+            self.m_albedo = _read_albedo(props, term)
+            self.m_albedo_mean = terms.PARAMETER_DEFAULTS["diffuse_reflectance"]
+            self.m_has_diffuse = term.present
+            self.m_snapshots, self.m_reader = {}, pc.Reader()
+            self._validate()
+            self._warn_unreadable_textures()
             self.m_sample_visible = _read_bool(props, "sample_visible", True)
             _refuse_unknown(props)
             self.m_polarized = bool(mi.is_polarized)
@@ -493,6 +521,8 @@ def _make_class():
             self.m_guard_index = any([_warn_unreadable(name, tex, f"[0, {ETA.hi:g}]")
                                       for name, tex in (("eta", self.m_eta), ("k", self.m_k))])
             self.m_guard_scale = _warn_unreadable("specular_reflectance", self.m_specular_reflectance, "[0, 1]")
+            self.m_guard_albedo = self.m_albedo is not None and _warn_unreadable(
+                "diffuse_reflectance", self.m_albedo, "[0, 1]")
 
         # ------------------------------------------------------------------
         # Nothing derived from the roughness is cached: alpha, the DHR texture coordinate and
@@ -506,6 +536,8 @@ def _make_class():
             callback.put("eta", self.m_eta, flags)
             callback.put("k", self.m_k, flags)
             callback.put("specular_reflectance", self.m_specular_reflectance, +mi.ParamFlags.Differentiable)
+            if self.m_albedo is not None:
+                callback.put("diffuse_reflectance", self.m_albedo, +mi.ParamFlags.Differentiable)
 
         def parameters_changed(self, keys=[]):
             """Validate updated values exactly as the constructor does (ValueError naming the key).
@@ -537,6 +569,8 @@ def _make_class():
             afterwards (the old texture's parameters no longer reach the BSDF)."""
             attrs = {self.m_rough_key: "m_rough", "eta": "m_eta", "k": "m_k",
                      "specular_reflectance": "m_specular_reflectance"}
+            if self.m_albedo is not None:
+                attrs["diffuse_reflectance"] = "m_albedo"
             if name not in attrs:
                 raise UsageError(f"hyde: replace_texture: unknown parameter {shorten(name)}; use {', '.join(attrs)}")
             old = getattr(self, attrs[name])
@@ -550,8 +584,11 @@ def _make_class():
 
         def _textures(self):
             """{traverse name: texture} of the checked parameters."""
-            return {self.m_rough_key: self.m_rough, "eta": self.m_eta, "k": self.m_k,
-                    "specular_reflectance": self.m_specular_reflectance}
+            out = {self.m_rough_key: self.m_rough, "eta": self.m_eta, "k": self.m_k,
+                   "specular_reflectance": self.m_specular_reflectance}
+            if self.m_albedo is not None:
+                out["diffuse_reflectance"] = self.m_albedo
+            return out
 
         def _changed(self, keys):
             """The changed traverse names among ``keys`` (``alpha`` or ``alpha.data``); all without keys."""
@@ -562,8 +599,9 @@ def _make_class():
             """{check group: its textures} of the groups the names belong to: the roughness, the index
             (eta and k: checked together, they must not both be 0), specular_reflectance."""
             groups = {"rough": [self.m_rough], "index": [self.m_eta, self.m_k],
-                      "scale": [self.m_specular_reflectance]}
-            of = {self.m_rough_key: "rough", "eta": "index", "k": "index", "specular_reflectance": "scale"}
+                      "scale": [self.m_specular_reflectance], "albedo": [self.m_albedo]}
+            of = {self.m_rough_key: "rough", "eta": "index", "k": "index", "specular_reflectance": "scale",
+                  "diffuse_reflectance": "albedo"}
             return {g: groups[g] for g in dict.fromkeys(of[n] for n in names)}
 
         def _validate(self, names=None):
@@ -580,6 +618,9 @@ def _make_class():
                 pc.check_index(self.m_eta, self.m_k, self.m_reader)
             if "scale" in groups:
                 pc.check_reflectance(self.m_specular_reflectance, self.m_reader)
+            if "albedo" in groups:      # its mean chooses the lobe to sample (p_spec); unreadable: the default
+                mean = pc.check_reflectance(self.m_albedo, self.m_reader, "diffuse_reflectance", DIFFUSE_REFLECTANCE.hi)
+                self.m_albedo_mean = terms.PARAMETER_DEFAULTS["diffuse_reflectance"] if mean is None else mean
             for group, members in groups.items():
                 self.m_snapshots[group] = pc.Snapshot(members)
 
@@ -587,7 +628,9 @@ def _make_class():
             index = (f"material={self.m_material!r}" if self.m_material else
                      f"eta={self.m_eta}, k={self.m_k}")
             return (f"HydeBSDF[{self.m_rough_key}={_describe(self.m_rough)}, {index}, "
-                    f"specular_reflectance={self.m_specular_reflectance}, shadowing={self.m_shadowing!r}, "
+                    f"specular_reflectance={self.m_specular_reflectance}, "
+                    + (f"diffuse_reflectance={self.m_albedo}, " if self.m_albedo is not None else "") +
+                    f"shadowing={self.m_shadowing!r}, "
                     f"diffuse={self.m_diffuse!r}, sample_visible={self.m_sample_visible}]")
 
         # ------------------------------------------------------------------
@@ -660,7 +703,7 @@ def _make_class():
         def _lobes(self, ctx):
             """(specular on, diffuse on) for this context (Python booleans)."""
             return (ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0),
-                    self.m_diffuse_factor is not None and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1))
+                    self.m_has_diffuse and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1))
 
         def _p_spec(self, ctx, si, rough):
             """Probability of sampling the specular lobe (a Python constant or a Float)."""
@@ -677,7 +720,12 @@ def _make_class():
             # kernels (benchmarks/bench_render.py measures the ratio).  Any p_spec in (0, 1) is unbiased (the
             # same p_spec is in the sampled pdf); this one only gives less variance-optimal
             # choices near grazing incidence, where rho departs from its average
-            return dr.clip(1.0 - self.m_dhr.one_minus_rho_avg(rough[2]), 0.05, 0.95)
+            rho_avg = 1.0 - self.m_dhr.one_minus_rho_avg(rough[2])
+            if self.m_albedo is not None:
+                # the Lambertian term: specular albedo rho_avg F against its own, the albedo's mean
+                # (a constant of the texture: no gradient flows through the choice of lobe)
+                return dr.clip(rho_avg / (rho_avg + self.m_albedo_mean + 1e-6), 0.05, 0.95)
+            return dr.clip(rho_avg, 0.05, 0.95)
 
         def _mueller(self, ctx, si, wo, h, n, k, spec, diff, scale, active):
             """(Fresnel(h) spec + M00(h) diff) scale as a Spectrum (Mueller matrix if polarized), 0
@@ -733,11 +781,25 @@ def _make_class():
             if spec_on:
                 # D G / (4 cos_i) = (Eq. 13 without M) * cos_o
                 spec = dr.minimum(distr.eval(h) * self.m_g(distr, si.wi, wo, h) / (4.0 * _pos(cos_i)), MAX_LOBE)
-            diff = self._diffuse(ctx, si, wo, rough[2]) * cos_o if diff_on else 0.0
+            paper = diff_on and self.m_diffuse_factor is not None
+            diff = self._diffuse(ctx, si, wo, rough[2]) * cos_o if paper else 0.0
+            weight = cos_o * dr.inv_pi
             if inv_pdf is not None:     # scaled here: a division of the whole Mueller matrix is slow to trace
-                spec, diff = spec * inv_pdf, (diff * inv_pdf if diff_on else 0.0)
-                active = active & (inv_pdf > 0)
-            return self._mueller(ctx, si, wo, h, n, k, spec, diff, scale, active)
+                spec, diff = spec * inv_pdf, (diff * inv_pdf if paper else 0.0)
+                weight, active = weight * inv_pdf, active & (inv_pdf > 0)
+            value = self._mueller(ctx, si, wo, h, n, k, spec, diff, scale, active)
+            if diff_on and self.m_albedo is not None:
+                value = value + self._lambertian(si, dr.select(active, weight, 0.0), active)
+            return value
+
+        def _lambertian(self, si, weight, active):
+            """The Lambertian term, diffuse_reflectance / pi times ``weight`` (cos theta_o, over the pdf when
+            sampling): unpolarized, a depolarizer in the [0, 0] element (the same in both transport modes)."""
+            albedo = self.m_albedo.eval(si, active)
+            if self.m_guard_albedo:
+                albedo = dr.select(albedo >= 0, dr.minimum(albedo, 1.0), 0.0)
+            value = albedo * weight
+            return mi.depolarizer(value) if self.m_polarized else value
 
         def _pdf(self, si, wo, geo, distr, p_spec):
             """The mixture density of :meth:`sample` (``p_spec`` from :meth:`_p_spec`)."""

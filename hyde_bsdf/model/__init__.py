@@ -7,10 +7,25 @@ rules), ``index`` (the index value type n + ik), ``parameters`` (the registry of
 ``roughness`` (the roughness spellings), ``dhr`` (Eqs. 14-16 and the DHR table) and
 ``evaluator`` (Eqs. 6, 13, 16, 17: :func:`pbrdf`).
 """
-from hyde_bsdf.model.dhr import dhr_specular_pec
-from hyde_bsdf.model.evaluator import diffuse_pbrdf, pbrdf, specular_pbrdf
-from hyde_bsdf.model.index import PEC, Index
-from hyde_bsdf.model.roughness import alpha_from_rms_slope, rms_slope_from, rms_slope_from_alpha
-
 __all__ = ["pbrdf", "specular_pbrdf", "diffuse_pbrdf", "dhr_specular_pec", "Index", "PEC", "rms_slope_from",
            "alpha_from_rms_slope", "rms_slope_from_alpha"]
+
+#: the public names, imported on first use: a module of this package that needs only the registry
+#: or the term records (the Mitsuba plugin) does not import the evaluator
+_HOMES = {"pbrdf": "evaluator", "specular_pbrdf": "evaluator", "diffuse_pbrdf": "evaluator",
+          "dhr_specular_pec": "dhr", "Index": "index", "PEC": "index", "rms_slope_from": "roughness",
+          "alpha_from_rms_slope": "roughness", "rms_slope_from_alpha": "roughness"}
+
+
+def __getattr__(name):
+    import importlib
+
+    if name in _HOMES:
+        value = getattr(importlib.import_module(f"hyde_bsdf.model.{_HOMES[name]}"), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'hyde_bsdf.model' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_HOMES))

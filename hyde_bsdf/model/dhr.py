@@ -1,5 +1,5 @@
 """Directional-hemispherical reflectance of the specular lobe of a PEC (paper Eqs. 14-16)
-and the cached (theta_i, rms_slope) table the diffuse term reads.
+and the (theta_i, rms_slope) table the diffuse term reads, shipped as data.
 
 rho^{s,PEC}(theta_i; s) = int F_00^{s,PEC} cos(theta_r) d omega_r          (Eq. 14, 16)
 
@@ -29,9 +29,9 @@ twice the nodes, doubled.
 
 The table
 ---------
-:func:`load_table` builds rho once on a grid of x = 1 - sqrt(cos theta_i) in [0, 1]
+:func:`build_table` computes rho on a grid of x = 1 - sqrt(cos theta_i) in [0, 1]
 and of ln(rms_slope) in [ln 1e-4, ln 100] (uniform in ln rms_slope, 20 nodes per
-decade) and interpolates it with bicubic splines.  x crowds the nodes towards
+decade); :class:`DHRTable` interpolates it with bicubic splines.  x crowds the nodes towards
 grazing incidence, where rho changes over a range of cos theta_i of the order of
 rms_slope; rho is a smooth function of x at both ends.  The x nodes are uniform
 (step 1/128) up to x = 15/16 and four times denser (step 1/512) above it: for a
@@ -40,58 +40,37 @@ near-mirror surface (rms_slope ~1e-4) the grazing dip of rho lies within
 to 7.5e-3 (measured); with the refined end the interpolation error is below
 2e-4 over the whole table (``validation/dhr_convergence.py`` charts it).
 
-The disk cache
---------------
-The table is cached as ``dhr_<shadowing>_<key>.npz`` in ``$HYDE_BSDF_CACHE``
-(unset or empty: ``~/.cache/hyde-bsdf``).  A cache you did not write is not trusted
-(:mod:`hyde_bsdf.io.trust`, ssh's rules): a folder that others may write to or that someone
-else owns is not used at all (the table is built and kept in memory, with one warning); a
-file that is not a regular file (a FIFO is refused before it is opened, never waited on),
-is owned by someone else or is writable by others is refused.  The file stores, besides the
-arrays, its build parameters (grid, quadrature order, shadowing), a code version (a hash of
-the quadrature's source) and a seal: HMAC-SHA256 of all of it under a per-user secret kept
-in the cache folder (``.dhr-cache-key``, mode 0600), so an edit resealed without the key
-(say with a plain SHA-256) is refused.  A file is used only if all of these match, its arrays
-have the grid's shapes and are finite, rho_avg is the average of rho, and 9 fixed and 690
-random nodes re-integrated on the spot with :func:`dhr_quadrature` agree with the stored rho
-to 1e-9 (an edit of 1 % of the nodes, even resealed with the key, is caught with probability
->= 0.999); otherwise a
-:class:`DHRCacheWarning` names the file and the reason, and the table is rebuilt
-and written back atomically (:mod:`hyde_bsdf.io.atomic`: no partial or temporary file
-is left behind).  A cache that cannot be written (read-only, a directory in the
-way) only costs the rebuild, with a one-line note on stderr.
+Shipped as data
+---------------
+The tables are package data, as Mitsuba ships its spectra: ``hyde_bsdf/data/dhr_table.npz``
+holds rho and rho_avg of every shadowing term (float64, so that the evaluator's numbers do not
+depend on how the table was obtained), and ``hyde_bsdf/data/dhr_texture_{vgroove,smith,none}.npz`` the
+plugin's resampled 1 - rho texture (:class:`DHRTexture`, float32, the values the plugin's
+``mi.Texture2f`` holds), so that loading a scene neither integrates, nor resamples, nor imports
+SciPy.  ``tools/make_dhr_tables.py`` writes them (:func:`build_table`, :func:`texture_from_table`);
+``tests/test_dhr_table.py`` recomputes a sample of nodes with the quadrature and of texels from
+the table.  :func:`load_table` and :func:`load_texture` read them with :mod:`importlib.resources`,
+once per process; nothing is built or written at load.
 """
 from __future__ import annotations
 
-import hashlib
-import hmac
-import inspect
-import json
 import math
-import os
-import stat
 import time
-import warnings
 from dataclasses import dataclass, field
 from functools import lru_cache
-from pathlib import Path
+from importlib import resources
 
 import numpy as np
 
-from hyde_bsdf.errors import InputFileError, UsageError
-
-from hyde_bsdf.io.atomic import atomic_open
-from hyde_bsdf.io.trust import UntrustedFileError, make_private_dir, open_trusted, user_secret
+from hyde_bsdf.errors import UsageError
 from hyde_bsdf.model.checks import broadcast_named, check_bool, real_array
 from hyde_bsdf.model.parameters import DHR_TABLE_RMS_SLOPE
-from hyde_bsdf.model import shadowing as _shadowing_module
-from hyde_bsdf.model import terms as _terms_module
 from hyde_bsdf.model.terms import shadowing_term
 from hyde_bsdf.progress import Throttle, as_callback
 
-__all__ = ["dhr_specular_pec", "dhr_quadrature", "DHRTable", "DHRHemisphere", "load_table", "build_table",
-           "x_of_theta", "theta_of_x", "table_x_nodes", "cache_dir", "cache_path", "DHRCacheWarning",
-           "TABLE_THETA_POINTS", "TABLE_SLOPE_POINTS", "TABLE_SLOPE_RANGE"]
+__all__ = ["dhr_specular_pec", "dhr_quadrature", "DHRTable", "DHRHemisphere", "DHRTexture", "load_table",
+           "load_texture", "build_table", "texture_from_table", "x_of_theta", "theta_of_x", "table_x_nodes",
+           "TABLE_THETA_POINTS", "TABLE_SLOPE_POINTS", "TABLE_SLOPE_RANGE", "TABLE_FILE", "TEXTURE_FILE"]
 
 _K = 8.5                       # Gaussian clipped at K sigma: exp(-K^2/2) < 2e-16
 _THETA_MAX = 0.5 * math.pi - 1e-9   # cos(theta) kept > 0; rho is continuous up to pi/2
@@ -105,17 +84,13 @@ TABLE_THETA_POINTS = (round(TABLE_X_REFINE_FROM * TABLE_X_STEPS)          # 120 
                       + round((1 - TABLE_X_REFINE_FROM) * TABLE_X_STEPS * TABLE_X_REFINE) + 1)  # + 33 fine
 TABLE_SLOPE_POINTS = 121       # 20 per decade over 6 decades
 TABLE_SLOPE_RANGE = DHR_TABLE_RMS_SLOPE   # wider than the accepted RMS_SLOPE (parameters.py)
-_TABLE_VERSION = 7             # bump when the quadrature or the grid changes
-#: stored rho and rho re-integrated at load must agree to this (same rule, same nodes)
-_SPOT_TOL = 1e-9
-#: (x index, slope index) of the nodes re-integrated at every load: the corners, the
-#: grazing end, the middle; plus _SPOT_RANDOM distinct nodes drawn afresh at each load, so that
-#: an edit of 1 % of the nodes is caught with probability 1 - 0.99^690 >= 0.999 even when the
-#: file is resealed with the key (0.16 s per load with the V-groove, 0.5 s with Smith)
-_SPOT_NODES = ((0, 0), (0, -1), (-1, 0), (-1, -1), (-3, 2), (-9, 30), (76, 60), (40, 100), (140, 10))
-_SPOT_RANDOM = 690
-#: the per-user secret (mode 0600) in the cache folder that seals the cache files (HMAC-SHA256)
-CACHE_KEY_NAME = ".dhr-cache-key"
+#: the plugin's texture of 1 - rho: nodes uniform in x on [0, 1], and per decade of rms_slope over
+#: the table's whole range (its error and size: mitsuba/plugin.py's DOC, "DHR lookup")
+TEXTURE_X_POINTS = 1025
+TEXTURE_SLOPE_PER_DECADE = 192
+#: the shipped files in hyde_bsdf/data/ (written by tools/make_dhr_tables.py)
+TABLE_FILE = "dhr_table.npz"
+TEXTURE_FILE = "dhr_texture_{}.npz"
 
 
 def _gauss_legendre(n):
@@ -352,7 +327,8 @@ def _rho_average(x, rho):
 
 
 def build_table(shadowing="vgroove", progress=True) -> DHRTable:
-    """Compute the table (no cache).  About 2-4 s on 2 cores.
+    """Compute the table by quadrature (tools/make_dhr_tables.py ships it; load_table reads it).
+    About 2-4 s on 2 cores.
 
     ``progress``: a callback ``progress(message)`` told every few seconds; True for lines on
     stderr unless the command line's ``-q`` silenced them (:mod:`hyde_bsdf.progress`).
@@ -374,185 +350,88 @@ def build_table(shadowing="vgroove", progress=True) -> DHRTable:
                     time.perf_counter() - t0)
 
 
-class DHRCacheWarning(UserWarning):
-    """A cached DHR table was refused (the message names the file and why); it is rebuilt."""
+@dataclass(frozen=True)
+class DHRTexture:
+    """The plugin's 1 - rho^{s,PEC}: ``one_minus[TEXTURE_X_POINTS, ns]`` (float32) on nodes uniform in
+    x = 1 - sqrt(cos theta) over [0, 1] and in ln(rms_slope) over [``log_lo``, ``log_hi``] (the table's
+    range, ``ns`` = TEXTURE_SLOPE_PER_DECADE per decade + 1), and ``one_minus_avg[ns]`` = 1 - rho_avg
+    (float32) on the same slope nodes.  Stored as 1 - rho so that the small diffuse weights of smooth
+    surfaces keep their float32 relative precision."""
+    log_lo: float
+    log_hi: float
+    one_minus: np.ndarray
+    one_minus_avg: np.ndarray
 
 
-def cache_dir() -> Path:
-    """``$HYDE_BSDF_CACHE``, or ``~/.cache/hyde-bsdf`` when it is unset or empty."""
-    value = os.environ.get("HYDE_BSDF_CACHE", "").strip()
-    return Path(value).expanduser() if value else Path.home() / ".cache" / "hyde-bsdf"
+def texture_from_table(table: DHRTable, x_points: int = TEXTURE_X_POINTS,
+                       per_decade: int = TEXTURE_SLOPE_PER_DECADE) -> DHRTexture:
+    """Resample ``table`` through its own bicubic spline (:meth:`DHRTable.on_grid`) and its cubic
+    rho_avg (:meth:`DHRTable.average`) onto the texture's grid (SciPy; tools/make_dhr_tables.py)."""
+    lo, hi = float(table.log_slope[0]), float(table.log_slope[-1])
+    ns = int(round((hi - lo) / math.log(10.0) * per_decade)) + 1
+    ls = np.linspace(lo, hi, ns)
+    one_minus = 1.0 - table.on_grid(np.linspace(0.0, 1.0, x_points), ls)
+    one_minus_avg = 1.0 - np.asarray(table.average(np.exp(ls)), dtype=float)
+    return DHRTexture(lo, hi, one_minus.astype(np.float32), one_minus_avg.astype(np.float32))
 
 
-@lru_cache(maxsize=1)
-def _code_version() -> str:
-    """Hash of the source that determines the table's values (quadrature, shadowing, grid)."""
-    parts = [str(_TABLE_VERSION)]
-    for obj in (_chi_of_p, _dhr_batch, table_x_nodes, _grid, _rho_average, _shadowing_module, _terms_module):
-        try:
-            parts.append(inspect.getsource(obj))
-        except (OSError, TypeError):       # no source (frozen install): the version number alone
-            parts.append(getattr(obj, "__name__", "?"))
-    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
+def _data_file(name: str):
+    """A shipped file of ``hyde_bsdf/data/``, opened for reading (importlib.resources)."""
+    return resources.files("hyde_bsdf").joinpath("data", name).open("rb")
 
 
-def _build_params(shadowing) -> dict:
-    """Everything the table's values depend on; stored in the cache file and compared at load."""
-    return {"format": 2, "table_version": _TABLE_VERSION, "code_version": _code_version(),
-            "shadowing": shadowing, "x_steps": TABLE_X_STEPS, "x_refine_from": TABLE_X_REFINE_FROM,
-            "x_refine": TABLE_X_REFINE, "theta_points": TABLE_THETA_POINTS,
-            "slope_points": TABLE_SLOPE_POINTS, "slope_range": list(TABLE_SLOPE_RANGE),
-            "order": list(shadowing_term(shadowing).dhr_order)}
-
-
-_ARRAYS = ("x", "theta", "log_slope", "rho", "rho_avg")
-
-
-def _cache_key() -> bytes:
-    """The per-user secret that seals the cache files (:func:`hyde_bsdf.io.trust.user_secret`)."""
-    return user_secret(cache_dir(), CACHE_KEY_NAME)
-
-
-def _checksum(meta_json: str, arrays: dict, key: bytes | None = None) -> str:
-    """HMAC-SHA256 of the build parameters and arrays under the per-user ``key``: a file edited
-    and resealed without the key (e.g. with a plain SHA-256) does not match."""
-    h = hmac.new(_cache_key() if key is None else key, meta_json.encode(), hashlib.sha256)
-    for name in _ARRAYS:
-        a = np.ascontiguousarray(arrays[name], dtype="<f8")
-        h.update(f"{name}{a.shape}".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
-
-
-def cache_path(shadowing) -> Path:
-    """The cache file of the table for ``shadowing`` (the name encodes the build parameters)."""
-    key = json.dumps(_build_params(shadowing), sort_keys=True)
-    return cache_dir() / f"dhr_{shadowing}_{hashlib.sha1(key.encode()).hexdigest()[:10]}.npz"
-
-
-_cache_path = cache_path   # old private name
-
-
-def _save_table(path: Path, table: DHRTable) -> None:
-    arrays = {name: getattr(table, name) for name in _ARRAYS}
-    meta = json.dumps(_build_params(table.shadowing), sort_keys=True)
-    key = _cache_key()
-    with atomic_open(path, "wb", permissions=0o600) as fh:   # writable by no one else
-        np.savez(fh, meta=np.array(meta), checksum=np.array(_checksum(meta, arrays, key)),
-                 build_seconds=np.array(table.build_seconds), **arrays)
-
-
-def _read_table(path: Path, shadowing) -> DHRTable:
-    """Load and verify a cache file; InputFileError (the reason, a phrase that completes
-    "DHR table cache PATH ...") if it must not be used."""
-    try:
-        with open_trusted(path) as fh, np.load(fh, allow_pickle=False) as z:
-            stored = {name: np.array(z[name]) for name in z.files}
-    except UntrustedFileError as exc:   # a FIFO, device, symlink, directory; another owner; mode
-        raise InputFileError(f"is refused: {exc}") from None
-    except Exception as exc:         # not an .npz, truncated, unreadable
-        raise InputFileError(f"cannot be read as a table ({type(exc).__name__}: {exc})") from None
-    missing = [n for n in ("meta", "checksum", "build_seconds", *_ARRAYS) if n not in stored]
-    if missing:
-        raise InputFileError(f"lacks {', '.join(missing)} (written by an older version)")
-    try:
-        meta_json = str(stored["meta"][()])
-        meta = json.loads(meta_json)
-    except (ValueError, TypeError):
-        raise InputFileError("its build parameters are not readable") from None
-    want = json.loads(json.dumps(_build_params(shadowing)))
-    if meta != want:
-        diff = sorted(k for k in set(meta) | set(want) if meta.get(k) != want.get(k))
-        raise InputFileError(f"was built with other parameters or code ({', '.join(diff)} differ)")
-    arrays = {name: stored[name] for name in _ARRAYS}
-    x, log_slope = _grid()
-    shapes = {"x": x.shape, "theta": x.shape, "log_slope": log_slope.shape,
-              "rho": (x.size, log_slope.size), "rho_avg": log_slope.shape}
-    for name, shape in shapes.items():
-        a = arrays[name]
-        if a.shape != shape or a.dtype.kind != "f":
-            raise InputFileError(f"{name} has shape {a.shape} and dtype {a.dtype}, expected {shape} float")
-        if not np.all(np.isfinite(a)):
-            raise InputFileError(f"{name} has non-finite values")
-    if str(stored["checksum"][()]) != _checksum(meta_json, arrays):
-        raise InputFileError("its checksum (sealed with your key) does not match its contents "
-                         "(modified, corrupt, or written by someone else)")
-    if not (np.array_equal(arrays["x"], x) and np.array_equal(arrays["log_slope"], log_slope)
-            and np.array_equal(arrays["theta"], theta_of_x(x))):
-        raise InputFileError("its grid is not the table's grid")
-    rho = arrays["rho"]
-    if not np.allclose(arrays["rho_avg"], _rho_average(x, rho), rtol=0.0, atol=1e-12):
-        raise InputFileError("rho_avg is not the average of rho")
-    # a few nodes re-integrated now, the fixed ones and some drawn at random
-    drawn = _spot_rng().choice(rho.size, _SPOT_RANDOM, replace=False)
-    ix = np.concatenate([[i % x.size for i, _ in _SPOT_NODES], drawn // log_slope.size])
-    js = np.concatenate([[j % log_slope.size for _, j in _SPOT_NODES], drawn % log_slope.size])
-    fresh = dhr_quadrature(theta_of_x(x[ix]), np.exp(log_slope[js]), shadowing,
-                         *shadowing_term(shadowing).dhr_order)
-    bad = np.abs(fresh - rho[ix, js]) > _SPOT_TOL
-    if bad.any():
-        i = int(np.argmax(bad))
-        raise InputFileError(f"rho at theta_i = {math.degrees(theta_of_x(x[ix[i]])):.4g} deg, rms_slope = "
-                         f"{math.exp(log_slope[js[i]]):.4g} is {rho[ix[i], js[i]]:.10g}, re-integrated "
-                         f"{fresh[i]:.10g}")
-    return DHRTable(arrays["x"], arrays["theta"], arrays["log_slope"], rho, arrays["rho_avg"], shadowing,
-                    float(stored["build_seconds"]))
+def _not_shipped(what: str, name: str):
+    return LookupError(f"the DHR {what} of shadowing={name!r} is not shipped in hyde_bsdf/data/: run "
+                       f"tools/make_dhr_tables.py (a new shadowing record needs its table)")
 
 
 _TABLES: dict[str, DHRTable] = {}
-#: the generator of the random spot checks (fresh entropy at each load; tests fix its seed)
-_spot_rng = np.random.default_rng
+_TEXTURES: dict[str, DHRTexture] = {}
 
 
 def load_table(shadowing="vgroove") -> DHRTable:
-    """The DHR table for a shadowing model: from memory, from the verified disk cache, or built now.
+    """The shipped DHR table of a shadowing term (``hyde_bsdf/data/dhr_table.npz``), read once per
+    process; LookupError naming the script to run if the term has none."""
+    name = shadowing_term(shadowing).name
+    if name not in _TABLES:
+        with _data_file(TABLE_FILE) as fh, np.load(fh, allow_pickle=False) as z:
+            if f"{name}_rho" not in z.files:
+                raise _not_shipped("table", name)
+            x, log_slope, rho, rho_avg = z["x"], z["log_slope"], z[f"{name}_rho"], z[f"{name}_rho_avg"]
+        _TABLES[name] = DHRTable(x, theta_of_x(x), log_slope, rho, rho_avg, name)
+    return _TABLES[name]
 
-    A cache file that fails any check (module docstring, "The disk cache") is reported with a
-    :class:`DHRCacheWarning` naming it and rebuilt; the new file replaces it atomically.
-    """
-    shadowing = shadowing_term(shadowing).name
-    if shadowing in _TABLES:
-        return _TABLES[shadowing]
-    path = cache_path(shadowing)
-    table, writable = _cached_table(path, shadowing)
-    if table is None:
-        table = build_table(shadowing)
+
+def encode_texture_values(a: np.ndarray) -> np.ndarray:
+    """float32 values as second differences along axis 0 of their bit patterns (uint32, modulo 2^32):
+    exact, and a smooth table's differences compress 2x better than its values."""
+    u = np.ascontiguousarray(a, dtype=np.float32).view(np.uint32)
+    d = np.diff(u, axis=0, prepend=np.uint32(0))
+    return np.diff(d, axis=0, prepend=np.uint32(0))
+
+
+def decode_texture_values(d2: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`encode_texture_values`, in place: two running sums modulo 2^32."""
+    u = np.asarray(d2, dtype=np.uint32)
+    np.cumsum(u, axis=0, out=u)
+    np.cumsum(u, axis=0, out=u)
+    return u.view(np.float32)
+
+
+def load_texture(shadowing="vgroove") -> DHRTexture:
+    """The plugin's shipped 1 - rho texture of a shadowing term
+    (``hyde_bsdf/data/dhr_texture_{vgroove,smith,none}.npz``), read once per process: no quadrature,
+    no resampling, no SciPy."""
+    name = shadowing_term(shadowing).name
+    if name not in _TEXTURES:
         try:
-            if writable:
-                _save_table(path, table)
-        except OSError as exc:       # read-only cache, a directory in the way: memory only
-            warnings.warn(f"could not cache the DHR table at {str(path)!r}: {exc.strerror or exc}; "
-                          "it is kept in memory for this run", DHRCacheWarning, stacklevel=2)
-    _TABLES[shadowing] = table
-    return table
-
-
-def _cached_table(path: Path, shadowing):
-    """(the verified table or None, whether the cache folder may be written).
-
-    A folder that others may write to or that someone else owns, or a key that others may read,
-    makes the whole cache untrusted: nothing is read or written there (one warning)."""
-    try:
-        make_private_dir(path.parent)
-        _cache_key()
-    except UntrustedFileError as exc:
-        warnings.warn(f"DHR table cache not used: {exc}; the table is built and kept in memory",
-                      DHRCacheWarning, stacklevel=3)
-        return None, False
-    except OSError:                  # the folder cannot be created: the save reports it
-        return None, True
-    if not os.path.lexists(path):
-        return None, True
-    if not stat.S_ISREG(os.lstat(path).st_mode):   # a FIFO, device, socket, symlink, folder: left alone
-        warnings.warn(f"DHR table cache {str(path)!r} is not a regular file: not opened, not replaced; "
-                      f"the table is built and kept in memory (remove it to cache again)",
-                      DHRCacheWarning, stacklevel=3)
-        return None, False
-    try:
-        return _read_table(path, shadowing), True
-    except ValueError as exc:        # InputFileError, or NumPy's on a file corrupt in a way not foreseen
-        warnings.warn(f"DHR table cache {str(path)!r} {exc}; rebuilding it", DHRCacheWarning, stacklevel=3)
-        return None, True
+            fh = _data_file(TEXTURE_FILE.format(name))
+        except FileNotFoundError:
+            raise _not_shipped("texture", name) from None
+        with fh, np.load(fh, allow_pickle=False) as z:
+            lo, hi = (float(v) for v in z["log_range"])
+            _TEXTURES[name] = DHRTexture(lo, hi, decode_texture_values(z["one_minus_d2"]), z["one_minus_avg"])
+    return _TEXTURES[name]
 
 
 def dhr_specular_pec(theta_i, rms_slope, shadowing="vgroove", error_estimate=False):

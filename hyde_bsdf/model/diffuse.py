@@ -1,4 +1,4 @@
-"""Diffuse terms F^d_00 (paper Eqs. 16-17 and a reciprocal variant), one function each.
+"""Diffuse terms F^d_00 (paper Eqs. 16-17, a reciprocal variant, a free Lambertian term), one function each.
 
 Each function returns the unpolarized diffuse element F^d_00 (it adds to M_00 only) from a
 *hemisphere* ``h`` that describes the specular lobe's directional-hemispherical reflectance rho:
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["f00_paper", "f00_reciprocal"]
+__all__ = ["f00_paper", "f00_reciprocal", "f00_lambertian"]
 
 
 def _one_minus(h, theta):
@@ -43,3 +43,13 @@ def f00_reciprocal(h, theta_i, theta_r, M00):
     if avg <= 0.0:    # rho = 1 everywhere (a mirror-smooth surface): no multiple scattering
         return np.zeros(np.broadcast(theta_i, theta_r, M00).shape)
     return _one_minus(h, theta_i) * _one_minus(h, theta_r) * M00 / (h.measure * avg)
+
+
+def f00_lambertian(h, theta_i, theta_r, M00, diffuse_reflectance):
+    """A Lambertian term with its own albedo: F^d_00 = diffuse_reflectance / pi (on the 2-D surface).
+
+    Not the paper's: its size is free (the albedo ``diffuse_reflectance``, its hemispherical
+    integral), not tied to the roughness through the DHR, and it does not depend on the facet
+    Fresnel average ``M00`` -- a subsurface or coating part, as in Mitsuba's plastic-like BSDFs.
+    Unpolarized, reciprocal, linear in its albedo."""
+    return np.full(np.broadcast(theta_i, theta_r, M00).shape, diffuse_reflectance / h.measure)

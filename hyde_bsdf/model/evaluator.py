@@ -3,11 +3,12 @@
     F(theta_i, theta_r, phi) = F^s + F^d                                   (Eq. 5, 17)
     F^s = P(alpha) M(beta; eta) G / (4 cos ti cos tr cos alpha)            (Eq. 6, 13)
     F^d_00 = (1/pi) [1 - rho^{s,PEC}(theta_i)] M_00(beta; eta)             (Eq. 16, 17)
+    or F^d_00 = diffuse_reflectance / pi                                  (a free Lambertian term)
 
 with alpha, beta from Eq. 7, P Beckmann (Eq. 8), M the Mueller matrix of the
 rotated Fresnel Jones matrix (Eqs. 9-11, all 16 elements), G the V-groove
 shadowing (Eq. 12) or an alternative, rho^{s,PEC} the specular DHR (Eqs. 14-16)
-read from the cached table of :mod:`hyde_bsdf.model.dhr`.
+read from the shipped table of :mod:`hyde_bsdf.model.dhr`.
 
 Conventions (this interface)
 ----------------------------
@@ -51,7 +52,7 @@ from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.jones_mueller import rotated_fresnel_mueller
 from hyde_bsdf.model.roughness import check_rms_slope
 from hyde_bsdf.model.slope_distribution import beckmann_P
-from hyde_bsdf.model.terms import check_pair, diffuse_term, shadowing_term
+from hyde_bsdf.model.terms import check_pair, diffuse_term, shadowing_term, term_arguments
 
 __all__ = ["pbrdf", "specular_pbrdf", "diffuse_pbrdf"]
 
@@ -122,22 +123,24 @@ def _specular(theta_i, theta_r, phi, s, index, shadowing):
     return F, M00.reshape(shape), above.reshape(shape)
 
 
-def diffuse_pbrdf(theta_i, theta_r, M00, rms_slope, mode="paper", shadowing="vgroove"):
+def diffuse_pbrdf(theta_i, theta_r, M00, rms_slope, mode="paper", shadowing="vgroove", diffuse_reflectance=None):
     """F^d_00 of the diffuse term ``mode`` (a name of :data:`hyde_bsdf.model.terms.DIFFUSE`, or
     True/False), e.g. Eqs. 16-17: (1/pi)(1 - rho^{s,PEC}(theta_i)) M00, with the DHR of ``shadowing``.
 
     ``M00`` is the facet Fresnel average M_00(beta; eta) (1 for a PEC).  With
     ``shadowing="none"`` rho can exceed 1 at grazing angles (Priest-Germer is
     unbounded); 1 - rho is then clipped at 0, which keeps F^d >= 0.
+    ``diffuse_reflectance``: the albedo of ``mode="lambertian"`` (its own parameter).
     """
     term = diffuse_term(mode)
     if not term.present:
         return np.zeros(np.broadcast(theta_i, theta_r, M00).shape)
-    return term.f00(DHRHemisphere(shadowing_term(shadowing).name, rms_slope), theta_i, theta_r, M00)
+    own = term_arguments(term, diffuse_reflectance=diffuse_reflectance)
+    return term.f00(DHRHemisphere(shadowing_term(shadowing).name, rms_slope), theta_i, theta_r, M00, **own)
 
 
 def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
-          shadowing="vgroove", diffuse=True, index=None):
+          shadowing="vgroove", diffuse=True, index=None, diffuse_reflectance=None):
     """The Hyde-Schmidt-Havrilla pBRDF Mueller matrix F (1/sr), paper Eq. 17.
 
     Parameters
@@ -156,10 +159,14 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
     shadowing : a shadowing term of :mod:`hyde_bsdf.model.terms`: "vgroove" (Eq. 12,
         the paper) | "smith" (exact Beckmann Smith) | "none"
     diffuse : a diffuse term of :mod:`hyde_bsdf.model.terms`: True / "paper" (Eq. 17) |
-        "reciprocal" (symmetric variant) | False / "none"; "reciprocal" needs a shadowing
-        term (:func:`hyde_bsdf.model.terms.check_pair`).
+        "reciprocal" (symmetric variant) | False / "none" | "lambertian" (a free albedo,
+        not the paper's); "reciprocal" needs a shadowing term
+        (:func:`hyde_bsdf.model.terms.check_pair`).
         ``shadowing="none", diffuse=False`` is the Priest-Germer pBRDF (Fig. 4).
-        The diffuse term uses the DHR of the same shadowing model.
+        The paper's diffuse term uses the DHR of the same shadowing model.
+    diffuse_reflectance : float in ``parameters.DIFFUSE_REFLECTANCE`` ([0, 1]), only with
+        ``diffuse="lambertian"``: its albedo, F_00 += diffuse_reflectance / pi (default 0.5,
+        Mitsuba's).
 
     Returns
     -------
@@ -177,11 +184,12 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
     s = check_rms_slope(rms_slope)
     index = Index.from_keywords(n, k, pec, index)
     shadow, term = check_pair(shadowing, diffuse)     # the rules of model/terms.py
+    own = term_arguments(term, diffuse_reflectance=diffuse_reflectance)
     theta_i, theta_r, phi = _check_all_angles(theta_i, theta_r, phi)
     out, A, above = _specular(theta_i, theta_r, phi, s, index, shadow)
     if term.present:
         ti, tr = np.broadcast_arrays(theta_i, theta_r)
-        diffuse = term.f00(DHRHemisphere(shadow.name, s), ti, tr, A)
+        diffuse = term.f00(DHRHemisphere(shadow.name, s), ti, tr, A, **own)
         out[..., 0, 0] += np.where(above, diffuse, 0.0)
     if not np.isfinite(out).all():   # never hand back NaN silently
         bad = np.argwhere((~np.isfinite(out.reshape(out.shape[:-2] + (16,)))).any(-1))[:1]

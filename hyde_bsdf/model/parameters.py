@@ -20,7 +20,8 @@ Ranges
   (every natural material);
 * :data:`INVERSE_ETA` [0.02, 50], :data:`INVERSE_K` [0, 50], :data:`INVERSE_SCALE` [1e-3, 1e3]:
   the inverse's optimisation boxes (log-space map updates floor k at :data:`INVERSE_K_LOG_FLOOR`);
-* :data:`ALPHA_SAMPLE` [1e-4, 10]: the .pbsdf file's importance-sampling alpha.
+* :data:`ALPHA_SAMPLE` [1e-4, 10]: the .pbsdf file's importance-sampling alpha;
+* :data:`DIFFUSE_REFLECTANCE` [0, 1]: the Lambertian term's albedo (its hemispherical reflectance).
 
 Conventions and spellings (one per interface, converted at the boundary)
 ------------------------------------------------------------------------
@@ -45,7 +46,8 @@ from hyde_bsdf.model.checks import real_scalar
 
 __all__ = ["Range", "RMS_SLOPE", "ALPHA", "DHR_TABLE_RMS_SLOPE", "N", "K", "ETA", "INDEX_MIN", "NATURAL_INDEX",
            "INVERSE_ETA", "INVERSE_K", "INVERSE_K_LOG_FLOOR", "INVERSE_SCALE", "ALPHA_SAMPLE", "FIT_PARAMETERS",
-           "INVERSE_PARAMETERS", "SPELLINGS", "SQRT2", "alpha_from_rms_slope", "rms_slope_from_alpha"]
+           "INVERSE_PARAMETERS", "DIFFUSE_REFLECTANCE", "SPELLINGS", "SQRT2", "alpha_from_rms_slope",
+           "rms_slope_from_alpha"]
 
 SQRT2 = math.sqrt(2.0)
 
@@ -113,6 +115,9 @@ INVERSE_SCALE = Range("specular_reflectance", 1e-3, 1e3, "dimensionless",
                       "the inverse's box for a per-texel multiplier (an unknown albedo or light)")
 ALPHA_SAMPLE = Range("alpha_sample", 1e-4, 10.0, "dimensionless (Beckmann alpha)",
                      "the .pbsdf file's importance-sampling alpha")
+DIFFUSE_REFLECTANCE = Range("diffuse_reflectance", 0.0, 1.0, "dimensionless (albedo)",
+                            "the Lambertian term's albedo (F_00 += diffuse_reflectance / pi): evaluator, plugin, "
+                            "fits, export")
 
 #: the fit's parameters (evaluator names, paper index n - jk), in this order everywhere
 FIT_PARAMETERS = ("n", "k", "rms_slope")

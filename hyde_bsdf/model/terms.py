@@ -9,7 +9,8 @@ of each term by the record's name: the evaluator and the plugin are independent 
 share data -- names, rules, the DHR table -- never formula code).
 
 Shadowing terms (:data:`SHADOWING_TERMS`): ``vgroove`` (paper Eq. 12), ``smith``, ``none``.
-Diffuse terms (:data:`DIFFUSE_TERMS`): ``paper`` (Eq. 17), ``reciprocal``, ``none``.
+Diffuse terms (:data:`DIFFUSE_TERMS`): ``paper`` (Eq. 17), ``reciprocal``, ``none``, ``lambertian``
+(a free albedo ``diffuse_reflectance``: not the paper's, its size not tied to the roughness).
 
 The rule (one statement, :func:`check_pair`): a diffuse term that divides by 1 - rho_avg
 (``reciprocal``) needs a shadowing term whose specular DHR stays <= 1; without shadowing rho
@@ -30,7 +31,8 @@ from hyde_bsdf.model import diffuse as _diffuse
 from hyde_bsdf.model import shadowing as _shadowing
 
 __all__ = ["ShadowingTerm", "DiffuseTerm", "SHADOWING_TERMS", "DIFFUSE_TERMS", "SHADOWING", "DIFFUSE",
-           "shadowing_term", "diffuse_term", "check_pair", "allowed", "model_size"]
+           "PARAMETER_DEFAULTS", "shadowing_term", "diffuse_term", "check_pair", "allowed", "term_arguments",
+           "model_size"]
 
 
 @dataclass(frozen=True)
@@ -101,6 +103,8 @@ DIFFUSE_TERMS = (
     DiffuseTerm("reciprocal", "(1 - rho(theta_i))(1 - rho(theta_o)) M00 / (pi (1 - rho_avg)), reciprocal",
                 _diffuse.f00_reciprocal, needs_bounded_dhr=True, rank=2),
     DiffuseTerm("none", "specular lobe only", None, reads_dhr=False, adds=0, rank=0),
+    DiffuseTerm("lambertian", "diffuse_reflectance / pi: a Lambertian part with its own albedo (not the paper's)",
+                _diffuse.f00_lambertian, reads_dhr=False, parameters=("diffuse_reflectance",), rank=3),
 )
 
 #: the names, in the registry's order (the first is the default)
@@ -151,6 +155,27 @@ def check_pair(shadowing, diffuse, booleans=True) -> tuple:
         raise UsageError(f"diffuse={d.name!r} needs shadowing={' or '.join(map(repr, ok))}; with "
                          f"shadowing={s.name!r} the specular DHR exceeds 1 and (1 - rho_avg) is not positive")
     return s, d
+
+
+#: the value a term parameter takes when it is not given (Mitsuba's diffuse_reflectance default, 0.5)
+PARAMETER_DEFAULTS = {"diffuse_reflectance": 0.5}
+
+
+def term_arguments(term, **given) -> dict:
+    """The keyword arguments of ``term``'s own parameters (checked against their registry ranges,
+    :data:`PARAMETER_DEFAULTS` where not given).  ``given``: name -> value or None; a value for a
+    parameter the term does not have is refused, naming the term that has it."""
+    from hyde_bsdf.model import parameters
+
+    term = diffuse_term(term)
+    for name, value in given.items():
+        if value is not None and name not in term.parameters:
+            owners = [t.name for t in DIFFUSE_TERMS if name in t.parameters]
+            raise UsageError(f"{name} is a parameter of diffuse={' or '.join(map(repr, owners))}, not of "
+                             f"diffuse={term.name!r}")
+    return {name: getattr(parameters, name.upper()).check(given.get(name) if given.get(name) is not None
+                                                          else PARAMETER_DEFAULTS[name], name)
+            for name in term.parameters}
 
 
 def model_size(shadowing, diffuse, free_parameters: int) -> int:

@@ -85,7 +85,7 @@ from hyde_bsdf.errors import UsageError
 from hyde_bsdf.model.fresnel import fresnel_mueller_terms
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import RMS_SLOPE
-from hyde_bsdf.model.terms import check_pair, shadowing_term
+from hyde_bsdf.model.terms import check_pair, shadowing_term, term_arguments
 
 __all__ = [
     "facet_angles",
@@ -209,27 +209,30 @@ AVERAGE_NODES = 200
 _THETA_MAX = _HALF_PI * (1.0 - 1e-12)
 
 
-def brdf_diffuse(theta_i, rms_slope, shadowing=True, diffuse=True, theta_r=None):
+def brdf_diffuse(theta_i, rms_slope, shadowing=True, diffuse=True, theta_r=None, diffuse_reflectance=None):
     """1-D Eq. 16 for a PEC: the diffuse term ``diffuse`` (a diffuse record of :mod:`hyde_bsdf.model.terms`,
     True = "paper") on the in-plane hemisphere, 1/rad; the paper's is the Lambertian 2-D BRDF
     f_d = (1 - rho_s(theta_i)) / 2.  ``theta_r`` (signed, radians) is needed by a term that
-    depends on it (the reciprocal one); it broadcasts against ``theta_i``."""
+    depends on it (the reciprocal one); it broadcasts against ``theta_i``.  ``diffuse_reflectance``:
+    the albedo of the "lambertian" term (in the plane its f_d = albedo / 2)."""
     _, term = check_pair(_term_name(shadowing), diffuse)
+    own = term_arguments(term, diffuse_reflectance=diffuse_reflectance)
     theta_i = np.asarray(theta_i, dtype=float)
     theta_r = theta_i if theta_r is None else np.asarray(theta_r, dtype=float)
     if not term.present:
         return np.zeros(np.broadcast(theta_i, theta_r).shape)
-    return term.f00(PlaneHemisphere(rms_slope, shadowing), theta_i, theta_r, 1.0)
+    return term.f00(PlaneHemisphere(rms_slope, shadowing), theta_i, theta_r, 1.0, **own)
 
 
-def brdf(theta_i, theta_r, rms_slope, shadowing=True, diffuse=True):
+def brdf(theta_i, theta_r, rms_slope, shadowing=True, diffuse=True, diffuse_reflectance=None):
     """1-D Eq. 17 for a PEC: f = f_s + f_d (1/rad); broadcasts theta_i against theta_r.
 
-    ``diffuse``: a diffuse term of :mod:`hyde_bsdf.model.terms` (True = "paper", False = "none")."""
+    ``diffuse``: a diffuse term of :mod:`hyde_bsdf.model.terms` (True = "paper", False = "none");
+    ``diffuse_reflectance``: the "lambertian" term's albedo."""
     theta_i, theta_r, rms_slope = _check(theta_i, theta_r, rms_slope)
     check_pair(_term_name(shadowing), diffuse)
     f = brdf_specular(theta_i, theta_r, rms_slope, shadowing)
-    return f + brdf_diffuse(theta_i, rms_slope, shadowing, diffuse, theta_r)
+    return f + brdf_diffuse(theta_i, rms_slope, shadowing, diffuse, theta_r, diffuse_reflectance)
 
 
 def sigma_equivalent(theta_i, theta_r, rms_slope, shadowing=True, diffuse=True):
