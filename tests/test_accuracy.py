@@ -227,9 +227,13 @@ def test_gather_hands_each_result_over_as_it_finishes():
     assert sorted(seen) == [(0, 1), (1, 2), (2, 3)]
 
 
-def test_fit_height_options_are_checked_before_the_data(tmp_path, capsys):
-    """hyde-bsdf fit --sigma-h-um without --wavelength-nm: one line naming both, exit 2, before the file is read
-    (here it does not even exist)."""
-    assert main(["fit", str(tmp_path / "missing.csv"), "--sigma-h-um", "1"]) == 2
+def test_fit_height_options_are_checked_before_the_fit(tmp_path, capsys):
+    """hyde-bsdf fit --sigma-h-um on data without a wavelength column and without --wavelength-nm: one line
+    saying what is missing, exit 2, before any fitting; two heights at once: refused before the file is read."""
+    data = tmp_path / "m.csv"
+    data.write_text("theta_i_deg,theta_r_deg,phi_deg,M22,M22_sigma\n20,20,180,-0.99,0.01\n40,40,180,-0.97,0.01\n")
+    assert main(["fit", str(data), "--sigma-h-um", "1"]) == 2
     err = capsys.readouterr().err.strip()
-    assert "\n" not in err and "--sigma-h-um needs --wavelength-nm" in err
+    assert "\n" not in err and "--sigma-h-um needs the wavelength" in err
+    assert main(["fit", str(tmp_path / "missing.csv"), "--sigma-h-um", "1", "--sigma-h-wl", "2"]) == 2
+    assert "give --sigma-h-wl or --sigma-h-um" in capsys.readouterr().err
