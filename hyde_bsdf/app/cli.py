@@ -47,6 +47,7 @@ COMMANDS = {
     "export": ("hyde_bsdf.app.export", "write a hyde material as a measured_polarized table for C++ Mitsuba"),
     "stokes": ("hyde_bsdf.app.stokes", "raw analyzer frames (DoFP mosaic or N angles) to a Stokes EXR with sigma"),
     "invert": ("hyde_bsdf.app.invert", "recover roughness and index from a Stokes image"),
+    "accuracy": ("hyde_bsdf.app.accuracy", "how wrong the model may be at your geometry (the accuracy atlas)"),
     "validate": ("hyde_bsdf.app.report.build", "run the validation report"),
 }
 
