@@ -921,22 +921,23 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
                    time.perf_counter() - t_wall)
 
 
-def estimate(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, pts_per_wl=10, seed=0,
-             workers=None, *, taper_width_wl=None, polarization="s", n=None, k=None, solver="auto", tol=None,
-             incidence="auto"):
+def estimate(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, *,
+             polarization="s", n=None, k=None, workers=None, options: MoMOptions | None = None, **settings):
     """What :func:`scatter` with these arguments will cost, without solving anything.
 
     The surface is realised (as ``scatter`` would: same seed, same resampling, same solver choice), then the cost
-    model of :mod:`hyde_bsdf.mom.cost` gives the CPU seconds per partition.  ``workers``: the processes the
+    model of :mod:`hyde_bsdf.mom.cost` gives the CPU seconds per partition.  ``options``/``settings``: as
+    :func:`scatter`'s (a :class:`MoMOptions` or its fields as keywords).  ``workers``: the processes the
     partitions are spread over (default: one per core, at most one per partition).  Returns a dict: ``cpu_seconds``
     (all partitions), ``wall_seconds`` (over the workers), ``memory_bytes`` (peak, all workers) and
     ``memory_text``, ``unknowns`` per partition, ``method``, ``partitions``, ``workers``, ``n_rhs``, ``n_far``,
     ``features`` (the model's inputs) and ``line`` (the sentence ``scatter`` prints before a long run).
     Raises what ``scatter`` raises for bad arguments or a run that would not fit in memory.
     """
+    opts = MoMOptions.of(options, settings, "estimate")
     cfg = _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
-                        pts_per_wl, seed, taper_width_wl, polarization, n, k, None, solver, tol)
-    cfg["beam"] = _check_incidence(incidence, cfg["ti_deg"])
+                        polarization, n, k, opts)
+    cfg["beam"] = _check_incidence(opts.incidence, cfg["ti_deg"])
     workers = max(1, min(int(workers or os.cpu_count() or 1), cfg["partitions"]))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MoMAccuracyWarning)
