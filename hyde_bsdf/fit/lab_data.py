@@ -23,7 +23,7 @@ imply: delta = sigma_jk / sqrt(1 + (M_jk/M00)^2) (the first-order propagation of
 the row's median over its elements).  Where M00 is not known to be above 0 within 3 standard
 deviations (delta > :data:`RATIO_DELTA` = 1/3) the ratio is one of noises -- not Gaussian, centred
 near 0: it looks depolarized, and with it the narrowest lobe plus any diffuse part "fits" better
-than the truth (the roughness 8 standard errors off in ``validation/fit_lab_data.py``) -- and the
+than the truth (the roughness 8 standard errors off in ``hyde_bsdf/validation/fit_lab_data.py``) -- and the
 row carries no usable information: it is left out, counted in ``Group.uninformative`` (the fit's
 note says how many; measure M00 to use them).  The rows kept are fitted as what they are:
 
