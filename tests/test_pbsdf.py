@@ -378,7 +378,7 @@ def test_rendered_flat_patch_of_an_exported_metal_keeps_its_colour(tmp_path):
     from hyde_bsdf.fit.pbsdf_bands import choose_bands, index_spectrum
 
     spec = importlib.util.spec_from_file_location(
-        "pbsdf_export_validation", Path(__file__).resolve().parents[1] / "validation" / "pbsdf_export.py")
+        "pbsdf_export_validation", Path(__file__).resolve().parents[1] / "hyde_bsdf" / "validation" / "pbsdf_export.py")
     v = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(v)
     rel = {}

@@ -251,7 +251,7 @@ def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi, neighbours=None):
         (f"the residuals are scatter without a trend ({st['scatter']:.3g} sigma rms): the sigmas underestimate "
          "the noise")
     msg = (f"reduced chi^2 = {red:.4g} (chi^2 = {chi2:.4g} for {dof} dof, p = {p:.3g}): {cause}; "
-           "try --model auto" + ("" if structured else ", or check the sigmas"))
+           "try `select_model`" + ("" if structured else ", or check the sigmas"))
     return Verdict(False, "chi2", "lower bounds", figs, msg, cause)
 
 
@@ -287,7 +287,7 @@ def floor_verdict(m00, elements, theta_i, theta_r, phi, neighbours=None):
     pct = (lambda v: f"{100 * v:.3g} %") if lead == "M00" else (lambda v: f"{v:.3g}")
     msg = (f"{lead} misfit {pct(figs[f'{lead}_rms'])} rms (systematic {pct(figs[f'{lead}_systematic'])}, the data's "
            f"floor {pct(figs[f'{lead}_scatter'])}; tolerance {pct(M00_TOLERANCE if lead == 'M00' else ELEMENT_TOLERANCE)}): "
-           f"{cause}; try --model auto")
+           f"{cause}; try `select_model`")
     figs.update({f"trend_{k}": v for k, v in trends.items()})
     return Verdict(False, "floor", "lower bounds", figs, msg, cause)
 

@@ -61,7 +61,7 @@ What the data can and cannot say (:class:`FitDataWarning`, ``FitResult.data_warn
 The command line (``hyde-bsdf fit DATA.csv``, the plot) is :mod:`hyde_bsdf.app.fit`; the CSV
 format is :mod:`hyde_bsdf.io.measurements`.  Large data sets report progress through the
 ``progress`` callback; 10^6 rows read and fit in about 20-30 s on 2 cores
-(``validation/fit_synthetic.py``, part 5).
+(``hyde_bsdf/validation/fit_synthetic.py``, part 5).
 """
 from __future__ import annotations
 
@@ -73,6 +73,7 @@ import numpy as np
 
 from hyde_bsdf.errors import RejectedResult, UsageError, UsageTypeError, shorten
 from hyde_bsdf.model.checks import real_array
+from hyde_bsdf.options import Options
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
@@ -84,7 +85,7 @@ from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, Inadequat
 from hyde_bsdf.io.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index,
                                        impossible_limit)
 
-__all__ = ["PARAMETERS", "FIT_PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning",
+__all__ = ["PARAMETERS", "FIT_PARAMETERS", "SEARCH_ROWS", "FitOptions", "FitResult", "check_options", "IllPosedFitWarning",
            "IllPosedFitError", "FitDataWarning", "InadequateModelWarning", "InadequateModelError",
            "merge_repeated_geometries", "impossible_values",
            "mueller_elements", "fit_mueller", "fit_measurements", "synthetic_measurements",
@@ -494,10 +495,24 @@ def check_options(fit=None, rms_slope=0.3, n0=None, k0=None, shadowing="vgroove"
     return fitted, mode, given
 
 
-def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_slope=0.3,
-                n0=None, k0=None, shadowing="vgroove", diffuse=True, corr_limit=0.95,
-                strict=False, progress=None) -> FitResult:
+@dataclass(frozen=True)
+class FitOptions(Options):
+    """The model terms and the reporting of :func:`fit_mueller` (each field is also a keyword of
+    :func:`fit_mueller`; its docstring describes them)."""
+
+    shadowing: str = "vgroove"
+    diffuse: object = True
+    corr_limit: float = 0.95
+    strict: bool = False
+    progress: object = None
+
+
+def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_slope=0.3, n0=None, k0=None,
+                options: FitOptions | None = None, **settings) -> FitResult:
     """Least-squares fit of the pBRDF (Eq. 17) to normalized Mueller elements.
+
+    The model terms and the reporting are a :class:`FitOptions` (``options``), or its fields given as
+    keywords: ``shadowing``, ``diffuse``, ``corr_limit``, ``strict``, ``progress`` below.
 
     Parameters
     ----------
@@ -528,7 +543,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
     Large data sets: with more than :data:`SEARCH_ROWS` geometries the multi-start search
     runs on a random subset of that size and only its best point is refined on all the
     data, with a forward-difference Jacobian (4 model evaluations per step instead of 7);
-    10^6 geometries fit in about 20 s (``validation/fit_synthetic.py`` measures it).
+    10^6 geometries fit in about 20 s (``hyde_bsdf/validation/fit_synthetic.py`` measures it).
 
     Returns
     -------
@@ -543,6 +558,8 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
     """
     from scipy.stats import chi2 as chi2_dist
 
+    o = FitOptions.of(options, settings, "fit_mueller")
+    shadowing, diffuse, corr_limit, strict, progress = o.shadowing, o.diffuse, o.corr_limit, o.strict, o.progress
     fitted, mode, given = check_options(fit, rms_slope, n0, k0, shadowing, diffuse, corr_limit)
     check_progress(progress)
     data = _FitData.build(theta_i, theta_r, phi, measured, sigma, fitted)

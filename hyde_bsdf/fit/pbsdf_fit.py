@@ -150,7 +150,7 @@ def _check(fit, rms_slope, n0, k0, shadowing, diffuse):
         if v is not None and not (isinstance(v, (int, float)) and 0 <= v <= BOUNDS[name[0]][1]):
             raise UsageError(f"{name} must be in [0, {BOUNDS[name[0]][1]:g}], got {v!r}")
     if ("n" not in fit and n0 is None) or ("k" not in fit and k0 is None):
-        raise UsageError("a parameter held fixed needs its value: --n0 for n, --k0 for k")
+        raise UsageError("a parameter held fixed needs its value: `n0` for n, `k0` for k")
     term = check_pair(shadowing, diffuse, booleans=False)[1]   # names only: the table interfaces take no True/False
     if term.parameters:
         raise UsageError(f"diffuse={term.name!r} has a free {', '.join(term.parameters)}: the table fit takes "

@@ -188,7 +188,7 @@ the table's whole range @DHR_TABLE@ (4.7 MB, float32), is shipped with the packa
 ``mi.Texture2f`` (differentiable in rms_slope), at each shading point's own roughness.
 Its deviation from the table, 1 - rho clipped at 0, for rms_slope in @RMS_SLOPE@ and
 theta <= 89 deg is <= 1.9e-5 (vgroove), 2.6e-5 (smith), 1.3e-4 (none), target 2e-4
-(``validation/plugin_checks.py``, "DHR texture interpolation error"); denser grids
+(``hyde_bsdf/validation/plugin_checks.py``, "DHR texture interpolation error"); denser grids
 cost render time once the roughness varies per point (cache misses).  1 - rho is
 clipped at 0 (rho > 1 happens without shadowing near grazing).
 
