@@ -136,7 +136,7 @@ def child(n: int, tile_texels: int, iterations: int, uncertainty: bool) -> dict:
     from hyde_bsdf import inverse as inv
     from hyde_bsdf.inverse import tiles as tl
 
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     grid = max(1, round(n / tile_texels))
     with tempfile.TemporaryDirectory() as tmp:
         capture, truth, t_sim = simulate(n, Path(tmp))

@@ -70,11 +70,11 @@ def run_one(name, res, spp, iterations):
 
     cfg = CONFIGS[name]
     inv.prepare()
-    scene = inv.load_scene(None, res=res, spp=spp, bsdf=cfg["bsdf"], diffuse=cfg["diffuse"])
-    ref = inv.render_reference(scene, inv.TRUTH, 4 * spp, seed=0, bsdf=cfg["bsdf"])
+    scene = inv.scalar.load_scene(None, res=res, spp=spp, bsdf=cfg["bsdf"], diffuse=cfg["diffuse"])
+    ref = inv.scalar.render_reference(scene, inv.scalar.TRUTH, 4 * spp, seed=0, bsdf=cfg["bsdf"])
     loss = inv.StokesLoss(ref)
     rss0 = _rss_mib()
-    r = inv.invert(scene, loss, inv.START, iterations=iterations, spp=spp, seed=1, bsdf=cfg["bsdf"],
+    r = inv.invert(scene, loss, inv.scalar.START, iterations=iterations, spp=spp, seed=1, bsdf=cfg["bsdf"],
                    progress=False)
     t = np.array([h["seconds"] for h in r.history])
     per = np.diff(t)
@@ -102,16 +102,16 @@ def bench_maps(res=80, rounds=7, iterations=6, variant=None, spp=4, csv_path=Non
 
     from hyde_bsdf import inverse as inv
 
-    variant = inv.prepare(variant or inv.MAP_VARIANT)
-    truth = inv.example_maps(32)
+    variant = inv.prepare(variant or inv.observations.MAP_VARIANT)
+    truth = inv.observations.example_maps(32)
     setups = {}
     for name, cfg in MAP_CONFIGS.items():
         obs = []
-        for light in range(len(inv.LIGHTS)):
-            scene = mi.load_dict(inv.plane_scene_dict(truth, bsdf=cfg["bsdf"], diffuse=cfg["diffuse"],
+        for light in range(len(inv.observations.LIGHTS)):
+            scene = mi.load_dict(inv.observations.plane_scene_dict(truth, bsdf=cfg["bsdf"], diffuse=cfg["diffuse"],
                                                       shadowing=cfg.get("shadowing"), light=light, res=res, spp=spp))
-            obs.append(inv.Observation(scene, inv.render_stokes_np(scene, 0, 4 * spp, seed=0)))
-        seen = sum(inv.texel_coverage(o, truth.shape) for o in obs) > 0
+            obs.append(inv.Observation(scene, inv.observations.render_stokes_np(scene, 0, 4 * spp, seed=0)))
+        seen = sum(inv.observations.texel_coverage(o, truth.shape) for o in obs) > 0
         setups[name] = (obs, seen)
     times = {name: [] for name in MAP_CONFIGS}
 

@@ -105,7 +105,7 @@ def map_variant():
     from hyde_bsdf import inverse as inv
 
     previous = mi.variant()
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     yield
     if previous is not None and previous != mi.variant():
         mi.set_variant(previous)

@@ -3,8 +3,8 @@
     io  ->  model  ->  {mitsuba, mom, fit}  ->  render  ->  inverse  ->  app  ->  validation
 
 A module may import from its own folder and from folders to its left; ``mitsuba``, ``mom`` and
-``fit`` are independent of one another; ``errors``, ``progress`` and ``resources`` may be imported
-from anywhere and import nothing of the package (``progress`` and ``resources`` only ``errors``).  Every ``import`` statement counts, the lazy ones inside
+``fit`` are independent of one another; ``errors``, ``progress``, ``resources`` and ``options`` may be
+imported from anywhere and import nothing of the package but ``errors``.  Every ``import`` statement counts, the lazy ones inside
 functions too (they are parsed, not run).  The bottom layer, ``io``, imports only the standard
 library, NumPy and (lazily) the file-format packages; the library below ``app`` does no argparse
 and no plotting.  ``validation`` (the validation scripts, run by ``hyde-bsdf validate`` as child
@@ -22,8 +22,8 @@ import pytest
 PACKAGE = Path(__file__).resolve().parent.parent / "hyde_bsdf"
 
 #: layer of each top-level part of the package; None: importable from anywhere
-LAYER = {"errors": None, "progress": None, "resources": None, "io": 0, "model": 1, "mitsuba": 2, "mom": 2, "fit": 2,
-         "render": 3, "inverse": 4, "app": 5, "validation": 6}
+LAYER = {"errors": None, "progress": None, "resources": None, "options": None, "io": 0, "model": 1, "mitsuba": 2,
+         "mom": 2, "fit": 2, "render": 3, "inverse": 4, "app": 5, "validation": 6}
 #: ``from hyde_bsdf import NAME`` for the package's own lazy names: where NAME lives
 ROOT_NAMES = {"register": "mitsuba", "pbrdf": "model", "dhr_specular_pec": "model", "rms_slope_from": "model",
               "alpha_from_rms_slope": "model", "rms_slope_from_alpha": "model"}

@@ -201,3 +201,17 @@ def valid_m00(res):
     from hyde_bsdf.mom.floor import FLOOR_MARGIN
 
     return res.mueller["M00"] >= FLOOR_MARGIN * 0.5 * (res.floor_s + res.floor_p)
+
+
+def atlas_checks(title, theta_i_deg, rms_slope, sigma_h_wl, cases):
+    """The accuracy atlas's verdict (hyde_bsdf.model.accuracy.verdict) for a script's geometry, one reported check
+    per material: ``cases`` [(label, n, k)] (n None: a PEC), the model V-groove with the paper's diffuse term."""
+    from hyde_bsdf.model.accuracy import verdict
+
+    out = []
+    for label, n, k in cases:
+        v = verdict(np.radians(theta_i_deg), rms_slope, n, k, sigma_h_wl=sigma_h_wl)
+        out.append(dict(name=f"{title}, {label}: the accuracy atlas's verdict for this geometry (rms slope "
+                             f"{rms_slope:g}, sigma_h {sigma_h_wl:.3g} lambda)", value=v["summary"],
+                        tolerance="reported", passed=True))
+    return out

@@ -10,7 +10,7 @@ pixel one super-pixel), demosaicked by super-pixel -- S0, S1, S2 with their prop
 retarder) -- S0..S3.  The sigma maps are the loss's weights and the standard errors' noise
 (:mod:`hyde_bsdf.inverse.camera_data`, :mod:`hyde_bsdf.inverse.analyzer`).
 
-Cases (``hyde`` on a 2 x 2 plane, :func:`hyde_bsdf.inverse.example_material`, scale known):
+Cases (``hyde`` on a 2 x 2 plane, :func:`hyde_bsdf.inverse.acquisition.example_material`, scale known):
 
 * ``dielectric``: the dielectric preset (5 unpolarized mirror pairs + 2 off-specular pairs);
 * ``metal``: with the linear camera the linear metal preset -- a 45 deg polarizer and circular light
@@ -74,7 +74,7 @@ def prepared(case: str, camera: str, *, n: int, res: int, spp_ref: int, facet_an
     truth["specular_reflectance"] = 1.0
     start = start_values(kind)
     obs = synthetic_observations(acquisition(case, camera, facet_angles), truth, start, res=res, spp=4,
-                                 spp_ref=spp_ref, seed=seed, camera_noise=NOISE, signal=SIGNAL)
+                                 spp_ref=spp_ref, seed=seed, noise=NOISE, signal=SIGNAL)
     return truth, start, tuple(start), obs
 
 
@@ -108,7 +108,7 @@ def validate(outdir="out/validation", quick=False):
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     previous = mi.variant()
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     if quick:
         obscfg = dict(n=4, res=16, spp_ref=32, facet_angles=(25.0, 55.0))
         fitcfg = dict(iterations=10, uncertainty_spp=4, polish=2, freeze=False)

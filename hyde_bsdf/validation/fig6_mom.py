@@ -248,6 +248,9 @@ def validate(outdir="out/validation", quick=False):
                            value=r["rms_diff_1d_model_dB"], tolerance=tol, passed=r["rms_diff_1d_model_dB"] <= tol))
         checks.append(dict(name=f"Fig6 MoM vs Eq. 17 (2-D model, normalised as in the paper), theta_i = {ti:g} deg (rms dB)",
                            value=r["rms_diff_dB"], tolerance="reported", passed=True))
+    from _common import atlas_checks
+    checks += atlas_checks("Fig6 MoM vs the model", [r["theta_i_deg"] for r in table], RMS_SLOPE, RMS_HEIGHT_WL,
+                           [("PEC", None, None)])
     return checks
 
 

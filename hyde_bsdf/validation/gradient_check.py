@@ -1,6 +1,6 @@
 """AD gradients of a rendered Stokes loss against central finite differences.
 
-Scene: hyde_bsdf/data/scenes/inverse.xml's sphere under two point lights (hyde_bsdf.inverse.scene_dict),
+Scene: hyde_bsdf/data/scenes/inverse.xml's sphere under two point lights (hyde_bsdf.inverse.scalar.scene_dict),
 llvm_ad_spectral_polarized, ``stokes`` around ``path``.  Loss: the Stokes loss of
 hyde_bsdf.inverse against a reference at (rms_slope 0.3, eta 1.5, k 3.0), evaluated at
 (0.4, 2.0, 4.0).  For each seed the AD gradient (``dr.backward`` through
@@ -34,15 +34,15 @@ AT = {"rms_slope": 0.4, "eta": 2.0, "k": 4.0}
 
 
 def check(diffuse, seeds, res, spp, rel_step):
-    scene = inv.load_scene(None, res=res, spp=spp, diffuse=diffuse)
-    ref = inv.render_reference(scene, inv.TRUTH, 256, seed=0)
+    scene = inv.scalar.load_scene(None, res=res, spp=spp, diffuse=diffuse)
+    ref = inv.scalar.render_reference(scene, inv.scalar.TRUTH, 256, seed=0)
     loss_fn = inv.StokesLoss(ref, components="stokes")
     rows = []
     for s in range(1, seeds + 1):
-        _, ad = inv.loss_and_gradient(scene, loss_fn, AT, spp=spp, seed=s, seed_grad=s)
-        _, ad_dec = inv.loss_and_gradient(scene, loss_fn, AT, spp=spp, seed=s)
+        _, ad = inv.scalar.loss_and_gradient(scene, loss_fn, AT, spp=spp, seed=s, seed_grad=s)
+        _, ad_dec = inv.scalar.loss_and_gradient(scene, loss_fn, AT, spp=spp, seed=s)
         for p in inv.PARAMETERS:
-            fd = inv.finite_difference_gradient(scene, loss_fn, AT, p, rel_step=rel_step, spp=spp, seed=s)
+            fd = inv.scalar.finite_difference_gradient(scene, loss_fn, AT, p, rel_step=rel_step, spp=spp, seed=s)
             rows.append({"diffuse": diffuse, "seed": s, "parameter": p, "ad": ad[p], "fd": fd,
                          "rel_diff": (ad[p] - fd) / abs(fd), "ad_decorrelated": ad_dec[p],
                          "rel_diff_decorrelated": (ad_dec[p] - fd) / abs(fd)})
@@ -66,7 +66,7 @@ def validate(outdir="out/validation", quick=False, seeds=4, res=48, spp=16, rel_
     rows = check("paper", args.seeds, args.res, args.spp, args.rel_step) + \
         check("none", args.seeds, args.res, args.spp, args.rel_step)
     with atomic_open(out / "gradient_check.csv", "w", newline="") as fh:
-        fh.write(f"# loss at {AT}, reference at {inv.TRUTH}; {args.res}x{args.res}, {args.spp} spp; "
+        fh.write(f"# loss at {AT}, reference at {inv.scalar.TRUTH}; {args.res}x{args.res}, {args.spp} spp; "
                  f"central differences with relative step {args.rel_step}, same seed as the AD render\n")
         w = csv.DictWriter(fh, fieldnames=list(rows[0]))
         w.writeheader()

@@ -44,29 +44,29 @@ _log = stderr_lines("[invert]")
 
 def recovery(out, iterations, spp, spp_ref, res, lighting, tag, runs=("stokes", "s0"), lr=0.05):
     """Reference at TRUTH, then one Adam run per loss from START."""
-    scene = inv.load_scene(None, res=res, spp=spp, lighting=lighting)
-    ref = inv.render_reference(scene, inv.TRUTH, spp_ref, seed=0)
+    scene = inv.scalar.load_scene(None, res=res, spp=spp, lighting=lighting)
+    ref = inv.scalar.render_reference(scene, inv.scalar.TRUTH, spp_ref, seed=0)
     results = {}
     for comp in runs:
         _log(f"[{tag}] {comp} loss, {iterations} iterations")
         loss_fn = inv.StokesLoss(ref, components=comp)
-        res_ = inv.invert(scene, loss_fn, inv.START, iterations=iterations, spp=spp, seed=1000,
-                          truth=inv.TRUTH, lr=lr)
-        inv.write_history(res_, out / f"inverse_history_{tag}_{comp}.csv")
+        res_ = inv.invert(scene, loss_fn, inv.scalar.START, iterations=iterations, spp=spp, seed=1000,
+                          truth=inv.scalar.TRUTH, lr=lr)
+        res_.write_history(out / f"inverse_history_{tag}_{comp}.csv")
         results[comp] = res_
     return scene, ref, results
 
 
 def landscape(scene, spp, grid_n=15, seed=7):
     """log10 of both losses over (eta, k) at the true rms_slope; common random numbers."""
-    ref = inv.render_reference(scene, inv.TRUTH, spp, seed=seed)
+    ref = inv.scalar.render_reference(scene, inv.scalar.TRUTH, spp, seed=seed)
     losses = {c: inv.StokesLoss(ref, components=c) for c in ("s0", "stokes")}
     etas = np.exp(np.linspace(np.log(0.5), np.log(8.0), grid_n))
     ks = np.exp(np.linspace(np.log(1.0), np.log(10.0), grid_n))
     maps = {c: np.zeros((grid_n, grid_n)) for c in losses}
     for i, e in enumerate(etas):
         for j, k in enumerate(ks):
-            S = inv.render_reference(scene, {"rms_slope": inv.TRUTH["rms_slope"], "eta": e, "k": k}, spp, seed=seed)
+            S = inv.scalar.render_reference(scene, {"rms_slope": inv.scalar.TRUTH["rms_slope"], "eta": e, "k": k}, spp, seed=seed)
             for c, fn in losses.items():
                 maps[c][i, j] = fn.numpy(S)
         print(f"\r[landscape] {i + 1}/{grid_n} rows", end="", file=sys.stderr, flush=True)
@@ -88,8 +88,8 @@ def valley_profile(scene, spp, seed=7, points=13):
 
     c = np.cos(np.radians(60.0))
     A = lambda e, k: float(fresnel_mueller_terms(np.array(c), Index(e, k))[0])
-    target = A(inv.TRUTH["eta"], inv.TRUTH["k"])
-    ref = inv.render_reference(scene, inv.TRUTH, spp, seed=seed)
+    target = A(inv.scalar.TRUTH["eta"], inv.scalar.TRUTH["k"])
+    ref = inv.scalar.render_reference(scene, inv.scalar.TRUTH, spp, seed=seed)
     losses = {comp: inv.StokesLoss(ref, components=comp) for comp in ("s0", "stokes")}
     rows = []
     for e in np.exp(np.linspace(np.log(0.6), np.log(6.0), points)):
@@ -97,7 +97,7 @@ def valley_profile(scene, spp, seed=7, points=13):
             k = brentq(lambda kk: A(e, kk) - target, 0.01, 40.0)
         except ValueError:       # no k gives this reflectance at this eta
             continue
-        S = inv.render_reference(scene, {"rms_slope": inv.TRUTH["rms_slope"], "eta": e, "k": k}, spp, seed=seed)
+        S = inv.scalar.render_reference(scene, {"rms_slope": inv.scalar.TRUTH["rms_slope"], "eta": e, "k": k}, spp, seed=seed)
         rows.append({"eta": e, "k": k, "loss_s0": losses["s0"].numpy(S), "loss_stokes": losses["stokes"].numpy(S)})
     return rows
 
@@ -106,19 +106,19 @@ def endpoint_losses(scene, runs, spp, spp_ref, seed=7):
     """Both losses at the truth and at each run's end point (same seed as the reference: no
     sampling noise), and the noise floor an iteration sees (a 16-spp render at the truth
     against the high-spp reference)."""
-    ref_crn = inv.render_reference(scene, inv.TRUTH, spp, seed=seed)
-    ref_hi = inv.render_reference(scene, inv.TRUTH, spp_ref, seed=0)
+    ref_crn = inv.scalar.render_reference(scene, inv.scalar.TRUTH, spp, seed=seed)
+    ref_hi = inv.scalar.render_reference(scene, inv.scalar.TRUTH, spp_ref, seed=0)
     rows = []
-    points = {"truth": inv.TRUTH, **{f"end of {c} run": r.final for c, r in runs.items()}}
+    points = {"truth": inv.scalar.TRUTH, **{f"end of {c} run": r.final for c, r in runs.items()}}
     for label, values in points.items():
-        S = inv.render_reference(scene, values, spp, seed=seed)
+        S = inv.scalar.render_reference(scene, values, spp, seed=seed)
         row = {"point": label, **{p: values[p] for p in inv.PARAMETERS}}
         for comp in ("s0", "stokes"):
             row[f"loss_{comp}"] = inv.StokesLoss(ref_crn, components=comp).numpy(S)
         rows.append(row)
-    S = inv.render_reference(scene, inv.TRUTH, spp, seed=seed + 1)
+    S = inv.scalar.render_reference(scene, inv.scalar.TRUTH, spp, seed=seed + 1)
     rows.append({"point": f"noise floor ({spp} spp vs {spp_ref} spp reference)",
-                 **{p: inv.TRUTH[p] for p in inv.PARAMETERS},
+                 **{p: inv.scalar.TRUTH[p] for p in inv.PARAMETERS},
                  **{f"loss_{c}": inv.StokesLoss(ref_hi, components=c).numpy(S) for c in ("s0", "stokes")}})
     return rows
 
@@ -167,10 +167,10 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
     for tag, runs in (("points", A), ("directional", B)):
         for comp, r in runs.items():
             for p in inv.PARAMETERS:
-                err = (r.final[p] - inv.TRUTH[p]) / inv.TRUTH[p]
+                err = (r.final[p] - inv.scalar.TRUTH[p]) / inv.scalar.TRUTH[p]
                 tol = 0.02 if p == "rms_slope" else 0.05
-                rows.append({"scene": tag, "loss": comp, "parameter": p, "truth": inv.TRUTH[p],
-                             "start": inv.START[p], "final": r.final[p], "rel_error": err,
+                rows.append({"scene": tag, "loss": comp, "parameter": p, "truth": inv.scalar.TRUTH[p],
+                             "start": inv.scalar.START[p], "final": r.final[p], "rel_error": err,
                              "tolerance": tol, "within": abs(err) <= tol,
                              "final_loss": r.history[-1]["loss"],
                              "s_per_iteration": r.seconds_per_iteration})
@@ -195,10 +195,10 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
         axes[0, 0].semilogy(itx, [h["loss"] for h in r.history], f"C{c}-", lw=1, label=f"{comp} loss")
         for a, p in zip(axes[0, 1:], inv.PARAMETERS):
             a.plot(itx, [h[p] for h in r.history], f"C{c}-", lw=1.2,
-                   label=f"{comp}: {r.final[p]:.4g} ({100 * (r.final[p] / inv.TRUTH[p] - 1):+.2f} %)")
+                   label=f"{comp}: {r.final[p]:.4g} ({100 * (r.final[p] / inv.scalar.TRUTH[p] - 1):+.2f} %)")
     for a, p in zip(axes[0, 1:], inv.PARAMETERS):
-        a.axhline(inv.TRUTH[p], color="k", ls="--", lw=0.8)
-        a.set_title(f"{p} (dashed: truth {inv.TRUTH[p]})")
+        a.axhline(inv.scalar.TRUTH[p], color="k", ls="--", lw=0.8)
+        a.set_title(f"{p} (dashed: truth {inv.scalar.TRUTH[p]})")
         a.legend(fontsize=7)
         a.set_xlabel("iteration")
     axes[0, 0].set_title("loss (own normalization)")
@@ -211,7 +211,7 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
         a.axis("off")
         fig.colorbar(im, ax=a, fraction=0.046)
     fig.suptitle("hyde inverse rendering, sphere under two point lights (64x64, 16 spp/it, Adam); "
-                 f"truth {inv.TRUTH}, start {inv.START}", fontsize=9)
+                 f"truth {inv.scalar.TRUTH}, start {inv.scalar.START}", fontsize=9)
     fig.tight_layout()
     save_figure(fig, out / "inverse_render.png", dpi=110)
 
@@ -221,7 +221,7 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
         im = a.pcolormesh(ks, etas, np.log10(maps[comp] + 1e-12), shading="auto", cmap="viridis")
         a.set_xscale("log")
         a.set_yscale("log")
-        a.plot(inv.TRUTH["k"], inv.TRUTH["eta"], "r*", ms=12, label="truth")
+        a.plot(inv.scalar.TRUTH["k"], inv.scalar.TRUTH["eta"], "r*", ms=12, label="truth")
         if comp in B:
             hist = B[comp].history
             a.plot([h["k"] for h in hist], [h["eta"] for h in hist], "w-", lw=0.8, label="Adam path")
@@ -236,9 +236,9 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
         itx = [h["iteration"] for h in r.history]
         for a, p in zip(axes[2:], ("eta", "k")):
             a.plot(itx, [h[p] for h in r.history], f"C{c}-",
-                   label=f"{comp} loss: {r.final[p]:.3g} ({100 * (r.final[p] / inv.TRUTH[p] - 1):+.1f} %)")
+                   label=f"{comp} loss: {r.final[p]:.3g} ({100 * (r.final[p] / inv.scalar.TRUTH[p] - 1):+.1f} %)")
     for a, p in zip(axes[2:4], ("eta", "k")):
-        a.axhline(inv.TRUTH[p], color="k", ls="--", lw=0.8)
+        a.axhline(inv.scalar.TRUTH[p], color="k", ls="--", lw=0.8)
         a.set_title(f"{p}: directional light, phase 120 deg" + ("" if B else " (runs skipped: quick mode)"))
         a.set_xlabel("iteration")
         if B:
@@ -246,7 +246,7 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
     ve = [r["eta"] for r in valley]
     axes[4].semilogy(ve, [r["loss_s0"] for r in valley], "C0o-", label="S0 loss")
     axes[4].semilogy(ve, [r["loss_stokes"] for r in valley], "C1s-", label="Stokes loss")
-    axes[4].axvline(inv.TRUTH["eta"], color="k", ls="--", lw=0.8)
+    axes[4].axvline(inv.scalar.TRUTH["eta"], color="k", ls="--", lw=0.8)
     axes[4].set_xscale("log")
     axes[4].set_xlabel("eta along the curve A(60 deg; eta, k) = A(60 deg; truth)")
     axes[4].set_title("losses along the S0 valley", fontsize=9)
@@ -277,7 +277,7 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
                                  f"({end['loss_s0'] / floor['loss_s0']:.2f})",
                            tolerance="> 10 (< 1)",
                            passed=end["loss_stokes"] > 10 * floor["loss_stokes"] and end["loss_s0"] < floor["loss_s0"]))
-    ratios = [v["loss_stokes"] / v["loss_s0"] for v in valley if abs(v["eta"] / inv.TRUTH["eta"] - 1) > 0.1]
+    ratios = [v["loss_stokes"] / v["loss_s0"] for v in valley if abs(v["eta"] / inv.scalar.TRUTH["eta"] - 1) > 0.1]
     checks.append(dict(name="directional scene, along the S0 valley A(60 deg) = const: Stokes loss / S0 loss "
                             "(smallest over the points away from the truth)",
                        value=f"{min(ratios):.1f}", tolerance="> 10", passed=min(ratios) > 10))

@@ -152,6 +152,9 @@ def validate(outdir="out/validation", quick=False):
         checks.append(dict(name=f"energy the specular lobe misses (1 - rho_s, 1-D model) vs MoM outside the lobe, "
                                 f"theta_i = {ti:g} deg", value=f"{r['model_missed_by_lobe']:.4f} vs {r['mom_outside_lobe']:.4f}",
                            tolerance="reported", passed=True))
+    from _common import atlas_checks
+    checks += atlas_checks("MoM vs 1-D model (Fig. 6 surface)", [r["theta_i_deg"] for r in table], fig6_mom.RMS_SLOPE,
+                           fig6_mom.RMS_HEIGHT_WL, [("PEC", None, None)])
     return checks
 
 

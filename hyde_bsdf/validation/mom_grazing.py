@@ -35,8 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.validation._common import (cli, flagged_legend, legend_entries, plot_flagged, save_figure, valid_m00,  # noqa: E402
-                     write_csv)
+from hyde_bsdf.validation._common import (atlas_checks, cli, flagged_legend, legend_entries, plot_flagged, save_figure,
+                                          valid_m00, write_csv)
 
 ELL = 5.0
 SLOPE = 0.3
@@ -361,6 +361,8 @@ def validate(outdir="out/validation", quick=False):
                                 "model rho_s",
                            value=f"{r[3]:.2f} / {r[4]:+.2f}; {r[5]:+.2f}; {r[6]:.3f}, {r[7]:.3f}, {r[8]:.3f}; "
                                  f"{r[9]:.3f}", tolerance="reported", passed=bool(np.isfinite(r[3]))))
+    checks += atlas_checks("MoM grazing", sorted({t for _, t in runs}), SLOPE, SIGMA_H,
+                           [(title, n, k) for stem, title, n, k in MATERIALS if stem in {s for s, _ in runs}])
     return checks
 
 

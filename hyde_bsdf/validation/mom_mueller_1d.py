@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.validation._common import cli, plot_flagged, save_figure, valid_m00, write_csv  # noqa: E402
+from hyde_bsdf.validation._common import atlas_checks, cli, plot_flagged, save_figure, valid_m00, write_csv
 
 ELL = 5.0
 THETA_I = [10.0, 30.0, 45.0, 60.0, 75.0]
@@ -198,6 +198,8 @@ def validate(outdir="out/validation", quick=False):
     diff = max(max(abs(a[0] - b[0]), abs(a[1] - b[1])) for a, b in zip(paired["infragold"], paired["pec"]))
     checks.insert(0, dict(name="MoM Infragold minus PEC on the same surface: max |difference of reflected + absorbed|",
                           value=f"{diff:.4f}", tolerance="reported", passed=bool(np.isfinite(diff))))
+    for stem, title, n, k, slope in CASES:
+        checks += atlas_checks("MoM vs 1-D model", theta_i(quick), slope, slope * ELL / math.sqrt(2.0), [(title, n, k)])
     write_csv(out / "mom_mueller_1d_table.csv",
               ["material", "theta_i_deg", "lobe_points", "M00_rms_dB", "M00_max_dB", "M01/M00_rms", "M01/M00_max",
                "M22/M00_rms", "M22/M00_max", "M23/M00_rms", "M23/M00_max", "energy_s", "energy_p", "absorbed_s",

@@ -14,7 +14,7 @@ off-specular pairs; ``llvm_ad_mono_polarized``):
   (Mitsuba's ``polarizer`` sheet, ``stokes`` + ``volpath``), so the retardance elements M22, M32
   enter, plus circular light (polarizer 0 deg + ``retarder`` quarter-wave at 45 deg: M23, M33) at
   beta = 50 and 65 deg -- 9 pictures, the ``"metal"`` preset, designed with
-  :func:`hyde_bsdf.inverse.predicted_stderr` for n, the weakly determined parameter.
+  :func:`hyde_bsdf.inverse.acquisition.predicted_stderr` for n, the weakly determined parameter.
 
 References: rendered from the truth at ``spp_ref`` samples plus Gaussian camera noise (1 % of the
 median lit S0, on each Stokes component).  Each case is fitted four times from constant start maps
@@ -26,7 +26,7 @@ errors from forward-mode AD at 8 spp):
 * ``s0``: the S0-only loss, scale known;
 * ``stokes+scale``: the truth has a per-texel scale map (0.6-1.4: an unknown albedo or an
   uncalibrated light) fitted jointly with the index and alpha, from a *fixed rig*
-  (:func:`hyde_bsdf.inverse.fixed_rig_acquisition`: camera and light 2 beta apart, beta = 50 deg
+  (:func:`hyde_bsdf.inverse.acquisition.fixed_rig_acquisition`: camera and light 2 beta apart, beta = 50 deg
   dielectric / 60 deg metal, the sample tilted by -16..16 deg; every picture at one facet angle) --
   the Stokes images still determine the index, because the scale cancels in the ratios B/A, C/A, S/A;
 * ``s0+scale``: the same with the S0 loss, where the index is *not* determined (the scale absorbs
@@ -107,7 +107,7 @@ RIG_FACET_ANGLE = {"dielectric": 50.0, "metal": 60.0}
 
 
 def truth_maps(case: str, n: int) -> dict:
-    """The truth of a case on an n x n map (:func:`hyde_bsdf.inverse.example_material`)."""
+    """The truth of a case on an n x n map (:func:`hyde_bsdf.inverse.acquisition.example_material`)."""
     return example_material(case, n)
 
 
@@ -181,7 +181,7 @@ def validate(outdir="out/validation", quick=False):
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     previous = mi.variant()
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     if quick:      # the dielectric's unknown-scale runs: 4 x 4 texels of 4 x 4 px, the fixed rig's 2 pictures
         cfg = dict(n=4, res=16, iterations=QUICK_ITERATIONS, spp_ref=32, uncertainty_spp=4,
                    facet_angles=(10.0, 40.0, 70.0), polish=2, freeze=False)

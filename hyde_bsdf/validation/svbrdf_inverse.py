@@ -1,9 +1,9 @@
 """SVBRDF inverse rendering: a 32 x 32 roughness map recovered from Stokes images of 3 views x 2 lights.
 
-Scene (:func:`hyde_bsdf.inverse.plane_scene_dict`): a 2 x 2 plane carrying the ``hyde``
+Scene (:func:`hyde_bsdf.inverse.observations.plane_scene_dict`): a 2 x 2 plane carrying the ``hyde``
 BSDF with a texture-valued Beckmann ``alpha`` (nearest-neighbour bitmap, 32 x 32 texels: a smooth
 gradient 0.15 -> 0.45 along u with a sine ripple along v, and a sharp-edged square at alpha 0.6;
-:func:`~hyde_bsdf.inverse.example_maps`) and a known constant index (eta 1.5, k 3, Mitsuba's
+:func:`~hyde_bsdf.inverse.observations.example_maps`) and a known constant index (eta 1.5, k 3, Mitsuba's
 n + ik).  Three cameras at 55 deg elevation, 120 deg apart (one ``batch`` sensor), and two point
 lights, one per scene (a scene with both lights would pick one at random per sample: noise), so each
 texel is seen under 6 pairs of directions.  Direct light only (``stokes`` around ``path``,
@@ -53,11 +53,11 @@ def setup(bsdf="hyde", n=32, res=80, spp=4, spp_ref=64, seed=0):
     """Truth map, the two scenes and their observations (references rendered at ``spp_ref``)."""
     import mitsuba as mi
 
-    truth = inv.example_maps(n)
+    truth = inv.observations.example_maps(n)
     observations = []
-    for light in range(len(inv.LIGHTS)):
-        scene = mi.load_dict(inv.plane_scene_dict(truth, bsdf=bsdf, eta=ETA, k=K, light=light, res=res, spp=spp))
-        observations.append(inv.Observation(scene, inv.render_stokes_np(scene, 0, spp_ref, seed=seed)))
+    for light in range(len(inv.observations.LIGHTS)):
+        scene = mi.load_dict(inv.observations.plane_scene_dict(truth, bsdf=bsdf, eta=ETA, k=K, light=light, res=res, spp=spp))
+        observations.append(inv.Observation(scene, inv.observations.render_stokes_np(scene, 0, spp_ref, seed=seed)))
     return truth, observations
 
 
@@ -68,7 +68,7 @@ def validate(outdir="out/validation", quick=False, bsdf="hyde", iterations=None,
     out = Path(outdir)
     out.mkdir(parents=True, exist_ok=True)
     previous = mi.variant()
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     # quick (the report's, ~25 CPU s): 30 iterations and no uncertainty pass (the per-texel standard
     # errors and their Gauss-Newton polish are checked by svbrdf_index.py and tests/test_inverse_capture.py)
     iterations = iterations or (30 if quick else 100)
@@ -77,7 +77,7 @@ def validate(outdir="out/validation", quick=False, bsdf="hyde", iterations=None,
     try:
         truth, observations = setup(bsdf=bsdf, res=res, spp_ref=spp_ref)
         # one coverage pass for both runs (a texel seen by any of the 6 images counts)
-        coverage = sum(inv.texel_coverage(o, truth.shape) for o in observations)
+        coverage = sum(inv.observations.texel_coverage(o, truth.shape) for o in observations)
         seen = coverage > 0
         runs = {}
         for comp in ("stokes", "s0"):
