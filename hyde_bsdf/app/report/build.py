@@ -23,8 +23,8 @@ fail because of the scripts that ran before it (an order-dependent failure class
 report had); and **layering** -- the package loads no file as code: the scripts are files it
 runs, not modules it loads.  The price is one interpreter start and its imports per script
 (about 1 CPU s each); the gain, besides, is that scripts run side by side: most of them are
-single-threaded Python and NumPy, so two at once on two cores roughly halve the report's wall
-time (docs/validation.md measures it).  With several at once, BLAS and OpenMP get their share of
+single-threaded Python and NumPy, so several at once keep every core busy (docs/validation.md,
+"The report's run time").  With several at once, BLAS and OpenMP get their share of
 the cores (:data:`THREAD_VARIABLES`); a time ratio a check reports is measured inside one script.
 
 Nothing is ever deleted.  The report is built in a fresh hidden folder beside ``DIR`` and its
