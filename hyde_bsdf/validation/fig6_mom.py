@@ -43,7 +43,7 @@ import time
 
 import numpy as np
 
-from hyde_bsdf.validation._common import flagged_legend, legend_entries, plot_flagged  # noqa: E402
+from hyde_bsdf.validation._common import flagged_legend, legend_entries, plot_flagged, save_figure  # noqa: E402
 
 THETA_I_DEG = [10.0, 30.0, 45.0, 60.0, 75.0]
 RMS_SLOPE = 0.3
@@ -169,7 +169,7 @@ def main(argv=None):
                  f"{float(d['pts_per_wl']):g} pts/lambda, s-pol")
     fig.tight_layout(rect=(0, below, 1, 1))
     png = os.path.join(args.outdir, "fig6_mom.png")
-    fig.savefig(png, dpi=120)
+    save_figure(fig, png, dpi=120)
 
     with open(os.path.join(args.outdir, "fig6_mom.csv"), "w", newline="") as fh:
         w = csv.writer(fh)

@@ -27,7 +27,7 @@ import os
 import numpy as np
 
 from hyde_bsdf.validation import fig6_mom  # noqa: E402  (the shared Fig. 6 case and its MoM run)
-from hyde_bsdf.validation._common import flagged_legend, legend_entries, plot_flagged  # noqa: E402
+from hyde_bsdf.validation._common import flagged_legend, legend_entries, plot_flagged, save_figure  # noqa: E402
 
 LOBE_LEVEL = 0.1
 
@@ -108,7 +108,7 @@ def main(argv=None):
                  "sigma = 2 pi cos(ti) f cos(tr); rms slope 0.3, 15000 lambda, 100 partitions")
     fig.tight_layout(rect=(0, below, 1, 1))
     png = os.path.join(args.outdir, "mom_1d_model.png")
-    fig.savefig(png, dpi=120)
+    save_figure(fig, png, dpi=120)
     with open(os.path.join(args.outdir, "mom_1d_model.csv"), "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["theta_i_deg", "theta_r_deg", "sigma_mom", "sigma_mom_std_error", "sigma_model1d",
