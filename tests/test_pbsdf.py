@@ -292,6 +292,25 @@ def test_round_trip_export_read_fit_recovers_the_parameters(exported):
     assert f"over 360-{first} and {last}-830 nm the end values are held (an extrapolation, not measured" in xml
 
 
+def test_a_table_misfit_from_a_held_roughness_is_blamed_on_it(exported):
+    """Issue 30 item 3 for tables: rms_slope held at 0.4 on a table made at 0.25 misfits M00 by far;
+    the verdict names the held parameter and the value it takes when fitted (0.25 to 1e-3) -- not the
+    lobe's shape or the terms it would otherwise suspect.  Two small fits, ~3 s."""
+    import warnings
+
+    from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
+
+    path, _ = exported
+    data = pbsdf_samples(path, max_points=150, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        held = fit_pbsdf(data, fit=("n", "k"), rms_slope=0.4, progress=False)
+    assert not held.verdict.adequate and held.verdict.message.startswith("M00 misfit")
+    assert "the parameter(s) held fixed (rms_slope = 0.4) cause the misfit" in held.verdict.message
+    fitted = float(held.verdict.message.split("(rms_slope = ")[2].split(")")[0])
+    assert fitted == pytest.approx(0.25, rel=1e-3)
+
+
 def test_fit_cli_on_a_pbsdf_file(exported, tmp_path, capsys):
     path, _ = exported
     code = main(["fit", str(path), "--max-points", "40", "--n0", "0.6", "--k0", "2.6", "-q"])
