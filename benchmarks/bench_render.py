@@ -22,6 +22,21 @@ out/bench/bench_render.csv).
 
     python benchmarks/bench_render.py [--spp 16] [--width 256 --height 160] [--repeats 7]
 
+**Cost per instance** (``--instances``, issue 31): M spheres with M *distinct* materials (1, 10, 50) on
+a diffuse floor, a sun and a sky, ``path`` depth 3, 1 spp, ``llvm_ad_rgb``, at 96 x 72 and 320 x 240 px:
+each BSDF (roughconductor; hyde smith/none, roughconductor's model; hyde's default material) in its
+**own fresh process**, warm renders only (warm-up renders first), the process's CPU time per render
+(all threads) and the main thread's (tracing and code generation, ``time.thread_time``); per process
+the median render.  The BSDFs run side by side in rounds, the order reversed every round; a ratio is
+the median over rounds of the round's hyde / roughconductor.  With ``--loops``: one optimisation
+iteration on the 96 x 72 scene (every material's roughness a grad-enabled parameter written through
+``params.update()``, ``mi.render(scene, params)``, loss = mean, ``dr.backward``), unfrozen and inside
+``dr.freeze`` (the update outside the frozen function, as the plugin's checks want).  Targets:
+<= 1.15 (smith/none) and <= 1.3 (default) at 50 materials, 96 x 72; the unfrozen loop <= 1.1.
+
+    python benchmarks/bench_render.py --instances [--rounds 3] [--materials 1,10,50]
+                                      [--sizes 96x72,320x240] [--loops]
+
 **Cold load** (``--cold``, issue 31): a fresh Python process with an empty home folder (no Dr.Jit
 kernel cache, nothing of hyde-bsdf's) imports Mitsuba, sets the variant, registers ``hyde`` (hyde
 only) and loads a default scene (a sphere with the BSDF at its defaults, a constant emitter, a
@@ -38,6 +53,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import math
 import os
 import statistics
@@ -224,6 +240,139 @@ def micro(n_log2: int = 20, repeats: int = 7) -> list[dict]:
     return rows
 
 
+#: the per-instance benchmark's BSDFs (hyde's default: no shadowing/diffuse given)
+INSTANCE_CONFIGS = {"roughconductor": None, "hyde smith/none": {"shadowing": "smith", "diffuse": "none"},
+                    "hyde default": {}}
+INSTANCE_TARGETS = {"hyde smith/none": 1.15, "hyde default": 1.3}
+INSTANCE_VARIANT = "llvm_ad_rgb"
+
+
+def instance_bsdf(config: str, i: int, count: int) -> dict:
+    """Material ``i`` of ``count``: its own roughness and index (no two alike)."""
+    rms = 0.05 + 0.6 * i / max(count - 1, 1)
+    n, k = 0.2 + 0.02 * i, 3.0 + 0.05 * i
+    if config == "roughconductor":
+        return {"type": "roughconductor", "distribution": "beckmann", "alpha": alpha_from_rms_slope(rms),
+                "eta": n, "k": k}
+    return {"type": "hyde", "rms_slope": rms, "eta": n, "k": k, **INSTANCE_CONFIGS[config]}
+
+
+def instance_scene(config: str, count: int, width: int, height: int) -> dict:
+    """``count`` spheres on a grid, each with its own material, on a diffuse floor; sun and sky."""
+    T = mi.ScalarTransform4f
+    d = {"type": "scene", "integrator": {"type": "path", "max_depth": 3},
+         "sensor": {"type": "perspective", "fov": 40,
+                    "to_world": T().look_at(origin=[0, -12, 6], target=[0, 0, 0], up=[0, 0, 1]),
+                    "film": {"type": "hdrfilm", "width": width, "height": height},
+                    "sampler": {"type": "independent", "sample_count": 1}},
+         "sun": {"type": "directional", "direction": [0.5, 0.6, -0.6], "irradiance": {"type": "rgb", "value": 3.0}},
+         "sky": {"type": "constant", "radiance": {"type": "rgb", "value": 0.3}},
+         "floor": {"type": "rectangle", "to_world": T().scale(20.0), "bsdf": {"type": "diffuse"}}}
+    side = math.ceil(math.sqrt(count))
+    for i in range(count):
+        x, y = i % side, i // side
+        d[f"sphere{i}"] = {"type": "sphere", "center": [(x - side / 2) * 1.2, (y - side / 2) * 1.2, 0.5],
+                           "radius": 0.5, "bsdf": instance_bsdf(config, i, count)}
+    return d
+
+
+def _timed(fn):
+    """(process CPU ms, main-thread CPU ms, wall ms) of ``fn()`` (its result evaluated)."""
+    dr.sync_thread()
+    c0, m0, t0 = time.process_time(), time.thread_time(), time.perf_counter()
+    dr.eval(fn())
+    dr.sync_thread()
+    return (1e3 * (time.process_time() - c0), 1e3 * (time.thread_time() - m0), 1e3 * (time.perf_counter() - t0))
+
+
+def instance_child(config: str, count: int, width: int, height: int, task: str, repeats: int, warmup: int) -> dict:
+    """In this (fresh) process: the median (process CPU, main CPU, wall) ms of a warm ``task``:
+    "render" (one 1-spp render), "loop" (one unfrozen optimisation iteration) or "frozen" (the same
+    iteration's render and backward pass inside ``dr.freeze``)."""
+    prepare_variant(INSTANCE_VARIANT, fallback=False)
+    scene = mi.load_dict(instance_scene(config, count, width, height))
+    if task == "render":
+        def step(seed):
+            return mi.render(scene, spp=1, seed=seed)
+    else:
+        params = mi.traverse(scene)
+        keys = roughness_keys(params)
+        if len(keys) != count:
+            raise RuntimeError(f"{config}: expected {count} roughness parameters, found {len(keys)}")
+
+        def render_backward(scene, seed):
+            img = mi.render(scene, params, spp=1, seed=seed)
+            loss = dr.mean(img, axis=None)
+            dr.backward(loss)
+            return loss
+
+        inner = dr.freeze(render_backward) if task == "frozen" else render_backward
+        warmup = max(warmup, 4) if task == "frozen" else warmup   # a frozen function records up to 3 times
+
+        def step(seed):
+            values = []
+            for key in keys:       # fresh grad-enabled values, as an optimiser step writes them
+                v = type(params[key])(dr.detach(params[key]))
+                dr.enable_grad(v)
+                params[key] = v
+                values.append(v)
+            params.update()
+            loss = inner(scene, dr.opaque(mi.UInt32, seed))
+            return [loss] + [dr.grad(v) for v in values]
+    times = [_timed(lambda: step(i)) for i in range(warmup + repeats)][warmup:]
+    return {name: statistics.median(t[j] for t in times) for j, name in enumerate(("cpu_ms", "main_ms", "wall_ms"))}
+
+
+def _run_instance_child(config, count, width, height, task, repeats, warmup) -> dict:
+    cmd = [sys.executable, os.path.abspath(__file__), "--instance-child",
+           json.dumps([config, count, width, height, task, repeats, warmup])]
+    out = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ))
+    if out.returncode != 0:
+        raise RuntimeError(f"{config} / {count} materials / {task} failed:\n{out.stderr[-3000:]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def instances(rounds=3, materials=(1, 10, 50), sizes=((96, 72), (320, 240)), loops=True, repeats=7,
+              warmup=3) -> list[dict]:
+    """The per-instance benchmark (module docstring): one row per (task, materials, size, BSDF)."""
+    cases = [("render", m, w, h) for w, h in sizes for m in materials]
+    if loops:
+        cases += [(task, m, 96, 72) for task in ("loop", "frozen") for m in (1, max(materials))]
+    names = list(INSTANCE_CONFIGS)
+    rows = []
+    for task, count, width, height in cases:
+        per = {n: [] for n in names}
+        for r in range(rounds):
+            for name in (names if r % 2 == 0 else names[::-1]):
+                per[name].append(_run_instance_child(name, count, width, height, task, repeats, warmup))
+            print(f"[bench_render] {task} {count} materials {width}x{height} round {r + 1}/{rounds}: "
+                  + ", ".join(f"{n} {per[n][-1]['cpu_ms']:.0f} ms" for n in names)
+                  + f" (load {os.getloadavg()[0]:.1f})", file=sys.stderr, flush=True)
+        for name in names:
+            ratio = {f: statistics.median(a[f] / b[f] for a, b in zip(per[name], per["roughconductor"]))
+                     for f in ("cpu_ms", "main_ms", "wall_ms")}
+            rows.append({"task": task, "materials": count, "size": f"{width}x{height}", "bsdf": name,
+                         "cpu_ms": statistics.median(t["cpu_ms"] for t in per[name]),
+                         "main_ms": statistics.median(t["main_ms"] for t in per[name]),
+                         "wall_ms": statistics.median(t["wall_ms"] for t in per[name]),
+                         "ratio_cpu": ratio["cpu_ms"], "ratio_main": ratio["main_ms"], "ratio_wall": ratio["wall_ms"],
+                         "target": INSTANCE_TARGETS.get(name, "") if (task, count, width) == ("render", 50, 96)
+                         else (1.1 if task == "loop" and name != "roughconductor" else ""),
+                         "rounds": rounds, "variant": INSTANCE_VARIANT})
+    return rows
+
+
+def print_instances(rows: list[dict]) -> None:
+    print(f"\ncost per instance ({INSTANCE_VARIANT}, 1 spp; CPU ms per render or iteration, median of the "
+          f"process's warm ones; ratio = median over rounds of hyde / roughconductor side by side):")
+    print(f"{'task':7s} {'materials':>9s} {'size':>8s} {'bsdf':16s} {'CPU ms':>8s} {'ratio':>6s} "
+          f"{'main ms':>8s} {'ratio':>6s} {'wall ratio':>10s} {'target':>7s}")
+    for r in rows:
+        target = f"<= {r['target']}" if r["target"] else ""
+        print(f"{r['task']:7s} {r['materials']:9d} {r['size']:>8s} {r['bsdf']:16s} {r['cpu_ms']:8.1f} "
+              f"{r['ratio_cpu']:6.3f} {r['main_ms']:8.1f} {r['ratio_main']:6.3f} {r['ratio_wall']:10.3f} {target:>7s}")
+
+
 def _write_csv(path: Path, rows: list[dict]) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", newline="") as f:
@@ -324,11 +473,27 @@ def main(argv=None) -> int:
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--variant", default="llvm_ad_spectral_polarized")
     p.add_argument("--no-micro", action="store_true", help="skip the per-method BSDF timing")
+    p.add_argument("--instances", action="store_true", help="only the cost-per-instance benchmark (issue 31)")
+    p.add_argument("--rounds", type=int, default=3, help="--instances: rounds of fresh processes (default 3)")
+    p.add_argument("--materials", default="1,10,50", help="--instances: material counts (default 1,10,50)")
+    p.add_argument("--sizes", default="96x72,320x240", help="--instances: image sizes (default 96x72,320x240)")
+    p.add_argument("--loops", action="store_true", help="--instances: also the unfrozen and frozen AD loop")
+    p.add_argument("--instance-child", default=None, help=argparse.SUPPRESS)
     p.add_argument("--cold", action="store_true", help="only the cold-load benchmark (issue 31)")
     p.add_argument("--cold-rounds", type=int, default=6, help="--cold: rounds of fresh processes (default 6)")
     p.add_argument("--cold-variants", default="llvm_ad_rgb,llvm_ad_spectral_polarized",
                    help="--cold: variants, comma-separated (default %(default)s)")
     args = p.parse_args(argv)
+    if args.instance_child:
+        print(json.dumps(instance_child(*json.loads(args.instance_child))))
+        return 0
+    if args.instances:
+        sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
+        rows = instances(args.rounds, [int(m) for m in args.materials.split(",")], sizes, args.loops)
+        print_instances(rows)
+        out = Path(args.out).with_name("bench_render_instances.csv")
+        _write_csv(out, rows)
+        return 0
     if args.cold:
         rows = cold(args.cold_rounds, tuple(v for v in args.cold_variants.split(",") if v))
         print_cold(rows)

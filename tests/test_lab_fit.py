@@ -169,3 +169,41 @@ def test_without_m00_the_roughness_is_reported_as_seen_through_the_diffuse_term(
         bare = fit_lab(m, shadowing="smith", diffuse="none")
     assert ("rms_slope", None) not in bare.fit.free
     assert any("rms_slope is not identified" in w for w in bare.warnings)
+
+
+# ---------------------------------------------------------------------------- a fit's material exported
+
+def test_export_takes_a_fits_index_per_wavelength_and_refuses_outside_it(tmp_path, capsys):
+    """``hyde-bsdf export --fit FIT.json``: the index interpolated between the measured wavelengths; a
+    band outside them (all of 450-650 nm but none here: the fit spans 400-700 nm) is refused unless
+    --extrapolate, which warns; a fit at one wavelength is refused at every band."""
+    from hyde_bsdf.fit.lab import material_at
+
+    fit = {"model": {"shadowing": "smith", "diffuse": "lambertian"},
+           "parameters": [{"name": "n", "wavelength_nm": 400.0, "value": 1.0, "stderr": 0.1},
+                          {"name": "n", "wavelength_nm": 700.0, "value": 0.4, "stderr": 0.1},
+                          {"name": "k", "wavelength_nm": 400.0, "value": 2.0, "stderr": 0.1},
+                          {"name": "k", "wavelength_nm": 700.0, "value": 4.0, "stderr": 0.1},
+                          {"name": "rms_slope", "wavelength_nm": None, "value": 0.25, "stderr": 0.01},
+                          {"name": "diffuse_reflectance", "wavelength_nm": None, "value": 0.1, "stderr": 0.01}]}
+    m = material_at(fit, [550.0])
+    assert m["n"] == pytest.approx([0.7]) and m["k"] == pytest.approx([3.0]) and not m["extrapolated"]
+    path = tmp_path / "fit.json"
+    path.write_text(json.dumps(fit))
+    out = tmp_path / "m.pbsdf"
+    assert main(["export", str(out), "--fit", str(path), "--resolution", "4x4x4", "--error-samples", "0", "-q"]) == 0
+    assert "diffuse_reflectance = 0.1" in capsys.readouterr().out
+    one = dict(fit, parameters=[p for p in fit["parameters"] if p["wavelength_nm"] != 700.0])
+    path.write_text(json.dumps(one))
+    assert main(["export", str(out), "--fit", str(path), "--resolution", "4x4x4", "--error-samples", "0", "-q"]) == 2
+    assert "the fit was measured at 400 nm; the export needs" in capsys.readouterr().err
+    assert main(["export", str(out), "--fit", str(path), "--extrapolate", "--resolution", "4x4x4",
+                 "--error-samples", "0", "-q"]) == 0
+    assert "the nearest measured index is held" in capsys.readouterr().err
+    # a Lambertian term's albedo is never a silent default (0.5 was written before)
+    plain = ["export", str(out), "--rms-slope", "0.25", "--material", "Au", "--diffuse", "lambertian",
+             "--resolution", "4x4x4", "--error-samples", "0", "-q"]
+    assert main(plain) == 2
+    assert "diffuse_reflectance must be given with diffuse='lambertian'" in capsys.readouterr().err
+    assert main(plain + ["--diffuse-reflectance", "0.1"]) == 0
+    assert "diffuse_reflectance = 0.1" in capsys.readouterr().out

@@ -48,7 +48,8 @@ from hyde_bsdf.app.plots import (PLOT_FORMATS, check_plot_path, plot_lab_fit, pl
 from hyde_bsdf.errors import RejectedResult, UsageError
 from hyde_bsdf.fit.adequacy import InadequateModelWarning
 from hyde_bsdf.fit.model_selection import select_model, select_model_pbsdf
-from hyde_bsdf.fit.lab import DIFFUSE_CHOICES, check_lab_options, extrapolation_warning, fit_lab
+from hyde_bsdf.fit.lab import DIFFUSE_CHOICES, check_lab_options, fit_lab
+from hyde_bsdf.fit.spectral import extrapolation_warning
 from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitWarning
 from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf.io.input_gate import STDIN, check_input
@@ -365,6 +366,9 @@ def _pbsdf_run(args) -> int:
     _warn_verdict(result)
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))
+    caveat = extrapolation_warning([float(w) for w in result.wavelengths])
+    if caveat:
+        warnings.warn(caveat, UserWarning, stacklevel=1)
     if args.output:
         plot_pbsdf_fit(result, data, args.output, title=str(args.data))
         print(f"\nplot: {args.output}")

@@ -17,7 +17,7 @@ FLAGS = {
     "iterations": "--iterations", "map_size": "--map-size", "prefix": "--target", "cameras": "--camera",
     "lights": "--light", "references": "--reference", "masks": "--mask", "tiles": "--tiles",
     "workers": "--workers", "n0": "--n0", "k0": "--k0", "select_model": "--model auto",
-    "resolution": "--resolution", "fit": "--fit",
+    "resolution": "--resolution", "fit": "--fit", "extrapolate": "--extrapolate",
 }
 _NAME = re.compile(r"`([A-Za-z_][A-Za-z0-9_]*)`")
 

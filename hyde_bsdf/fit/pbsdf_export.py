@@ -9,9 +9,12 @@ paper Eq. 17):
 - grids: theta_h = (pi/2) u^2 for u uniform in [0, 1] (concentrated near 0, where the specular
   lobe is), theta_d uniform in [0, pi/2], phi_d uniform in [-pi, pi] (the paper's diffuse term
   is not reciprocal, so both signs are stored); resolution (N_pd, N_td, N_th);
-- 5 bands at 450, 500, 550, 600, 650 nm (Mitsuba's loader reads exactly 5; queries outside are
-  clamped), with n, k per band (scalars, 5 values, or a Mitsuba ``data/ior`` material such as
-  "Au" sampled at the band centres);
+- 5 bands (Mitsuba's loader reads exactly 5, interpolates linearly between them and clamps outside):
+  for a Mitsuba ``data/ior`` material ("Au", ...) the band wavelengths are chosen by the colour error
+  they cause and each band holds the colour-weighted projection of the index spectrum
+  (:mod:`hyde_bsdf.fit.pbsdf_bands`; gold: each sRGB channel within 0.11 % of the Python plugin's
+  render, 5.7 % with the index sampled at 450-650 nm), or ``wavelengths`` and ``band_index`` given;
+  n, k given as scalars or 5 values (one per band, at ``wavelengths``, default 450-650 nm);
 - each cell is F in the table's Stokes frames (x = normalize(omega_i x omega_r)), 1/sr;
   cells with a direction beyond the edge angle (near, at or below the horizon) are filled with
   the model at the edge (polar angles clamped to it), never NaN: Mitsuba's interpolation turns
@@ -53,6 +56,7 @@ import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path
 from hyde_bsdf.errors import UsageError, shorten
+from hyde_bsdf.fit.pbsdf_bands import COLOUR_TARGET, BandChoice, check_wavelengths, choose_bands, index_spectrum
 from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.io.output_gate import check_free_space, check_output_path
@@ -60,14 +64,15 @@ from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, read_pbsdf, 
                                      table_frame_x, table_nbytes, write_table)
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
-from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N, RMS_SLOPE
-from hyde_bsdf.model.terms import check_pair
+from hyde_bsdf.model.parameters import ALPHA_SAMPLE, DIFFUSE_REFLECTANCE, INDEX_MIN, N, RMS_SLOPE
+from hyde_bsdf.model.terms import check_pair, term_arguments
+from hyde_bsdf.options import Options
 from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
 from hyde_bsdf.resources import COSTS, OutputLock, check_memory, format_bytes
 
 __all__ = ["DEFAULT_RESOLUTION", "edge_deg", "ALPHA_CANDIDATES", "ExportReport", "grids",
            "band_index", "check_table_size", "interpolation_error", "suggest_alpha_sample",
-           "export_pbsdf"]
+           "ExportOptions", "export_pbsdf"]
 
 #: (N_phi_d, N_theta_d, N_theta_h) of the default export: the smallest table of the sweep in
 #: hyde_bsdf/validation/pbsdf_export.py with an M00 L1 error <= 1 % and normalized elements within 2 % (95th
@@ -203,8 +208,10 @@ def band_indices(params) -> list:
 
 
 def _model(theta_i, theta_r, phi, params, band):
+    albedo = params.get("diffuse_reflectance")
     return pbrdf(theta_i, theta_r, phi, rms_slope=params["rms_slope"], index=band_indices(params)[band],
-                 shadowing=params["shadowing"], diffuse=params["diffuse"])
+                 shadowing=params["shadowing"], diffuse=params["diffuse"],
+                 diffuse_reflectance=None if albedo is None else albedo[band])
 
 
 def _slab(p, phi_d, theta_d, theta_h, params):
@@ -368,6 +375,7 @@ class ExportReport:
     wavelengths: tuple
     alpha_sample: float
     errors: dict = field(default_factory=dict)
+    bands: BandChoice | None = None
 
     def xml(self, indent: str = "") -> str:
         """The ``<bsdf type="measured_polarized">`` element that loads the file."""
@@ -381,8 +389,15 @@ class ExportReport:
         idx = ", ".join(f"{w:g} nm: {i.n:.4g} - j{i.k:.4g}" for w, i in zip(self.wavelengths, band_indices(p)))
         lines = [f"wrote {self.path} ({self.nbytes / 2**20:.1f} MiB, {'x'.join(map(str, self.resolution))} "
                  f"phi_d x theta_d x theta_h x {len(self.wavelengths)} bands, {self.seconds:.1f} s)",
-                 f"  hyde: rms_slope = {p['rms_slope']:.6g}, shadowing = {p['shadowing']}, diffuse = {p['diffuse']}",
+                 f"  hyde: rms_slope = {p['rms_slope']:.6g}, shadowing = {p['shadowing']}, diffuse = {p['diffuse']}"
+                 + (f", diffuse_reflectance = {', '.join(f'{a:.4g}' for a in p['diffuse_reflectance'])}"
+                    if p.get("diffuse_reflectance") else ""),
                  f"  index (paper eta = n - jk): {idx}"]
+        if self.bands is not None:
+            lines.append(f"  {self.bands.text()}")
+            if self.bands.worst is not None and self.bands.worst > COLOUR_TARGET:
+                lines.append(f"  WARNING: a colour channel is off by more than {100 * COLOUR_TARGET:g} %: see "
+                             f"docs/tutorials/pbsdf.md (materials whose table ends inside 360-830 nm or has gaps)")
         e = self.errors
         if e:
             lines.append(f"  interpolation error (worst band, {e['samples']} geometries): M00 L1 "
@@ -392,31 +407,88 @@ class ExportReport:
         return "\n".join(lines)
 
 
-def _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths):
+def _bands(n, k, material, bands) -> BandChoice:
+    """The export's bands (:mod:`hyde_bsdf.fit.pbsdf_bands`): ``bands`` a BandChoice is used as it is
+    (``material`` then only names it);
+    otherwise (None or 5 wavelengths) for a material the wavelengths are chosen by colour error (unless
+    given) and each band holds the projected index; n, k given per band or as constants are at the
+    given wavelengths (default 450-650 nm)."""
+    if isinstance(bands, BandChoice):
+        if n is not None or k is not None:
+            raise UsageError("bands (a BandChoice) holds the index: do not also give n and k")
+        return bands
+    if material is not None:
+        if n is not None or k is not None:
+            raise UsageError("give either material or n and k, not both")
+        return choose_bands(index_spectrum(material), bands)
+    bands = check_wavelengths(KAIST_WAVELENGTHS if bands is None else bands)
+    nb, kb = band_index(bands, n, k)
+    constant = np.ptp(nb) == 0 and np.ptp(kb) == 0       # no spectrum, no colour error
+    return BandChoice(bands, tuple(float(v) for v in nb), tuple(float(v) for v in kb), "given", False,
+                      (0.0, 0.0, 0.0) if constant else None)
+
+
+def _check_params(rms_slope, n, k, material, shadowing, diffuse, bands=None, diffuse_reflectance=None):
     if not isinstance(rms_slope, (int, float)) or isinstance(rms_slope, bool) or not RMS_SLOPE.contains(rms_slope):
         raise UsageError(f"rms_slope must be a number in [{RMS_SLOPE.lo:g}, {RMS_SLOPE.hi:g}], got {rms_slope!r}")
-    check_pair(shadowing, diffuse, booleans=False)      # names only: the export takes no True/False
-    nb, kb = band_index(wavelengths, n, k, material)
-    return {"rms_slope": float(rms_slope), "n": [float(v) for v in nb], "k": [float(v) for v in kb],
-            "shadowing": shadowing, "diffuse": diffuse, "material": material}
+    term = check_pair(shadowing, diffuse, booleans=False)[1]     # names only: the export takes no True/False
+    params = {"shadowing": shadowing, "diffuse": diffuse}
+    if "diffuse_reflectance" not in term.parameters:
+        term_arguments(term, diffuse_reflectance=diffuse_reflectance)     # refuses an albedo, naming its term
+    elif diffuse_reflectance is None:      # no silent default: a table is a material, its albedo is measured
+        raise UsageError(f"diffuse_reflectance must be given with diffuse={diffuse!r}: the Lambertian term's own "
+                         "albedo, one value or one per band (a fit's is in the JSON the fit command writes)")
+    else:
+        a = np.atleast_1d(np.asarray(diffuse_reflectance, float))
+        if a.ndim != 1 or a.size not in (1, len(KAIST_WAVELENGTHS)):
+            raise UsageError(f"diffuse_reflectance must be one value or {len(KAIST_WAVELENGTHS)} (one per band), "
+                             f"got {diffuse_reflectance!r}")
+        params["diffuse_reflectance"] = [DIFFUSE_REFLECTANCE.check(float(x), "diffuse_reflectance")
+                                         for x in np.broadcast_to(a, (len(KAIST_WAVELENGTHS),))]
+    bands = _bands(n, k, material, bands)
+    return {"rms_slope": float(rms_slope), "n": list(bands.n), "k": list(bands.k), "material": material,
+            **params}, bands
 
 
-def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="vgroove",
-                 diffuse="paper", resolution=DEFAULT_RESOLUTION, error_samples: int = 20000,
-                 alpha_sample: float | None = None, seed: int = 0, progress=None) -> ExportReport:
+@dataclass(frozen=True)
+class ExportOptions(Options):
+    """The table's size and the export's reporting (each field is also a keyword of :func:`export_pbsdf`;
+    its docstring describes them)."""
+
+    resolution: object = DEFAULT_RESOLUTION
+    error_samples: int = 20000
+    alpha_sample: float | None = None
+    seed: int = 0
+    progress: object = None
+
+
+def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="vgroove", diffuse="paper",
+                 diffuse_reflectance=None, bands=None, options: ExportOptions | None = None,
+                 **settings) -> ExportReport:
     """Write the ``hyde`` model as a ``measured_polarized`` table (see the module docstring).
+
+    The table's size and the reporting are an :class:`ExportOptions` (``options``), or its fields given as
+    keywords: ``resolution``, ``error_samples``, ``alpha_sample``, ``seed``, ``progress`` below.
 
     Parameters: ``rms_slope`` (the paper's), the index as ``n``/``k`` (eta = n - jk; one value or
     one per band) or ``material`` (Mitsuba ``data/ior`` name), ``shadowing``, ``diffuse`` (as
     :func:`hyde_bsdf.pbrdf`), ``resolution`` (N_phi_d, N_theta_d, N_theta_h) or "37x55x55",
     ``error_samples`` geometries for the error estimate (0: skip it), ``alpha_sample`` (default:
     :func:`suggest_alpha_sample`), ``seed`` of the error geometries, ``progress`` a callback
-    ``progress(message)`` (True: lines on stderr; :mod:`hyde_bsdf.progress`).
+    ``progress(message)`` (True: lines on stderr; :mod:`hyde_bsdf.progress`), ``bands`` the five
+    band wavelengths (nm; default: chosen by colour error for a material, 450-650 nm for n, k) or a
+    :class:`~hyde_bsdf.fit.pbsdf_bands.BandChoice` (e.g. ``choose_bands(index_spectrum("Au"),
+    (450, 500, 550, 600, 650), "sampled")``, the index sampled at the band wavelengths),
+    ``diffuse_reflectance`` the albedo of ``diffuse="lambertian"`` (one value or one per band; required
+    with it).
     Everything is checked, and the size refused (:func:`check_table_size`), before any work.
     """
     t0 = time.perf_counter()
-    wavelengths = KAIST_WAVELENGTHS
-    params = _check_params(rms_slope, n, k, material, shadowing, diffuse, wavelengths)
+    o = ExportOptions.of(options, settings, "export_pbsdf")
+    resolution, error_samples, alpha_sample, seed, progress = (o.resolution, o.error_samples, o.alpha_sample, o.seed,
+                                                               o.progress)
+    params, choice = _check_params(rms_slope, n, k, material, shadowing, diffuse, bands, diffuse_reflectance)
+    wavelengths = choice.wavelengths
     res = _check_resolution(resolution)
     if not (isinstance(error_samples, (int, np.integer)) and 0 <= error_samples <= 10**7):
         raise UsageError(f"error_samples must be an integer in [0, 1e7], got {error_samples!r}")
@@ -438,6 +510,8 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
     with OutputLock([path], "pBSDF file"), atomic_path(path) as tmp:     # one writer at a time
         meta = {"producer": "hyde-bsdf export", "model": "Hyde, Schmidt, Havrilla, Opt. Express 17(24) 2009, Eq. 17",
                 **params, "resolution": list(res), "wavelengths_nm": list(wavelengths),
+                "bands": {"band_index": choice.band_index, "chosen_by_colour_error": choice.searched,
+                          "colour_error_rgb": choice.colour_error},
                 "theta_h_grid": "(pi/2) u^2", "edge_deg": edge_deg(res[1])}
         offsets = write_table(tmp, th, td, pd, wavelengths, slabs(), extra={"hyde_export": " " * _JSON_BYTES})
         table = read_pbsdf(tmp)
@@ -452,7 +526,7 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
         _write_metadata(tmp, offsets["hyde_export"], meta, errors, alpha_sample)
     return ExportReport(path=Path(path), resolution=res, nbytes=os.path.getsize(path),
                         seconds=time.perf_counter() - t0, params=params, wavelengths=tuple(wavelengths),
-                        alpha_sample=float(alpha_sample), errors=errors)
+                        alpha_sample=float(alpha_sample), errors=errors, bands=choice)
 
 
 def _write_metadata(tmp, offset, meta, errors, alpha_sample):

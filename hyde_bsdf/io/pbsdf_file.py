@@ -63,7 +63,7 @@ __all__ = ["PbsdfFileError", "PbsdfTable", "KAIST_WAVELENGTHS", "MITSUBA_BANDS",
            "read_tensor_file", "table_nbytes", "rusinkiewicz_to_directions", "directions_to_rusinkiewicz",
            "table_frame_x"]
 
-#: the band centres of the KAIST database and of every exported table (nm)
+#: the band centres of the KAIST database (nm), the export's default for n, k given per band
 KAIST_WAVELENGTHS = (450, 500, 550, 600, 650)
 #: Mitsuba's loader reads exactly this many wavelengths
 MITSUBA_BANDS = 5

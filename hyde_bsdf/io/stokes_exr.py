@@ -280,7 +280,8 @@ def read_camera_stokes(path, what: str = "camera Stokes EXR") -> dict:
         raise InputFileError(f"{path}: not a readable OpenEXR file ({type(exc).__name__})") from None
     layers = _layers(chans)
     if "S0" not in layers:
-        raise InputFileError(f"{path}: no S0 channel (found {sorted(chans)}); a Stokes EXR has S0[.R ...], S1, S2[, S3]")
+        raise InputFileError(f"{path} is not a Stokes EXR: no S0 channel (found {sorted(chans)}); a Stokes EXR has "
+                             "S0[.R ...], S1, S2[, S3]")
     colours = tuple(sorted(layers["S0"], key=lambda x: ("RGB".find(x) if x in "RGB" and x else 9, x)))
     out: dict = {"stokes": {}, "sigma": {}, "colours": colours}
     for c in STOKES_NAMES:

@@ -272,8 +272,8 @@ def _check_chi2(result, meas):
         if meas.m00 is not None:
             chi2 += float((((F[:, 0, 0] - meas.m00[rows]) / meas.m00_sigma[rows]) ** 2).sum())
             m += int(rows.sum())
-        for e in NAMES:
-            model = F[:, int(e[1]), int(e[2])] / F[:, 0, 0]
+        for e in NAMES:     # where F00 underflows (a lobe narrower than the grid, albedo 0): the depolarized limit
+            model = np.divide(F[:, int(e[1]), int(e[2])], F[:, 0, 0], out=np.zeros(rows.sum()), where=F[:, 0, 0] > 0)
             chi2 += float((((model - meas.values[e][rows]) / meas.sigma[e][rows]) ** 2).sum())
             m += int(rows.sum())
     dof = m - len(result.fit.free)

@@ -7,7 +7,7 @@
    normalized-element error max_jk |M_jk/M00 - F_jk/F00| (paper bases), worst of the 5 bands;
    with the file size and the export time.
 2. Independent check: Mitsuba's own C++ `measured_polarized` (scalar_spectral_polarized) evaluates
-   the exported file, the Python `hyde` plugin evaluates the model, at geometries drawn with a
+   the exported file, the Python `hyde` plugin evaluates the model (with the band's index), at geometries drawn with a
    different seed from the export's; their difference must be within the error the export
    reported (x 1.5: a different random set; 2e-4 absolute).  Also: the C++ lookup against the
    NumPy replica the export uses (frames, Rusinkiewicz coordinates, interpolation): <= 1e-4.
@@ -20,8 +20,16 @@
    table's first render there compiles for tens of minutes on the shared 2-core machine.
 5. Recommended default: the smallest table of the sweep with M00 L1 <= 1 % and normalized-element
    p95 <= 2 % at every roughness swept (full run: 0.3 and 0.1) -- checked against DEFAULT_RESOLUTION.
+6. Colour of a rendered flat patch (issue 31): a plane seen by an orthographic camera under a
+   directional light (one geometry for every pixel; the light an RGB white, D65 in spectral
+   variants), rendered with the exported table (Mitsuba's C++ ``measured_polarized``) and with the
+   Python plugin (``material=...``), ``scalar_spectral_polarized``, same seed (the same wavelengths
+   per sample): each sRGB channel of the table's render within 1 % of the plugin's, at three
+   geometries, for gold and copper at the default resolution (quick: gold, 37x19x19 near the
+   specular peak); the table with the index sampled at 450-650 nm is shown beside it (gold: B +5 %).
 
-Writes pbsdf_export.png, pbsdf_export.csv (sweep), pbsdf_export_render.csv, pbsdf_export_fit.png.
+Writes pbsdf_export.png, pbsdf_export.csv (sweep), pbsdf_export_render.csv, pbsdf_export_fit.png,
+pbsdf_export_colour.csv.
 """
 import math
 import tempfile
@@ -77,7 +85,9 @@ def cpp_check(path, report, samples, seed):
     cpp = mi.load_dict({"type": "measured_polarized", "filename": str(path)})
     b = 2
     wl = float(table.wavelengths[b])
-    plugin = mi.load_dict({"type": "hyde", "rms_slope": report.params["rms_slope"], "material": "Au"})
+    # the band's own index (the export stores the colour-weighted projection of gold's spectrum)
+    plugin = mi.load_dict({"type": "hyde", "rms_slope": report.params["rms_slope"], "eta": report.params["n"][b],
+                           "k": report.params["k"][b]})
     om_i, om_r, w = _query_geometries(samples, report.params["rms_slope"], np.random.default_rng(seed))
     _, _, _, pi_, pr = paper_angles(om_i, om_r)
     s_i, s_r = _paper_axes(pi_, pr)
@@ -143,6 +153,87 @@ def render_times(path, alpha_sample, variant, width, height, spp, rounds):
     return {k: (first[k], float(np.median(times[k])), s0[k]) for k in scenes}
 
 
+#: (theta_i, theta_r, phi) in degrees of the flat-patch geometries: near the specular peak, off it
+PATCH_GEOMETRIES = ((40.0, 50.0, 180.0), (20.0, 60.0, 150.0), (60.0, 30.0, 120.0))
+
+
+def _direction(theta_deg, phi_deg):
+    t, p = math.radians(theta_deg), math.radians(phi_deg)
+    return [math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t)]
+
+
+def patch_scene(bsdf, theta_i, theta_r, phi, spp, px=16):
+    """A plane under a directional light from (theta_i, azimuth 0), seen by an orthographic camera from
+    (theta_r, phi): every pixel sees the same geometry (degrees)."""
+    import mitsuba as mi
+
+    T = mi.ScalarTransform4f
+    cam = _direction(theta_r, phi)
+    return {"type": "scene", "integrator": {"type": "path", "max_depth": 2},
+            "sensor": {"type": "orthographic",
+                       "to_world": T().look_at(origin=[5.0 * c for c in cam], target=[0, 0, 0],
+                                               up=[0, 0, 1] if theta_r > 1.0 else [0, 1, 0]) @ T().scale([0.2, 0.2, 1.0]),
+                       "film": {"type": "hdrfilm", "width": px, "height": px, "rfilter": {"type": "box"},
+                                "pixel_format": "rgb"},
+                       "sampler": {"type": "independent", "sample_count": spp}},
+            "sun": {"type": "directional", "direction": [-c for c in _direction(theta_i, 0.0)],
+                    "irradiance": {"type": "rgb", "value": 1.0}},
+            "patch": {"type": "rectangle", "bsdf": bsdf}}
+
+
+def patch_colour(path, material, rms_slope, geometries=PATCH_GEOMETRIES, spp=64, alpha_sample=0.3):
+    """[(geometry, plugin's mean sRGB, table / plugin - 1 per channel)] of the flat patch (module
+    docstring, 6), ``scalar_spectral_polarized``, seed 0 for both renders."""
+    import mitsuba as mi
+    import hyde_bsdf
+    from hyde_bsdf.mitsuba.variants import set_variant
+
+    set_variant("scalar_spectral_polarized", fallback=False)
+    hyde_bsdf.register("scalar_spectral_polarized")
+    out = []
+    for g in geometries:
+        rgb = {}
+        for name, bsdf in (("plugin", {"type": "hyde", "rms_slope": rms_slope, "material": material}),
+                           ("table", {"type": "measured_polarized", "filename": str(path), "alpha_sample": alpha_sample})):
+            img = np.array(mi.render(mi.load_dict(patch_scene(bsdf, *g, spp)), seed=0))
+            rgb[name] = img[..., :3].reshape(-1, 3).mean(axis=0)
+        out.append((g, rgb["plugin"], rgb["table"] / rgb["plugin"] - 1.0))
+    return out
+
+
+def colour_checks(work, out, quick, alpha):
+    """Section 6 of the module docstring: checks, and the rows written to pbsdf_export_colour.csv."""
+    from hyde_bsdf.fit import export_pbsdf
+    from hyde_bsdf.fit.pbsdf_bands import choose_bands, index_spectrum
+    from hyde_bsdf.fit.pbsdf_export import DEFAULT_RESOLUTION
+
+    res = (37, 19, 19) if quick else DEFAULT_RESOLUTION
+    geometries = PATCH_GEOMETRIES[:1] if quick else PATCH_GEOMETRIES
+    checks, rows = [], []
+    for material in (("Au",) if quick else ("Au", "Cu")):
+        for how in ("chosen", "sampled at 450-650 nm"):
+            bands = None if how == "chosen" else choose_bands(index_spectrum(material), (450, 500, 550, 600, 650),
+                                                              "sampled")
+            path = work / f"patch_{material}.pbsdf"
+            report = export_pbsdf(path, rms_slope=0.3, material=material, resolution=res, error_samples=0,
+                                  alpha_sample=alpha, bands=bands)
+            for g, rgb, rel in patch_colour(path, material, 0.3, geometries, 32 if quick else 64, alpha):
+                rows.append([material, how, " ".join(map(str, report.bands.wavelengths)), *g,
+                             *(f"{v:.5f}" for v in rgb), *(f"{v:.5f}" for v in rel),
+                             *(f"{v:.5f}" for v in report.bands.colour_error)])
+                if how == "chosen":
+                    checks.append(dict(
+                        name=f"colour of a rendered flat patch, {material} rms_slope 0.3, {'x'.join(map(str, res))}, "
+                             f"theta_i/theta_r/phi {g[0]:g}/{g[1]:g}/{g[2]:g} deg: C++ table / Python plugin - 1 "
+                             f"(bands {', '.join(map(str, report.bands.wavelengths))} nm)",
+                        value=" ".join(f"{c} {100 * v:+.2f} %" for c, v in zip("RGB", rel)),
+                        tolerance="each channel within 1 %", passed=bool(np.all(np.abs(rel) <= 0.01))))
+    write_csv(out / "pbsdf_export_colour.csv",
+              ["material", "bands", "wavelengths_nm", "theta_i_deg", "theta_r_deg", "phi_deg", "plugin_R",
+               "plugin_G", "plugin_B", "rel_R", "rel_G", "rel_B", "predicted_R", "predicted_G", "predicted_B"], rows)
+    return checks
+
+
 def recommend(rows):
     """The smallest resolution meeting both targets at every roughness of the sweep."""
     by_res = {}
@@ -203,10 +294,11 @@ def validate(outdir="out/validation", quick=False):
         checks.append(dict(name="C++ measured_polarized lookup vs the NumPy replica (frames, Rusinkiewicz, interpolation)",
                            value=f"{replica:.2e}", tolerance="<= 1e-4 of M00", passed=replica <= 1e-4))
 
-        # ---- 3. round trip
+        # ---- 3. round trip (against the index the export stored per band)
         data = pbsdf_samples(path, max_points=150 if quick else 3000)
         fit = fit_pbsdf(data, progress=False)
-        worst = max(abs(fit.rms_slope / 0.3 - 1), *(abs(fit.n / n_au - 1)), *(abs(fit.k / k_au - 1)))
+        n_b, k_b = np.array(report.params["n"]), np.array(report.params["k"])
+        worst = max(abs(fit.rms_slope / 0.3 - 1), *(abs(fit.n / n_b - 1)), *(abs(fit.k / k_b - 1)))
         checks.append(dict(name="round trip export -> read -> fit: largest relative error of rms_slope, n, k (5 bands)",
                            value=f"{worst:.2e}", tolerance="<= 1e-4", passed=bool(worst <= 1e-4 and fit.success)))
         plot_pbsdf_fit(fit, data, out / "pbsdf_export_fit.png", title=f"round trip: {path.name} ({'x'.join(map(str, res))})")
@@ -228,6 +320,9 @@ def validate(outdir="out/validation", quick=False):
                                 f"{rt['hyde (Python plugin)'][1] / ref:.1f}x)",
                            value=f"{table_ratio:.1f}x", tolerance="measured (finite, > 0)",
                            passed=bool(math.isfinite(table_ratio) and table_ratio > 0)))
+
+        # ---- 6. colour of a rendered flat patch
+        checks += colour_checks(work, out, quick, alpha)
 
         # ---- 5. recommendation
         rec = recommend(rows)
