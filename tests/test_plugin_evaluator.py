@@ -51,7 +51,7 @@ def _index_at(mi, bsdf_params, wavelength):
 
 
 def _directions(n, seed, theta_max_deg=89.0):
-    from hyde_bsdf.validation import frames as pf
+    from hyde_bsdf.validation import _frames as pf
 
     rng = np.random.default_rng(seed)
     ti, tr, ph, phi_i = pf.random_angles(n, rng, math.radians(theta_max_deg))
@@ -65,7 +65,7 @@ def _directions(n, seed, theta_max_deg=89.0):
 
 def _compare(mi, params, n_dirs, seed, mode="radiance", wavelength=633.0):
     import hyde_bsdf
-    from hyde_bsdf.validation import frames as pf
+    from hyde_bsdf.validation import _frames as pf
 
     dirs, (ti, tr, ph) = _directions(n_dirs, seed)
     bsdf = mi.load_dict({"type": "hyde", **params})
@@ -173,7 +173,7 @@ def test_normal_incidence_mirror_is_diag_1_1_m1_m1(variant):
     """Paper's convention check without the evaluator: at normal incidence and normal
     observation r_p = -r_s, so any metal's Mueller matrix in the paper's bases is
     F00 diag(1, 1, -1, -1) (COMMON.md); this also exercises the collinear-frame fallback."""
-    from hyde_bsdf.validation import frames as pf
+    from hyde_bsdf.validation import _frames as pf
 
     mi = mitsuba_with_hyde(variant)
     bsdf = mi.load_dict({"type": "hyde", "rms_slope": 0.1, "material": "Au", "diffuse": "none"})

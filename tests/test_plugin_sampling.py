@@ -3,7 +3,7 @@
 Physics checked: the directions ``sample`` draws (visible-normal Beckmann sampling
 of the specular lobe mixed with cosine sampling of the diffuse lobe) follow the
 density ``pdf`` reports - Mitsuba's chi^2 test on the sphere (``mitsuba.chi2``,
-with the polarization-aware adapter ``hyde_bsdf.validation.chi2``) at 13 (rms_slope,
+with the polarization-aware adapter ``hyde_bsdf.validation._chi2``) at 13 (rms_slope,
 theta_i) configurations spanning rms_slope 0.02-1.5 and theta_i 0-85 deg, for
 several shadowing/diffuse/sample_visible settings, in an unpolarized and a
 polarized LLVM variant; and the returned Mueller weight is eval/pdf.
@@ -35,7 +35,7 @@ CASES += [("llvm_ad_rgb", ("smith", "lambertian", True), c) for c in ((0.02, 30)
                          ids=[f"{v}-{m[0]}-{m[1]}-{'vis' if m[2] else 'all'}-{c[0]}-{c[1]}deg"
                               for v, m, c in CASES])
 def test_chi2(variant, model, config):
-    from hyde_bsdf.validation.chi2 import chi2_test
+    from hyde_bsdf.validation._chi2 import chi2_test
 
     mi = mitsuba_with_hyde(variant)
     shadowing, diffuse, visible = model

@@ -192,7 +192,7 @@ def mitsuba_table(path, bsdf: dict, resolution=(13, 24, 24)):
     table on the exporter's grid: the paper's bases from :func:`eval_paper`, then the table's frames."""
     import mitsuba as mi
 
-    from hyde_bsdf.validation.frames import eval_paper
+    from hyde_bsdf.validation._frames import eval_paper
     from hyde_bsdf.mitsuba.variants import set_variant
 
     set_variant("llvm_ad_spectral_polarized")

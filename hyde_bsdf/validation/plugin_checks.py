@@ -30,7 +30,7 @@ import numpy as np
 
 
 import hyde_bsdf
-from hyde_bsdf.validation import frames as pf
+from hyde_bsdf.validation import _frames as pf
 
 from hyde_bsdf.validation._common import CLASSES, cli, save_figure, sweep_chart, write_csv  # noqa: E402
 
