@@ -284,9 +284,31 @@ def test_round_trip_export_read_fit_recovers_the_parameters(exported):
     assert np.allclose(result.n, PARAMS["n"], rtol=1e-4) and np.allclose(result.k, PARAMS["k"], rtol=1e-4)
     xml = result.plugin_xml()
     assert result.stderr["rms_slope"] < 1e-4 and "spectrum" in xml
-    # the index at the table's bands only: nothing held out to 360 or 830 nm, and the XML says so
-    first = f"{result.wavelengths[0]:g}:"
-    assert f'"{first}' in xml and "360:" not in xml and "830:" not in xml and "reads these spectra as 0" in xml
+    # the index at the table's bands, the end values held out to Mitsuba's 360-830 nm (else 0 there in
+    # spectral variants, a wrong colour in RGB ones) -- explicitly: the XML says where it extrapolates
+    first, last = (f"{w:g}" for w in (result.wavelengths[0], result.wavelengths[-1]))
+    assert f'"360:{result.n[0]:.6g}, {first}:{result.n[0]:.6g}' in xml
+    assert f'{last}:{result.n[-1]:.6g}, 830:{result.n[-1]:.6g}"' in xml
+    assert f"over 360-{first} and {last}-830 nm the end values are held (an extrapolation, not measured" in xml
+
+
+def test_a_table_misfit_from_a_held_roughness_is_blamed_on_it(exported):
+    """Issue 30 item 3 for tables: rms_slope held at 0.4 on a table made at 0.25 misfits M00 by far;
+    the verdict names the held parameter and the value it takes when fitted (0.25 to 1e-3) -- not the
+    lobe's shape or the terms it would otherwise suspect.  Two small fits, ~3 s."""
+    import warnings
+
+    from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
+
+    path, _ = exported
+    data = pbsdf_samples(path, max_points=150, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        held = fit_pbsdf(data, fit=("n", "k"), rms_slope=0.4, progress=False)
+    assert not held.verdict.adequate and held.verdict.message.startswith("M00 misfit")
+    assert "the parameter(s) held fixed (rms_slope = 0.4) cause the misfit" in held.verdict.message
+    fitted = float(held.verdict.message.split("(rms_slope = ")[2].split(")")[0])
+    assert fitted == pytest.approx(0.25, rel=1e-3)
 
 
 def test_fit_cli_on_a_pbsdf_file(exported, tmp_path, capsys):

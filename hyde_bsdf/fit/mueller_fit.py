@@ -595,9 +595,10 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
         data_diag.append(f"rms_slope is not identified: without a diffuse term the normalized elements do not depend "
                          f"on it; it is held at rms_slope = {vals['rms_slope']:.4g} (give the value you know: a "
                          "material needs it) -- M00 in 1/sr determines it (hyde_bsdf.fit.lab.fit_lab)")
-    if not verdict.adequate and len(fitted) < len(PARAMETERS):
+    determined = _check_fit_names(None, mode)      # what the elements depend on: freeing the rest cannot help
+    if not verdict.adequate and set(determined) - set(fitted):
         _blame_fixed(verdict, data_diag, vals, fitted, chi2, dof, lambda v: fit_mueller(
-            theta_i, theta_r, phi, measured, sigma=sigma, fit=PARAMETERS, rms_slope=v["rms_slope"], n0=v["n"],
+            theta_i, theta_r, phi, measured, sigma=sigma, fit=determined, rms_slope=v["rms_slope"], n0=v["n"],
             k0=v["k"], shadowing=shadowing, diffuse=diffuse, corr_limit=corr_limit, progress=False))
     result = FitResult(
         params=vals, fitted=fitted, stderr=stderr, covariance=cov, correlation=corr,
@@ -614,19 +615,19 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
 
 
 def _blame_fixed(verdict, notes, vals, fitted, chi2, dof, refit):
-    """A misfit with parameters held fixed: ``refit(vals)`` fits all three from these values; when
-    that removes the misfit the verdict and the notes name the fixed parameters as its cause
-    (:func:`hyde_bsdf.fit.adequacy.blame_fixed_parameters`).  Returns the free fit, or None."""
+    """A misfit with parameters held fixed: ``refit(vals)`` fits every parameter the elements depend
+    on, from these values; when that removes the misfit the verdict and the notes name the held
+    parameters it freed as its cause (:func:`hyde_bsdf.fit.adequacy.blame_fixed_parameters`)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
             free = refit(vals)
-        except UsageError:          # fewer values than three parameters: nothing to compare
-            return None
-    held = ", ".join(f"{q} = {vals[q]:.4g}" for q in PARAMETERS if q not in fitted)
-    freed = ", ".join(f"{q} = {free.params[q]:.4g}" for q in PARAMETERS if q not in fitted)
-    named = blame_fixed_parameters(verdict, notes, chi2, dof, (free.chi2, free.dof, free.verdict.adequate), held, freed)
-    return free if named else None
+        except UsageError:          # fewer values than parameters: nothing to compare
+            return
+    freed = [q for q in free.fitted if q not in fitted]
+    blame_fixed_parameters(verdict, notes, chi2, dof, (free.chi2, free.dof, free.verdict.adequate),
+                           ", ".join(f"{q} = {vals[q]:.4g}" for q in freed),
+                           ", ".join(f"{q} = {free.params[q]:.4g}" for q in freed))
 
 
 @dataclass
