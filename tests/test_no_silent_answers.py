@@ -121,7 +121,7 @@ def test_camera_reference_leaves_impossible_pixels_out_of_the_mask():
 # --- calibrated raw data -----------------------------------------------------------------------------------
 
 def test_raw_pixels_below_the_black_level_are_left_out_and_counted():
-    from hyde_bsdf.inverse.analyzer import CameraNoise, stokes_from_mosaic
+    from hyde_bsdf.model.polarimetry import CameraNoise, stokes_from_mosaic
 
     noise = CameraNoise(gain=1.0, read_noise=2.0, black_level=64.0)
     raw = np.full((8, 8), 1064.0)
@@ -135,7 +135,7 @@ def test_raw_pixels_below_the_black_level_are_left_out_and_counted():
 
 
 def test_a_non_finite_analysis_matrix_is_refused():
-    from hyde_bsdf.inverse.analyzer import stokes_from_frames
+    from hyde_bsdf.model.polarimetry import stokes_from_frames
 
     A = np.array([[0.5, 0.5, 0, 0], [0.5, 0, 0.5, 0], [0.5, -0.5, 0, 0.0]])
     A[1, 2] = np.nan
@@ -286,7 +286,7 @@ def test_maps_of_a_sample_no_camera_sees_are_refused_before_the_work(tmp_path, c
 
 
 def test_model_selection_does_not_advise_itself():
-    """A fixed model's inadequate verdict advises '--model auto'; once every model was tried (auto
+    """A fixed model's inadequate verdict advises model selection ('--model auto'); once every model was tried (auto
     mode) the advice is dropped -- the rest of the message, its figures and cause, stay."""
     from hyde_bsdf.fit.adequacy import MODEL_ADVICE, chi2_verdict, without_advice
 
@@ -295,7 +295,7 @@ def test_model_selection_does_not_advise_itself():
     v = chi2_verdict(float((r ** 2).sum()), 4 * 24 - 3, r, th, th, np.pi, parameters=3)
     assert not v.adequate and v.message.endswith(MODEL_ADVICE)
     text = v.message
-    assert without_advice(v).message == text[: -len(MODEL_ADVICE)] and "try --model auto" not in v.message
+    assert without_advice(v).message == text[: -len(MODEL_ADVICE)] and "select_model" not in v.message
 
 
 def test_stokes_checks_the_estimate_after_calibration(tmp_path, capsys):

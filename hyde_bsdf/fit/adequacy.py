@@ -60,9 +60,9 @@ Z_LIMIT = 5.0
 FLOAT32_FLOOR = 1e-6
 #: neighbours whose residuals define the systematic part
 NEIGHBOURS = 8
-#: what an inadequate verdict of one fixed model advises; model selection, which tried them all, drops it
-#: (:func:`without_advice`)
-MODEL_ADVICE = "; try --model auto"
+#: what an inadequate verdict of one fixed model advises (the command line says ``--model auto``:
+#: hyde_bsdf.app.flags); model selection, which tried them all, drops it (:func:`without_advice`)
+MODEL_ADVICE = "; try `select_model`"
 #: fewest distinct geometries a verdict without error bars can be "adequate" at (module docstring)
 MIN_GEOMETRIES = NEIGHBOURS + 2
 #: quantile bins of theta_h and of theta_d for the trends

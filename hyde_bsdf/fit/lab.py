@@ -424,14 +424,14 @@ def material_at(result: dict, wavelengths, extrapolate: bool = False) -> dict:
         model = result["model"]
         shadowing, diffuse = str(model["shadowing"]), str(model["diffuse"])
     except (KeyError, TypeError, ValueError) as exc:
-        raise UsageError(f"not a fit result (hyde-bsdf fit --json): {shorten(exc)}") from None
+        raise UsageError(f"not a fit result (the JSON the fit command writes): {shorten(exc)}") from None
     measured = sorted({wl for (name, wl) in params if name == "n" and wl is not None})
     wanted = [float(w) for w in wavelengths]
     outside = [w for w in wanted if not measured or w < measured[0] - 1e-9 or w > measured[-1] + 1e-9]
     if outside and not extrapolate:
         at = f"measured at {', '.join(f'{w:g}' for w in measured)} nm" if measured else "measured at no stated wavelength"
         raise UsageError(f"the fit was {at}; the export needs {', '.join(f'{w:g}' for w in outside)} nm, outside "
-                         "them: its index there is unknown -- measure there, or give --extrapolate to hold the "
+                         "them: its index there is unknown -- measure there, or give `extrapolate` to hold the "
                          "nearest measured values (a guess)")
 
     def curve(name):
@@ -444,6 +444,6 @@ def material_at(result: dict, wavelengths, extrapolate: bool = False) -> dict:
 
     rms = params.get(("rms_slope", None))
     if rms is None:
-        raise UsageError("not a fit result (hyde-bsdf fit --json): no rms_slope")
+        raise UsageError("not a fit result (the JSON the fit command writes): no rms_slope")
     return {"rms_slope": rms, "shadowing": shadowing, "diffuse": diffuse, "n": curve("n"), "k": curve("k"),
             "diffuse_reflectance": curve("diffuse_reflectance"), "measured_nm": measured, "extrapolated": outside}

@@ -12,7 +12,7 @@ estimates them from its residuals: :meth:`LabData.with_noise`).
 With M00 the elements are fitted as what the instrument measured, the absolute M_jk =
 (M_jk/M00) M00 in 1/sr (``LabData.absolute``), each with its own noise: a ratio of two noisy
 values is not Gaussian where M00 is small (its tail biased the albedo by 1.2 standard errors in
-``validation/fit_lab_data.py``), and the ratios of one row share M00's noise, which a fit of
+``hyde_bsdf/validation/fit_lab_data.py``), and the ratios of one row share M00's noise, which a fit of
 ratios as independent values ignores (its errors came out 1.8x the Cramer-Rao bound of the
 design).  The absolute sigma is the file's ratio sigma with the first-order propagation undone,
 sigma_jk^2 = (M00 sigma_r)^2 - (r sigma_00)^2 -- exact for the usual propagation of independent
@@ -23,7 +23,7 @@ imply: delta = sigma_jk / sqrt(1 + (M_jk/M00)^2) (the first-order propagation of
 the row's median over its elements).  Where M00 is not known to be above 0 within 3 standard
 deviations (delta > :data:`RATIO_DELTA` = 1/3) the ratio is one of noises -- not Gaussian, centred
 near 0: it looks depolarized, and with it the narrowest lobe plus any diffuse part "fits" better
-than the truth (the roughness 8 standard errors off in ``validation/fit_lab_data.py``) -- and the
+than the truth (the roughness 8 standard errors off in ``hyde_bsdf/validation/fit_lab_data.py``) -- and the
 row carries no usable information: it is left out, counted in ``Group.uninformative`` (the fit's
 note says how many; measure M00 to use them).  The rows kept are fitted as what they are:
 

@@ -61,7 +61,7 @@ What the data can and cannot say (:class:`FitDataWarning`, ``FitResult.data_warn
 The command line (``hyde-bsdf fit DATA.csv``, the plot) is :mod:`hyde_bsdf.app.fit`; the CSV
 format is :mod:`hyde_bsdf.io.measurements`.  Large data sets report progress through the
 ``progress`` callback; 10^6 rows read and fit in about 20-30 s on 2 cores
-(``validation/fit_synthetic.py``, part 5).
+(``hyde_bsdf/validation/fit_synthetic.py``, part 5).
 """
 from __future__ import annotations
 
@@ -73,6 +73,7 @@ import numpy as np
 
 from hyde_bsdf.errors import RejectedResult, UsageError, UsageTypeError, shorten
 from hyde_bsdf.model.checks import real_array
+from hyde_bsdf.options import Options
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
@@ -85,7 +86,7 @@ from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, Inadequat
 from hyde_bsdf.io.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index,
                                        impossible_limit)
 
-__all__ = ["PARAMETERS", "FIT_PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning",
+__all__ = ["PARAMETERS", "FIT_PARAMETERS", "SEARCH_ROWS", "FitOptions", "FitResult", "check_options", "IllPosedFitWarning",
            "IllPosedFitError", "FitDataWarning", "InadequateModelWarning", "InadequateModelError",
            "merge_repeated_geometries", "impossible_values",
            "mueller_elements", "fit_mueller", "fit_measurements", "synthetic_measurements",
@@ -495,10 +496,24 @@ def check_options(fit=None, rms_slope=0.3, n0=None, k0=None, shadowing="vgroove"
     return fitted, mode, given
 
 
-def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_slope=0.3,
-                n0=None, k0=None, shadowing="vgroove", diffuse=True, corr_limit=0.95,
-                strict=False, progress=None) -> FitResult:
+@dataclass(frozen=True)
+class FitOptions(Options):
+    """The model terms and the reporting of :func:`fit_mueller` (each field is also a keyword of
+    :func:`fit_mueller`; its docstring describes them)."""
+
+    shadowing: str = "vgroove"
+    diffuse: object = True
+    corr_limit: float = 0.95
+    strict: bool = False
+    progress: object = None
+
+
+def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_slope=0.3, n0=None, k0=None,
+                options: FitOptions | None = None, **settings) -> FitResult:
     """Least-squares fit of the pBRDF (Eq. 17) to normalized Mueller elements.
+
+    The model terms and the reporting are a :class:`FitOptions` (``options``), or its fields given as
+    keywords: ``shadowing``, ``diffuse``, ``corr_limit``, ``strict``, ``progress`` below.
 
     Parameters
     ----------
@@ -529,7 +544,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
     Large data sets: with more than :data:`SEARCH_ROWS` geometries the multi-start search
     runs on a random subset of that size and only its best point is refined on all the
     data, with a forward-difference Jacobian (4 model evaluations per step instead of 7);
-    10^6 geometries fit in about 20 s (``validation/fit_synthetic.py`` measures it).
+    10^6 geometries fit in about 20 s (``hyde_bsdf/validation/fit_synthetic.py`` measures it).
 
     Returns
     -------
@@ -544,6 +559,8 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
     """
     from scipy.stats import chi2 as chi2_dist
 
+    o = FitOptions.of(options, settings, "fit_mueller")
+    shadowing, diffuse, corr_limit, strict, progress = o.shadowing, o.diffuse, o.corr_limit, o.strict, o.progress
     fitted, mode, given = check_options(fit, rms_slope, n0, k0, shadowing, diffuse, corr_limit)
     check_progress(progress)
     data = _FitData.build(theta_i, theta_r, phi, measured, sigma, fitted)
@@ -579,9 +596,10 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
         data_diag.append(f"rms_slope is not identified: without a diffuse term the normalized elements do not depend "
                          f"on it; it is held at rms_slope = {vals['rms_slope']:.4g} (give the value you know: a "
                          "material needs it) -- M00 in 1/sr determines it (hyde_bsdf.fit.lab.fit_lab)")
-    if not verdict.adequate and len(fitted) < len(PARAMETERS):
+    determined = _check_fit_names(None, mode)      # what the elements depend on: freeing the rest cannot help
+    if not verdict.adequate and set(determined) - set(fitted):
         _blame_fixed(verdict, data_diag, vals, fitted, chi2, dof, lambda v: fit_mueller(
-            theta_i, theta_r, phi, measured, sigma=sigma, fit=PARAMETERS, rms_slope=v["rms_slope"], n0=v["n"],
+            theta_i, theta_r, phi, measured, sigma=sigma, fit=determined, rms_slope=v["rms_slope"], n0=v["n"],
             k0=v["k"], shadowing=shadowing, diffuse=diffuse, corr_limit=corr_limit, progress=False))
     result = FitResult(
         params=vals, fitted=fitted, stderr=stderr, covariance=cov, correlation=corr,
@@ -598,19 +616,19 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
 
 
 def _blame_fixed(verdict, notes, vals, fitted, chi2, dof, refit):
-    """A misfit with parameters held fixed: ``refit(vals)`` fits all three from these values; when
-    that removes the misfit the verdict and the notes name the fixed parameters as its cause
-    (:func:`hyde_bsdf.fit.adequacy.blame_fixed_parameters`).  Returns the free fit, or None."""
+    """A misfit with parameters held fixed: ``refit(vals)`` fits every parameter the elements depend
+    on, from these values; when that removes the misfit the verdict and the notes name the held
+    parameters it freed as its cause (:func:`hyde_bsdf.fit.adequacy.blame_fixed_parameters`)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
             free = refit(vals)
-        except UsageError:          # fewer values than three parameters: nothing to compare
-            return None
-    held = ", ".join(f"{q} = {vals[q]:.4g}" for q in PARAMETERS if q not in fitted)
-    freed = ", ".join(f"{q} = {free.params[q]:.4g}" for q in PARAMETERS if q not in fitted)
-    named = blame_fixed_parameters(verdict, notes, chi2, dof, (free.chi2, free.dof, free.verdict.adequate), held, freed)
-    return free if named else None
+        except UsageError:          # fewer values than parameters: nothing to compare
+            return
+    freed = [q for q in free.fitted if q not in fitted]
+    blame_fixed_parameters(verdict, notes, chi2, dof, (free.chi2, free.dof, free.verdict.adequate),
+                           ", ".join(f"{q} = {vals[q]:.4g}" for q in freed),
+                           ", ".join(f"{q} = {free.params[q]:.4g}" for q in freed))
 
 
 @dataclass

@@ -15,7 +15,7 @@ import os
 
 import numpy as np
 
-from hyde_bsdf.errors import UsageError, one_line, shorten
+from hyde_bsdf.errors import InputFileError, UsageError, one_line, shorten
 from hyde_bsdf.io.input_gate import check_dimensions, check_input
 from hyde_bsdf.resources import format_bytes
 
@@ -98,7 +98,7 @@ def exr_shape(path, what: str = "EXR file") -> tuple[int, int, int]:
         lo, hi = header["dataWindow"]
         return int(hi[1]) - int(lo[1]) + 1, int(hi[0]) - int(lo[0]) + 1, len(header["channels"])
     except Exception as exc:  # noqa: BLE001 -- any unreadable file is a user's input problem
-        raise UsageError(f"{what} {shorten(str(path))}: not a readable OpenEXR file ({type(exc).__name__})") from None
+        raise InputFileError(f"{what} {shorten(str(path))}: not a readable OpenEXR file ({type(exc).__name__})") from None
 
 
 #: image files whose header PIL reads without decoding

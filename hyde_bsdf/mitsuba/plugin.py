@@ -157,7 +157,7 @@ Stokes sign convention.  Mitsuba's Stokes vectors use the reference axis
 x = ``stokes_basis(k)`` with y = k x x, and the same S0..S3 definitions as the
 paper's bases (s, p, k) with S3 = -2 Im(E_s E_p*) for e^{+j w t}: rotating
 Mitsuba's bases into the paper's (``mi.mueller.rotate_mueller_basis``, see
-:mod:`hyde_bsdf.mitsuba.frames`) reproduces all 16 elements of
+:mod:`hyde_bsdf.validation._frames`) reproduces all 16 elements of
 :func:`hyde_bsdf.pbrdf`, S3 rows and columns included - no sign conversion is
 needed at this boundary.  At normal incidence r_p = -r_s (Mitsuba's Fresnel
 signs), so a mirror gives F00 diag(1, 1, -1, -1) in the paper's bases.
@@ -188,7 +188,7 @@ the table's whole range @DHR_TABLE@ (4.7 MB, float32), is shipped with the packa
 ``mi.Texture2f`` (differentiable in rms_slope), at each shading point's own roughness.
 Its deviation from the table, 1 - rho clipped at 0, for rms_slope in @RMS_SLOPE@ and
 theta <= 89 deg is <= 1.9e-5 (vgroove), 2.6e-5 (smith), 1.3e-4 (none), target 2e-4
-(``validation/plugin_checks.py``, "DHR texture interpolation error"); denser grids
+(``hyde_bsdf/validation/plugin_checks.py``, "DHR texture interpolation error"); denser grids
 cost render time once the roughness varies per point (cache misses).  1 - rho is
 clipped at 0 (rho > 1 happens without shadowing near grazing).
 
