@@ -78,8 +78,7 @@ def _error(command: str, message: str) -> None:
     if sys.stderr is None:          # closed: print(file=None) would write to standard output
         return
     try:
-        sys.stderr.write(f"hyde-bsdf {command}: {shorten_values(for_command_line(message))}
-")   # one write
+        sys.stderr.write(f"hyde-bsdf {command}: {shorten_values(for_command_line(message))}\n")   # one write
         sys.stderr.flush()
     except (OSError, ValueError):
         pass
