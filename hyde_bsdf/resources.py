@@ -70,8 +70,8 @@ class Costs:
     #: ``export``: Mitsuba's loader holds this many copies of a ``.pbsdf`` table
     pbsdf_loader_copies: int = 2
     #: ``pbrdf``: peak bytes per direction beyond the caller's angle arrays (the (4, 4) float64 result, the
-    #: raveled angles, the diffuse term's temporaries, the finiteness check; measured 161 B at 10^6)
-    pbrdf_bytes_per_direction: int = 192
+    #: raveled angles, the diffuse term's temporaries, the finiteness check; measured 161-185 B at 10^6)
+    pbrdf_bytes_per_direction: int = 224
     #: ``stokes``: peak bytes per raw value (pixel x frame) of frames or a superpixel mosaic, and of a
     #: bilinear (full-resolution) mosaic (measured 72-94 B and 270 B at 1-12 million values)
     stokes_bytes_per_value: int = 128

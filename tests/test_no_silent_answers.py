@@ -194,13 +194,13 @@ def test_array_files_are_sized_from_their_headers(tmp_path, monkeypatch):
 
 
 def test_pbrdf_refuses_a_direction_count_beyond_the_memory(monkeypatch):
-    """10^4 x 10^4 broadcast directions need 10^8 x 192 B = 17.9 GiB (COSTS.pbrdf_bytes_per_direction,
-    measured 161 B): with 1 GiB available, one line before any allocation (was a MemoryError after 71 s)."""
+    """10^4 x 10^4 broadcast directions need 10^8 x 224 B = 20.9 GiB (COSTS.pbrdf_bytes_per_direction,
+    measured 161-185 B): with 1 GiB available, one line before any allocation (was a MemoryError after 71 s)."""
     from hyde_bsdf import pbrdf
 
     monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 2**30)
     th = np.linspace(0.0, 1.5, 10**4)
-    with pytest.raises(UsageError, match=r"pbrdf of 100000000 directions \(192 B each\): about 17\.9 GiB of memory "
+    with pytest.raises(UsageError, match=r"pbrdf of 100000000 directions \(224 B each\): about 20\.9 GiB of memory "
                                          r"needed, but only 1 GiB is available; evaluate fewer directions"):
         pbrdf(th[:, None], th[None, :], np.pi, rms_slope=0.3, n=1.5)
     assert pbrdf(th[:100], th[:100], np.pi, rms_slope=0.3, n=1.5).shape == (100, 4, 4)   # small: unchecked
@@ -261,7 +261,7 @@ def test_maps_of_a_sample_no_camera_sees_are_refused_before_the_work(tmp_path, c
     from hyde_bsdf.app.cli import main
     from hyde_bsdf.io.stokes_exr import write_stokes_exr
 
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     mi.Bitmap(np.full((2, 2, 1), 0.3, np.float32)).write(str(tmp_path / "a.exr"))
     (tmp_path / "s.xml").write_text(f"""<scene version="3.0.0">
   <integrator type="stokes"><integrator type="path"><integer name="max_depth" value="2"/></integrator></integrator>
