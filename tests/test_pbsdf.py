@@ -6,7 +6,7 @@ Physics and format checked:
 - the reader on hand-built tables with NaN, negative-M00 and over-polarized cells: the counts
   are exact and no such cell reaches the fit;
 - the frame conversion against Mitsuba's own C++ ``measured_polarized`` eval (scalar variant),
-  rotated into the paper's bases by ``hyde_bsdf.mitsuba.frames.eval_paper``: the NumPy lookup
+  rotated into the paper's bases by ``hyde_bsdf.validation._frames.eval_paper``: the NumPy lookup
   replica in the paper's bases equals it to 1e-4 (float32 interpolation), including the NaN
   quirks (a NaN in M00 at a corner blacks out the matrix, a NaN elsewhere makes it all NaN);
 - Mitsuba's C++ eval of an exported file against the Python ``hyde`` plugin: the error
@@ -169,7 +169,7 @@ def test_reader_refuses_a_table_mitsuba_would_refuse(tmp_path):
 
 def test_frames_and_lookup_match_mitsubas_measured_polarized(exported, tmp_path):
     mi = _mitsuba()
-    from hyde_bsdf.mitsuba.frames import eval_paper
+    from hyde_bsdf.validation._frames import eval_paper
 
     path, _ = exported
     t = read_pbsdf(path)
@@ -212,7 +212,7 @@ def test_frames_and_lookup_match_mitsubas_measured_polarized(exported, tmp_path)
 def test_cpp_eval_of_the_export_agrees_with_the_hyde_plugin_within_the_reported_error(exported):
     mi = _mitsuba()
     import hyde_bsdf
-    from hyde_bsdf.mitsuba.frames import eval_paper
+    from hyde_bsdf.validation._frames import eval_paper
 
     hyde_bsdf.register("scalar_spectral_polarized")
     path, report = exported
