@@ -318,9 +318,9 @@ def pbsdf_parser() -> Parser:
     ap.add_argument("--tolerance", type=float, default=0.05,
                     help="a cell with |M_jk| or a degree of polarization above (1 + tolerance) M00 is non-physical")
     ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
-    ap.add_argument("--json", default=None, metavar="FILE",
-                    help="write the result as JSON (values per band, standard errors, covariance, verdict, the "
-                         "table of models); '-' for stdout (the summary then goes to stderr)")
+    writes(ap.add_argument("--json", default=None, metavar="FILE",
+                           help="write the result as JSON (values per band, standard errors, covariance, verdict, "
+                                "the table of models); '-' for stdout (the summary then goes to stderr)"))
     add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
     writes(ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller "
