@@ -298,7 +298,7 @@ def validate(outdir="out/validation", quick=False):
 
         # ---- 3. round trip (against the index the export stored per band)
         data = pbsdf_samples(path, max_points=150 if quick else 3000)
-        fit = fit_pbsdf(data, progress=False)
+        fit = fit_pbsdf(data, shadowing=report.params["shadowing"], diffuse=report.params["diffuse"], progress=False)
         n_b, k_b = np.array(report.params["n"]), np.array(report.params["k"])
         worst = max(abs(fit.rms_slope / 0.3 - 1), *(abs(fit.n / n_b - 1)), *(abs(fit.k / k_b - 1)))
         checks.append(dict(name="round trip export -> read -> fit: largest relative error of rms_slope, n, k (5 bands)",

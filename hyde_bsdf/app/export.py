@@ -16,7 +16,7 @@ from hyde_bsdf.app.args import Parser, quiet_option, user_input
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.pbsdf_bands import BAND_INDEX, check_wavelengths, choose_bands, index_spectrum
 from hyde_bsdf.fit.pbsdf_export import DEFAULT_RESOLUTION, export_pbsdf
-from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
+from hyde_bsdf.model.terms import DIFFUSE, RENDER_DEFAULT, SHADOWING
 from hyde_bsdf.progress import stderr_lines
 
 __all__ = ["build_parser", "cli_main"]
@@ -41,10 +41,12 @@ def build_parser() -> Parser:
     ap.add_argument("--material", default=None, help="a Mitsuba data/ior material (Au, Ag, Al, Cu, ...)")
     ap.add_argument("--n", default=None, help="real part of the index: one value or 5 (450..650 nm)")
     ap.add_argument("--k", default=None, help="imaginary part (paper's kappa >= 0): one value or 5")
-    ap.add_argument("--shadowing", default=SHADOWING[0], choices=SHADOWING,
+    ap.add_argument("--shadowing", default=RENDER_DEFAULT[0], choices=SHADOWING,
                     help="shadowing-masking: the paper's V-groove, Smith's for Beckmann, or none (default %(default)s)")
-    ap.add_argument("--diffuse", default=DIFFUSE[0], choices=DIFFUSE,
-                    help="diffuse term: the paper's, a reciprocal variant, or none (default %(default)s)")
+    ap.add_argument("--diffuse", default=RENDER_DEFAULT[1], choices=DIFFUSE,
+                    help="diffuse term: the reciprocal form of the paper's (default: a table that conserves energy in "
+                         "a path tracer, as the plugin's default), the paper's Eq. 17 (gains energy at grazing "
+                         "angles in a path tracer: docs/plugin.md), none, ... (default %(default)s)")
     ap.add_argument("--resolution", default="x".join(map(str, DEFAULT_RESOLUTION)),
                     help="N_phi_d x N_theta_d x N_theta_h (default %(default)s)")
     ap.add_argument("--error-samples", type=int, default=20000,
