@@ -7,7 +7,7 @@ tutorial's gradient, eta 1.5), one calibrated camera (60 deg elevation, 3 units 
 intrinsics are the raw sensor's) and two point lights (docs/tutorials/camera.md's).  For each n the film
 scales with the map -- (1224 x 1024) n / 256 super-pixels, a texel ~4.5 x 4.5 super-pixels at the
 centre -- so 256^2 texels IS the 5-megapixel run.  The capture is simulated as in
-validation/capture_camera.py (its camera noise model NOISE and exposure SIGNAL): the truth rendered
+hyde_bsdf/validation/capture_camera.py (its camera noise model NOISE and exposure SIGNAL): the truth rendered
 through the calibrated sensor (2 passes of 4 spp), put on the raw DoFP mosaic (Sony layout) with shot
 and read noise, and estimated back by super-pixel with propagated sigma
 (:func:`hyde_bsdf.inverse.analyzer.simulate_capture`).  Then :func:`invert_maps_tiled` fits alpha with
@@ -48,7 +48,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "validation"))
 
 FULL = (1224, 1024)          # Stokes super-pixels of the 5 MP DoFP camera (2448 x 2048 raw)
 FULL_TEXELS = 256
@@ -103,7 +102,7 @@ def simulate(n: int, folder: Path, seed: int = 0):
     """The capture of an n x n sample: (Capture, truth, seconds)."""
     import mitsuba as mi
 
-    from capture_camera import NOISE, SIGNAL
+    from hyde_bsdf.validation.capture_camera import NOISE, SIGNAL
     from hyde_bsdf.inverse.analyzer import simulate_capture
     from hyde_bsdf.inverse.camera_data import camera_reference
     from hyde_bsdf.inverse.observations import render_stokes_np
@@ -137,7 +136,7 @@ def child(n: int, tile_texels: int, iterations: int, uncertainty: bool) -> dict:
     from hyde_bsdf import inverse as inv
     from hyde_bsdf.inverse import tiles as tl
 
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     grid = max(1, round(n / tile_texels))
     with tempfile.TemporaryDirectory() as tmp:
         capture, truth, t_sim = simulate(n, Path(tmp))

@@ -4,7 +4,7 @@ One iteration = set the parameters, ``mi.render(scene, params, spp, seed)`` thro
 ``stokes`` around ``path`` (llvm_ad_spectral_polarized), the masked Stokes loss,
 ``dr.backward``, one ``mi.ad.Adam`` step (exactly hyde_bsdf.inverse.invert).  Each
 material runs in its own fresh process (so the peak resident memory is its own):
-the scene of scenes/inverse.xml at ``--res`` x ``--res`` pixels and ``--spp`` samples,
+the scene of hyde_bsdf/data/scenes/inverse.xml at ``--res`` x ``--res`` pixels and ``--spp`` samples,
 ``--iterations`` iterations; reported: the first iteration (includes the JIT
 compilation), the median of the later ones, and the process's resident memory
 before the loop and at its peak (ru_maxrss).  roughconductor gets the same
@@ -16,7 +16,7 @@ The multijitter sampler rounds sample counts to a product of two near-equal inte
     python benchmarks/bench_inverse.py --scalar [--res 64] [--spp 16] [--iterations 40] [--csv out/bench_inverse.csv]
 
 Default (``--maps``): the SVBRDF inversion (hyde_bsdf.inverse.invert_maps) of the
-validation's textured plane (validation/svbrdf_inverse.py: a 32 x 32 Beckmann alpha bitmap,
+validation's textured plane (hyde_bsdf/validation/svbrdf_inverse.py: a 32 x 32 Beckmann alpha bitmap,
 3 views in one batch sensor x 2 point lights, llvm_ad_mono_polarized, 4 spp), with ``hyde``
 (diffuse "paper" and "none") against ``roughconductor`` given the same ``alpha`` texture, eta, k
 (its key ``alpha.data`` is hyde's).  All in one process: the scenes are built and JIT-warmed,
@@ -70,11 +70,11 @@ def run_one(name, res, spp, iterations):
 
     cfg = CONFIGS[name]
     inv.prepare()
-    scene = inv.load_scene(None, res=res, spp=spp, bsdf=cfg["bsdf"], diffuse=cfg["diffuse"])
-    ref = inv.render_reference(scene, inv.TRUTH, 4 * spp, seed=0, bsdf=cfg["bsdf"])
+    scene = inv.scalar.load_scene(None, res=res, spp=spp, bsdf=cfg["bsdf"], diffuse=cfg["diffuse"])
+    ref = inv.scalar.render_reference(scene, inv.scalar.TRUTH, 4 * spp, seed=0, bsdf=cfg["bsdf"])
     loss = inv.StokesLoss(ref)
     rss0 = _rss_mib()
-    r = inv.invert(scene, loss, inv.START, iterations=iterations, spp=spp, seed=1, bsdf=cfg["bsdf"],
+    r = inv.invert(scene, loss, inv.scalar.START, iterations=iterations, spp=spp, seed=1, bsdf=cfg["bsdf"],
                    progress=False)
     t = np.array([h["seconds"] for h in r.history])
     per = np.diff(t)
@@ -102,16 +102,16 @@ def bench_maps(res=80, rounds=7, iterations=6, variant=None, spp=4, csv_path=Non
 
     from hyde_bsdf import inverse as inv
 
-    variant = inv.prepare(variant or inv.MAP_VARIANT)
-    truth = inv.example_maps(32)
+    variant = inv.prepare(variant or inv.observations.MAP_VARIANT)
+    truth = inv.observations.example_maps(32)
     setups = {}
     for name, cfg in MAP_CONFIGS.items():
         obs = []
-        for light in range(len(inv.LIGHTS)):
-            scene = mi.load_dict(inv.plane_scene_dict(truth, bsdf=cfg["bsdf"], diffuse=cfg["diffuse"],
+        for light in range(len(inv.observations.LIGHTS)):
+            scene = mi.load_dict(inv.observations.plane_scene_dict(truth, bsdf=cfg["bsdf"], diffuse=cfg["diffuse"],
                                                       shadowing=cfg.get("shadowing"), light=light, res=res, spp=spp))
-            obs.append(inv.Observation(scene, inv.render_stokes_np(scene, 0, 4 * spp, seed=0)))
-        seen = sum(inv.texel_coverage(o, truth.shape) for o in obs) > 0
+            obs.append(inv.Observation(scene, inv.observations.render_stokes_np(scene, 0, 4 * spp, seed=0)))
+        seen = sum(inv.observations.texel_coverage(o, truth.shape) for o in obs) > 0
         setups[name] = (obs, seen)
     times = {name: [] for name in MAP_CONFIGS}
 

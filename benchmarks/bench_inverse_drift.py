@@ -48,10 +48,10 @@ def main(argv=None):
     from hyde_bsdf import inverse as inv
 
     inv.prepare(args.variant)
-    truth = inv.example_maps(16)
+    truth = inv.observations.example_maps(16)
     setups = {}
     for name in ("hyde", "roughconductor"):
-        scene = mi.load_dict(inv.plane_scene_dict(truth, bsdf=name, light=0, res=args.res, spp=args.spp))
+        scene = mi.load_dict(inv.observations.plane_scene_dict(truth, bsdf=name, light=0, res=args.res, spp=args.spp))
         ref = mi.render(scene, spp=4 * args.spp, seed=0)
         params = mi.traverse(scene)
         key = next(k for k in params.keys() if k.endswith("alpha.data"))

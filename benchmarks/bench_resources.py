@@ -50,11 +50,11 @@ def memory_model(name, units, commands, estimate, fixed_key, per_key):
 
 
 def render(tmp, variant, polarized):
-    """``hyde-bsdf render scenes/inverse.xml`` at res 300, 600 and 900, 1 spp."""
+    """``hyde-bsdf render hyde_bsdf/data/scenes/inverse.xml`` at res 300, 600 and 900, 1 spp."""
     from hyde_bsdf.resources import render_bytes
 
     sizes = (300, 600, 900)
-    cmds = [CLI + ["render", "scenes/inverse.xml", "-o", str(tmp / f"r{r}.exr"), "--variant", variant,
+    cmds = [CLI + ["render", "hyde_bsdf/data/scenes/inverse.xml", "-o", str(tmp / f"r{r}.exr"), "--variant", variant,
                    "-D", f"res={r}", "--spp", "1", "-q"] for r in sizes]
     per_key = "render_stokes_bytes_per_pixel" if polarized else "render_colour_bytes_per_pixel"
     return memory_model(f"render {variant} px", [r * r for r in sizes], cmds,

@@ -55,6 +55,16 @@ class Costs:
     dense_interior_seconds_per_n3: float = 5.5e-10
     #: ``mom.scatter``'s fast solver, CPU seconds per unknown (where it has not run yet)
     fast_seconds_per_unknown: float = 2e-3
+    #: ``mom.estimate``'s model of the fast solver's time per partition (hyde_bsdf/mom/cost.py; fitted and checked
+    #: by benchmarks/bench_mom_estimate.py): set-up per strong-part entry and region, per entry and skin-depth panel,
+    #: per plane wave; solve per strong entry and per plane wave, each per right-hand side and region; far field per
+    #: unknown, angle and right-hand side
+    fast_fill_seconds_per_entry: float = 6.76e-7
+    fast_panel_seconds_per_entry: float = 7.72e-7
+    fast_wave_seconds: float = 0.0
+    fast_band_seconds: float = 1.37e-9
+    fast_sweep_seconds: float = 2.9e-8
+    far_field_seconds: float = 5.65e-10
     #: ``export``: Mitsuba's loader holds this many copies of a ``.pbsdf`` table
     pbsdf_loader_copies: int = 2
     #: disk, upper bounds: one plot file (the largest raster figure, a 16-element fit at 120 dpi, is

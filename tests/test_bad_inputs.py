@@ -6,12 +6,12 @@ before the output paths and the scene have been checked.
 
 * ``argv``: the ``hyde-bsdf`` arguments; ``{name}`` is filled from the ``paths`` fixture below
   (``tmp``, ``file`` (a regular file), ``tiny`` (a small valid scene), ``nosensor``, ``ptracer``,
-  ``inverse`` (scenes/inverse.xml), ``csv`` (a Mueller-measurement CSV), ``notreport``
+  ``inverse`` (hyde_bsdf/data/scenes/inverse.xml), ``csv`` (a Mueller-measurement CSV), ``notreport``
   (a folder with a user's file in it));
 * ``needle``: a piece of the last stderr line (it names the parameter or file);
 * ``how``: ``"in"`` runs ``hyde_bsdf.app.cli.main`` in this process; ``"sub"`` runs
   ``python -m hyde_bsdf.app.cli`` (where a crash or signal is the point); ``"lowmem"`` is ``"in"``
-  with ``MemAvailable`` read as 2 GiB; ``"nocheckout"`` is ``"in"`` with the validation scripts'
+  with ``MemAvailable`` read as 2 GiB; ``"noscripts"`` is ``"in"`` with the validation scripts'
   folder missing; ``"sigint"`` sends Ctrl-C once the render's progress line appears;
   ``"pipe"`` closes the reader of stdout at once (``hyde-bsdf fit ... | head -0``);
   ``"cuda"`` is ``"in"``, run only on a machine without a CUDA GPU (hardware-dependent);
@@ -107,7 +107,8 @@ CLI_ROWS = [
     ("validate: outdir under a regular file", ["validate", "-o", "{file}/r"], 2, "is a regular file", "in"),
     ("validate: outdir is a user's folder", ["validate", "-o", "{notreport}"], 2, "is not a validation report", "in"),
     ("validate: outdir is the current folder", ["validate", "-o", "."], 2, "is the current folder", "in"),
-    ("validate: outside a source checkout", ["validate", "-o", "{tmp}/r"], 2, "source checkout", "nocheckout"),
+    ("validate: the package's scripts are missing (an incomplete install)", ["validate", "-o", "{tmp}/r"], 2,
+     "validation scripts are missing", "noscripts"),
     ("validate: --scripts names a folder without the scripts (new)", ["validate", "-o", "{tmp}/r", "--scripts",
      "{tmp}"], 2, "holds none of the validation scripts", "in"),
     # --- fit (output path checked before the fit) ---
@@ -419,7 +420,7 @@ def paths(tmp_path_factory):
     return {"site": tmp / "site", "full": tmp / "full", "stale": tmp / "stale",
             "copies": tmp / "copies.csv", "impossible": tmp / "impossible.csv", "crcsv": tmp / "crlines.csv",
             "tmp": tmp, "file": tmp / "file.txt", "tiny": tmp / "tiny.xml", "nosensor": tmp / "nosensor.xml",
-            "ptracer": tmp / "ptracer.xml", "inverse": ROOT / "scenes" / "inverse.xml", "csv": tmp / "meas.csv",
+            "ptracer": tmp / "ptracer.xml", "inverse": ROOT / "hyde_bsdf" / "data" / "scenes" / "inverse.xml", "csv": tmp / "meas.csv",
             "notreport": tmp / "notreport", "badhyde": tmp / "badhyde.xml", "ref1e30": tmp / "ref1e30.exr",
             **_plugin_scenes(tmp), **_gate_files(tmp)}
 
@@ -601,7 +602,7 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
             def no_pass(*args, **kwargs):
                 raise AssertionError("a render pass ran before the free space was checked")
             monkeypatch.setattr("hyde_bsdf.render.renderer._render_pass", no_pass)
-        if how == "nocheckout":
+        if how == "noscripts":
             monkeypatch.setattr("hyde_bsdf.app.report.build.VALIDATION_DIR", paths["tmp"] / "no_validation")
         monkeypatch.chdir(paths["tmp"])
         try:

@@ -13,6 +13,7 @@ import inspect
 
 import numpy as np
 import pytest
+from conftest import library_modules
 
 import hyde_bsdf
 from hyde_bsdf.app.cli import COMMANDS, main
@@ -153,7 +154,7 @@ def test_exceptions_become_messages_in_one_place():
     root = Path(hyde_bsdf.__file__).resolve().parent
     allowed = {root / "app" / "cli.py", root / "progress.py"}
     bad = []
-    for path in sorted(root.rglob("*.py")):
+    for path in library_modules(root):
         if path in allowed:
             continue
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
@@ -184,3 +185,23 @@ def test_library_usage_errors_reach_the_command_line_as_one_prefixed_line(tmp_pa
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in err[0]
     assert f"data file {str(csv)!r}: too few data to fit n, k, rms_slope" in err[0]
+
+
+def test_every_flag_of_the_table_is_an_option_of_a_command():
+    """The one table that turns the library's parameter names into flags (hyde_bsdf.app.flags) names
+    only options some sub-command has, and the command line prints them: a library message
+    'lower `spp`' reaches the user as 'lower --spp'."""
+    import importlib
+
+    from hyde_bsdf.app.cli import COMMANDS
+    from hyde_bsdf.app.flags import FLAGS, for_command_line
+
+    options = set()
+    for module, _ in COMMANDS.values():
+        mod = importlib.import_module(module)
+        for name in ("build_parser", "csv_parser", "pbsdf_parser"):
+            if hasattr(mod, name):
+                options |= {o for a in getattr(mod, name)()._actions for o in a.option_strings}
+    assert {flag.split()[0] for flag in FLAGS.values()} <= options
+    assert for_command_line("lower `spp` or fewer `workers`; `partitions` stays") == \
+        "lower --spp or fewer --workers; `partitions` stays"

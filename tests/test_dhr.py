@@ -74,7 +74,7 @@ def test_table_interpolation_error_over_the_whole_slope_range_1e_4_to_100():
     """Issue 9: the diffuse term reads the table for rms_slope 1e-4 .. 100; its error must stay
     <= 2e-4 everywhere, including the grazing dip of near-mirror surfaces (rho falls to 0.934
     within cos(theta_i) ~ rms_slope of 90 deg, the hardest place: 7.5e-3 on a uniform x grid)
-    and very rough ones.  Measured on a 2049 x 241 grid: 3.1e-5 (validation/dhr_convergence.py)."""
+    and very rough ones.  Measured on a 2049 x 241 grid: 3.1e-5 (hyde_bsdf/validation/dhr_convergence.py)."""
     table = dhr.load_table("vgroove")
     t = rng.uniform(0, math.pi / 2, 300)
     s = np.exp(rng.uniform(math.log(1e-4), math.log(100), 300))

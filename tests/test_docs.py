@@ -2,7 +2,7 @@
 
 * Every fenced ```python block runs.  The blocks of one page run in order in one subprocess
   (a shared namespace, like a notebook), with the current directory a scratch folder that
-  links ``scenes/``, ``validation/`` and ``benchmarks/`` of this checkout, and with
+  links ``hyde_bsdf/`` (its scenes and validation scripts) and ``benchmarks/`` of this checkout, and with
   ``HYDE_DOCS_FAST=1`` set: a snippet may read it to pick smaller sizes.  A block that is
   deliberately not runnable is fenced as ```python no-run; there are at most MAX_NO_RUN.
 * A block fenced as ```xml file=NAME is written to NAME in that folder before the page's
@@ -10,7 +10,7 @@
   loaded with ``mi.load_string`` in ``llvm_ad_spectral_polarized`` after ``register()``.
 * Every relative link (and image) points at an existing file, and an ``#anchor`` into a
   Markdown page at one of its headings.
-* Every repository path the text names (``scenes/demo.xml``, ``validation/fig6_mom.py``, ...)
+* Every repository path the text names (``hyde_bsdf/data/scenes/demo.xml``, ``hyde_bsdf/validation/fig6_mom.py``, ...)
   exists, and every dotted name ``hyde_bsdf.x.y`` resolves to a module or a name defined in one.
 * Every command line shown (in ```sh blocks and in inline code): ``hyde-bsdf SUB`` is a
   sub-command and each of its ``--flags`` appears in ``hyde-bsdf SUB --help`` (which is run);
@@ -164,7 +164,7 @@ def _runnable_pages():
 @pytest.mark.parametrize("page", _runnable_pages(), ids=_rel)
 def test_code_blocks_run(page, tmp_path):
     """Each page's Python blocks run in order in one process; its XML blocks load."""
-    for name in ("scenes", "validation", "benchmarks"):
+    for name in ("hyde_bsdf", "benchmarks"):
         (tmp_path / name).symlink_to(REPO / name)
     bl = [b for b in blocks(page) if not b.flags.get("no-run")]
     spec = {
@@ -340,7 +340,7 @@ def _flags(tokens):
     return [t.split("=", 1)[0] for t in tokens if t.startswith("-") and t not in ("-", "--")]
 
 
-_PLACEHOLDER = re.compile(r"^(?:[A-Z][A-Z_]+:?|.*<[^>]*>.*)$")   # COMMAND, CMD, validation/<name>.py
+_PLACEHOLDER = re.compile(r"^(?:[A-Z][A-Z_]+:?|.*<[^>]*>.*)$")   # COMMAND, CMD, hyde_bsdf/validation/<name>.py
 
 
 def _check_command(cmd: str, commands: dict) -> list[str]:
@@ -387,7 +387,7 @@ def _check_command(cmd: str, commands: dict) -> list[str]:
                     problems.append(f"{part}: no script {args[0]}")
                     continue
                 source = script.read_text(encoding="utf-8")
-                common = REPO / "validation" / "_common.py"
+                common = REPO / "hyde_bsdf" / "validation" / "_common.py"
                 if script.parent.name == "validation" and common.exists():
                     source += common.read_text(encoding="utf-8")
                 for flag in _flags(args[1:]):

@@ -14,6 +14,7 @@ import ast
 from pathlib import Path
 
 import pytest
+from conftest import library_modules
 
 PACKAGE = Path(__file__).resolve().parent.parent / "hyde_bsdf"
 
@@ -40,7 +41,7 @@ def _plain_raises(path: Path, root: Path = PACKAGE) -> list[str]:
 
 
 def _library_files():
-    return sorted(PACKAGE.rglob("*.py"))
+    return library_modules(PACKAGE)
 
 
 def test_no_plain_value_or_type_error_outside_the_allow_list():

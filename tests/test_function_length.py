@@ -10,6 +10,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+from conftest import library_modules
+
 PACKAGE = Path(__file__).resolve().parent.parent / "hyde_bsdf"
 MAX_LINES = 60
 
@@ -46,7 +48,7 @@ def _nested_class_lines(node) -> int:
 def function_lengths():
     """(length, "path:name", line) for every function and method under hyde_bsdf/."""
     rows = []
-    for path in sorted(PACKAGE.rglob("*.py")):
+    for path in library_modules(PACKAGE):
         rel = path.relative_to(PACKAGE).as_posix()
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):

@@ -20,15 +20,12 @@ that of the model's geometry), ``llvm_ad_rgb``, NumPy's seeded generator for the
 Cost: ~10 s (kernel compilation of three models, 2^18-sample cells).
 """
 import math
-import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "validation"))
-import furnace  # noqa: E402
+from hyde_bsdf.validation import furnace
 
 SAMPLES = 1 << 18
 

@@ -22,8 +22,8 @@ AT = {"rms_slope": 0.4, "eta": 2.0, "k": 4.0}
 def tiny():
     previous = mi.variant()
     inv.prepare()
-    scene = inv.load_scene(None, res=RES, spp=SPP)
-    ref = inv.render_reference(scene, inv.TRUTH, 64, seed=0)
+    scene = inv.scalar.load_scene(None, res=RES, spp=SPP)
+    ref = inv.scalar.render_reference(scene, inv.scalar.TRUTH, 64, seed=0)
     yield scene, ref
     if previous is not None and previous != mi.variant():
         mi.set_variant(previous)
@@ -46,9 +46,9 @@ def test_ad_gradient_equals_finite_difference_same_seed(tiny):
     """Same samples for the AD pass and both FD renders: agreement to the FD truncation error."""
     scene, ref = tiny
     fn = inv.StokesLoss(ref)
-    _, ad = inv.loss_and_gradient(scene, fn, AT, spp=SPP, seed=3, seed_grad=3)
+    _, ad = inv.scalar.loss_and_gradient(scene, fn, AT, spp=SPP, seed=3, seed_grad=3)
     for p in inv.PARAMETERS:
-        fd = inv.finite_difference_gradient(scene, fn, AT, p, rel_step=1e-2, spp=SPP, seed=3)
+        fd = inv.scalar.finite_difference_gradient(scene, fn, AT, p, rel_step=1e-2, spp=SPP, seed=3)
         assert ad[p] == pytest.approx(fd, rel=5e-3), p
     # at AT every parameter is too large, so the loss grows with rms_slope and falls with eta
     assert ad["rms_slope"] > 0 and ad["eta"] < 0
@@ -62,10 +62,10 @@ def test_decorrelated_gradient_pass_has_right_sign_and_size(tiny):
     ad = {p: [] for p in inv.PARAMETERS}
     fd = {p: [] for p in inv.PARAMETERS}
     for seed in (5, 6, 7, 8):
-        _, g = inv.loss_and_gradient(scene, fn, AT, spp=SPP, seed=seed)
+        _, g = inv.scalar.loss_and_gradient(scene, fn, AT, spp=SPP, seed=seed)
         for p in inv.PARAMETERS:
             ad[p].append(g[p])
-            fd[p].append(inv.finite_difference_gradient(scene, fn, AT, p, rel_step=1e-2, spp=SPP, seed=seed))
+            fd[p].append(inv.scalar.finite_difference_gradient(scene, fn, AT, p, rel_step=1e-2, spp=SPP, seed=seed))
     for p in inv.PARAMETERS:
         a, f = np.mean(ad[p]), np.mean(fd[p])
         assert math.copysign(1, a) == math.copysign(1, f), p
@@ -76,22 +76,22 @@ def test_few_adam_steps_reduce_loss_and_approach_truth(tiny):
     scene, ref = tiny
     start = {"rms_slope": 0.4, "eta": 1.0, "k": 2.0}
     res = inv.invert(scene, inv.StokesLoss(ref), start, iterations=12, lr=0.05, spp=SPP, seed=10,
-                     truth=inv.TRUTH, progress=False, average_last=1)
+                     truth=inv.scalar.TRUTH, progress=False, average_last=1)
     first, last = res.history[0], res.history[-1]
     assert last["loss"] < 0.3 * first["loss"]
     for p in inv.PARAMETERS:
-        assert abs(math.log(last[p] / inv.TRUTH[p])) < abs(math.log(start[p] / inv.TRUTH[p])), p
+        assert abs(math.log(last[p] / inv.scalar.TRUTH[p])) < abs(math.log(start[p] / inv.scalar.TRUTH[p])), p
     assert len(res.history) == 12 and res.seconds_per_iteration > 0
 
 
 def test_parameter_keys_and_errors(tiny):
     scene, _ = tiny
-    keys = inv.parameter_keys(mi.traverse(scene))
+    keys = inv.scalar.parameter_keys(mi.traverse(scene))
     assert keys == {"rms_slope": "sphere.bsdf.rms_slope.value", "eta": "sphere.bsdf.eta.value",
                     "k": "sphere.bsdf.k.value"}
     empty = mi.load_dict({"type": "scene", "s": {"type": "sphere", "bsdf": {"type": "diffuse"}}})
     with pytest.raises(ValueError, match="exactly one BSDF parameter for 'rms_slope'"):
-        inv.parameter_keys(mi.traverse(empty))
+        inv.scalar.parameter_keys(mi.traverse(empty))
     with pytest.raises(ValueError, match="start must give a value"):
         inv.invert(scene, inv.StokesLoss(tiny[1]), {"eta": 1.0}, iterations=1)
 

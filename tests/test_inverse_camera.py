@@ -85,7 +85,7 @@ def test_loss_ignores_unmeasured_components_and_weights_by_sigma():
     pytest.importorskip("mitsuba")
     from hyde_bsdf import inverse as inv
 
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     rng = np.random.default_rng(3)
     ref = 1.0 + rng.random((4, 6, 6))
     ref[1:] *= 0.2
@@ -136,7 +136,7 @@ def test_linear_only_dielectric_with_sigma_maps():
     from hyde_bsdf.inverse import acquisition as acqm
     from hyde_bsdf.inverse.camera_data import camera_observation
 
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     truth = acqm.example_material("dielectric", 4)
     truth["specular_reflectance"] = 1.0
     acq = inv.design_acquisition("dielectric", facet_angles=(25.0, 55.0), off_specular=((35.0, 15.0),), retarder=())
@@ -177,15 +177,15 @@ def test_designs_know_the_camera():
     assert "M22" in pol45.elements_for("linear") and "M32" not in pol45.elements_for("linear")
     assert "M32" in pol45.elements_for("stokes")
     texel = {"alpha": 0.25, "eta": 0.8, "k": 4.0}
-    full = inv.predicted_stderr(lin, texel, camera="stokes")
-    part = inv.predicted_stderr(lin, texel)
+    full = inv.acquisition.predicted_stderr(lin, texel, camera="stokes")
+    part = inv.acquisition.predicted_stderr(lin, texel)
     assert all(part[p] >= full[p] * (1 - 1e-9) for p in full) and part["k"] > 1.2 * full["k"]
     diel = inv.design_acquisition("dielectric")
-    d_full = inv.predicted_stderr(diel, {"alpha": 0.25, "eta": 1.6}, fit=("alpha", "eta"), camera="stokes")
-    d_lin = inv.predicted_stderr(diel, {"alpha": 0.25, "eta": 1.6}, fit=("alpha", "eta"), camera="linear")
+    d_full = inv.acquisition.predicted_stderr(diel, {"alpha": 0.25, "eta": 1.6}, fit=("alpha", "eta"), camera="stokes")
+    d_lin = inv.acquisition.predicted_stderr(diel, {"alpha": 0.25, "eta": 1.6}, fit=("alpha", "eta"), camera="linear")
     assert d_lin["eta"] == pytest.approx(d_full["eta"], rel=1e-6)
     unpol = inv.design_acquisition("metal", polarizer_angles=(None,), retarder=(), camera="linear")
-    assert inv.predicted_stderr(unpol, texel)["eta"] > 0.10
+    assert inv.acquisition.predicted_stderr(unpol, texel)["eta"] > 0.10
     with pytest.raises(ValueError, match="camera must be one of"):
         inv.design_acquisition("metal", camera="mono")
 
@@ -203,7 +203,7 @@ def test_calibrated_rig_recovers_an_alpha_map():
     from hyde_bsdf.inverse.observations import render_stokes_np
     from hyde_bsdf.render.camera import Calibration, calibrated_scene, light_dict
 
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     alpha = 0.2 + 0.2 * np.linspace(0, 1, 16).reshape(4, 4)
 
     def sample(a):
@@ -253,7 +253,7 @@ def test_observations_from_files_checks_before_rendering(tmp_path):
     (tmp_path / "lights.json").write_text(json.dumps({"lights": [{"type": "point", "position": [0, 0, 3]}] * 2}))
     S = {k: v[:6, :5, 0] for k, v in _stokes(6, 5).items() if k != "S3"}
     ref = write_camera_stokes(tmp_path / "s.exr", S)
-    with pytest.raises(UsageError, match=r"give 2 --reference files, light-major"):
+    with pytest.raises(UsageError, match=r"give 2 `references` files, light-major"):
         observations_from_files("scene.xml", tmp_path / "cam.json", tmp_path / "lights.json", [ref])
-    with pytest.raises(UsageError, match=r"is 5x6 px but camera 0 of --camera is 8x6 .*binning"):
+    with pytest.raises(UsageError, match=r"is 5x6 px but camera 0 of `cameras` is 8x6 .*binning"):
         observations_from_files("scene.xml", tmp_path / "cam.json", tmp_path / "lights.json", [ref, ref])

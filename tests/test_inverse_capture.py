@@ -64,9 +64,9 @@ def test_polarizer_sheet_halves_s0_and_rotates_the_state():
     material = {"alpha": 0.2, "eta": 1.5, "k": 0.0}
     out = {}
     for pol in (None, 45.0):
-        c = inv.Configuration((40.0, 0.0), (40.0, 180.0), pol)
-        scene = mi.load_dict(inv.acquisition_scene_dict(c, material, res=8, spp=4))
-        S = inv.render_stokes_np(scene, 0, 64, seed=1)
+        c = inv.acquisition.Configuration((40.0, 0.0), (40.0, 180.0), pol)
+        scene = mi.load_dict(inv.acquisition.acquisition_scene_dict(c, material, res=8, spp=4))
+        S = inv.observations.render_stokes_np(scene, 0, 64, seed=1)
         m = S[0] > 0
         out[pol] = S[:, m].mean(axis=1)
     assert out[45.0][0] / out[None][0] == pytest.approx(0.5, rel=0.02)
@@ -79,7 +79,7 @@ def _tiny_problem(case="dielectric", n=2, res=12, fit=("alpha", "eta"), componen
     truth = acqm.example_material(case, n)
     if not scale:
         truth["specular_reflectance"] = 1.0
-    acq = (inv.fixed_rig_acquisition(case, tilts=(0.0, 12.0)) if rig else
+    acq = (inv.acquisition.fixed_rig_acquisition(case, tilts=(0.0, 12.0)) if rig else
            inv.design_acquisition(case, facet_angles=facet_angles, off_specular=((35.0, 15.0),), retarder=()))
     if configs is not None:
         acq.configurations = acq.configurations[:configs]
@@ -93,7 +93,7 @@ def test_information_block_matches_finite_differences():
     renders with the same seed (relative step 1e-3), and so A_t = sum w J J^T agrees with the
     matrix built from the differences, texel by texel (2 x 2 map, alpha and eta, one picture)."""
     truth, obs = _tiny_problem(configs=1)
-    problem = inv.MapProblem.build(obs, {k: truth[k] for k in ("alpha", "eta")}, ("alpha", "eta"))
+    problem = inv.maps.MapProblem.build(obs, {k: truth[k] for k in ("alpha", "eta")}, ("alpha", "eta"))
     scene, params, keys = problem.scenes[0], problem.all_params[0], problem.keys[0]
     S, J = stokes_tangents(scene, params, keys, ("alpha", "eta"), 0, 16, 5, problem.channels[0])
     h = 1e-3
@@ -102,7 +102,7 @@ def test_information_block_matches_finite_differences():
         out = []
         for sgn in (1, -1):
             problem.write({name: problem.as_value(name, base * np.exp(sgn * h))})
-            out.append(inv.render_stokes_np(scene, 0, 16, seed=5))
+            out.append(inv.observations.render_stokes_np(scene, 0, 16, seed=5))
         problem.write({name: problem.as_value(name, base)})
         fd = (out[0] - out[1]) / (2 * h)
         mask = problem.losses[0].mask_np
@@ -136,14 +136,14 @@ def test_fisher_information_matches_the_numpy_model():
     fit = ("alpha", "eta", "k")
     truth = acqm.example_material("metal", 4)
     truth["specular_reflectance"] = 1.0
-    acq = inv.Acquisition([inv.Configuration((55.0, 0.0), (55.0, 180.0), 45.0)], "metal")
+    acq = inv.acquisition.Acquisition([inv.acquisition.Configuration((55.0, 0.0), (55.0, 180.0), 45.0)], "metal")
     obs = inv.synthetic_observations(acq, truth, {k: truth[k] for k in fit}, res=16, spp=4, spp_ref=16,
                                      noise=0.01, seed=2)
-    problem = inv.MapProblem.build(obs, {k: truth[k] for k in fit}, fit)
+    problem = inv.maps.MapProblem.build(obs, {k: truth[k] for k in fit}, fit)
     sigma = obs[0].noise_std
     A, B, g, noise, n_data = information_blocks(problem, fit, spp=8, seed=3, noise=sigma)
     assert np.allclose(A, B, rtol=1e-9)
-    pix, tex = inv.pixel_texels(obs[0], (4, 4), None, sub=4, edges=True)
+    pix, tex = inv.observations.pixel_texels(obs[0], (4, 4), None, sub=4, edges=True)
     key, counts = np.unique(pix.astype(np.int64) * 16 + tex, return_counts=True)
     inside = np.bincount(key[counts == 16] % 16, minlength=16)
     h = 1e-4
@@ -177,7 +177,7 @@ def test_predicted_stderr_designs_the_metal_acquisition():
     beta = 55 deg already gives n to < 5 %."""
     m = acqm.example_material("metal", 4)        # (8 x 8 in the docstring's numbers)
     ppt = (128 / 32 / 1.05) ** 2
-    med = lambda acq: {k: float(np.median(v)) for k, v in inv.predicted_stderr(acq, m, pixels_per_texel=ppt).items()}
+    med = lambda acq: {k: float(np.median(v)) for k, v in inv.acquisition.predicted_stderr(acq, m, pixels_per_texel=ppt).items()}
     unpol = med(inv.design_acquisition("metal", polarizer_angles=(None,), retarder=()))
     linear = med(inv.design_acquisition("metal", retarder=()))
     preset = med(inv.design_acquisition("metal"))
@@ -185,7 +185,7 @@ def test_predicted_stderr_designs_the_metal_acquisition():
     assert unpol["eta"] > 0.10 and linear["eta"] < 0.035 and preset["eta"] < 0.9 * linear["eta"]
     assert single["eta"] < 0.05 and preset["alpha"] < 0.01 and preset["k"] < 0.01
     with pytest.raises(ValueError, match="values must give alpha and eta"):
-        inv.predicted_stderr(inv.design_acquisition("metal"), {"alpha": 0.2})
+        inv.acquisition.predicted_stderr(inv.design_acquisition("metal"), {"alpha": 0.2})
 
 
 def test_unknown_scale_s0_leaves_the_index_undetermined():
@@ -198,8 +198,8 @@ def test_unknown_scale_s0_leaves_the_index_undetermined():
     fit = ("alpha", "eta", "specular_reflectance")
     rel = {}
     for comp in ("stokes", "s0"):
-        problem = inv.MapProblem.build(obs, {k: truth[k] for k in fit}, fit, components=comp)
-        _, unc = inv.map_uncertainty(problem, {k: truth[k] for k in fit}, spp=8, polish=0)
+        problem = inv.maps.MapProblem.build(obs, {k: truth[k] for k in fit}, fit, components=comp)
+        _, unc = inv.maps.map_uncertainty(problem, {k: truth[k] for k in fit}, spp=8, polish=0)
         rel[comp] = unc.rel_stderr
     print({c: np.round(r["eta"], 4).tolist() for c, r in rel.items()})
     assert np.median(rel["stokes"]["eta"]) < 0.02 and np.all(rel["stokes"]["eta"] < 0.1)
@@ -244,7 +244,7 @@ def test_validation_case_tiny(case, fit):
     alpha within 8 %; n moves the images least and is weakly determined by 3 pictures of 16 px at
     1 % noise (measured: median error 17 % from a start at 21 %; with the uncertainty step its
     relative standard errors are of the same size and flag it), so only n < 30 % is asserted.
-    validation/svbrdf_index.py measures the metal at 16 x 16 texels (docs/validation.md)."""
+    hyde_bsdf/validation/svbrdf_index.py measures the metal at 16 x 16 texels (docs/validation.md)."""
     metal = case == "metal"
     truth, obs = _tiny_problem(case, n=4, res=16, fit=fit, facet_angles=(40.0, 70.0) if metal else (25.0, 55.0))
     start = {"alpha": 0.3, "eta": 1.6 if case == "dielectric" else 0.8, "k": 4.0}

@@ -62,7 +62,7 @@ def _one_error_line(err):
     (["--maps", "--weight", "-1"], ["--weight", ">= 0"]),
     (["--maps", "--fit", "alpha,rms_slope"], ["--fit", "same roughness"]),
     (["--reference", "/nonexistent/ref.exr"], ["/nonexistent/ref.exr", "does not exist"]),
-    (["--maps", "--scene", "scenes/inverse.xml"], ["--reference per scene"]),
+    (["--maps", "--scene", "hyde_bsdf/data/scenes/inverse.xml"], ["--reference per scene"]),
 ])
 def test_usage_errors_are_one_line_exit_2(capsys, argv, words):
     rc, _, err = _run(capsys, argv)

@@ -28,7 +28,7 @@ pytestmark = pytest.mark.usefixtures("map_variant")     # tests/conftest.py
 def _observations(filter_type="nearest", n=2, res=12):
     truth = acqm.example_material("dielectric", n)
     truth["specular_reflectance"] = 1.0
-    acq = inv.fixed_rig_acquisition("dielectric", facet_angle=50.0, tilts=(0.0, 12.0))
+    acq = inv.acquisition.fixed_rig_acquisition("dielectric", facet_angle=50.0, tilts=(0.0, 12.0))
     start = {"alpha": 0.3, "eta": 1.6}
     obs = inv.synthetic_observations(acq, truth, start, res=res, spp=4, spp_ref=32, noise=0.01, seed=2,
                                      filter_type=filter_type)
@@ -61,10 +61,10 @@ def test_filter_type_is_read_from_the_texture():
         _, start, obs = _observations(filter_type)
         params = mi.traverse(obs[0].scene)
         key = next(k for k in params.keys() if k.endswith("alpha.data"))
-        assert inv.filters_bilinearly(params, key, params[key].shape, inv.MAP_PARAMETERS["alpha"][1]) is expected
-        problem = inv.MapProblem.build(obs, start, tuple(start))
+        assert inv.maps.filters_bilinearly(params, key, params[key].shape, inv.MAP_PARAMETERS["alpha"][1]) is expected
+        problem = inv.maps.MapProblem.build(obs, start, tuple(start))
         assert problem.bilinear == () and problem.nearest == (("alpha", "eta") if expected else ())
-        assert not inv.filters_bilinearly(problem.all_params[0], problem.keys[0]["alpha"], problem.shapes["alpha"],
+        assert not inv.maps.filters_bilinearly(problem.all_params[0], problem.keys[0]["alpha"], problem.shapes["alpha"],
                                           inv.MAP_PARAMETERS["alpha"][1])
 
 
@@ -96,7 +96,7 @@ def test_bilinear_maps_are_fitted_as_nearest_with_one_warning():
     runs = {}
     for fit_filter in ("nearest", "bilinear"):
         truth, start, _ = _observations()
-        acq = inv.fixed_rig_acquisition("dielectric", facet_angle=50.0, tilts=(0.0, 12.0))
+        acq = inv.acquisition.fixed_rig_acquisition("dielectric", facet_angle=50.0, tilts=(0.0, 12.0))
         obs = inv.synthetic_observations(acq, truth, start, res=12, spp=4, spp_ref=32, noise=0.01, seed=2,
                                          filter_type="nearest", fit_filter_type=fit_filter)
         with warnings.catch_warnings(record=True) as caught:
@@ -110,7 +110,7 @@ def test_bilinear_maps_are_fitted_as_nearest_with_one_warning():
     for n in ("alpha", "eta"):
         np.testing.assert_allclose(bil.final[n], near.final[n], rtol=1e-6)
         np.testing.assert_allclose(bil.stderr[n], near.stderr[n], rtol=1e-6)
-    problem = inv.MapProblem.build(obs, {"alpha": 0.3, "eta": 1.6}, ("alpha", "eta"))
+    problem = inv.maps.MapProblem.build(obs, {"alpha": 0.3, "eta": 1.6}, ("alpha", "eta"))
     assert problem.bilinear == () and problem.nearest == ()        # the scenes were changed in place
 
 
@@ -119,7 +119,7 @@ def test_bilinear_maps_of_other_bsdfs_give_nan_standard_errors_and_one_warning()
     bilinear, its standard errors are NaN, and one BilinearFilterWarning says why."""
     truth = {"alpha": acqm.example_material("dielectric", 2)["alpha"], "eta": 0.2, "k": 3.0,
              "specular_reflectance": 1.0}
-    acq = inv.fixed_rig_acquisition("metal", facet_angle=50.0, tilts=(0.0, 12.0))
+    acq = inv.acquisition.fixed_rig_acquisition("metal", facet_angle=50.0, tilts=(0.0, 12.0))
     obs = inv.synthetic_observations(acq, truth, {"alpha": 0.3}, res=12, spp=4, spp_ref=16, noise=0.01, seed=2,
                                      bsdf="roughconductor", filter_type="bilinear")
     with warnings.catch_warnings(record=True) as caught:
@@ -145,12 +145,12 @@ def test_measured_masks_unseen_and_invalid_texels():
 def test_trajectory_convergence_tells_drift_from_jitter():
     rng = np.random.default_rng(3)
     level = 1.5 + 0.002 * rng.standard_normal(20)            # jitter around a level
-    assert inv.trajectory_converged(level, "eta") == (True, "")
+    assert inv.scalar.trajectory_converged(level, "eta") == (True, "")
     trend = np.linspace(1.2, 1.4, 20) + 0.002 * rng.standard_normal(20)   # still moving
-    ok, msg = inv.trajectory_converged(trend, "eta")
+    ok, msg = inv.scalar.trajectory_converged(trend, "eta")
     assert not ok and msg.startswith("eta has not converged: it moved by")
-    assert inv.trajectory_converged(np.linspace(1.5, 1.5005, 20), "eta")[0]   # below the 0.1 % floor
-    assert not inv.trajectory_converged([1.0, 1.1], "eta")[0]
+    assert inv.scalar.trajectory_converged(np.linspace(1.5, 1.5005, 20), "eta")[0]   # below the 0.1 % floor
+    assert not inv.scalar.trajectory_converged([1.0, 1.1], "eta")[0]
 
 
 def test_monochrome_message_once_per_run():
@@ -202,8 +202,8 @@ def test_scene_bitmaps_are_loaded_nearest(tmp_path):
         scene, names = load_scene_nearest(path, ("alpha",))
         assert names == changed
         params = mi.traverse(scene)
-        key = inv.map_keys(params, ("alpha",))["alpha"]
-        assert not inv.filters_bilinearly(params, key, params[key].shape, inv.MAP_PARAMETERS["alpha"][1])
+        key = inv.observations.map_keys(params, ("alpha",))["alpha"]
+        assert not inv.maps.filters_bilinearly(params, key, params[key].shape, inv.MAP_PARAMETERS["alpha"][1])
 
 
 def _record(rng, t, sigma, offset=0.0):
@@ -265,7 +265,7 @@ def test_stopped_early_keeps_no_standard_error_far_from_the_truth():
     truth = acqm.example_material("dielectric", 4)
     truth["specular_reflectance"] = 1.0
     start = {"alpha": 0.3, "eta": 1.6}
-    acq = inv.fixed_rig_acquisition("dielectric", facet_angle=50.0, tilts=(0.0, 12.0))
+    acq = inv.acquisition.fixed_rig_acquisition("dielectric", facet_angle=50.0, tilts=(0.0, 12.0))
     obs = inv.synthetic_observations(acq, truth, start, res=16, spp=4, spp_ref=32, noise=0.01, seed=0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)      # the NotConvergedWarning is the subject here

@@ -23,12 +23,12 @@ BSDF = "hyde"     # alpha texture: Beckmann alpha, key alpha.data (as roughcondu
 @pytest.fixture(scope="module")
 def problem():
     previous = mi.variant()
-    inv.prepare(inv.MAP_VARIANT)
-    truth = inv.example_maps(N)
+    inv.prepare(inv.observations.MAP_VARIANT)
+    truth = inv.observations.example_maps(N)
     obs = []
     for light in range(2):
-        scene = mi.load_dict(inv.plane_scene_dict(truth, bsdf=BSDF, light=light, res=RES, views=(0.0, 180.0)))
-        obs.append(inv.Observation(scene, inv.render_stokes_np(scene, 0, 64, seed=0)))
+        scene = mi.load_dict(inv.observations.plane_scene_dict(truth, bsdf=BSDF, light=light, res=RES, views=(0.0, 180.0)))
+        obs.append(inv.Observation(scene, inv.observations.render_stokes_np(scene, 0, 64, seed=0)))
     yield truth, obs
     if previous is not None and previous != mi.variant():
         mi.set_variant(previous)
@@ -50,20 +50,20 @@ def test_alpha_map_recovered_from_two_views(problem):
 def test_coverage_matches_gradient_support(problem):
     """A view that sees one half of the plane: coverage > 0 exactly where dL/dalpha != 0."""
     truth, _ = problem
-    d = inv.plane_scene_dict(truth, bsdf=BSDF, light=0, res=RES, views=(0.0,))
+    d = inv.observations.plane_scene_dict(truth, bsdf=BSDF, light=0, res=RES, views=(0.0,))
     d["sensor"]["view0"]["to_world"] = mi.ScalarTransform4f().look_at(origin=[0.6, 0, 3], target=[0.6, 0, 0],
                                                                        up=[0, 1, 0])
     d["sensor"]["view0"]["fov"] = 25
     scene = mi.load_dict(d)
-    o = inv.Observation(scene, inv.render_stokes_np(scene, 0, 16, seed=0))
-    cover = inv.texel_coverage(o, (N, N))
+    o = inv.Observation(scene, inv.observations.render_stokes_np(scene, 0, 16, seed=0))
+    cover = inv.observations.texel_coverage(o, (N, N))
     assert 16 < (cover > 0).sum() < N * N and (cover[:, :3] == 0).all() and (cover[2:6, 4:] > 0).all()
     params = mi.traverse(scene)
     x = mi.TensorXf(np.full((N, N, 1), 0.4, np.float32))
     dr.enable_grad(x)
     params["plane.bsdf.alpha.data"] = x
     params.update()
-    loss = inv.StokesLoss(o.reference, mask=_obs_mask(o))(inv.render_stokes(scene, 0, 4, 3, params=params))
+    loss = inv.StokesLoss(o.reference, mask=_obs_mask(o))(inv.observations.render_stokes(scene, 0, 4, 3, params=params))
     dr.backward(loss)
     g = np.asarray(dr.grad(x))[..., 0]
     # rows along v, columns along u: the nearest-neighbour lookup and the coverage bin alike
@@ -75,13 +75,13 @@ def test_smoothness_values():
     with d^2; a constant map costs 0."""
     step = np.zeros((4, 4, 1), np.float32)
     step[:, 2:] = 1.0
-    tv = inv.smoothness(mi.TensorXf(step), "tv", eps=1e-6)
-    l2 = inv.smoothness(mi.TensorXf(2 * step), "l2")
+    tv = inv.loss.smoothness(mi.TensorXf(step), "tv", eps=1e-6)
+    l2 = inv.loss.smoothness(mi.TensorXf(2 * step), "l2")
     assert float(np.asarray(tv).ravel()[0]) == pytest.approx(4 / 24, rel=1e-4)
     assert float(np.asarray(l2).ravel()[0]) == pytest.approx(4 * 4 / 24, rel=1e-6)
-    assert float(np.asarray(inv.smoothness(mi.TensorXf(np.ones((4, 4, 1), np.float32)))).ravel()[0]) == 0.0
+    assert float(np.asarray(inv.loss.smoothness(mi.TensorXf(np.ones((4, 4, 1), np.float32)))).ravel()[0]) == 0.0
     with pytest.raises(ValueError, match="regularizer"):
-        inv.smoothness(mi.TensorXf(step), "tikhonov")
+        inv.loss.smoothness(mi.TensorXf(step), "tikhonov")
 
 
 def test_mask_limits_the_seen_texels(problem):
@@ -90,11 +90,11 @@ def test_mask_limits_the_seen_texels(problem):
     truth, obs = problem
     masked = []
     for o in obs:
-        m = inv.interior_mask(o.reference[0])
+        m = inv.loss.interior_mask(o.reference[0])
         m[:, RES // 2:] = False
         masked.append(inv.Observation(o.scene, o.reference, mask=m, weight=0.5))
-    full = sum(inv.texel_coverage(o, (N, N)) for o in obs) > 0
-    part = sum(inv.texel_coverage(o, (N, N)) for o in masked) > 0
+    full = sum(inv.observations.texel_coverage(o, (N, N)) for o in obs) > 0
+    part = sum(inv.observations.texel_coverage(o, (N, N)) for o in masked) > 0
     assert part.sum() < full.sum() and not (part & ~full).any() and part.sum() >= N * N // 4
     res = inv.invert_maps(masked, {"alpha": 0.3}, iterations=2, spp=4, seed=1, progress=False)
     assert (res.seen == part).all()
@@ -127,7 +127,7 @@ def test_input_errors_name_the_parameter(problem):
     with pytest.raises(ValueError, match=r"peak \|S0\| = .*e\+\d\d, outside the accepted range \[1e-10, 1e\+10\]"):
         inv.invert_maps([inv.Observation(o.scene, o.reference * 1e30)], {"alpha": 0.3}, iterations=1)
     with pytest.raises(FloatingPointError, match="gradient of alpha became NaN or infinite at iteration 3"):
-        inv.check_gradients({"alpha": mi.Float([1.0, float("nan")])}, 3)
+        inv.scalar.check_gradients({"alpha": mi.Float([1.0, float("nan")])}, 3)
     with pytest.raises(ValueError, match="missing 'alpha'"):
         inv.invert_maps(obs, {"eta": 1.5}, iterations=1)
     with pytest.raises(ValueError, match="regularizer"):
@@ -136,7 +136,7 @@ def test_input_errors_name_the_parameter(problem):
         inv.invert_maps(obs, {"alpha": 0.3}, fit=("sigma",), iterations=1)
     with pytest.raises(ValueError, match=r"start\['alpha'\] must be a number or an array"):
         inv.invert_maps(obs, {"alpha": np.ones((3, 3))}, iterations=1)
-    assert inv.map_keys(mi.traverse(o.scene), ("alpha", "eta", "k")) == {
+    assert inv.observations.map_keys(mi.traverse(o.scene), ("alpha", "eta", "k")) == {
         "alpha": "plane.bsdf.alpha.data", "eta": "plane.bsdf.eta.value", "k": "plane.bsdf.k.value"}
 
 
@@ -161,7 +161,7 @@ def test_a_run_leaves_no_gradient_state_behind(problem):
                           first.final["alpha"].astype(np.float32))            # the scenes keep the result
     again = []
     for light in range(2):
-        scene = mi.load_dict(inv.plane_scene_dict(truth, bsdf=BSDF, light=light, res=RES, views=(0.0, 180.0)))
-        again.append(inv.Observation(scene, inv.render_stokes_np(scene, 0, 64, seed=0)))
+        scene = mi.load_dict(inv.observations.plane_scene_dict(truth, bsdf=BSDF, light=light, res=RES, views=(0.0, 180.0)))
+        again.append(inv.Observation(scene, inv.observations.render_stokes_np(scene, 0, 64, seed=0)))
     second = inv.invert_maps(again, {"alpha": 0.3}, iterations=2, spp=4, seed=1, progress=False)
     assert np.isfinite(second.rel_stderr["alpha"]).any()

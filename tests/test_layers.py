@@ -1,13 +1,14 @@
 """The package's layers, as the folders hold them: no import runs up the layers.
 
-    io  ->  model  ->  {mitsuba, mom, fit}  ->  render  ->  inverse  ->  app
+    io  ->  model  ->  {mitsuba, mom, fit}  ->  render  ->  inverse  ->  app  ->  validation
 
 A module may import from its own folder and from folders to its left; ``mitsuba``, ``mom`` and
-``fit`` are independent of one another; ``errors``, ``progress`` and ``resources`` may be imported
-from anywhere and import nothing of the package (``progress`` and ``resources`` only ``errors``).  Every ``import`` statement counts, the lazy ones inside
+``fit`` are independent of one another; ``errors``, ``progress``, ``resources`` and ``options`` may be
+imported from anywhere and import nothing of the package but ``errors``.  Every ``import`` statement counts, the lazy ones inside
 functions too (they are parsed, not run).  The bottom layer, ``io``, imports only the standard
 library, NumPy and (lazily) the file-format packages; the library below ``app`` does no argparse
-and no plotting.  This test reads the source only: it checks the rule of docs/index.md's
+and no plotting.  ``validation`` (the validation scripts, run by ``hyde-bsdf validate`` as child
+processes) is the top layer: nothing else imports it.  This test reads the source only: it checks the rule of docs/index.md's
 "Package layout" in a fraction of a second.
 """
 from __future__ import annotations
@@ -21,14 +22,14 @@ import pytest
 PACKAGE = Path(__file__).resolve().parent.parent / "hyde_bsdf"
 
 #: layer of each top-level part of the package; None: importable from anywhere
-LAYER = {"errors": None, "progress": None, "resources": None, "io": 0, "model": 1, "mitsuba": 2, "mom": 2, "fit": 2,
-         "render": 3, "inverse": 4, "app": 5}
+LAYER = {"errors": None, "progress": None, "resources": None, "options": None, "io": 0, "model": 1, "mitsuba": 2,
+         "mom": 2, "fit": 2, "render": 3, "inverse": 4, "app": 5, "validation": 6}
 #: ``from hyde_bsdf import NAME`` for the package's own lazy names: where NAME lives
 ROOT_NAMES = {"register": "mitsuba", "pbrdf": "model", "dhr_specular_pec": "model", "rms_slope_from": "model",
               "alpha_from_rms_slope": "model", "rms_slope_from_alpha": "model"}
 #: third-party packages the io layer may use (the last three only inside the function that needs them)
 IO_THIRD_PARTY = {"numpy", "OpenEXR", "mitsuba", "drjit"}
-#: what only the application (``app``) may import
+#: what only the application (``app``) and the validation scripts above it may import
 APP_ONLY = {"argparse", "matplotlib"}
 
 
@@ -82,7 +83,7 @@ def _violations(path: Path, root: Path = PACKAGE) -> list[str]:
     for line, module, names in _imports(path, root):
         where = f"{rel}:{line}: import of {module}"
         top = module.partition(".")[0]
-        if own != "app" and top in APP_ONLY:
+        if own not in ("app", "validation") and top in APP_ONLY:
             out.append(f"{where}: argparse and plotting belong to hyde_bsdf.app")
         if own == "io" and _part(module) is None and top not in IO_THIRD_PARTY and top not in sys.stdlib_module_names:
             out.append(f"{where}: the io layer imports only the standard library, NumPy and file-format packages")

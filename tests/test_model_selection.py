@@ -41,7 +41,7 @@ def test_a_wrong_shadowing_is_flagged_with_its_figure_and_cause(smith_table):
     few.theta_i, few.theta_r, few.phi, few.F = (a[..., :80, :, :] if a.ndim > 1 else a[:80] for a in
                                                 (smith_table.theta_i, smith_table.theta_r, smith_table.phi,
                                                  smith_table.F))
-    with pytest.warns(InadequateModelWarning, match=r"M00 misfit .* %.*try --model auto"):
+    with pytest.warns(InadequateModelWarning, match=r"M00 misfit .* %.*try `select_model`"):
         res = fit_pbsdf(few, fit=("k", "rms_slope"), n0=1.5, shadowing="vgroove", diffuse="paper", start=START,
                         progress=False)
     v = res.verdict

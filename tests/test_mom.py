@@ -65,7 +65,7 @@ def test_small_rough_surface_conserves_power():
     differ in height is tilted, and intercepts cos(ti + tilt)/cos(ti) of the nominal
     power; the tilt ~ sqrt(2) sigma_h / (w sqrt(pi/2)) averages out only as 1/sqrt(M).
     At theta_i <= 40 deg this is < 1 % here; the full Fig. 6 case (100 partitions of
-    150 lambda) is checked to 1 % up to 75 deg by validation/fig6_mom.py.
+    150 lambda) is checked to 1 % up to 75 deg by hyde_bsdf/validation/fig6_mom.py.
     """
     sigma_h = 0.3
     ell = math.sqrt(2) * sigma_h / 0.3  # rms slope 0.3, as in Fig. 6

@@ -88,13 +88,8 @@ def test_forward_grazing_floor_of_the_windowed_current():
     the specular peak; the beam's MoM p follows it within 3 dB at 86-87 deg and stays below -95 dB at 88-89 (s too,
     its numerical floor), where the windowed current's s sits at about -50 dB: the surface waves its plane-wave-lit
     partition ends launch (they decay only as x^-3/2 in s; -44.5 dB at 4 w)."""
-    import importlib.util
-    import pathlib
+    from hyde_bsdf.validation import mom_forward_grazing as fg
 
-    spec = importlib.util.spec_from_file_location(
-        "mom_forward_grazing", pathlib.Path(__file__).resolve().parent.parent / "validation" / "mom_forward_grazing.py")
-    fg = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(fg)
     tr = np.array([86.0, 87.0, 88.0, 89.0])
     ref = fg.beam_reference(80.0, 75.0, tr)
     peak = float(fg.beam_reference(80.0, 75.0, np.array([80.0]))[0])
@@ -132,11 +127,7 @@ def test_partition_floor_flags_forward_grazing_of_the_truncated_partition():
     analytic result is -82 to -126 dB, flagged), w = 37.5 at 83 deg on 6 w (86-89 deg valid: measured within
     1.5 dB), w = 20 at 85 deg on 4 w (a spectrum clipped at grazing: its backward-side floor, 25 dB below the peak,
     flagged) -- with a reason naming the partition."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "validation"))
-    from mom_forward_grazing import beam_reference
+    from hyde_bsdf.validation.mom_forward_grazing import beam_reference
 
     theta_r = np.arange(20.0, 89.76, 0.25)
     for f, w, ti, at_grazing in ((4, 75.0, 80.0, 0), (6, 75.0, 80.0, 0), (6, 37.5, 83.0, 4), (4, 20.0, 85.0, 0)):

@@ -1,14 +1,12 @@
 """The MoM plots mark the angles the result flags (issue 25, item 2: "mark the affected angles in the result and the
 plots, with the reason").
 
-``validation/_common.plot_flagged`` is the one helper every MoM plot uses: the curve is drawn where the result is
+``hyde_bsdf/validation/_common.plot_flagged`` is the one helper every MoM plot uses: the curve is drawn where the result is
 reported valid and broken at the flagged angles, whose values are drawn grey with crosses and carry one legend
 entry with ``MoMResult.floor_reason``.  Checked on a fixed pattern (no solve) and on a real flat-plate result, where
 the flagged angles are exactly ``~MoMResult.valid_s``.
 """
-import sys
 import warnings
-from pathlib import Path
 
 import matplotlib
 import numpy as np
@@ -17,9 +15,8 @@ import pytest
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "validation"))
-from _common import (FLAGGED_PREFIX, FLAGGED_STYLE, flagged_legend, legend_entries, plot_flagged,  # noqa: E402
-                     valid_m00)
+from hyde_bsdf.validation._common import (FLAGGED_PREFIX, FLAGGED_STYLE, flagged_legend,  # noqa: E402
+                                         legend_entries, plot_flagged, valid_m00)
 
 from hyde_bsdf import mom  # noqa: E402
 
@@ -102,7 +99,7 @@ def test_windowed_current_obliquity_is_flagged_in_s():
     current's obliquity cos^2 ti where the reflected beam has cos^2 theta_r -- 7.3 dB above the analytic result at
     86-89 deg, and reported valid there before the floor counted it.  Now every s reported valid at 86-89 deg is
     within 3 dB of the analytic reflected beam, and the excess angles are flagged; p (no such bias) stays valid."""
-    from mom_forward_grazing import beam_reference
+    from hyde_bsdf.validation.mom_forward_grazing import beam_reference
 
     tr = np.arange(86.0, 89.01, 0.25)
     res = _flat(83.0, 37.5, 6, "window", tr)
@@ -118,7 +115,7 @@ def test_grazing_zone_is_the_partitions_cut_of_the_current():
     """Flat PEC, beam, 85 deg, w = 50 lambda on 4 w: in p the MoM's departure from the infinite plane at theta_r =
     86-89.75 deg (-0.7 to -4.2 dB) is the infinite-plane current cut to the partition, to 0.05 dB (computed
     independently by ``truncated_plane_db``): the grazing zone's cause, named in ``floor_reason``."""
-    from mom_forward_grazing import beam_reference, truncated_plane_db
+    from hyde_bsdf.validation.mom_forward_grazing import beam_reference, truncated_plane_db
 
     tr = np.arange(86.0, 89.76, 0.25)
     res = _flat(85.0, 50.0, 4, "beam", tr)

@@ -31,7 +31,7 @@ GLASS = (1.5, 0.0)
 def test_flat_plate_reproduces_fresnel(nk):
     """60-lambda tapered plate, 10 pts/lambda: reflectance within 0.005 of Fresnel, phase of r_p/r_s
     within 0.4 deg (glass at 60 deg is 4 deg from Brewster, |r_p|^2 = 0.002), reflected + absorbed = 1
-    within 0.5 %.  (validation/mom_polarization.py checks 0-80 deg on longer plates.)"""
+    within 0.5 %.  (hyde_bsdf/validation/mom_polarization.py checks 0-80 deg on longer plates.)"""
     n, k = nk
     ti = np.array([0.0, 40.0, 60.0])
     res = mom.scatter(60.0, 1, 0.0, 1.0, ti, ti, pts_per_wl=10, executor=SERIAL, polarization=("s", "p"),

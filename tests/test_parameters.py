@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 
 import pytest
+from conftest import library_modules
 
 import hyde_bsdf
 from hyde_bsdf.model import parameters as P
@@ -121,7 +122,7 @@ def range_literals(source: str):
 
 def test_no_range_literal_outside_the_registry():
     offenders = []
-    for path in sorted(PACKAGE.rglob("*.py")):
+    for path in library_modules(PACKAGE):
         if path == REGISTRY:
             continue
         for line, what in range_literals(path.read_text()):

@@ -284,7 +284,14 @@ def test_round_trip_export_read_fit_recovers_the_parameters(exported):
     assert result.success and not result.warnings
     assert result.rms_slope == pytest.approx(0.25, rel=1e-4)
     assert np.allclose(result.n, PARAMS["n"], rtol=1e-4) and np.allclose(result.k, PARAMS["k"], rtol=1e-4)
-    assert result.stderr["rms_slope"] < 1e-4 and "spectrum" in result.plugin_xml()
+    xml = result.plugin_xml()
+    assert result.stderr["rms_slope"] < 1e-4 and "spectrum" in xml
+    # the index at the table's bands, the end values held out to Mitsuba's 360-830 nm (else 0 there in
+    # spectral variants, a wrong colour in RGB ones) -- explicitly: the XML says where it extrapolates
+    first, last = (f"{w:g}" for w in (result.wavelengths[0], result.wavelengths[-1]))
+    assert f'"360:{result.n[0]:.6g}, {first}:{result.n[0]:.6g}' in xml
+    assert f'{last}:{result.n[-1]:.6g}, 830:{result.n[-1]:.6g}"' in xml
+    assert f"over 360-{first} and {last}-830 nm the end values are held (an extrapolation, not measured" in xml
 
 
 def test_fit_cli_on_a_pbsdf_file(exported, tmp_path, capsys):
@@ -373,7 +380,7 @@ def test_rendered_flat_patch_of_an_exported_metal_keeps_its_colour(tmp_path):
     from hyde_bsdf.fit.pbsdf_bands import choose_bands, index_spectrum
 
     spec = importlib.util.spec_from_file_location(
-        "pbsdf_export_validation", Path(__file__).resolve().parents[1] / "validation" / "pbsdf_export.py")
+        "pbsdf_export_validation", Path(__file__).resolve().parents[1] / "hyde_bsdf" / "validation" / "pbsdf_export.py")
     v = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(v)
     rel = {}

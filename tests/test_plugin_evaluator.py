@@ -28,7 +28,7 @@ ATOL = 1e-7            # sr^-1, far below any visible BRDF value
 #: (measured: 1.2e-6 vgroove, 2.0e-6 smith, 3.0e-6 none)
 #: (checked below); the diffuse F00 error is at most E_TEX M00 / pi (paper form)
 # the DHR texture (1025 x 192 nodes per decade of rms_slope over 1e-4..100) against the table:
-# measured 1.6e-5, 2.2e-5, 2.2e-5 (theta <= 89 deg, rms_slope 0.02-1.5; validation/plugin_checks.py)
+# measured 1.6e-5, 2.2e-5, 2.2e-5 (theta <= 89 deg, rms_slope 0.02-1.5; hyde_bsdf/validation/plugin_checks.py)
 E_TEX = {"vgroove": 2.5e-5, "smith": 3e-5, "none": 3e-5}
 SMITH_RTOL = 7e-3
 

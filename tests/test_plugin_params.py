@@ -175,7 +175,7 @@ def test_defaults_and_xml():
 @pytest.mark.parametrize("variant", ["scalar_rgb", "llvm_ad_spectral_polarized"])
 def test_parameter_scenes_load(variant):
     mi = _setup(variant)
-    files = sorted(glob.glob(os.path.join(ROOT, "scenes", "plugin_*.xml")))
+    files = sorted(glob.glob(os.path.join(ROOT, "hyde_bsdf", "data", "scenes", "plugin_*.xml")))
     assert len(files) >= 5
     for f in files:
         assert mi.load_file(f, width=24, height=8, spp=1) is not None, f
@@ -183,7 +183,7 @@ def test_parameter_scenes_load(variant):
 
 def test_parameter_scene_renders_finite():
     mi = _setup("llvm_ad_rgb")
-    scene = mi.load_file(os.path.join(ROOT, "scenes", "plugin_diffuse.xml"), width=48, height=16, spp=2)
+    scene = mi.load_file(os.path.join(ROOT, "hyde_bsdf", "data", "scenes", "plugin_diffuse.xml"), width=48, height=16, spp=2)
     img = np.array(mi.render(scene))
     assert np.isfinite(img).all() and img.mean() > 0.01
 

@@ -11,7 +11,7 @@ Tolerance: |a - b| <= 1e-5 max|b| (per matrix, or per array for pdfs) + 1e-7.
 Near backscatter (wi ~ wo) roughconductor's float32 s axis, cross(H, -wo_hat), is
 ill-conditioned (relative error ~ eps32 / |wi x wo|) while the plugin uses a
 compensated cross product, so there the tolerance adds 16 eps32 / |wi x wo|.
-(Measured with ``python validation/plugin_report.py``: at |wi x wo| = 6.9e-3 the
+(Measured with ``python hyde_bsdf/validation/plugin_report.py``: at |wi x wo| = 6.9e-3 the
 normalized Mueller matrix of roughconductor is 2.9e-5 off the float64 evaluator,
 the plugin's 4e-7; over 10^4 pairs the plugin stays within 1.3e-6.)
 """

@@ -10,28 +10,15 @@ Physics checked:
   uniform environment of radiance 1 renders to rho^s(theta_o) + 1 - rho_avg;
 - S0 of the Stokes image equals the ordinary radiance image; DoLP/AoLP/DoCP formulas.
 """
-import importlib.util
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import scaled
 
-ROOT = Path(__file__).resolve().parent.parent
-
-
-def _load_render_checks():
-    spec = importlib.util.spec_from_file_location("render_checks", ROOT / "validation" / "render_checks.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["render_checks"] = mod  # dataclasses look their module up here
-    spec.loader.exec_module(mod)
-    return mod
-
-
-rc = _load_render_checks()
+from hyde_bsdf.validation import render_checks as rc
 
 TINY_SCENE = """<scene version="3.0.0">
     <default name="spp" value="4"/>

@@ -86,7 +86,7 @@ def test_invert_reads_a_linear_camera_exr(tmp_path, capsys):
     from hyde_bsdf import inverse as inv
     from hyde_bsdf.inverse.analyzer import simulate_capture, write_stokes_estimate
 
-    inv.prepare(inv.MAP_VARIANT)
+    inv.prepare(inv.observations.MAP_VARIANT)
     mi.Bitmap(np.full((2, 2, 1), 0.3, np.float32)).write(str(tmp_path / "a.exr"))
     xml = f"""<scene version="3.0.0">
   <integrator type="stokes"><integrator type="path"><integer name="max_depth" value="2"/></integrator></integrator>
@@ -100,7 +100,7 @@ def test_invert_reads_a_linear_camera_exr(tmp_path, capsys):
   <emitter type="point"><point name="position" x="0" y="3" z="3"/><float name="intensity" value="20"/></emitter>
 </scene>"""
     (tmp_path / "s.xml").write_text(xml)
-    ref = inv.render_stokes_np(inv.load_scene(str(tmp_path / "s.xml")), 0, 32, seed=1)
+    ref = inv.observations.render_stokes_np(inv.scalar.load_scene(str(tmp_path / "s.xml")), 0, 32, seed=1)
     est = simulate_capture(ref, CameraNoise(read_noise=3.0, black_level=64.0), np.random.default_rng(0), signal=3000.0)
     write_stokes_estimate(est, tmp_path / "ref.exr")
     out = tmp_path / "out"

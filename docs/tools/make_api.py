@@ -138,10 +138,12 @@ def _order(mod: str):
 
 
 def modules() -> list[tuple[str, ast.Module, str, list]]:
-    """(module name, tree, source, __all__) of every package module with a literal ``__all__``."""
+    """(module name, tree, source, __all__) of every package module with a literal ``__all__``
+    (the validation scripts, which run as programs, are no API)."""
     found = []
     for path in PACKAGE.rglob("*.py"):
-        if any(part.startswith("_") and part != "__init__.py" for part in path.relative_to(PACKAGE).parts):
+        parts = path.relative_to(PACKAGE).parts
+        if parts[0] == "validation" or any(p.startswith("_") and p != "__init__.py" for p in parts):
             continue
         source = path.read_text(encoding="utf-8")
         tree = ast.parse(source)

@@ -7,7 +7,7 @@
 ``render``    ``hyde-bsdf render``
 ``demo``      ``hyde-bsdf demo``
 ``invert``    ``hyde-bsdf invert``
-``report``    ``hyde-bsdf validate`` (runs the checkout's ``validation/`` scripts, each as a child process)
+``report``    ``hyde-bsdf validate`` (runs the ``hyde_bsdf.validation`` scripts, each as a child process)
 ``plots``     fit and inversion plots (matplotlib)
 ``pictures``  PNG charts of a Stokes image (matplotlib)
 """

@@ -47,6 +47,7 @@ COMMANDS = {
     "export": ("hyde_bsdf.app.export", "write a hyde material as a measured_polarized table for C++ Mitsuba"),
     "stokes": ("hyde_bsdf.app.stokes", "raw analyzer frames (DoFP mosaic or N angles) to a Stokes EXR with sigma"),
     "invert": ("hyde_bsdf.app.invert", "recover roughness and index from a Stokes image"),
+    "accuracy": ("hyde_bsdf.app.accuracy", "how wrong the model may be at your geometry (the accuracy atlas)"),
     "validate": ("hyde_bsdf.app.report.build", "run the validation report"),
 }
 
@@ -65,11 +66,13 @@ def _quiet_stdout() -> None:
 
 
 def _error(command: str, message: str) -> None:
-    """One line ``hyde-bsdf COMMAND: MESSAGE`` on stderr, long values in it cut to a readable length."""
+    """One line ``hyde-bsdf COMMAND: MESSAGE`` on stderr, the library's parameter names as the command
+    line's flags (:mod:`hyde_bsdf.app.flags`), long values cut to a readable length."""
+    from hyde_bsdf.app.flags import for_command_line
     from hyde_bsdf.errors import shorten_values
 
     try:
-        print(f"hyde-bsdf {command}: {shorten_values(message)}", file=sys.stderr, flush=True)
+        print(f"hyde-bsdf {command}: {shorten_values(for_command_line(message))}", file=sys.stderr, flush=True)
     except (OSError, ValueError):
         pass
 

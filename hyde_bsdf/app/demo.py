@@ -1,6 +1,6 @@
 """``hyde-bsdf demo``: the main job -- render the demo scene with the ``hyde`` BSDF.
 
-Renders ``scenes/demo.xml`` (a gold and an aluminium sphere and an aluminium
+Renders ``hyde_bsdf/data/scenes/demo.xml`` (a gold and an aluminium sphere and an aluminium
 cylinder on a rough dark-glass floor, low sun, dim sky) with Mitsuba's
 ``stokes`` integrator in ``llvm_ad_spectral_polarized`` (falling back to
 ``scalar_spectral_polarized`` with a message when no usable libLLVM is present)
@@ -47,8 +47,8 @@ from hyde_bsdf.render.renderer import DEFAULT_VARIANT, prepare_variant, render_s
 
 __all__ = ["DEMO_SCENE", "cli_main", "render_demo", "demo_bytes"]
 
-#: The demo scene, in the repository's scenes/ folder.
-DEMO_SCENE = Path(__file__).resolve().parents[2] / "scenes" / "demo.xml"
+#: The demo scene, shipped with the package (hyde_bsdf/data/scenes/, beside the other example scenes).
+DEMO_SCENE = Path(__file__).resolve().parents[1] / "data" / "scenes" / "demo.xml"
 
 
 _log = stderr_lines("[demo]")
@@ -76,8 +76,7 @@ def _render_demo(outdir, width, height, spp, variant, seed, bsdf, scene) -> dict
         raise UsageError(f"bsdf must be 'hyde' or 'roughconductor', got {bsdf!r}")
     scene = Path(scene)
     if not scene.exists():
-        raise UsageError(f"demo scene {str(scene)!r} not found (run from a checkout of the repository, "
-                         f"or pass --scene)")
+        raise UsageError(f"demo scene {str(scene)!r} not found: pass --scene")
     check_input(scene, "demo scene", stdin=False)          # a FIFO or a device: one line, never opened
     outdir = check_output_dir(outdir, "--outdir")
     for path in demo_outputs(outdir, str(variant).endswith("_polarized")):
@@ -202,7 +201,7 @@ def build_parser() -> Parser:
     p.add_argument("--seed", type=int, default=0, help="random seed 0..32767 (default 0)")
     p.add_argument("--bsdf", choices=("hyde", "roughconductor"), default="hyde",
                    help="BSDF of the metals and the floor (default hyde; roughconductor to compare)")
-    p.add_argument("--scene", default=str(DEMO_SCENE), help="scene file (default scenes/demo.xml)")
+    p.add_argument("--scene", default=str(DEMO_SCENE), help="scene file (default hyde_bsdf/data/scenes/demo.xml)")
     quiet_option(p)
     return p
 

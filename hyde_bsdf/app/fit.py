@@ -6,11 +6,11 @@ Command lines::
     hyde-bsdf fit DATA.csv [--fit rms_slope,n,k,diffuse_reflectance] [--rms-slope X] [--n0 N] [--k0 K]
                   [--diffuse-reflectance A] [--model auto|fixed] [--shadowing vgroove|smith|none]
                   [--diffuse paper|reciprocal|none|lambertian] [--albedo shared|per-wavelength]
-                  [--json FILE] [--strict] [-o plot.png] [-q]
+                  [--sigma-h-wl H | --sigma-h-um UM [--wavelength-nm NM]] [--json FILE] [--strict] [-o plot.png] [-q]
     hyde-bsdf fit FILE.pbsdf [--fit n,k,rms_slope] [--rms-slope 0.3] [--n0 N] [--k0 K]
                   [--model auto|fixed] [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
                   [--max-points 3000] [--theta-max 80] [--tolerance 0.05] [--seed 0]
-                  [--strict] [-o fit.png] [-q]
+                  [--sigma-h-um UM | --sigma-h-wl H] [--strict] [-o fit.png] [-q]
 
 A CSV (M00 in 1/sr optional, several wavelengths in one file) is fitted by
 :func:`hyde_bsdf.fit.lab.fit_lab`: everything the data determine unless ``--fit`` names fewer,
@@ -20,7 +20,9 @@ one joint fit over the wavelengths; ``--json FILE`` writes the machine-readable 
 adequate one kept; the table of models is printed and, with ``-o``, plotted (misfit against model
 size) beside the fit as ``NAME_models.EXT``.  Every fit prints its verdict
 (:mod:`hyde_bsdf.fit.adequacy`); an inadequate model is a ``WARNING:`` line in the summary and on
-stderr.
+stderr.  Told the surface height (``--sigma-h-wl``, or ``--sigma-h-um`` with the data's wavelength column
+or ``--wavelength-nm``), a fit also states the accuracy atlas's verdict on the fitted model at the data's
+incidence angles, per wavelength (:func:`hyde_bsdf.model.accuracy.verdict`).
 
 (CSV format: :mod:`hyde_bsdf.io.measurements`; the fits: :mod:`hyde_bsdf.fit.mueller_fit`,
 :mod:`hyde_bsdf.fit.pbsdf_fit`.)  Options and the ``-o`` path are checked before the file is
@@ -37,13 +39,17 @@ import sys
 import warnings
 from pathlib import Path
 
+from hyde_bsdf.app.accuracy import (add_height_options, check_height_options, height_wl, lab_verdict_lines,
+                                    pbsdf_verdict_lines)
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.flags import for_command_line
 from hyde_bsdf.app.plots import (PLOT_FORMATS, check_plot_path, plot_lab_fit, plot_lab_selection, plot_pbsdf_fit,
                                  plot_selection)
 from hyde_bsdf.errors import RejectedResult, UsageError
 from hyde_bsdf.fit.adequacy import InadequateModelWarning
 from hyde_bsdf.fit.model_selection import select_model, select_model_pbsdf
-from hyde_bsdf.fit.lab import DIFFUSE_CHOICES, check_lab_options, extrapolation_warning, fit_lab
+from hyde_bsdf.fit.lab import DIFFUSE_CHOICES, check_lab_options, fit_lab
+from hyde_bsdf.fit.spectral import extrapolation_warning
 from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitWarning
 from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf.io.input_gate import STDIN, check_input
@@ -196,6 +202,7 @@ def csv_parser() -> Parser:
     ap.add_argument("--json", default=None, metavar="FILE",
                     help="write the result as JSON (values, standard errors, covariance, verdict, the table of "
                          "models); '-' for stdout (the summary then goes to stderr)")
+    add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
     ap.add_argument("-o", "--output", default=None,
                     help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)}); with --model "
@@ -240,6 +247,7 @@ def _csv_options(args) -> dict:
                 shadowing=None if auto else (args.shadowing or SHADOWING[0]),
                 diffuse=None if auto else (args.diffuse or DIFFUSE[0]))
     check_lab_options(**opts)
+    check_height_options(args)
     return opts
 
 
@@ -247,12 +255,16 @@ def _csv_run(args) -> int:
     with user_input():
         opts = _csv_options(args)
     meas = read_measurements(args.data, progress=_progress(args))
+    if args.sigma_h_um is not None and meas.wavelength_nm is None:
+        height_wl(args)                            # --sigma-h-um needs a wavelength: said before the fit
     with user_input(f"data file {args.data!r}", library=True):
         result = _quiet_fit(fit_lab, meas, **opts, progress=_progress(args, auto=True))
     out = sys.stderr if args.json == "-" else sys.stdout
     print(f"data: {meas.source} ({len(meas)} rows, {', '.join(result.fit.data.columns)}"
           + (", sigma / sqrt(n_samples)" if meas.n_samples is not None else "") + ")", file=out)
-    print(result.summary(), file=out)
+    print(for_command_line(result.summary()), file=out)
+    for line in lab_verdict_lines(meas, result, args):
+        print(line, file=out)
     _warn_verdict(result)
     for text in result.warnings:               # also on stderr, where a script's log sees them
         if text != result.verdict.message and not text.startswith("NO candidate"):
@@ -304,6 +316,7 @@ def pbsdf_parser() -> Parser:
     ap.add_argument("--tolerance", type=float, default=0.05,
                     help="a cell with |M_jk| or a degree of polarization above (1 + tolerance) M00 is non-physical")
     ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
+    add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
     ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element; "
                     "with --model auto also NAME_models.EXT, misfit against model size")
@@ -323,6 +336,7 @@ def _pbsdf_run(args) -> int:
         auto = _auto(args)
         shadowing, diffuse = args.shadowing or SHADOWING[0], args.diffuse or DIFFUSE[0]
         fit = _check(args.fit, args.rms_slope, args.n0, args.k0, shadowing, diffuse)
+        check_height_options(args)                  # a table carries its wavelengths: --sigma-h-um needs no other
     if not 0 <= args.seed < 2**32:
         raise UsageError(f"--seed must be an integer in [0, 2^32), got {args.seed}")
     if not 0 < args.theta_max <= 90:
@@ -345,11 +359,16 @@ def _pbsdf_run(args) -> int:
     sel = _quiet_fit(select_model_pbsdf, data, **opts) if auto else None
     result = sel.result if auto else _quiet_fit(fit_pbsdf, data, shadowing=shadowing, diffuse=diffuse, **opts)
     if sel is not None:
-        print(sel.summary())
-    print(result.summary())
+        print(for_command_line(sel.summary()))
+    print(for_command_line(result.summary()))
+    for line in pbsdf_verdict_lines(data.theta_i, result, args):
+        print(line)
     _warn_verdict(result)
     print("\nMitsuba material (hyde plugin):")
     print(result.plugin_xml(indent="    "))
+    caveat = extrapolation_warning([float(w) for w in result.wavelengths])
+    if caveat:
+        warnings.warn(caveat, UserWarning, stacklevel=1)
     if args.output:
         plot_pbsdf_fit(result, data, args.output, title=str(args.data))
         print(f"\nplot: {args.output}")

@@ -1,11 +1,35 @@
-"""``hyde-bsdf invert``: the command line of scalar and texture-valued (``--maps``) inversion.
+"""``hyde-bsdf invert``: the command line of scalar and texture-valued (``--maps``) inversion
+(:mod:`hyde_bsdf.inverse`); the plot is :func:`hyde_bsdf.app.plots.plot_history`.
 
-The options and outputs are described in :mod:`hyde_bsdf.inverse`; the plot is
-:func:`hyde_bsdf.app.plots.plot_history`.
+Errors: one line on stderr, exit 2; Ctrl-C: exit 130; progress per iteration on
+stderr; output paths and memory checked before any rendering; outputs written atomically::
+
+    hyde-bsdf invert [--scene SCENE.xml [--target PREFIX] | (built-in sphere)] [--truth rms_slope=0.3,eta=1.5,k=3]
+                     [--reference REF.exr] [--start rms_slope=0.6,eta=3,k=6]
+                     [--fit rms_slope,eta,k] [--loss stokes|s0] [--iterations 200]
+                     [--spp 16] [--spp-ref 512] [--res 64] [--lr 0.05] [--seed 0] [-o OUTDIR]
+
+writes OUTDIR/invert_history.csv and OUTDIR/invert.png (loss and parameter trajectories).
+Texture mode::
+
+    hyde-bsdf invert --maps [--scene S1.xml --reference R1.exr [--mask M1.png] ...
+                     | --preset dielectric|metal [--noise 0.01]
+                     | (built-in plane, 3 views x 2 lights, truth map of --map-size 32)]
+                     [--fit alpha[,eta,k][,specular_reflectance]] [--start alpha=0.3,eta=1.6]
+                     [--regularizer tv|l2 --weight 0.1] [--no-uncertainty]
+                     [--iterations 100] [--spp 4] [--spp-ref 64] [--res 80] [--sensor 0] [-o OUTDIR]
+    hyde-bsdf invert --maps --scene SAMPLE.xml --camera CAMERA.json --light LIGHT.json --reference R.exr ...
+                     [--tiles N|RxC [--workers K | --scheduler tcp://HOST:8786]]
+
+writes OUTDIR/invert_maps_history.csv, OUTDIR/NAME.npy and NAME.exr per fitted map (rows along
+v; load the EXR as a ``bitmap`` texture with ``raw`` true and ``filter_type`` nearest; NaN where no
+picture sees the texel), NAME_stderr.npy/.exr (per-texel standard errors; NaN where not valid),
+NAME_seen.npy/.exr (1 where a picture sees the texel) and OUTDIR/invert_maps.png.  ``--preset`` captures the built-in synthetic sample
+(:func:`hyde_bsdf.inverse.acquisition.example_material`) in the designed acquisition (:func:`hyde_bsdf.inverse.design_acquisition`; --res default
+4 x --map-size, so that texels span pure pixels) and reports the errors against its truth.
 """
 from __future__ import annotations
 
-import csv
 import math
 import warnings
 from pathlib import Path
@@ -13,17 +37,17 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.flags import for_command_line
 from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError, one_line, shorten
-from hyde_bsdf.inverse._common import Y_WEIGHTS
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
 from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
 from hyde_bsdf.inverse.maps import invert_maps
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, Observation, example_maps,
                                             map_keys, plane_scene_dict, render_stokes_np)
 from hyde_bsdf.inverse.scalar import (PARAMETERS, RANGES, START, TRUTH, invert, load_scene, parameter_keys,
-                                      prepare, render_reference, write_history)
-from hyde_bsdf.io.atomic import atomic_open, atomic_path
+                                      prepare, render_reference)
+from hyde_bsdf.io.atomic import atomic_path
 from hyde_bsdf.io.input_gate import check_input
 from hyde_bsdf.io.output_gate import check_free_space, check_output_path, output_gate
 from hyde_bsdf.io.stokes_exr import exr_bytes
@@ -263,14 +287,17 @@ def _check_out(path):
 
 
 def _read_reference(path, width, height, what="--reference"):
-    """Luminance Stokes images (4, H, W) of a Stokes EXR, checked against the film size and for NaN."""
-    from hyde_bsdf.io.stokes_exr import read_stokes_exr
+    """Luminance Stokes images (4, H, W) of a Stokes EXR, read as every reference is
+    (:func:`~hyde_bsdf.inverse.camera_data.camera_reference`), checked against the film size, for all
+    four components (the scalar inversion compares S0..S3) and for NaN."""
+    from hyde_bsdf.inverse.camera_data import camera_reference
 
-    try:
-        st = read_stokes_exr(path)
-    except (ValueError, OSError, RuntimeError) as exc:
-        raise UsageError(f"{what} {str(path)!r}: {one_line(exc)}") from None
-    ref = np.array([np.asarray(st[s], np.float64) @ np.array(Y_WEIGHTS) for s in ("S0", "S1", "S2", "S3")])
+    with user_input(f"{what} {shorten(str(path))}", library=True):
+        data = camera_reference(str(path), channel="Y")
+    if len(data["measured"]) < 4:
+        raise UsageError(f"{what} {shorten(str(path))} holds {'+'.join(data['measured'])}; the scalar inversion "
+                         "compares all four Stokes components (S0..S3): use --maps for a camera's measured ones")
+    ref = data["reference"]
     h, w = ref.shape[1:]
     if (w, h) != (width, height):
         raise UsageError(f"{what} {str(path)!r} is {w}x{h} pixels but the scene's film is {width}x{height}: "
@@ -400,7 +427,7 @@ def _scalar_run(args, truth, start, fit, paths):
         warnings.simplefilter("always")
         res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
                      seed=args.seed, truth=truth if truth_known else None, prefix=args.target)
-    write_history(res, paths[0])
+    res.write_history(paths[0])
     plot_history({args.loss: res}, paths[1],
                  title=f"hyde-bsdf invert ({args.loss} loss, {args.iterations} it, {args.spp} spp)")
     print(f"loss: {args.loss}; {args.iterations} iterations, {res.seconds_per_iteration:.3f} s/iteration "
@@ -413,7 +440,7 @@ def _scalar_run(args, truth, start, fit, paths):
             line += " (fixed)"
         print(line)
     for message in dict.fromkeys(res.warnings + [str(w.message) for w in caught]):
-        print(f"WARNING: {message}")
+        print(f"WARNING: {for_command_line(message)}")
     print(f"wrote {paths[0]} and {paths[1]}")
     return 0
 
@@ -535,7 +562,7 @@ def _print_maps_result(res, args, fit, start, n_images, paths, messages) -> None
     if res.seen is not None:
         print(f"  texels seen by the images: {int(res.seen.sum())} of {res.seen.size}")
     for message in messages:
-        print(f"WARNING: {message}")
+        print(f"WARNING: {for_command_line(message)}")
     print("wrote " + ", ".join(str(p) for p in paths.values()))
 
 
@@ -663,7 +690,7 @@ def _map_range(res, n) -> str:
 
 
 def _write_map_outputs(res, paths, args):
-    _write_history(res, paths["history"])
+    res.write_history(paths["history"])
     for n in res.fitted:
         v = np.asarray(res.final[n], np.float32)
         if v.ndim == 2 and res.seen is not None:      # an unseen texel keeps no start value: NaN
@@ -675,18 +702,6 @@ def _write_map_outputs(res, paths, args):
         if n + "_stderr.npy" in paths and n in res.stderr:
             _save_map(paths, n + "_stderr", np.asarray(res.stderr[n], np.float32))
     _plot_maps(res, paths["png"], args.loss)
-
-
-def _write_history(res, path):
-    """The optimizer's history, one CSV row per iteration (loss terms, time, map errors)."""
-    with atomic_open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        cols = ["iteration", "loss", "data_loss", "regularizer", "seconds"]
-        extra = [k for k in res.history[0] if k.endswith("_error")]
-        w.writerow(cols + extra)
-        for h in res.history:
-            w.writerow([h["iteration"]] + [f"{h[c]:.6e}" for c in cols[1:4]] + [f"{h['seconds']:.3f}"]
-                       + [f"{h[c]:.5f}" for c in extra])
 
 
 def _save_map(paths, key, image, npy=None):

@@ -39,7 +39,7 @@ __all__ = ["Verdict", "InadequateModelWarning", "InadequateModelError", "ERRORS_
            "M00_TOLERANCE", "ELEMENT_TOLERANCE", "Z_LIMIT", "NEIGHBOURS",
            "half_angles", "neighbour_index", "residual_structure", "angle_trends", "geometry_clusters", "cluster_covariance",
            "correlation", "larger_errors",
-           "chi2_verdict", "floor_verdict"]
+           "chi2_verdict", "floor_verdict", "birge_scaling", "blame_fixed_parameters", "SIGMAS_OR_MODEL"]
 
 #: chi^2 tail probability below which a fit with error bars is inadequate
 P_LIMIT = 1e-3
@@ -251,7 +251,7 @@ def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi, neighbours=None):
         (f"the residuals are scatter without a trend ({st['scatter']:.3g} sigma rms): the sigmas underestimate "
          "the noise")
     msg = (f"reduced chi^2 = {red:.4g} (chi^2 = {chi2:.4g} for {dof} dof, p = {p:.3g}): {cause}; "
-           "try --model auto" + ("" if structured else ", or check the sigmas"))
+           "try `select_model`" + ("" if structured else ", or check the sigmas"))
     return Verdict(False, "chi2", "lower bounds", figs, msg, cause)
 
 
@@ -287,7 +287,7 @@ def floor_verdict(m00, elements, theta_i, theta_r, phi, neighbours=None):
     pct = (lambda v: f"{100 * v:.3g} %") if lead == "M00" else (lambda v: f"{v:.3g}")
     msg = (f"{lead} misfit {pct(figs[f'{lead}_rms'])} rms (systematic {pct(figs[f'{lead}_systematic'])}, the data's "
            f"floor {pct(figs[f'{lead}_scatter'])}; tolerance {pct(M00_TOLERANCE if lead == 'M00' else ELEMENT_TOLERANCE)}): "
-           f"{cause}; try --model auto")
+           f"{cause}; try `select_model`")
     figs.update({f"trend_{k}": v for k, v in trends.items()})
     return Verdict(False, "floor", "lower bounds", figs, msg, cause)
 
@@ -296,3 +296,51 @@ def _describe(name, figs):
     if name == "M00":
         return (f"M00 {100 * figs['M00_systematic']:.3g} % systematic, {100 * figs['M00_scatter']:.3g} % scatter")
     return f"elements {figs['elements_systematic']:.3g} systematic, {figs['elements_scatter']:.3g} scatter"
+
+
+#: what a reduced chi^2 far above 1 says by itself: one of the two is wrong, the test cannot tell
+#: which -- unless a parameter held fixed explains it (:func:`blame_fixed_parameters`)
+SIGMAS_OR_MODEL = "the sigmas underestimate the scatter, or the model does not describe the data"
+
+
+def birge_scaling(chi2, dof, cov, notes):
+    """With sigmas: a reduced chi^2 far above 1 (p < :data:`P_LIMIT`) scales the errors up by the
+    Birge ratio sqrt(chi^2 / dof) (never down); far from 1 either way adds a note to ``notes``.
+    Returns (scale, covariance)."""
+    from scipy.stats import chi2 as chi2_dist
+
+    red = chi2 / dof
+    if chi2_dist.sf(chi2, dof) < P_LIMIT:
+        scale = math.sqrt(red)      # the Birge ratio: errors as large as the scatter says
+        if red > 2.0:
+            notes.append(f"reduced chi^2 = {red:.4g} is far above 1 (dof = {dof}): {SIGMAS_OR_MODEL}; the "
+                         f"standard errors are scaled by sqrt(chi^2_red) = {scale:.3g}")
+        return scale, cov * red
+    if chi2_dist.cdf(chi2, dof) < P_LIMIT and red < 0.5:
+        # never scaled down: noiseless or over-cautious sigmas must not shrink the errors to 0
+        notes.append(f"reduced chi^2 = {red:.4g} is far below 1 (dof = {dof}): the sigmas overestimate the "
+                     "scatter, or the rows are not independent measurements; the standard errors follow the "
+                     "given sigmas and may be too large")
+    return 1.0, cov
+
+
+def blame_fixed_parameters(verdict: Verdict, notes: list, chi2, dof, free, held: str, freed: str) -> bool:
+    """A misfit with parameters held fixed, against the same model with every parameter fitted
+    (``free``: its (chi2, dof, adequate)).  When that one describes the data, or fits significantly
+    better (chi^2 difference test, p < :data:`P_LIMIT`), the fixed parameters cause the misfit, not
+    the sigmas: ``verdict``'s cause and message, and the sigma-or-model note among ``notes``
+    (:func:`birge_scaling`), are rewritten to name them (``held``: "rms_slope = 0.3"; ``freed``: the
+    values they take when fitted).  Returns whether they were."""
+    from scipy.stats import chi2 as chi2_dist
+
+    free_chi2, free_dof, free_adequate = free
+    gained = dof - free_dof
+    if not (free_adequate or (gained > 0 and chi2 > free_chi2 and chi2_dist.sf(chi2 - free_chi2, gained) < P_LIMIT)):
+        return False
+    fixed = f"the parameter(s) held fixed ({held}) cause the misfit, not the sigmas"
+    verdict.cause = (f"{fixed}: with them fitted the model {'describes' if free_adequate else 'fits significantly better'}"
+                     f" the data (chi^2 = {free_chi2:.4g} for {free_dof} dof; {freed})")
+    red = f"reduced chi^2 = {chi2 / dof:.4g} (chi^2 = {chi2:.4g} for {dof} dof)" if dof > 0 else f"chi^2 = {chi2:.4g}"
+    verdict.message = f"{red}: {verdict.cause}; fit them"
+    notes[:] = [n.replace(SIGMAS_OR_MODEL, fixed) for n in notes]
+    return True

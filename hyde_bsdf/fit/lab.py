@@ -41,21 +41,20 @@ from hyde_bsdf.fit.adequacy import ERRORS_NOTE, InadequateModelError, Inadequate
 from hyde_bsdf.fit.lab_data import lab_data
 from hyde_bsdf.fit.lab_fit import BOUNDS, PARAMETERS, LabModel, ModelFit, blame_fixed, check_enough, fit_model
 from hyde_bsdf.fit.lab_selection import Selection, model_size, select
+from hyde_bsdf.fit.spectral import spectrum_element, wavelength_note
 from hyde_bsdf.fit.mueller_fit import FitDataWarning, IllPosedFitError, IllPosedFitWarning, impossible_values
 from hyde_bsdf.io.measurements import Measurements, read_measurements
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.terms import DIFFUSE, SHADOWING, check_pair, diffuse_term
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 
-__all__ = ["LabFitResult", "fit_lab", "check_lab_options", "RENDER_RANGE_NM"]
+__all__ = ["LabFitResult", "fit_lab", "check_lab_options", "material_at"]
 
 #: the diffuse terms a CSV fit takes (every record of model/terms.py)
 DIFFUSE_CHOICES = DIFFUSE
 ALBEDO_CHOICES = ("shared", "per_wavelength")
 #: with ``progress=None`` only a problem of more geometries reports its progress
 LARGE_GEOMETRIES = 4000
-#: the wavelengths Mitsuba's spectral variants render (nm): an index measured elsewhere is extrapolated there
-RENDER_RANGE_NM = (360.0, 830.0)
 
 
 def _names(fit) -> tuple:
@@ -245,47 +244,15 @@ class LabFitResult:
         f, wls = self.fit, self.wavelengths
         pr = [f.params(g) for g in range(len(wls))]
         lines = [f'{indent}<bsdf type="hyde">', f'{indent}    <float name="rms_slope" value="{pr[0]["rms_slope"]:.6g}"/>']
-        lines.append(f"{indent}    <!-- {_wavelength_note(wls)} -->")
+        lines.append(f"{indent}    <!-- {wavelength_note(wls)} -->")
         lines.append(f"{indent}    <!-- Mitsuba n + ik; the paper writes eta = n - jk with the same numbers -->")
         for q, name in (("n", "eta"), ("k", "k")):
-            lines.append(f"{indent}    {_spectrum(name, wls, [p[q] for p in pr])}")
+            lines.append(f"{indent}    {spectrum_element(name, wls, [p[q] for p in pr])}")
         lines += [f'{indent}    <string name="shadowing" value="{self.model.shadowing}"/>',
                   f'{indent}    <string name="diffuse" value="{self.model.diffuse}"/>']
         if self.model.lambertian:
-            lines.append(f"{indent}    {_spectrum('diffuse_reflectance', wls, [p['diffuse_reflectance'] for p in pr])}")
+            lines.append(f"{indent}    {spectrum_element('diffuse_reflectance', wls, [p['diffuse_reflectance'] for p in pr])}")
         return "\n".join(lines + [f"{indent}</bsdf>"])
-
-
-def _spectrum(name, wavelengths, values) -> str:
-    """A float (one value, or the same at every wavelength) or a spectrum of wavelength:value pairs."""
-    if len(values) == 1 or all(v == values[0] for v in values):
-        return f'<float name="{name}" value="{values[0]:.6g}"/>'
-    pairs = ", ".join(f"{w:g}:{v:.6g}" for w, v in zip(wavelengths, values))
-    return f'<spectrum name="{name}" value="{pairs}"/>'
-
-
-def _wavelength_note(wavelengths) -> str:
-    """Where the material was measured, and what a renderer does elsewhere."""
-    if wavelengths == [None]:
-        return ("the data give no wavelength: this index holds at the wavelength it was measured at, "
-                "and a renderer uses it at every wavelength")
-    lo, hi = min(wavelengths), max(wavelengths)
-    if len(wavelengths) == 1:
-        return (f"measured at {lo:g} nm only: the index holds there; Mitsuba uses it at every rendered wavelength "
-                f"({RENDER_RANGE_NM[0]:g}-{RENDER_RANGE_NM[1]:g} nm in spectral variants), where it was not measured")
-    out = "" if lo <= RENDER_RANGE_NM[0] and hi >= RENDER_RANGE_NM[1] else (
-        f"; outside {lo:g}-{hi:g} nm Mitsuba reads these spectra as 0, where the plugin reflects nothing (and warns)")
-    return f"measured at {', '.join(f'{w:g}' for w in wavelengths)} nm, interpolated linearly between" + out
-
-
-def extrapolation_warning(wavelengths) -> str | None:
-    """The warning for a material measured at one wavelength (or none stated), or outside the
-    rendered range; None when its wavelengths span Mitsuba's 360-830 nm."""
-    if wavelengths == [None] or len(wavelengths) == 1:
-        return "the exported material: " + _wavelength_note(wavelengths)
-    if min(wavelengths) > RENDER_RANGE_NM[0] or max(wavelengths) < RENDER_RANGE_NM[1]:
-        return "the exported material: " + _wavelength_note(wavelengths).split("; ", 1)[1]
-    return None
 
 
 def _fit_dict(f: ModelFit, chosen: bool) -> dict:
@@ -312,12 +279,19 @@ def _table(sel: Selection) -> str:
     return "\n".join(out)
 
 
-def _roughness_note(f: ModelFit) -> str | None:
-    """Without M00: how (and how weakly) the roughness is determined, or None."""
+def _roughness_note(f: ModelFit) -> tuple:
+    """Without M00: how (and how weakly) the roughness is determined -- (text or None, whether it is
+    a warning: weakly, above 10 %, or not at all: a Lambertian albedo not distinguished from 0)."""
     key = ("rms_slope", None)
     if f.data.has_m00 or key not in f.free:
-        return None
+        return None, False
     v, e = f.values[key], f.stderr[key]
+    albedos = [(f.name(k), f.values[k], f.stderr[k]) for k in f.free if k[0] == "diffuse_reflectance"]
+    if albedos and all(not (a > 3 * ea) for _, a, ea in albedos):
+        shown = ", ".join(f"{name} = {a:.3g} +- {ea:.2g}" for name, a, ea in albedos)
+        return (f"rms_slope is not identified: without M00 it is seen only through the diffuse part, and the "
+                f"Lambertian albedo ({shown}) is not distinguished from 0 (within 3 standard errors): its value "
+                f"{v:.4g} +- {e:.2g} describes no measured effect -- measure M00 (1/sr) to see the lobe's width"), True
     rel = e / v if v > 0 else math.inf
     how = ("the size of the diffuse part relative to the specular lobe" if not f.model.lambertian else
            "the depolarized part's change over the geometries (the lobe's shape: the albedo is free")
@@ -328,12 +302,16 @@ def _roughness_note(f: ModelFit) -> str | None:
         how += ")"
     return (f"without M00 the roughness is determined only through the diffuse term ({f.model.diffuse}): by {how}; "
             f"rms_slope = {v:.4g} +- {e:.2g} ({100 * rel:.2g} %{', weakly' if rel > 0.1 else ''}), and only as far as "
-            "the diffuse term is right -- measure M00 (1/sr) to see the lobe's width itself")
+            "the diffuse term is right -- measure M00 (1/sr) to see the lobe's width itself"), rel > 0.1
 
 
 def _repeats_notes(data) -> list:
     out = []
     for g in data.groups:
+        if g.uninformative:
+            out.append(f"{g.label}: {g.uninformative} of {g.rows_in} rows left out -- their normalized values are "
+                       "ratios over an M00 not known to be above 0 within 3 sigma (the sigmas imply its relative "
+                       "error is above 1/3): a ratio of noises, which looks depolarized; measure M00 (1/sr) to use them")
         if g.repeats:
             r = g.repeats
             out.append(f"{g.label}: {r['repeated_rows']} of {r['rows']} rows repeat another row's geometry; they were "
@@ -344,27 +322,29 @@ def _repeats_notes(data) -> list:
 
 
 def impossible_notes(meas: Measurements) -> list:
-    """Normalized values no Mueller matrix has, beyond 3 of their standard deviations (the reader kept
-    them: within its file-size limit, :func:`hyde_bsdf.io.measurements.impossible_limit`)."""
+    """Normalized values no Mueller matrix has beyond what their noise reaches by chance
+    (:func:`~hyde_bsdf.fit.mueller_fit.impossible_values`, the reader's file-size limit; the
+    reader refuses single elements beyond it, so these are mostly degrees of polarization above 1
+    or data built in Python)."""
     if meas.sigma is None or not meas.values:
         return []
-    return [f"impossible data: {what} beyond 3 sigma (worst {v:.4g} +- {e:.2g} at theta_i="
+    return [f"impossible data: {what} beyond {limit:.2g} sigma (worst {v:.4g} +- {e:.2g} at theta_i="
             f"{math.degrees(meas.theta_i[i]):.4g}, theta_r={math.degrees(meas.theta_r[i]):.4g}, "
             f"phi={math.degrees(meas.phi[i]):.4g} deg"
             + ("" if meas.wavelength_nm is None else f", {meas.wavelength_nm[i]:g} nm") + "): no Mueller matrix "
             "has it -- a calibration error, or sigmas too small; the fit cannot describe these values"
-            for what, i, v, e in impossible_values(meas.values, meas.uncertainty())]
+            for what, i, v, e, limit in impossible_values(meas.values, meas.uncertainty())]
 
 
 def _collect_warnings(f: ModelFit, sel: Selection | None, meas: Measurements) -> tuple:
     """(warnings, notes): what limits the result, and what is said for information (the roughness
-    note without M00 -- a warning when the roughness is weakly determined, above 10 %)."""
+    note without M00 -- a warning when the roughness is weakly determined, above 10 %, or not at all)."""
     out = []
     if not f.verdict.adequate:
         out.append(("NO candidate model is adequate; the best: " if sel is not None else "") + f.verdict.message)
     out += list(f.warnings) + list(f.notes) + (sel.notes if sel is not None else [])
-    note, notes = _roughness_note(f), []
-    if note and ", weakly" in note:
+    (note, warn), notes = _roughness_note(f), []
+    if note and warn:
         out.append(note)
     elif note:
         notes.append(note)
@@ -430,3 +410,39 @@ def _raise_or_warn(result: LabFitResult, strict: bool):
     for text in result.warnings[int(not f.verdict.adequate):]:
         if text not in f.warnings:
             warnings.warn(text, FitDataWarning, stacklevel=3)
+
+
+def material_at(result: dict, wavelengths, extrapolate: bool = False) -> dict:
+    """A fit's material (its JSON dict, :meth:`LabFitResult.to_dict`) at ``wavelengths`` (nm): rms_slope,
+    shadowing, diffuse, and n, k and the albedo per wavelength, interpolated linearly between the
+    measured wavelengths.  A wavelength outside them -- every other one, for a fit at one
+    wavelength -- is refused (UsageError naming it and the measured ones) unless ``extrapolate``:
+    then the nearest measured values are held there, and ``"extrapolated"`` lists those wavelengths."""
+    try:
+        params = {(p["name"], p["wavelength_nm"]): float(p["value"]) for p in result["parameters"]}
+        model = result["model"]
+        shadowing, diffuse = str(model["shadowing"]), str(model["diffuse"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise UsageError(f"not a fit result (the JSON the fit command writes): {shorten(exc)}") from None
+    measured = sorted({wl for (name, wl) in params if name == "n" and wl is not None})
+    wanted = [float(w) for w in wavelengths]
+    outside = [w for w in wanted if not measured or w < measured[0] - 1e-9 or w > measured[-1] + 1e-9]
+    if outside and not extrapolate:
+        at = f"measured at {', '.join(f'{w:g}' for w in measured)} nm" if measured else "measured at no stated wavelength"
+        raise UsageError(f"the fit was {at}; the export needs {', '.join(f'{w:g}' for w in outside)} nm, outside "
+                         "them: its index there is unknown -- measure there, or give `extrapolate` to hold the "
+                         "nearest measured values (a guess)")
+
+    def curve(name):
+        if (name, None) in params:               # shared by the wavelengths (or no wavelength column)
+            return [params[(name, None)]] * len(wanted)
+        pts = sorted((wl, v) for (q, wl), v in params.items() if q == name)
+        if not pts:
+            return None
+        return list(np.interp(wanted, [w for w, _ in pts], [v for _, v in pts]))
+
+    rms = params.get(("rms_slope", None))
+    if rms is None:
+        raise UsageError("not a fit result (the JSON the fit command writes): no rms_slope")
+    return {"rms_slope": rms, "shadowing": shadowing, "diffuse": diffuse, "n": curve("n"), "k": curve("k"),
+            "diffuse_reflectance": curve("diffuse_reflectance"), "measured_nm": measured, "extrapolated": outside}

@@ -33,10 +33,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.fit.adequacy import (Verdict, chi2_verdict, cluster_covariance, correlation, floor_verdict,
-                                    geometry_clusters, half_angles, larger_errors)
+from hyde_bsdf.fit.adequacy import (Verdict, birge_scaling, blame_fixed_parameters, chi2_verdict,
+                                    cluster_covariance, correlation, floor_verdict, geometry_clusters, half_angles,
+                                    larger_errors)
 from hyde_bsdf.fit.lab_data import LabData
-from hyde_bsdf.fit.mueller_fit import _birge_scaling
 from hyde_bsdf.io.measurements import M00, element_index
 from hyde_bsdf.model.parameters import DIFFUSE_REFLECTANCE, FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.model.terms import diffuse_term
@@ -53,6 +53,10 @@ GRID_SLOPES = tuple(np.geomspace(0.02, 1.5, 12))
 GRID_N = (0.15, 0.4, 0.8, 1.3, 1.8, 2.6, 4.0)
 GRID_K = (0.0, 0.5, 1.5, 3.0, 5.5, 9.0, 14.0)
 GRID_ALBEDO = (0.0, 0.01, 0.03, 0.1, 0.3)
+#: the finest albedo step the normalized elements' derivative resolves: where F00 underflows far from
+#: the lobe, d(F_jk/F00)/d albedo = -(F_jk/F00) u / F00 is unbounded (the ratio falls from its specular
+#: value to 0 within an albedo of F00 / u); the chord over this step keeps the Jacobian finite
+ALBEDO_STEP = 1e-9
 #: noise assumed for the start and the first pass of a fit without sigmas
 START_NOISE = {"m00_relative": 0.05, "elements": 0.02}
 
@@ -149,11 +153,8 @@ class _Problem:
             out[self.data.rows[g]] = self._stack(g, *self.predict_group(v, g))
         return out
 
-    def weights(self):
-        return self.data.w if self.data.w is not None else 1.0
-
     def __call__(self, x) -> np.ndarray:
-        r = (self.prediction(self.unpack(x)) - self.data.y) / self.weights()
+        r = self.data.whiten(self.prediction(self.unpack(x)) - self.data.y)
         if self.tick is not None:
             self.tick(r)
         return r
@@ -161,10 +162,9 @@ class _Problem:
     def jac(self, x) -> np.ndarray:
         """Forward differences, group by group (a group's index moves only its rows); the
         albedo's column analytic: dF00/da = u (the term per unit albedo, 1/pi), d(F_jk/F00)/da =
-        -(F_jk/F00) u / F00."""
+        -(F_jk/F00) u / F00 (F00 floored at ALBEDO_STEP u: finite where the lobe underflows)."""
         v0 = self.unpack(x)
         J = np.zeros((self.data.y.size, len(self.free)))
-        w = self.weights()
         for g in range(len(self.data.groups)):
             rows = self.data.rows[g]
             F00, norm = self.predict_group(v0, g)
@@ -174,8 +174,9 @@ class _Problem:
                     continue
                 if q == "diffuse_reflectance":
                     dn = np.zeros_like(norm)          # absolute elements do not depend on it
-                    if not self.data.absolute:
-                        np.divide(-norm * self.per_albedo[g], F00, out=dn, where=F00 > 0.0)
+                    if not self.data.absolute:        # the chord over albedo steps of ALBEDO_STEP at least
+                        u = self.per_albedo[g]
+                        dn = -norm * u / np.maximum(F00, ALBEDO_STEP * u)
                     J[rows, col] = self._stack(g, self.per_albedo[g], dn)
                     continue
                 h = 1e-7 * max(1.0, abs(v0[(q, gq)]))
@@ -183,7 +184,7 @@ class _Problem:
                 v = dict(v0)
                 v[(q, gq)] += h
                 J[rows, col] = (self._stack(g, *self.predict_group(v, g)) - base) / h
-        return J / (w[:, None] if np.ndim(w) else w)
+        return self.data.whiten(J)
 
 
 def _grid_start(data: LabData, model: LabModel, values: dict, free: list) -> dict:
@@ -444,6 +445,10 @@ def fit_model(data: LabData, model: LabModel, *, fit=PARAMETERS, values: dict | 
         data = data.with_noise(_estimated_noise(first, res.x))
     problem = _Problem(data, model, free, values, tick)
     res = _solve(problem, [init[key] for key in free], 60 * len(free))
+    if data.shared is not None and not data.shared_model:   # the rows' shared M00 noise along the model's r
+        data = data.with_shared(problem.prediction(problem.unpack(res.x)))
+        problem = _Problem(data, model, free, values, tick)
+        res = _solve(problem, res.x, 60 * len(free))
     fitted = _uncertainty(problem, res)
     fitted.fixed_by_user = user_fixed
     fitted.notes += notes
@@ -489,7 +494,7 @@ def _uncertainty(problem: _Problem, res) -> ModelFit:
     notes, scale = [], 1.0
     finite = bool(np.all(np.isfinite(cov)))
     if data.sigma_given and dof > 0 and finite:
-        scale, cov = _birge_scaling(chi2, dof, cov, notes)
+        scale, cov = birge_scaling(chi2, dof, cov, notes)
     ti, tr, ph = data.angles()
     if data.sigma_given:
         verdict = chi2_verdict(chi2, dof, r.reshape(len(data.columns), -1), ti, tr, ph, data.neighbours())
@@ -517,7 +522,8 @@ def _covariance(J, names):
     still resolved): the data do not separate the parameters, and the errors are infinite."""
     scale = np.sqrt(np.einsum("ij,ij->j", J, J))
     p = len(names)
-    lam, V = (np.linalg.eigh((J / scale).T @ (J / scale)) if np.all(scale > 0) else (np.zeros(p), np.eye(p)))
+    usable = np.all(np.isfinite(scale)) and np.all(scale > 0)
+    lam, V = np.linalg.eigh((J / scale).T @ (J / scale)) if usable else (np.zeros(p), np.eye(p))
     if not (lam[0] > 1e-14 * lam[-1]):
         corr = np.where(np.eye(p, dtype=bool), 1.0, np.nan)
         cond = math.sqrt(lam[-1] / lam[0]) if lam[0] > 0 else math.inf
@@ -585,25 +591,17 @@ def _parameter_notes(values, stderr, corr, free, names, dof) -> list:
 
 def blame_fixed(data: LabData, fitted: ModelFit, tick=None) -> ModelFit | None:
     """A misfit with parameters held fixed: the same model with every parameter free.  Returns the
-    free fit when it describes the data (or fits significantly better: chi^2 test of the
-    difference, p < 0.001), after rewriting ``fitted``'s verdict to name the fixed parameters as
-    the cause; None when freeing them does not help (then the verdict stands)."""
+    free fit when it describes the data (or fits significantly better), after rewriting ``fitted``'s
+    verdict and notes to name the fixed parameters as the cause
+    (:func:`hyde_bsdf.fit.adequacy.blame_fixed_parameters`); None when freeing them does not help
+    (then the verdict stands)."""
     if fitted.verdict.adequate or not fitted.fixed_by_user:
         return None
-    from scipy.stats import chi2 as chi2_dist
-
     free = fit_model(data, fitted.model, fit=PARAMETERS, values=fitted.values, start=fitted.values, tick=tick)
-    gained = len(free.free) - len(fitted.free)
-    better = free.verdict.adequate or (gained > 0 and fitted.chi2 > free.chi2 and
-                                        chi2_dist.sf(fitted.chi2 - free.chi2, gained) < 1e-3)
-    if not better:
-        return None
     held = ", ".join(f"{q} = {fitted.values.get((q, None), fitted.values.get((q, 0))):.4g}"
                      for q in fitted.fixed_by_user if any(k[0] == q for k in fitted.values))
     freed = ", ".join(f"{free.name(k)} = {free.values[k]:.4g}" for k in free.free if k[0] in fitted.fixed_by_user)
-    v = fitted.verdict
-    v.cause = (f"the parameter(s) held fixed ({held}) cause the misfit, not the sigmas: with them fitted the "
-               f"model {'describes' if free.verdict.adequate else 'fits significantly better'} the data "
-               f"(chi^2 = {free.chi2:.4g} for {free.dof} dof; {freed})")
-    v.message = f"misfit (chi^2 = {fitted.chi2:.4g} for {fitted.dof} dof): {v.cause}; fit them (--fit)"
+    if not blame_fixed_parameters(fitted.verdict, fitted.notes, fitted.chi2, fitted.dof,
+                                  (free.chi2, free.dof, free.verdict.adequate), held, freed):
+        return None
     return free

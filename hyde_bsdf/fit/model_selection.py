@@ -156,29 +156,31 @@ def _bic_weighted(rss, m, p):
 # ---------------------------------------------------------------------------------------------
 # CSV (Mueller-matrix measurements)
 
-def select_model(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), rms_slope=0.3, n0=None, k0=None,
+def select_model(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_slope=0.3, n0=None, k0=None,
                  strict=False, **kwargs) -> ModelSelection:
     """Fit every candidate to normalized Mueller measurements (as :func:`hyde_bsdf.fit.fit_mueller`,
-    same arguments but no shadowing/diffuse) and choose; returns a :class:`ModelSelection`.
+    same arguments but no shadowing/diffuse; ``fit`` None: what each candidate's data determine) and
+    choose; returns a :class:`ModelSelection`.
 
     More than :data:`CSV_SCREEN_ROWS` values per element: the candidates are fitted to that many
     (a fixed random subset), and only the chosen one to all the data."""
     from hyde_bsdf.fit.mueller_fit import _check_fit_names, fit_mueller
 
     fitted_names = _check_fit_names(fit)
+    names = lambda model: _check_fit_names(None, model[1]) if fit is None else fitted_names   # noqa: E731
     full = (theta_i, theta_r, phi, measured, sigma)
     data, screened = _csv_subset(full)
     rows, results = [], []
     for model in _order():
         start = _neighbour_start(model, rows)
-        row, res = _csv_candidate(model, False, fitted_names, start, rms_slope, n0, k0, data, kwargs, fit_mueller)
+        row, res = _csv_candidate(model, False, names(model), start, rms_slope, n0, k0, data, kwargs, fit_mueller)
         rows.append(row)
         results.append(res)
     best_k = min(rows, key=lambda r: r.bic).params["k"]
     if "k" in fitted_names and best_k < DIELECTRIC_K:
         for model in sorted({(r.shadowing, r.diffuse) for r in sorted(rows, key=lambda r: r.bic)[:3]}):
             start = next(r.params for r in rows if (r.shadowing, r.diffuse) == model)
-            row, res = _csv_candidate(model, True, tuple(q for q in fitted_names if q != "k"), start, rms_slope,
+            row, res = _csv_candidate(model, True, tuple(q for q in names(model) if q != "k"), start, rms_slope,
                                       n0, 0.0, data, kwargs, fit_mueller)
             rows.append(row)
             results.append(res)

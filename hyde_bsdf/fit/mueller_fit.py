@@ -53,14 +53,15 @@ What the data can and cannot say (:class:`FitDataWarning`, ``FitResult.data_warn
   the rows not independent -- the errors are then never scaled down (noiseless data
   would get zero errors).
 - *Impossible data*: a normalized element |M_jk / M_00| > 1, or a degree of polarization
-  sqrt(M01^2 + M02^2 + M03^2) (or of the first column) > 1, beyond 3 standard deviations
+  sqrt(M01^2 + M02^2 + M03^2) (or of the first column) > 1, beyond what the noise reaches by
+  chance (3 standard deviations, more for many values: ``io.measurements.impossible_limit``)
   (the given sigma, or the fit's residual scatter without sigma): no Mueller matrix has
   them, so the summary never reports a plain "converged".
 
 The command line (``hyde-bsdf fit DATA.csv``, the plot) is :mod:`hyde_bsdf.app.fit`; the CSV
 format is :mod:`hyde_bsdf.io.measurements`.  Large data sets report progress through the
 ``progress`` callback; 10^6 rows read and fit in about 20-30 s on 2 cores
-(``validation/fit_synthetic.py``, part 5).
+(``hyde_bsdf/validation/fit_synthetic.py``, part 5).
 """
 from __future__ import annotations
 
@@ -72,18 +73,19 @@ import numpy as np
 
 from hyde_bsdf.errors import RejectedResult, UsageError, UsageTypeError, shorten
 from hyde_bsdf.model.checks import real_array
+from hyde_bsdf.options import Options
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import FIT_PARAMETERS, INDEX_MIN, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.model.terms import check_pair
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
-                                    chi2_verdict, cluster_covariance, correlation, floor_verdict,
-                                    geometry_clusters, half_angles, larger_errors)
+                                    birge_scaling, blame_fixed_parameters, chi2_verdict, cluster_covariance,
+                                    correlation, floor_verdict, geometry_clusters, half_angles, larger_errors)
 from hyde_bsdf.io.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index,
                                        impossible_limit)
 
-__all__ = ["PARAMETERS", "FIT_PARAMETERS", "SEARCH_ROWS", "FitResult", "check_options", "IllPosedFitWarning",
+__all__ = ["PARAMETERS", "FIT_PARAMETERS", "SEARCH_ROWS", "FitOptions", "FitResult", "check_options", "IllPosedFitWarning",
            "IllPosedFitError", "FitDataWarning", "InadequateModelWarning", "InadequateModelError",
            "merge_repeated_geometries", "impossible_values",
            "mueller_elements", "fit_mueller", "fit_measurements", "synthetic_measurements",
@@ -113,10 +115,6 @@ class FitDataWarning(UserWarning):
     """The data repeat geometries, do not match their sigmas (chi^2_red far from 1), or are impossible."""
 
 
-#: chi^2 tail probability below which the reduced chi^2 counts as far from 1 (either tail)
-CHI2_TAIL = 1e-3
-#: standard deviations beyond which |M_jk / M00| > 1 (or a degree of polarization > 1) is impossible
-IMPOSSIBLE_SIGMAS = 3.0
 
 
 def merge_repeated_geometries(theta_i, theta_r, phi, values, sigma=None):
@@ -173,24 +171,29 @@ def merge_repeated_geometries(theta_i, theta_r, phi, values, sigma=None):
     return a[starts], b[starts], c[starts], out_v, out_s, info
 
 
-def impossible_values(values, noise) -> list:
-    """Values no Mueller matrix can have, beyond ``IMPOSSIBLE_SIGMAS`` x ``noise``.
+def impossible_values(values, noise, limit: float | None = None) -> list:
+    """Values no Mueller matrix can have, beyond ``limit`` x ``noise`` (None: what the noise of that
+    many values reaches with probability 0.001, at least 3:
+    :func:`hyde_bsdf.io.measurements.impossible_limit`, as the CSV reader judges -- honest data at
+    the edge of the range pass, whatever their number).
 
     ``values``: element -> normalized values M_jk / M00 (1-D arrays of one length);
     ``noise``: element -> their standard deviations (arrays or scalars).  Checks |M_jk/M00| <= 1
     and the degrees of polarization sqrt(M01^2 + M02^2 + M03^2) <= 1 (output of unpolarized
     light) and sqrt(M10^2 + M20^2 + M30^2) <= 1 (diattenuation), over the elements present.
-    Returns a list of (what, row index, value, its sigma) for each failing check's worst row.
+    Returns a list of (what, row index, value, its sigma, limit) for each failing check's worst row.
     """
     found = []
+    if limit is None:
+        limit = impossible_limit(sum(np.size(v) for v in values.values()))
     for name, v in values.items():
         v = np.asarray(v, float)
         s = np.broadcast_to(np.asarray(noise[name], float), v.shape)
         excess = (np.abs(v) - 1.0) / s
-        bad = excess > IMPOSSIBLE_SIGMAS
+        bad = excess > limit
         if bad.any():
             i = int(np.argmax(np.where(bad, excess, -np.inf)))
-            found.append((f"|{name}/M00| > 1 in {int(bad.sum())} row(s)", i, float(v[i]), float(s[i])))
+            found.append((f"|{name}/M00| > 1 in {int(bad.sum())} row(s)", i, float(v[i]), float(s[i]), limit))
     for label, group in (("degree of polarization sqrt(M01^2+M02^2+M03^2)", ("M01", "M02", "M03")),
                          ("diattenuation sqrt(M10^2+M20^2+M30^2)", ("M10", "M20", "M30"))):
         present = [g for g in group if g in values]
@@ -202,10 +205,10 @@ def impossible_values(values, noise) -> list:
         with np.errstate(invalid="ignore", divide="ignore"):
             sd = np.sqrt(sum((x * e) ** 2 for x, e in zip(vs, ss))) / np.where(dop > 0, dop, 1.0)
             excess = (dop - 1.0) / np.maximum(sd, 1e-300)
-        bad = excess > IMPOSSIBLE_SIGMAS
+        bad = excess > limit
         if bad.any():
             i = int(np.argmax(np.where(bad, excess, -np.inf)))
-            found.append((f"{label} > 1 in {int(bad.sum())} row(s)", i, float(dop[i]), float(sd[i])))
+            found.append((f"{label} > 1 in {int(bad.sum())} row(s)", i, float(dop[i]), float(sd[i]), limit))
     return found
 
 
@@ -441,7 +444,11 @@ def _judge_by_sigma(name, v, s):
                          "by M00, or check the sigma")
 
 
-def _check_fit_names(fit):
+def _check_fit_names(fit, diffuse_mode="paper"):
+    """The fitted names in canonical order; None: every parameter the data determine -- n, k and
+    rms_slope, which without a diffuse term the normalized elements do not depend on (then held)."""
+    if fit is None:
+        return tuple(q for q in PARAMETERS if q != "rms_slope" or diffuse_mode != "none")
     if isinstance(fit, str):
         fit = tuple(p.strip() for p in fit.split(",") if p.strip())
     fit = tuple(fit)
@@ -469,12 +476,12 @@ def _start_value(name, value, fitted):
     return v
 
 
-def check_options(fit=("n", "k"), rms_slope=0.3, n0=None, k0=None, shadowing="vgroove", diffuse=True,
+def check_options(fit=None, rms_slope=0.3, n0=None, k0=None, shadowing="vgroove", diffuse=True,
                   corr_limit=0.95):
     """Check :func:`fit_mueller`'s options without data (the command line does so before it
     reads a large file); returns (fitted names, diffuse mode, start/fixed values)."""
-    fitted = _check_fit_names(fit)
     term = check_pair(shadowing, diffuse)[1]       # the rules of model/terms.py
+    fitted = _check_fit_names(fit, term.name)
     if term.parameters:
         raise UsageError(f"diffuse={term.name!r} has a free {', '.join(term.parameters)}: fit it with "
                          "hyde_bsdf.fit.lab.fit_lab (fit_mueller fits n, k, rms_slope)")
@@ -488,10 +495,24 @@ def check_options(fit=("n", "k"), rms_slope=0.3, n0=None, k0=None, shadowing="vg
     return fitted, mode, given
 
 
-def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), rms_slope=0.3,
-                n0=None, k0=None, shadowing="vgroove", diffuse=True, corr_limit=0.95,
-                strict=False, progress=None) -> FitResult:
+@dataclass(frozen=True)
+class FitOptions(Options):
+    """The model terms and the reporting of :func:`fit_mueller` (each field is also a keyword of
+    :func:`fit_mueller`; its docstring describes them)."""
+
+    shadowing: str = "vgroove"
+    diffuse: object = True
+    corr_limit: float = 0.95
+    strict: bool = False
+    progress: object = None
+
+
+def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_slope=0.3, n0=None, k0=None,
+                options: FitOptions | None = None, **settings) -> FitResult:
     """Least-squares fit of the pBRDF (Eq. 17) to normalized Mueller elements.
+
+    The model terms and the reporting are a :class:`FitOptions` (``options``), or its fields given as
+    keywords: ``shadowing``, ``diffuse``, ``corr_limit``, ``strict``, ``progress`` below.
 
     Parameters
     ----------
@@ -502,7 +523,12 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     sigma : dict of the same names -> standard deviations of those values, in
         [1e-12, 1e3], or None (unit weights; the covariance is then scaled by chi^2 / dof).
     fit : subset of ("n", "k", "rms_slope") (or "n,k,rms_slope") to fit; the others
-        are held at their given values.
+        are held at their given values.  None (the default): every parameter the data
+        determine -- all three, but rms_slope not without a diffuse term (the normalized
+        elements do not depend on it then: it is held, and a FitDataWarning says so).  A
+        misfit that a parameter held fixed causes is blamed on it, never on the sigmas: the
+        fit is repeated with all three free, and when that removes the misfit the verdict
+        names the fixed parameter.
     rms_slope : start (if fitted) or fixed value of the paper's sqrt(2) sigma_h / ell.
     n0, k0 : start (if fitted) or fixed value of eta = n - jk (n, k >= 0).  A fitted
         parameter without a start value is started from several points
@@ -517,7 +543,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     Large data sets: with more than :data:`SEARCH_ROWS` geometries the multi-start search
     runs on a random subset of that size and only its best point is refined on all the
     data, with a forward-difference Jacobian (4 model evaluations per step instead of 7);
-    10^6 geometries fit in about 20 s (``validation/fit_synthetic.py`` measures it).
+    10^6 geometries fit in about 20 s (``hyde_bsdf/validation/fit_synthetic.py`` measures it).
 
     Returns
     -------
@@ -532,6 +558,8 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     """
     from scipy.stats import chi2 as chi2_dist
 
+    o = FitOptions.of(options, settings, "fit_mueller")
+    shadowing, diffuse, corr_limit, strict, progress = o.shadowing, o.diffuse, o.corr_limit, o.strict, o.progress
     fitted, mode, given = check_options(fit, rms_slope, n0, k0, shadowing, diffuse, corr_limit)
     check_progress(progress)
     data = _FitData.build(theta_i, theta_r, phi, measured, sigma, fitted)
@@ -549,7 +577,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     data_diag = [] if data.repeats is None else [_repeats_note(data.repeats)]
     scale = 1.0
     if data.sigma_given and dof > 0 and math.isfinite(cond) and cond <= 1e10:
-        scale, cov = _birge_scaling(chi2, dof, cov, data_diag)
+        scale, cov = birge_scaling(chi2, dof, cov, data_diag)
     data_diag += _impossible_notes(data, chi2, dof)
     classic = np.sqrt(np.diag(cov))
     verdict, cov = _adequacy(r, J, cov, data.ti, data.tr, data.ph, len(data.names), chi2, dof,
@@ -563,6 +591,15 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
     diag += _parameter_notes(vals, stderr, corr, fitted, corr_limit, m, dof)
     if not res.success:
         diag.append(f"the optimizer did not converge: {res.message}")
+    if fit is None and "rms_slope" not in fitted:
+        data_diag.append(f"rms_slope is not identified: without a diffuse term the normalized elements do not depend "
+                         f"on it; it is held at rms_slope = {vals['rms_slope']:.4g} (give the value you know: a "
+                         "material needs it) -- M00 in 1/sr determines it (hyde_bsdf.fit.lab.fit_lab)")
+    determined = _check_fit_names(None, mode)      # what the elements depend on: freeing the rest cannot help
+    if not verdict.adequate and set(determined) - set(fitted):
+        _blame_fixed(verdict, data_diag, vals, fitted, chi2, dof, lambda v: fit_mueller(
+            theta_i, theta_r, phi, measured, sigma=sigma, fit=determined, rms_slope=v["rms_slope"], n0=v["n"],
+            k0=v["k"], shadowing=shadowing, diffuse=diffuse, corr_limit=corr_limit, progress=False))
     result = FitResult(
         params=vals, fitted=fitted, stderr=stderr, covariance=cov, correlation=corr,
         chi2=chi2, dof=dof, reduced_chi2=chi2 / dof if dof > 0 else float("nan"),
@@ -575,6 +612,22 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=("n", "k"), 
         warnings.warn(text, FitDataWarning, stacklevel=2)
     raise_or_warn(verdict, diag, strict, stacklevel=3)
     return result
+
+
+def _blame_fixed(verdict, notes, vals, fitted, chi2, dof, refit):
+    """A misfit with parameters held fixed: ``refit(vals)`` fits every parameter the elements depend
+    on, from these values; when that removes the misfit the verdict and the notes name the held
+    parameters it freed as its cause (:func:`hyde_bsdf.fit.adequacy.blame_fixed_parameters`)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            free = refit(vals)
+        except UsageError:          # fewer values than parameters: nothing to compare
+            return
+    freed = [q for q in free.fitted if q not in fitted]
+    blame_fixed_parameters(verdict, notes, chi2, dof, (free.chi2, free.dof, free.verdict.adequate),
+                           ", ".join(f"{q} = {vals[q]:.4g}" for q in freed),
+                           ", ".join(f"{q} = {free.params[q]:.4g}" for q in freed))
 
 
 @dataclass
@@ -740,41 +793,19 @@ def _repeats_note(repeats) -> str:
              ", its sigma that of the mean of the repeats"))
 
 
-def _birge_scaling(chi2, dof, cov, notes):
-    """With sigmas: a reduced chi^2 far above 1 scales the errors up by the Birge ratio (never
-    down); far from 1 either way adds a note.  Returns (scale, covariance)."""
-    from scipy.stats import chi2 as chi2_dist
-    red = chi2 / dof
-    if chi2_dist.sf(chi2, dof) < CHI2_TAIL:
-        scale = math.sqrt(red)      # the Birge ratio: errors as large as the scatter says
-        if red > 2.0:
-            notes.append(
-                f"reduced chi^2 = {red:.4g} is far above 1 (dof = {dof}): the sigmas underestimate the "
-                "scatter, or the model does not describe the data; the standard errors are scaled by "
-                f"sqrt(chi^2_red) = {scale:.3g}")
-        return scale, cov * red
-    if chi2_dist.cdf(chi2, dof) < CHI2_TAIL and red < 0.5:
-        # never scaled down: noiseless or over-cautious sigmas must not shrink the errors to 0
-        notes.append(
-            f"reduced chi^2 = {red:.4g} is far below 1 (dof = {dof}): the sigmas overestimate the "
-            "scatter, or the rows are not independent measurements; the standard errors follow the "
-            "given sigmas and may be too large")
-    return 1.0, cov
-
-
 def _impossible_notes(data, chi2, dof) -> list:
-    """Notes on values no Mueller matrix has, beyond IMPOSSIBLE_SIGMAS of the noise (the given
-    sigmas, or the fit's residual scatter without)."""
+    """Notes on values no Mueller matrix has, beyond :func:`impossible_values`' limit of the noise (the
+    given sigmas, or the fit's residual scatter without)."""
     if not data.sigma_given and dof <= 0:
         return []
     noise = data.w if data.sigma_given else {
         n_: np.full(data.rows, math.sqrt(chi2 / dof)) for n_ in data.names}
     bad = impossible_values(data.y, {n_: np.maximum(noise[n_], 1e-12) for n_ in data.names})
-    return [f"impossible data: {what} beyond {IMPOSSIBLE_SIGMAS:g} sigma (worst {v:.4g} +- {e:.2g} at "
+    return [f"impossible data: {what} beyond {limit:.2g} sigma (worst {v:.4g} +- {e:.2g} at "
             f"theta_i={math.degrees(data.ti[i]):.4g}, theta_r={math.degrees(data.tr[i]):.4g}, "
             f"phi={math.degrees(data.ph[i]):.4g} deg): no Mueller matrix has it -- unnormalized data or a "
             "calibration error; the fit cannot describe these values"
-            for what, i, v, e in bad]
+            for what, i, v, e, limit in bad]
 
 
 def _parameter_notes(vals, stderr, corr, fitted, corr_limit, m, dof) -> list:

@@ -60,21 +60,22 @@ from hyde_bsdf.fit.pbsdf_bands import COLOUR_TARGET, BandChoice, check_wavelengt
 from hyde_bsdf.fit.pbsdf_samples import paper_angles, paper_to_table, table_to_paper
 from hyde_bsdf.io.ior import material_files
 from hyde_bsdf.io.output_gate import check_free_space, check_output_path
-from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, _header, read_pbsdf,
-                                     rusinkiewicz_to_directions, table_frame_x, table_nbytes)
+from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, read_pbsdf, rusinkiewicz_to_directions,
+                                     table_frame_x, table_nbytes, write_table)
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
-from hyde_bsdf.model.parameters import ALPHA_SAMPLE, INDEX_MIN, N, RMS_SLOPE
-from hyde_bsdf.model.terms import RENDER_DEFAULT, check_pair
+from hyde_bsdf.model.parameters import ALPHA_SAMPLE, DIFFUSE_REFLECTANCE, INDEX_MIN, N, RMS_SLOPE
+from hyde_bsdf.model.terms import RENDER_DEFAULT, check_pair, term_arguments
+from hyde_bsdf.options import Options
 from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
 from hyde_bsdf.resources import COSTS, OutputLock, check_memory, format_bytes
 
 __all__ = ["DEFAULT_RESOLUTION", "edge_deg", "ALPHA_CANDIDATES", "ExportReport", "grids",
            "band_index", "check_table_size", "interpolation_error", "suggest_alpha_sample",
-           "export_pbsdf"]
+           "ExportOptions", "export_pbsdf"]
 
 #: (N_phi_d, N_theta_d, N_theta_h) of the default export: the smallest table of the sweep in
-#: validation/pbsdf_export.py with an M00 L1 error <= 1 % and normalized elements within 2 % (95th
+#: hyde_bsdf/validation/pbsdf_export.py with an M00 L1 error <= 1 % and normalized elements within 2 % (95th
 #: percentile) for gold at rms_slope 0.3 and 0.1 (35 MB; phi_d resolution hardly matters: the table's
 #: frames follow the facet, so 37, 73 and 145 phi_d nodes give the same error)
 DEFAULT_RESOLUTION = (37, 55, 55)
@@ -207,8 +208,10 @@ def band_indices(params) -> list:
 
 
 def _model(theta_i, theta_r, phi, params, band):
+    albedo = params.get("diffuse_reflectance")
     return pbrdf(theta_i, theta_r, phi, rms_slope=params["rms_slope"], index=band_indices(params)[band],
-                 shadowing=params["shadowing"], diffuse=params["diffuse"])
+                 shadowing=params["shadowing"], diffuse=params["diffuse"],
+                 diffuse_reflectance=None if albedo is None else albedo[band])
 
 
 def _slab(p, phi_d, theta_d, theta_h, params):
@@ -386,7 +389,9 @@ class ExportReport:
         idx = ", ".join(f"{w:g} nm: {i.n:.4g} - j{i.k:.4g}" for w, i in zip(self.wavelengths, band_indices(p)))
         lines = [f"wrote {self.path} ({self.nbytes / 2**20:.1f} MiB, {'x'.join(map(str, self.resolution))} "
                  f"phi_d x theta_d x theta_h x {len(self.wavelengths)} bands, {self.seconds:.1f} s)",
-                 f"  hyde: rms_slope = {p['rms_slope']:.6g}, shadowing = {p['shadowing']}, diffuse = {p['diffuse']}",
+                 f"  hyde: rms_slope = {p['rms_slope']:.6g}, shadowing = {p['shadowing']}, diffuse = {p['diffuse']}"
+                 + (f", diffuse_reflectance = {', '.join(f'{a:.4g}' for a in p['diffuse_reflectance'])}"
+                    if p.get("diffuse_reflectance") else ""),
                  f"  index (paper eta = n - jk): {idx}"]
         if self.bands is not None:
             lines.append(f"  {self.bands.text()}")
@@ -423,19 +428,47 @@ def _bands(n, k, material, bands) -> BandChoice:
                       (0.0, 0.0, 0.0) if constant else None)
 
 
-def _check_params(rms_slope, n, k, material, shadowing, diffuse, bands=None):
+def _check_params(rms_slope, n, k, material, shadowing, diffuse, bands=None, diffuse_reflectance=None):
     if not isinstance(rms_slope, (int, float)) or isinstance(rms_slope, bool) or not RMS_SLOPE.contains(rms_slope):
         raise UsageError(f"rms_slope must be a number in [{RMS_SLOPE.lo:g}, {RMS_SLOPE.hi:g}], got {rms_slope!r}")
-    check_pair(shadowing, diffuse, booleans=False)      # names only: the export takes no True/False
+    term = check_pair(shadowing, diffuse, booleans=False)[1]     # names only: the export takes no True/False
+    params = {"shadowing": shadowing, "diffuse": diffuse}
+    if "diffuse_reflectance" not in term.parameters:
+        term_arguments(term, diffuse_reflectance=diffuse_reflectance)     # refuses an albedo, naming its term
+    elif diffuse_reflectance is None:      # no silent default: a table is a material, its albedo is measured
+        raise UsageError(f"diffuse_reflectance must be given with diffuse={diffuse!r}: the Lambertian term's own "
+                         "albedo, one value or one per band (a fit's is in the JSON the fit command writes)")
+    else:
+        a = np.atleast_1d(np.asarray(diffuse_reflectance, float))
+        if a.ndim != 1 or a.size not in (1, len(KAIST_WAVELENGTHS)):
+            raise UsageError(f"diffuse_reflectance must be one value or {len(KAIST_WAVELENGTHS)} (one per band), "
+                             f"got {diffuse_reflectance!r}")
+        params["diffuse_reflectance"] = [DIFFUSE_REFLECTANCE.check(float(x), "diffuse_reflectance")
+                                         for x in np.broadcast_to(a, (len(KAIST_WAVELENGTHS),))]
     bands = _bands(n, k, material, bands)
-    return {"rms_slope": float(rms_slope), "n": list(bands.n), "k": list(bands.k),
-            "shadowing": shadowing, "diffuse": diffuse, "material": material}, bands
+    return {"rms_slope": float(rms_slope), "n": list(bands.n), "k": list(bands.k), "material": material,
+            **params}, bands
+
+
+@dataclass(frozen=True)
+class ExportOptions(Options):
+    """The table's size and the export's reporting (each field is also a keyword of :func:`export_pbsdf`;
+    its docstring describes them)."""
+
+    resolution: object = DEFAULT_RESOLUTION
+    error_samples: int = 20000
+    alpha_sample: float | None = None
+    seed: int = 0
+    progress: object = None
 
 
 def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing=RENDER_DEFAULT[0],
-                 diffuse=RENDER_DEFAULT[1], resolution=DEFAULT_RESOLUTION, error_samples: int = 20000,
-                 alpha_sample: float | None = None, seed: int = 0, progress=None, bands=None) -> ExportReport:
+                 diffuse=RENDER_DEFAULT[1], diffuse_reflectance=None, bands=None,
+                 options: ExportOptions | None = None, **settings) -> ExportReport:
     """Write the ``hyde`` model as a ``measured_polarized`` table (see the module docstring).
+
+    The table's size and the reporting are an :class:`ExportOptions` (``options``), or its fields given as
+    keywords: ``resolution``, ``error_samples``, ``alpha_sample``, ``seed``, ``progress`` below.
 
     Parameters: ``rms_slope`` (the paper's), the index as ``n``/``k`` (eta = n - jk; one value or
     one per band) or ``material`` (Mitsuba ``data/ior`` name), ``shadowing``, ``diffuse`` (as
@@ -446,11 +479,16 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing=RE
     ``progress(message)`` (True: lines on stderr; :mod:`hyde_bsdf.progress`), ``bands`` the five
     band wavelengths (nm; default: chosen by colour error for a material, 450-650 nm for n, k) or a
     :class:`~hyde_bsdf.fit.pbsdf_bands.BandChoice` (e.g. ``choose_bands(index_spectrum("Au"),
-    (450, 500, 550, 600, 650), "sampled")``, the index sampled at the band wavelengths).
+    (450, 500, 550, 600, 650), "sampled")``, the index sampled at the band wavelengths),
+    ``diffuse_reflectance`` the albedo of ``diffuse="lambertian"`` (one value or one per band; required
+    with it).
     Everything is checked, and the size refused (:func:`check_table_size`), before any work.
     """
     t0 = time.perf_counter()
-    params, choice = _check_params(rms_slope, n, k, material, shadowing, diffuse, bands)
+    o = ExportOptions.of(options, settings, "export_pbsdf")
+    resolution, error_samples, alpha_sample, seed, progress = (o.resolution, o.error_samples, o.alpha_sample, o.seed,
+                                                               o.progress)
+    params, choice = _check_params(rms_slope, n, k, material, shadowing, diffuse, bands, diffuse_reflectance)
     wavelengths = choice.wavelengths
     res = _check_resolution(resolution)
     if not (isinstance(error_samples, (int, np.integer)) and 0 <= error_samples <= 10**7):
@@ -476,7 +514,7 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing=RE
                 "bands": {"band_index": choice.band_index, "chosen_by_colour_error": choice.searched,
                           "colour_error_rgb": choice.colour_error},
                 "theta_h_grid": "(pi/2) u^2", "edge_deg": edge_deg(res[1])}
-        offsets = _write_arrays(tmp, res, wavelengths, (th, td, pd), slabs())
+        offsets = write_table(tmp, th, td, pd, wavelengths, slabs(), extra={"hyde_export": " " * _JSON_BYTES})
         table = read_pbsdf(tmp)
         errors = {}
         if error_samples:
@@ -490,27 +528,6 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing=RE
     return ExportReport(path=Path(path), resolution=res, nbytes=os.path.getsize(path),
                         seconds=time.perf_counter() - t0, params=params, wavelengths=tuple(wavelengths),
                         alpha_sample=float(alpha_sample), errors=errors, bands=choice)
-
-
-def _write_arrays(tmp, res, wavelengths, axes, slabs) -> dict:
-    """The table's header, axes (theta_h, theta_d, phi_d), wavelengths and the Mueller slabs
-    into ``tmp``; the metadata field is left blank.  Returns each field's byte offset."""
-    th, td, pd = axes
-    layout = {"theta_h": (np.dtype(np.float32), (1, res[2])), "theta_d": (np.dtype(np.float32), (1, res[1])),
-              "phi_d": (np.dtype(np.float32), (1, res[0])), "wvls": (np.dtype(np.uint16), (len(wavelengths),)),
-              "hyde_export": (np.dtype(np.uint8), (_JSON_BYTES,)), "M": (np.dtype(np.float32), (*res, len(wavelengths), 4, 4))}
-    head, offsets, total = _header(layout)
-    with open(tmp, "wb") as f:
-        f.write(head)
-        for name, arr in (("theta_h", th), ("theta_d", td), ("phi_d", pd)):
-            f.seek(offsets[name])
-            f.write(np.asarray(arr, np.float32).tobytes())
-        f.seek(offsets["wvls"])
-        f.write(np.asarray(wavelengths, np.uint16).tobytes())
-        f.seek(offsets["M"])
-        for slab in slabs:
-            f.write(slab.tobytes())
-    return offsets
 
 
 def _write_metadata(tmp, offset, meta, errors, alpha_sample):

@@ -43,6 +43,7 @@ from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, Verdict, cluster_covariance, co
                                     geometry_clusters, half_angles, larger_errors)
 from hyde_bsdf.fit.mueller_fit import DEFAULT_STARTS, raise_or_warn
 from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
+from hyde_bsdf.fit.spectral import spectrum_element, wavelength_note
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import NATURAL_INDEX, RMS_SLOPE
@@ -95,23 +96,16 @@ class PbsdfFitResult:
                      diffuse=self.diffuse)
 
     def plugin_xml(self, indent: str = "") -> str:
-        """A ``<bsdf type="hyde">`` with eta and k as spectra over the bands (held constant outside)."""
+        """A ``<bsdf type="hyde">`` with eta and k as spectra over the table's bands only (nothing held or
+        extrapolated beyond them: :mod:`hyde_bsdf.fit.spectral`), and a comment on what Mitsuba does
+        elsewhere."""
         wl = [float(w) for w in self.wavelengths]
-
-        def spectrum(values):
-            pts = [(360.0, values[0])] + list(zip(wl, values)) + [(830.0, values[-1])]
-            return ", ".join(f"{w:g}:{v:.6g}" for w, v in pts)
-
-        if len(wl) == 1:
-            eta = f'<float name="eta" value="{self.n[0]:.6g}"/>'
-            k = f'<float name="k" value="{self.k[0]:.6g}"/>'
-        else:
-            eta = f'<spectrum name="eta" value="{spectrum(list(self.n))}"/>'
-            k = f'<spectrum name="k" value="{spectrum(list(self.k))}"/>'
         return "\n".join([f'{indent}<bsdf type="hyde">',
                           f'{indent}    <float name="rms_slope" value="{self.rms_slope:.6g}"/>',
+                          f"{indent}    <!-- {wavelength_note(wl)} -->",
                           f'{indent}    <!-- Mitsuba n + ik; the paper writes eta = n - jk with the same numbers -->',
-                          f"{indent}    {eta}", f"{indent}    {k}",
+                          f"{indent}    {spectrum_element('eta', wl, list(self.n))}",
+                          f"{indent}    {spectrum_element('k', wl, list(self.k))}",
                           f'{indent}    <string name="shadowing" value="{self.shadowing}"/>',
                           f'{indent}    <string name="diffuse" value="{self.diffuse}"/>',
                           f"{indent}</bsdf>"])
@@ -156,7 +150,7 @@ def _check(fit, rms_slope, n0, k0, shadowing, diffuse):
         if v is not None and not (isinstance(v, (int, float)) and 0 <= v <= BOUNDS[name[0]][1]):
             raise UsageError(f"{name} must be in [0, {BOUNDS[name[0]][1]:g}], got {v!r}")
     if ("n" not in fit and n0 is None) or ("k" not in fit and k0 is None):
-        raise UsageError("a parameter held fixed needs its value: --n0 for n, --k0 for k")
+        raise UsageError("a parameter held fixed needs its value: `n0` for n, `k0` for k")
     term = check_pair(shadowing, diffuse, booleans=False)[1]   # names only: the table interfaces take no True/False
     if term.parameters:
         raise UsageError(f"diffuse={term.name!r} has a free {', '.join(term.parameters)}: the table fit takes "

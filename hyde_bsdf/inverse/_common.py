@@ -1,9 +1,13 @@
 """Small pieces the inverse modules share: luminance weights, error lines, the not-converged
-warning.
+warning, the history of an optimisation and its CSV file.
 """
 from __future__ import annotations
 
+import csv
 import time
+from pathlib import Path
+
+from hyde_bsdf.io.atomic import atomic_open
 
 #: luminance weights of linear sRGB (the film's R, G, B)
 Y_WEIGHTS = (0.2126, 0.7152, 0.0722)
@@ -27,6 +31,20 @@ def record_iteration(row: dict, history: list, t0: float, t_it: float, t_first):
     row["seconds"] = time.perf_counter() - t0
     history.append(row)
     return dt if t_first is None else t_first
+
+
+def write_history(path, history: list, columns, comment: str = "") -> Path:
+    """The optimiser's history as a CSV file, written atomically (the one history writer): an optional
+    ``# comment`` line, a header, one row per iteration with ``columns`` of its row -- integers as they
+    are, other numbers to 7 significant digits."""
+    with atomic_open(path, "w", newline="") as fh:
+        if comment:
+            fh.write(f"# {comment}\n")
+        w = csv.writer(fh)
+        w.writerow(columns)
+        for row in history:
+            w.writerow([row[c] if isinstance(row[c], int) else f"{row[c]:.7g}" for c in columns])
+    return Path(path)
 
 
 def seconds_per_iteration(history: list) -> float:

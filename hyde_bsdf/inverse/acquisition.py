@@ -79,6 +79,7 @@ sheet uses ``stokes`` + ``volpath`` (which transmits through them); the others u
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -423,9 +424,8 @@ def acquisition_scene_dict(config: Configuration, material: dict, *, bsdf: str =
 
 
 def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *, res: int = 48, spp: int = 4,
-                           spp_ref: int = 256, noise: float = 0.0, seed: int = 0, bsdf: str = "hyde",
-                           camera_noise=None, signal: float = 1000.0, fit_filter_type: str | None = None,
-                           **scene_kwargs) -> list:
+                           spp_ref: int = 256, noise=0.0, seed: int = 0, bsdf: str = "hyde", signal: float = 1000.0,
+                           fit_filter_type: str | None = None, **scene_kwargs) -> list:
     """The observation set of ``acquisition`` for a synthetic sample: per configuration, a scene
     whose material holds ``start`` (the fit's start values; parameters absent there take
     ``truth``'s) and a reference rendered from ``truth`` at ``spp_ref`` samples, plus Gaussian
@@ -434,7 +434,7 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
     :class:`~hyde_bsdf.inverse.observations.Observation`, each carrying the noise standard
     deviation it was given in ``.noise_std`` (0 when ``noise`` is 0).
 
-    ``camera_noise`` (a :class:`~hyde_bsdf.inverse.analyzer.CameraNoise`, instead of ``noise``): the
+    ``noise`` a :class:`~hyde_bsdf.inverse.analyzer.CameraNoise` instead of a number: the
     reference goes through the acquisition's camera instead -- raw frames at ``signal`` DN (median lit
     S0) with that noise, a DoFP mosaic for a ``"linear"`` camera or six analyzer frames for a
     ``"stokes"`` one, and the least-squares Stokes step (:func:`~hyde_bsdf.inverse.analyzer.simulate_capture`);
@@ -456,8 +456,8 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
         del ref_scene
         sigma = 0.0
         sig_maps = None
-        if camera_noise is not None:
-            est = simulate_capture(ref, camera_noise, rng, camera=acquisition.camera, signal=signal)
+        if not isinstance(noise, numbers.Real):                     # a camera's noise model
+            est = simulate_capture(ref, noise, rng, camera=acquisition.camera, signal=signal)
             ref = np.array([est.stokes.get(c, np.zeros(ref.shape[1:])) for c in ("S0", "S1", "S2", "S3")])
             sig_maps = np.array([est.sigma.get(c, np.zeros(ref.shape[1:])) for c in ("S0", "S1", "S2", "S3")])
         elif noise > 0:

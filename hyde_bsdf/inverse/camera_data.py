@@ -179,8 +179,8 @@ def camera_files(cameras, lights, references, *, masks=None, channel: str = "Y")
     cams, lts = load_cameras(cameras), load_lights(lights)
     refs = [str(r) for r in references]
     if len(refs) != len(cams) * len(lts):
-        raise UsageError(f"--camera has {len(cams)} camera(s) and --light {len(lts)} light(s): give "
-                         f"{len(cams) * len(lts)} --reference files, light-major (for each light, one per camera); "
+        raise UsageError(f"`cameras` has {len(cams)} camera(s) and `lights` {len(lts)} light(s): give "
+                         f"{len(cams) * len(lts)} `references` files, light-major (for each light, one per camera); "
                          f"got {len(refs)}")
     data = [[camera_reference(refs[j * len(cams) + i], channel=channel) for i in range(len(cams))]
             for j in range(len(lts))]
@@ -188,7 +188,7 @@ def camera_files(cameras, lights, references, *, masks=None, channel: str = "Y")
         for i, cam in enumerate(cams):
             h, w = data[j][i]["reference"].shape[1:]
             if (w, h) != (cam.width, cam.height):
-                raise UsageError(f"--reference {refs[j * len(cams) + i]!r} is {w}x{h} px but camera {i} of --camera is "
+                raise UsageError(f"`references` {refs[j * len(cams) + i]!r} is {w}x{h} px but camera {i} of `cameras` is "
                                  f"{cam.width}x{cam.height} (a DoFP camera's super-pixel images need \"binning\": 2)")
     if masks is not None:
         for k, m in enumerate(masks):

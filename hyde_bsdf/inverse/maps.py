@@ -3,7 +3,7 @@ Stokes images (:func:`invert_maps`), with per-texel standard errors.
 
 :func:`invert_maps` runs four steps, each its own function: the observation set-up
 (:meth:`MapProblem.build`), the loss (:func:`map_loss`) and its gradient (:func:`map_step`), the
-update (:class:`LogAdam`), and the uncertainty (:func:`map_uncertainty`,
+update (:class:`~hyde_bsdf.inverse.adam.LogAdam`), and the uncertainty (:func:`map_uncertainty`,
 :mod:`hyde_bsdf.inverse.uncertainty`).
 """
 from __future__ import annotations
@@ -13,15 +13,17 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.inverse._common import _first_line, record_iteration, seconds_per_iteration
+from hyde_bsdf.inverse._common import _first_line, record_iteration, seconds_per_iteration, write_history
 from hyde_bsdf.inverse.loss import StokesLoss, smoothness
 from hyde_bsdf.inverse.observations import (MAP_PARAMETERS, _obs_mask, film_channels, map_keys, render_stokes,
                                             texel_coverage)
-from hyde_bsdf.inverse.scalar import check_gradients
+from hyde_bsdf.inverse.adam import LogAdam
+from hyde_bsdf.options import Options
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, STDERR_THRESHOLD, BilinearFilterWarning,
                                            NotConvergedWarning, UnidentifiedParameterWarning, Uncertainty,
@@ -29,7 +31,7 @@ from hyde_bsdf.inverse.uncertainty import (CONVERGENCE_THRESHOLD, STDERR_THRESHO
                                            gauss_newton_step, identification_warnings, misfit_pvalues, pixel_records,
                                            standard_errors, texel_convergence, texel_misfit)
 
-__all__ = ["MapInversionResult", "MapProblem", "filters_bilinearly", "map_loss", "map_step", "LogAdam", "map_uncertainty",
+__all__ = ["MapOptions", "MapInversionResult", "MapProblem", "filters_bilinearly", "map_loss", "map_step", "map_uncertainty",
            "invert_maps"]
 
 
@@ -57,6 +59,11 @@ class MapInversionResult:
     wall_seconds: float = float("nan")              # invert_maps_tiled: the whole run, planning included
     memory_estimate: int = 0                        # invert_maps_tiled: the estimate checked before the work (B)
     messages: list = field(default_factory=list)    # (category, message) of each warning
+
+    def write_history(self, path) -> Path:
+        """CSV: one row per iteration (loss terms, seconds, the maps' errors against the truth)."""
+        errors = [k for k in self.history[0] if k.endswith("_error")] if self.history else []
+        return write_history(path, self.history, ["iteration", "loss", "data_loss", "regularizer", "seconds", *errors])
 
     def texel_errors(self, name: str = "alpha") -> np.ndarray:
         """|final / truth - 1| over the seen texels of map ``name`` (1-D array)."""
@@ -278,66 +285,24 @@ def map_step(problem: MapProblem, spp: int, regularizer=None, weight=0.0):
     return step
 
 
-class LogAdam:
-    """Step 3, the update: Adam on log(value) per texel (values stay positive, one learning rate
-    fits every texel), clamped to :data:`MAP_PARAMETERS`' ranges; lr constant for the first half of
-    ``iterations``, then decaying geometrically to lr/10; the mean of the iterates over the last
-    ``average_last`` iterations (Polyak averaging) is the result."""
+class _MapAdam(LogAdam):
+    """Step 3, the update: :class:`~hyde_bsdf.inverse.adam.LogAdam` over the problem's fitted maps, in
+    :data:`MAP_PARAMETERS`' ranges; the values are written into every scene as gradient-enabled leaves
+    (a frozen step sees them as inputs)."""
 
     def __init__(self, problem: MapProblem, start: dict, lr: float, iterations: int, average_last: int):
-        import drjit as dr
-        import mitsuba as mi
-
-        # beta_2 = 0.9 (not Adam's 0.999): a texel's gradient falls by orders of magnitude as it
-        # converges, and a long memory of the early large gradients stalls it (measured: with 0.999 the
-        # alpha = 0.6 square of the validation map sat 11 % high after 60 iterations; with 0.9, < 1 %);
-        # beta_1 = 0.8: less momentum, less overshoot of the texels that move far
-        self.opt = mi.ad.Adam(lr=lr, beta_1=0.8, beta_2=0.9)
-        self.problem, self.lr, self.iterations, self.average_last = problem, lr, iterations, average_last
-        for name in problem.fit:
-            self.opt[name] = dr.log(problem.as_value(name, start[name]))
-        self.sums, self.n_avg = {}, 0
+        super().__init__({n: problem.as_value(n, start[n]) for n in problem.fit},
+                         {n: MAP_PARAMETERS[n][1] for n in problem.fit}, lr, iterations, average_last)
+        self.problem = problem
 
     def values(self) -> dict:
-        """Clamp, then write exp(latent) into every scene as gradient-enabled leaves (a frozen step
-        sees them as inputs; the chain rule to log(value) is applied in :meth:`step`)."""
-        import drjit as dr
-
-        for name in self.problem.fit:
-            lo, hi = MAP_PARAMETERS[name][1]
-            self.opt[name] = dr.clip(self.opt[name], math.log(lo), math.log(hi))
-        values = {}
-        for name in self.problem.fit:
-            values[name] = dr.exp(dr.detach(self.opt[name]))
-            dr.enable_grad(values[name])
+        values = super().values()
         self.problem.write(values)
         return values
 
     def snapshot(self, name):
-        v = np.exp(np.asarray(self.opt[name], dtype=np.float64))
+        v = super().snapshot(name)
         return v[..., 0] if self.problem.shapes[name] is not None else float(v.ravel()[0])
-
-    def step(self, it: int, values: dict) -> dict:
-        """The Adam step of iteration ``it`` from the gradients in ``values``; returns the iterate
-        before the step (NumPy) and adds it to the average over the last iterations."""
-        import drjit as dr
-
-        if it >= self.iterations // 2:
-            span = max(1, self.iterations - 1 - self.iterations // 2)
-            self.opt.set_learning_rate(self.lr * 0.1 ** ((it - self.iterations // 2) / span))
-        for name in self.problem.fit:
-            dr.set_grad(self.opt[name], dr.grad(values[name]) * dr.detach(values[name]))
-        check_gradients({n: dr.grad(self.opt[n]) for n in self.problem.fit}, it)
-        current = {n: self.snapshot(n) for n in self.problem.fit}
-        self.opt.step()
-        if it >= self.iterations - self.average_last:
-            for n in self.problem.fit:
-                self.sums[n] = self.sums.get(n, 0.0) + current[n]
-            self.n_avg += 1
-        return current
-
-    def average(self) -> dict:
-        return {n: self.sums[n] / self.n_avg for n in self.problem.fit}
 
 
 def map_uncertainty(problem: MapProblem, final: dict, *, spp: int = 16, seed: int = 0, noise=None,
@@ -467,16 +432,38 @@ def _uncertainty_messages(problem, unc, found, seen, convergence, regularized) -
     return out
 
 
-def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 100, lr: float = 0.05,
-                spp: int = 4, seed: int = 0, components: str = "stokes", regularizer: str | None = None,
-                weight: float = 0.0, truth: dict | None = None, prefix: str | None = None,
-                average_last: int | None = None, progress=True,
-                seen: np.ndarray | None = None, freeze: bool = True, uncertainty: bool = True,
-                uncertainty_spp: int = 16, polish: int = 2, noise=None,
-                threshold: float = STDERR_THRESHOLD, convergence: float = CONVERGENCE_THRESHOLD,
-                extra_polish: int = 3) -> MapInversionResult:
+@dataclass(frozen=True)
+class MapOptions(Options):
+    """The loop and the uncertainty step of :func:`invert_maps` (each field is also a keyword of
+    :func:`invert_maps`; its docstring describes them)."""
+
+    iterations: int = 100
+    lr: float = 0.05
+    spp: int = 4
+    seed: int = 0
+    components: str = "stokes"
+    regularizer: str | None = None
+    weight: float = 0.0
+    average_last: int | None = None
+    freeze: bool = True
+    uncertainty: bool = True
+    uncertainty_spp: int = 16
+    polish: int = 2
+    threshold: float = STDERR_THRESHOLD
+    convergence: float = CONVERGENCE_THRESHOLD
+    extra_polish: int = 3
+
+
+def invert_maps(observations, start: dict, options: MapOptions | None = None, *, fit=("alpha",),
+                truth: dict | None = None, prefix: str | None = None, seen: np.ndarray | None = None, noise=None,
+                progress=True, **settings) -> MapInversionResult:
     """Optimise texture-valued BSDF parameters (a roughness map, optionally index maps) to match
     one or more reference Stokes images.
+
+    The loop's and the uncertainty step's settings are a :class:`MapOptions` (``options``), or its
+    fields given as keywords (``iterations=50, spp=8``): ``iterations``, ``lr``, ``spp``, ``seed``,
+    ``components``, ``regularizer``, ``weight``, ``average_last``, ``freeze``, ``uncertainty``,
+    ``uncertainty_spp``, ``polish``, ``threshold``, ``convergence``, ``extra_polish`` below.
 
     ``observations``: list of :class:`Observation`.  ``start``: name -> start value, a float
     (a constant map) or an array (rows, cols) for texture parameters; a parameter named in
@@ -535,19 +522,21 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
 
     The steps, each its own function: :meth:`MapProblem.build` (observation set-up: checks, losses,
     traverse keys, texel coverage), :func:`map_loss` (renders and the loss), :func:`map_step` (the
-    loss and its gradient, the frozen function), :class:`LogAdam` (the update in log values, the
-    learning-rate schedule, the average), :func:`map_uncertainty` (the information, the polish, the
+    loss and its gradient, the frozen function), :class:`~hyde_bsdf.inverse.adam.LogAdam` (the update in log values,
+    the learning-rate schedule, the average), :func:`map_uncertainty` (the information, the polish, the
     standard errors and warnings).
     """
+    o = MapOptions.of(options, settings, "invert_maps")
+    iterations, seed, regularizer, weight = o.iterations, o.seed, o.regularizer, o.weight
     _check_options(iterations, regularizer, weight)
     progress = as_callback(progress, "[invert]")
-    problem = MapProblem.build(observations, start, fit, components=components, prefix=prefix, seen=seen)
+    problem = MapProblem.build(observations, start, fit, components=o.components, prefix=prefix, seen=seen)
     n_obs = len(problem.observations)
-    average_last = max(1, iterations // 4) if average_last is None else max(1, int(average_last))
-    adam = LogAdam(problem, start, lr, iterations, average_last)
+    average_last = max(1, iterations // 4) if o.average_last is None else max(1, int(o.average_last))
+    adam = _MapAdam(problem, start, o.lr, iterations, average_last)
     truth_np = {n: np.asarray(v, np.float64) for n, v in (truth or {}).items()}
-    history, t_first = _adam_loop(problem, adam, map_step(problem, spp, regularizer, weight), iterations=iterations,
-                                  seed=seed, freeze=freeze, truth_np=truth_np, progress=progress)
+    history, t_first = _adam_loop(problem, adam, map_step(problem, o.spp, regularizer, weight), iterations=iterations,
+                                  seed=seed, freeze=o.freeze, truth_np=truth_np, progress=progress)
     final = adam.average()
     adam_final = dict(final)
     # the scenes keep the result, detached: the last iteration's gradient-enabled leaves must not
@@ -555,18 +544,18 @@ def invert_maps(observations, start: dict, *, fit=("alpha",), iterations: int = 
     # otherwise reach their edges from inside mi.render's isolated AD scope and fail)
     problem.write({n: problem.as_value(n, final[n]) for n in problem.fit})
     unc = None
-    if uncertainty:
+    if o.uncertainty:
         regularized = regularizer is not None and weight > 0
         if progress:
-            progress(f"uncertainty: forward-mode information of {', '.join(problem.fit)} at {uncertainty_spp} spp"
-                     + (f", {polish} Gauss-Newton step(s)" if polish and not regularized else ""))
-        final, unc = map_uncertainty(problem, final, spp=uncertainty_spp, seed=seed + 1 + iterations * n_obs,
-                                     noise=noise, polish=0 if regularized else polish, threshold=threshold,
-                                     convergence=convergence, extra_polish=extra_polish, regularized=regularized)
+            progress(f"uncertainty: forward-mode information of {', '.join(problem.fit)} at {o.uncertainty_spp} spp"
+                     + (f", {o.polish} Gauss-Newton step(s)" if o.polish and not regularized else ""))
+        final, unc = map_uncertainty(problem, final, spp=o.uncertainty_spp, seed=seed + 1 + iterations * n_obs,
+                                     noise=noise, polish=0 if regularized else o.polish, threshold=o.threshold,
+                                     convergence=o.convergence, extra_polish=o.extra_polish, regularized=regularized)
     for n in problem.names:
         if n not in problem.fit:
             final[n] = np.asarray(start[n], np.float64) if np.ndim(start[n]) else float(start[n])
-    res = MapInversionResult(fitted=problem.fit, final=final, start=dict(start), components=components,
+    res = MapInversionResult(fitted=problem.fit, final=final, start=dict(start), components=o.components,
                              seen=problem.seen, truth=truth, history=history,
                              seconds_per_iteration=seconds_per_iteration(history), first_iteration_seconds=t_first,
                              adam_final=adam_final, uncertainty=unc)

@@ -18,7 +18,6 @@ eta = n - jk describes the same material with the same numbers.
 """
 from __future__ import annotations
 
-import csv
 import math
 import time
 import warnings
@@ -28,15 +27,16 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.io.atomic import atomic_open
-from hyde_bsdf.inverse._common import NotConvergedWarning, record_iteration
+from hyde_bsdf.inverse._common import NotConvergedWarning, record_iteration, write_history
+from hyde_bsdf.inverse.adam import LogAdam, check_gradients
+from hyde_bsdf.options import Options
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.inverse.loss import StokesLoss, channel_names, stokes_images
 from hyde_bsdf.model.parameters import INVERSE_ETA, INVERSE_K, INVERSE_PARAMETERS, RMS_SLOPE, SQRT2
 
-__all__ = ["VARIANT", "PARAMETERS", "INVERSE_PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict",
+__all__ = ["InversionOptions", "VARIANT", "PARAMETERS", "INVERSE_PARAMETERS", "TRUTH", "START", "RANGES", "prepare", "scene_dict",
            "load_scene", "parameter_keys", "render_reference", "InversionResult", "invert", "trajectory_converged",
-           "check_gradients", "loss_and_gradient", "finite_difference_gradient", "write_history"]
+           "check_gradients", "loss_and_gradient", "finite_difference_gradient"]
 
 VARIANT = "llvm_ad_spectral_polarized"
 #: optimizable BSDF parameters (``parameters.INVERSE_PARAMETERS``: the plugin's names, Mitsuba's n + ik)
@@ -67,10 +67,10 @@ def prepare(variant: str = VARIANT) -> str:
 def scene_dict(*, bsdf: str = "hyde", rms_slope: float = 0.3, eta: float = 1.5, k: float = 3.0,
                res: int = 64, spp: int = 16, diffuse: str = "paper", sampler: str = "multijitter",
                lighting: str = "points", phase_deg: float = 120.0) -> dict:
-    """The inverse-rendering scene (as scenes/inverse.xml) as a ``mi.load_dict`` dict.
+    """The inverse-rendering scene (as hyde_bsdf/data/scenes/inverse.xml) as a ``mi.load_dict`` dict.
 
     ``lighting="points"``: two point lights (front and back; facet angles beta ~ 10-70 deg
-    over the image, as scenes/inverse.xml).  ``lighting="directional"``: one distant light
+    over the image, as hyde_bsdf/data/scenes/inverse.xml).  ``lighting="directional"``: one distant light
     at ``phase_deg`` from the viewing direction, so that every pixel sees nearly the same
     facet angle beta = phase_deg / 2 (the identifiability study: S0 then measures one
     reflectance value, too little for two unknowns n, k).
@@ -154,7 +154,7 @@ def _unique_key(params, name, suffix_groups, prefix):
         raise UsageError(f"need exactly one BSDF parameter for {name!r} "
                          f"(keys ending in {' or '.join(suffixes)}"
                          f"{'' if prefix is None else ' under ' + shorten(prefix)}); found {found}"
-                         f"{'; name the BSDF with prefix= (CLI: --target)' if len(found) > 1 else ''}")
+                         f"{'; name the BSDF with `prefix`' if len(found) > 1 else ''}")
     return found[0]
 
 
@@ -196,6 +196,12 @@ class InversionResult:
             return {}
         return {n: (self.final[n] - self.truth[n]) / self.truth[n] for n in self.fitted}
 
+    def write_history(self, path) -> Path:
+        """CSV: one row per iteration (iteration, loss, seconds, parameters), after a comment line."""
+        return write_history(path, self.history, ["iteration", "loss", "seconds", *PARAMETERS],
+                             f"loss={self.components}; truth={self.truth}; start={self.start}; "
+                             f"final (mean of the last iterations)={self.final}")
+
 
 def _check_invert_args(fit, start, iterations):
     """The fitted names in PARAMETERS order; UsageError for an empty fit, a start missing a parameter or a
@@ -211,39 +217,26 @@ def _check_invert_args(fit, start, iterations):
     return fit
 
 
-def _log_adam(start, fit, lr):
-    """``mi.ad.Adam`` over log(parameter) of the fitted parameters, from ``start`` clamped into RANGES."""
+def _log_adam(start, fit, lr, iterations, average_last):
+    """The optimiser (:class:`~hyde_bsdf.inverse.adam.LogAdam`) of the fitted parameters, from ``start``
+    clamped into RANGES (floored at 1e-6: log values)."""
     import mitsuba as mi
 
-    opt = mi.ad.Adam(lr=lr)
-    for p in fit:
-        lo, hi = RANGES[p]
-        opt[p] = mi.Float(math.log(min(max(float(start[p]), max(lo, 1e-6)), hi)))
-    return opt
+    ranges = {p: (max(RANGES[p][0], 1e-6), RANGES[p][1]) for p in fit}
+    return LogAdam({p: mi.Float(min(max(float(start[p]), ranges[p][0]), ranges[p][1])) for p in fit}, ranges, lr,
+                   iterations, average_last)
 
 
-def _apply_latents(opt, params, keys, fit, bsdf):
-    """Clip each latent log(parameter) into its box, set exp(latent) into the scene (a differentiable
-    edge; roughconductor takes alpha = sqrt(2) rms_slope) and update; returns {name: value}."""
-    import drjit as dr
-
-    values = {}
-    for p in fit:
-        lo, hi = RANGES[p]
-        # keep the latent inside the box (the plugin refuses rms_slope outside parameters.RMS_SLOPE)
-        opt[p] = dr.clip(opt[p], math.log(max(lo, 1e-6)), math.log(hi))
-        values[p] = dr.exp(opt[p])
-        if p == "rms_slope" and bsdf == "roughconductor":
-            params[keys[p]] = values[p] * SQRT2
-        else:
-            params[keys[p]] = values[p]
+def _apply_values(values, params, keys, bsdf):
+    """Set the values into the scene (roughconductor takes alpha = sqrt(2) rms_slope) and update."""
+    for p, v in values.items():
+        params[keys[p]] = v * SQRT2 if p == "rms_slope" and bsdf == "roughconductor" else v
     params.update()
-    return values
 
 
-def _backpropagate(loss, opt, values, fit, it):
+def _backpropagate(loss, values, fit, it):
     """The iteration's history row (loss and fitted values); FloatingPointError for a non-finite loss, else
-    the loss's gradients propagated to the latents (and checked: :func:`check_gradients`)."""
+    the loss's gradients propagated to the values."""
     import drjit as dr
 
     row = {"iteration": it, "loss": float(np.asarray(loss).ravel()[0])}
@@ -252,7 +245,6 @@ def _backpropagate(loss, opt, values, fit, it):
         raise FloatingPointError(f"the loss became {row['loss']} at iteration {it} with "
                                  + ", ".join(f"{p}={row[p]:.6g}" for p in fit))
     dr.backward(loss)
-    check_gradients({p: dr.grad(opt[p]) for p in fit}, it)
     return row
 
 
@@ -276,15 +268,28 @@ def _inversion_result(history, fit, fixed, start, truth, loss_fn, average_last, 
     return result
 
 
-def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iterations: int = 200,
-           lr: float = 0.05, spp: int = 16, seed: int = 0, truth: dict | None = None,
-           bsdf: str = "hyde", progress=True, average_last: int = 20,
-           prefix: str | None = None) -> InversionResult:
+@dataclass(frozen=True)
+class InversionOptions(Options):
+    """The loop of :func:`invert` (each field is also a keyword of :func:`invert`)."""
+
+    iterations: int = 200
+    lr: float = 0.05
+    spp: int = 16
+    seed: int = 0
+    average_last: int = 20
+
+
+def invert(scene, loss_fn: StokesLoss, start: dict, options: InversionOptions | None = None, *, fit=PARAMETERS,
+           truth: dict | None = None, bsdf: str = "hyde", prefix: str | None = None, progress=True,
+           **settings) -> InversionResult:
     """Optimize the BSDF parameters ``fit`` of ``scene`` to minimize ``loss_fn``.
 
+    The loop's settings are an :class:`InversionOptions` (``options``), or its fields given as
+    keywords: ``iterations`` (200), ``lr`` (0.05), ``spp`` (16), ``seed`` (0), ``average_last`` (20).
+
     ``start`` gives every parameter's start value (the unfitted ones stay there).
-    Adam on log(parameter), lr decaying by 5 % per iteration over the last quarter;
-    iteration i renders ``spp`` samples with seed ``seed + 1 + i``.  The final value
+    Adam on log(parameter) (:class:`~hyde_bsdf.inverse.adam.LogAdam`: lr constant for the first half,
+    then decaying geometrically to lr/10); iteration i renders ``spp`` samples with seed ``seed + 1 + i``.  The final value
     is the mean of the parameters over the last ``average_last`` iterations
     (Polyak averaging: it cancels the Monte-Carlo jitter of single steps).  Before it is reported,
     each parameter's convergence is tested on that window (:func:`trajectory_converged`): one still
@@ -296,35 +301,34 @@ def invert(scene, loss_fn: StokesLoss, start: dict, *, fit=PARAMETERS, iteration
     """
     import mitsuba as mi
 
+    o = InversionOptions.of(options, settings, "invert")
+    iterations, lr, spp, seed = o.iterations, o.lr, o.spp, o.seed
     progress = as_callback(progress, "[invert]")
     fit = _check_invert_args(fit, start, iterations)
     params = mi.traverse(scene)
     keys = parameter_keys(params, PARAMETERS, prefix)
     fixed = {p: float(start[p]) for p in PARAMETERS if p not in fit}
     _set(params, keys, {**fixed, **{p: float(start[p]) for p in fit}}, bsdf)
-    opt = _log_adam(start, fit, lr)
+    adam = _log_adam(start, fit, lr, iterations, o.average_last)
     names = None
     history = []
     t0 = time.perf_counter()
     t_first = None
-    rate = lr
     for it in range(iterations):
         t_it = time.perf_counter()
-        values = _apply_latents(opt, params, keys, fit, bsdf)
+        values = adam.values()
+        _apply_values(values, params, keys, bsdf)
         img = mi.render(scene, params, spp=int(spp), seed=int(seed) + 1 + it)
         if names is None:
             names = channel_names(scene)
-        row = _backpropagate(loss_fn(stokes_images(img, names)), opt, values, fit, it)
+        row = _backpropagate(loss_fn(stokes_images(img, names)), values, fit, it)
         row.update(fixed)
-        opt.step()
-        if it >= iterations - iterations // 4:
-            rate *= 0.95
-            opt.set_learning_rate(rate)
+        adam.step(it, values)
         t_first = record_iteration(row, history, t0, t_it, t_first)
         if progress:
             progress(f"it {it + 1:4d}/{iterations}  loss {row['loss']:.3e}  " +
                      "  ".join(f"{p}={row[p]:.4f}" for p in fit) + f"  ({row['seconds']:.1f} s)")
-    return _inversion_result(history, fit, fixed, start, truth, loss_fn, average_last, t_first)
+    return _inversion_result(history, fit, fixed, start, truth, loss_fn, o.average_last, t_first)
 
 
 #: relative drift below which an averaged trajectory counts as settled whatever its scatter
@@ -348,17 +352,6 @@ def trajectory_converged(values, name: str = "parameter") -> tuple:
         return True, ""
     return False, (f"{name} has not converged: it moved by {100 * drift / level:.2g} % between the halves of the "
                    f"last {v.size} iterations (more than their scatter); run more iterations or a larger lr")
-
-
-def check_gradients(grads: dict, iteration: int) -> None:
-    """FloatingPointError naming the parameter and the iteration when a gradient is NaN or infinite
-    (an optimiser step with it would turn every value into NaN)."""
-    import drjit as dr
-
-    for name, g in grads.items():
-        if not bool(dr.all(dr.isfinite(g), axis=None)):
-            raise FloatingPointError(f"the gradient of {name} became NaN or infinite at iteration {iteration} "
-                                     f"(a reference far from what the scene can render, or a step too large)")
 
 
 def loss_and_gradient(scene, loss_fn: StokesLoss, values: dict, *, spp: int, seed: int,
@@ -418,21 +411,5 @@ def finite_difference_gradient(scene, loss_fn: StokesLoss, values: dict, name: s
         S = np.array([np.asarray(s, dtype=np.float64) for s in stokes_images(img, channel_names(scene))])
         out.append(loss_fn.numpy(S))
     return (out[0] - out[1]) / (2 * h)
-
-
-def write_history(result: InversionResult, path) -> Path:
-    """CSV: one row per iteration (iteration, loss, seconds, parameters)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    cols = ["iteration", "loss", "seconds"] + list(PARAMETERS)
-    with atomic_open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        fh.write(f"# loss={result.components}; truth={result.truth}; start={result.start}; "
-                 f"final (mean of the last iterations)={result.final}\n")
-        w.writerow(cols)
-        for r in result.history:
-            w.writerow([r["iteration"], f"{r['loss']:.6e}", f"{r['seconds']:.3f}"] +
-                       [f"{r[p]:.6g}" for p in PARAMETERS])
-    return path
 
 

@@ -311,13 +311,13 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
     tasks, shape, _ = plan_tiles(capture, start, fit=fit, tiles=tiles, prefix=prefix, options=options)
     if not tasks:
         raise UsageError("no picture has a whole pixel inside any tile: the sample is not seen (check the "
-                         "--camera/--light files and the references' masks)")
+                         "`cameras`/`lights` files and the references' masks)")
     spp = int(options.get("spp", 4))
     unc_spp = int(options.get("uncertainty_spp", 16)) if options.get("uncertainty", True) else 0
     largest, concurrent = max(t.pixels for t in tasks), _concurrency(executor, workers)
     estimate = check_memory(inversion_bytes(largest, spp, unc_spp) * concurrent,
                             f"{concurrent} tile(s) at once, the largest with {largest} px of film crops at {spp} spp",
-                            "use more --tiles (smaller crops), a lower --spp or fewer --workers")
+                            "use more `tiles` (smaller crops), a lower `spp` or fewer `workers`")
     own = executor is None
     # spawned, not forked: a fork copies this process mid-work in Dr.Jit's (and a dask client's) threads,
     # and the children deadlock (measured: a forked pool after a dask LocalCluster in the same process)

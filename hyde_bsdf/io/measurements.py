@@ -38,7 +38,7 @@ Values outside the physical range are judged against their own uncertainty: |M_j
 and M00 >= 0 hold for every physical measurement, and a value within 3 standard deviations of
 that range -- or within what the noise of a file of that many values reaches with probability
 0.001, if more (:func:`impossible_limit`: 4.8 sigma for 10^3 values) -- is data, kept as it
-is (the fit flags values beyond 3 sigma).  Only a value that is impossible at its stated error
+is (the fit flags a degree of polarization above 1 beyond the same limit).  Only a value that is impossible at its stated error
 is refused, naming its line.  Without sigma columns a normalized element must satisfy
 |M_jk/M_00| <= 1.5 (more means an unnormalized file) and M00 >= 0.
 

@@ -59,7 +59,7 @@ from hyde_bsdf.errors import InputFileError, UsageError, shorten
 from hyde_bsdf.io.input_gate import check_dimensions, check_input
 from hyde_bsdf.io.output_gate import check_output_path
 
-__all__ = ["PbsdfFileError", "PbsdfTable", "KAIST_WAVELENGTHS", "MITSUBA_BANDS", "read_pbsdf", "write_pbsdf",
+__all__ = ["PbsdfFileError", "PbsdfTable", "KAIST_WAVELENGTHS", "MITSUBA_BANDS", "read_pbsdf", "write_pbsdf", "write_table",
            "read_tensor_file", "table_nbytes", "rusinkiewicz_to_directions", "directions_to_rusinkiewicz",
            "table_frame_x"]
 
@@ -159,14 +159,24 @@ def table_nbytes(n_phi: int, n_theta_d: int, n_theta_h: int, bands: int = MITSUB
 
 def write_pbsdf(path, theta_h, theta_d, phi_d, wavelengths, M, extra: dict | None = None,
                 progress=None) -> Path:
-    """Write a ``measured_polarized`` table atomically.
+    """Write a ``measured_polarized`` table atomically (:func:`write_table` into a temporary file
+    beside ``path``, renamed over it when complete)."""
+    path = check_output_path(path, "pBSDF file")
+    with atomic_path(path) as tmp:
+        write_table(tmp, theta_h, theta_d, phi_d, wavelengths, M, extra, progress)
+    return path
+
+
+def write_table(path, theta_h, theta_d, phi_d, wavelengths, M, extra: dict | None = None, progress=None) -> dict:
+    """Write a ``measured_polarized`` table into the file ``path`` (the one writer of the format);
+    returns each field's byte offset.
 
     ``M`` is an array of shape (N_pd, N_td, N_th, K, 4, 4) (any float type, written as float32)
     or an iterable yielding N_pd slabs of shape (N_td, N_th, K, 4, 4) in order (streamed: only
     one slab is in memory).  ``extra``: more fields, name -> array or str (a str is stored as
-    uint8 UTF-8 text; Mitsuba ignores extra fields).  ``progress(i, n)`` is called per slab.
+    uint8 UTF-8 text; Mitsuba ignores extra fields), written between the grids and ``M``.
+    ``progress(i, n)`` is called per slab.
     """
-    path = check_output_path(path, "pBSDF file")
     grids = {"theta_h": np.asarray(theta_h, np.float32).reshape(1, -1),
              "theta_d": np.asarray(theta_d, np.float32).reshape(1, -1),
              "phi_d": np.asarray(phi_d, np.float32).reshape(1, -1),
@@ -186,7 +196,7 @@ def write_pbsdf(path, theta_h, theta_d, phi_d, wavelengths, M, extra: dict | Non
     slabs = [M] if isinstance(M, np.ndarray) else M
     if isinstance(M, np.ndarray) and M.shape != shape:
         raise UsageError(f"M has shape {M.shape}; the grids need {shape}")
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+    with open(path, "wb") as f:
         f.write(head)
         for name, a in small.items():
             f.seek(offsets[name])
@@ -201,8 +211,7 @@ def write_pbsdf(path, theta_h, theta_d, phi_d, wavelengths, M, extra: dict | Non
                 progress(i + 1, shape[0])
         if written != int(np.prod(shape)):
             raise UsageError(f"M: {written} values written, the grids need {int(np.prod(shape))}")
-        f.flush()
-    return path
+    return offsets
 
 
 # ---------------------------------------------------------------------------------------------

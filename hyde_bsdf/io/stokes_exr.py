@@ -179,34 +179,22 @@ def _verify_exr(tmp, channels) -> None:
 
 
 def read_stokes_exr(path) -> dict:
-    """Read a Stokes EXR (ours or one Mitsuba's ``stokes`` integrator wrote).
+    """Read a full Stokes EXR (ours or one Mitsuba's ``stokes`` integrator wrote): S0..S3 in R, G, B.
 
     Returns a dict ``{"RGB", "S0", "S1", "S2", "S3"}`` of float32 arrays (H, W, 3)
-    and ``"metadata"``: the ``hyde_bsdf.*`` header attributes as strings.
-    Raises ValueError naming the missing channels if it is not a Stokes EXR.
+    and ``"metadata"``: the ``hyde_bsdf.*`` header attributes as strings.  The file is read by
+    :func:`read_camera_stokes` (the one reader); InputFileError naming the missing channels if it is
+    not a full RGB Stokes image.
     """
-    import OpenEXR
-
-    path = check_input(path, "Stokes EXR", stdin=False)    # the input gate: a regular file, no FIFO
-    f = OpenEXR.File(str(path), separate_channels=True)
-    chans = {name: ch.pixels for name, ch in f.channels().items()}
-    need = [f"{s}.{c}" for s in STOKES_NAMES for c in COLOURS]
-    missing = [n for n in need if n not in chans]
+    data = read_camera_stokes(path, "Stokes EXR")
+    missing = [f"{s}.{c}" for s in STOKES_NAMES for c in COLOURS if s not in data["stokes"] or c not in data["colours"]]
     if missing:
-        raise InputFileError(f"{path} is not a Stokes EXR: channels {missing} are missing "
-                             f"(found {sorted(chans)})")
-    out: dict = {}
-    for s in STOKES_NAMES:
-        out[s] = np.stack([chans[f"{s}.{c}"] for c in COLOURS], axis=-1).astype(np.float32)
-    if all(c in chans for c in COLOURS):
-        out["RGB"] = np.stack([chans[c] for c in COLOURS], axis=-1).astype(np.float32)
-    else:
-        out["RGB"] = out["S0"].copy()
-    out["metadata"] = {k[len("hyde_bsdf."):]: str(v) for k, v in f.header().items()
-                       if isinstance(k, str) and k.startswith("hyde_bsdf.")}
+        raise InputFileError(f"{path} is not a Stokes EXR: channels {missing} are missing")
+    out = {s: data["stokes"][s][..., [data["colours"].index(c) for c in COLOURS]].astype(np.float32)
+           for s in STOKES_NAMES}
+    out["RGB"] = out["S0"].copy() if data["rgb"] is None else data["rgb"]
+    out["metadata"] = data["metadata"]
     return out
-
-
 
 
 # camera Stokes images: any subset of S0..S3, mono or any colour/spectral channels, sigma and mask
@@ -273,27 +261,27 @@ def _layers(names) -> dict:
     return out
 
 
-def read_camera_stokes(path) -> dict:
+def read_camera_stokes(path, what: str = "camera Stokes EXR") -> dict:
     """Read camera Stokes data from an EXR: Mitsuba's (``S0.R ... S3.B``), plain mono ``S0, S1, S2[, S3]``,
     any colour or spectral channel suffixes, with optional ``S0_sigma...`` layers and a ``mask``.
 
     Returns ``{"stokes": {name: (H, W, C)}, "sigma": {name: (H, W, C)}, "mask": (H, W) bool or None,
-    "colours": tuple of suffixes (("",) for mono), "metadata": {...}}`` -- only the components present
-    (the camera's measured ones).  UsageError naming the file when S0 is missing or the components'
+    "colours": tuple of suffixes (("",) for mono), "rgb": the plain R, G, B channels (H, W, 3) float32
+    or None, "metadata": {...}}`` -- only the components present (the camera's measured ones).  The
+    file passes the input gate first; UsageError naming it when S0 is missing or the components'
     channel suffixes differ."""
     import OpenEXR
 
-    path = Path(path)
-    if not path.is_file():
-        raise UsageError(f"{str(path)!r} is not an existing file")
+    path = check_input(path, what, stdin=False)        # the input gate: a regular file, no FIFO
     try:
         f = OpenEXR.File(str(path), separate_channels=True)
         chans = {name: ch.pixels for name, ch in f.channels().items()}
     except Exception as exc:  # noqa: BLE001 -- any unreadable file is a user's input problem
-        raise UsageError(f"{path}: not a readable OpenEXR file ({type(exc).__name__})") from None
+        raise InputFileError(f"{path}: not a readable OpenEXR file ({type(exc).__name__})") from None
     layers = _layers(chans)
     if "S0" not in layers:
-        raise UsageError(f"{path}: no S0 channel (found {sorted(chans)}); a Stokes EXR has S0[.R ...], S1, S2[, S3]")
+        raise InputFileError(f"{path} is not a Stokes EXR: no S0 channel (found {sorted(chans)}); a Stokes EXR has "
+                             "S0[.R ...], S1, S2[, S3]")
     colours = tuple(sorted(layers["S0"], key=lambda x: ("RGB".find(x) if x in "RGB" and x else 9, x)))
     out: dict = {"stokes": {}, "sigma": {}, "colours": colours}
     for c in STOKES_NAMES:
@@ -301,10 +289,12 @@ def read_camera_stokes(path) -> dict:
             if layer not in layers:
                 continue
             if sorted(layers[layer]) != sorted(colours):
-                raise UsageError(f"{path}: {layer} has channels {sorted(layers[layer])} but S0 has {sorted(colours)}")
+                raise InputFileError(f"{path}: {layer} has channels {sorted(layers[layer])} but S0 has {sorted(colours)}")
             out[key][c] = np.stack([chans[f"{layer}.{x}" if x else layer] for x in colours], axis=-1).astype(np.float64)
     mask = chans.get(MASK_CHANNEL)
     out["mask"] = None if mask is None else np.asarray(mask) > 0.5
+    out["rgb"] = (np.stack([chans[c] for c in COLOURS], axis=-1).astype(np.float32)
+                  if all(c in chans for c in COLOURS) else None)
     out["metadata"] = {k[len("hyde_bsdf."):]: str(v) for k, v in f.header().items()
                        if isinstance(k, str) and k.startswith("hyde_bsdf.")}
     return out

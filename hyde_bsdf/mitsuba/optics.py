@@ -260,7 +260,7 @@ class DHRLookup:
     filtering keeps the lookup differentiable w.r.t. rms_slope.  1 - rho_avg(rms_slope) (for the
     reciprocal diffuse term and the lobe choice) is an ``mi.Texture1f``.  ``use_accel=False`` keeps
     positional gradients on CUDA as well.  Interpolation error against the table's ``__call__``:
-    ``validation/plugin_checks.py`` ("DHR texture interpolation error").
+    ``hyde_bsdf/validation/plugin_checks.py`` ("DHR texture interpolation error").
     """
 
     def __new__(cls, texture=None):

@@ -110,7 +110,7 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
      (pi (1 - rho_avg)), the default: white-furnace albedo <= 1 in both transport modes;
      "paper" = Eq. 17 as written, (1/pi) (1 - rho(theta_in)) M00(beta): in a path tracer
      (radiance mode) its albedo is rho(theta) + 1 - rho_avg, up to 1.94 at grazing angles
-     (validation/furnace.py); "none" = specular lobe only; "lambertian" = diffuse_reflectance / pi
+     (hyde_bsdf/validation/furnace.py); "none" = specular lobe only; "lambertian" = diffuse_reflectance / pi
      (its own albedo)
    - no
  * - sample_visible
@@ -193,7 +193,7 @@ the table's whole range @DHR_TABLE@ (4.7 MB, float32), is shipped with the packa
 ``mi.Texture2f`` (differentiable in rms_slope), at each shading point's own roughness.
 Its deviation from the table, 1 - rho clipped at 0, for rms_slope in @RMS_SLOPE@ and
 theta <= 89 deg is <= 1.9e-5 (vgroove), 2.6e-5 (smith), 1.3e-4 (none), target 2e-4
-(``validation/plugin_checks.py``, "DHR texture interpolation error"); denser grids
+(``hyde_bsdf/validation/plugin_checks.py``, "DHR texture interpolation error"); denser grids
 cost render time once the roughness varies per point (cache misses).  1 - rho is
 clipped at 0 (rho > 1 happens without shadowing near grazing).
 
@@ -494,7 +494,7 @@ def _read_albedo(props, term):
     return None
 
 
-#: the albedo of shadowing="none" is checked up to this angle of incidence (deg), as validation/furnace.py does
+#: the albedo of shadowing="none" is checked up to this angle of incidence (deg), as hyde_bsdf/validation/furnace.py does
 GAIN_THETA_DEG = 89.5
 #: above 1 by more than the DHR table's interpolation error: an energy gain
 GAIN_TOL = 2e-4
@@ -523,7 +523,7 @@ def _gain_warning(values, scale):
     onset = math.degrees(theta[np.argmax(rho > 1.0 + GAIN_TOL)])
     return (f"hyde: shadowing='none' (no shadowing/masking) reflects more light than it receives at grazing "
             f"incidence at rms_slope {rms:.3g}: its albedo exceeds 1 from {onset:.1f} deg on and reaches "
-            f"{rho.max():.3g} at {GAIN_THETA_DEG:g} deg (validation/furnace.py); {advice}")
+            f"{rho.max():.3g} at {GAIN_THETA_DEG:g} deg (hyde_bsdf/validation/furnace.py); {advice}")
 
 
 def _achromatic(tex):

@@ -38,7 +38,7 @@ rms_slope; rho is a smooth function of x at both ends.  The x nodes are uniform
 near-mirror surface (rms_slope ~1e-4) the grazing dip of rho lies within
 1 - x ~ sqrt(rms_slope) ~ 0.01 of the end, which the uniform step resolved only
 to 7.5e-3 (measured); with the refined end the interpolation error is below
-2e-4 over the whole table (``validation/dhr_convergence.py`` charts it).
+2e-4 over the whole table (``hyde_bsdf/validation/dhr_convergence.py`` charts it).
 
 Shipped as data
 ---------------

@@ -113,8 +113,8 @@ DIFFUSE = tuple(t.name for t in DIFFUSE_TERMS)
 #: (shadowing, diffuse) of the renderers' default material -- the ``hyde`` plugin and ``hyde-bsdf export``
 #: (a table Mitsuba renders): the paper's V-groove with the reciprocal diffuse term, whose white-furnace albedo
 #: stays <= 1 in both transport modes at every roughness and angle; the paper's Eq. 17 term returns up to
-#: 1.93x the light of the furnace in a path tracer (docs/plugin.md, "The default material";
-#: validation/furnace.py)
+#: 1.94x the light of the furnace in a path tracer (docs/plugin.md, "Energy: the default material";
+#: hyde_bsdf/validation/furnace.py)
 RENDER_DEFAULT = ("vgroove", "reciprocal")
 _BY_NAME = {"shadowing": {t.name: t for t in SHADOWING_TERMS}, "diffuse": {t.name: t for t in DIFFUSE_TERMS}}
 

@@ -9,7 +9,7 @@ that radiate at forward grazing.  Where the surface's own sigma is not well abov
 near forward grazing of a smooth or near-specular surface at 80 deg and beyond, with the default partitions.
 
 The estimate, relative to the flat plate's specular peak sigma_0 = sqrt(2 pi) k w cos^2 ti (every term measured on
-flat PEC plates at 10 pts/lambda against the analytic reflected beam, ``validation/mom_forward_grazing.py``):
+flat PEC plates at 10 pts/lambda against the analytic reflected beam, ``hyde_bsdf/validation/mom_forward_grazing.py``):
 
 * truncation (both incidences, s and p): a_e^2 / max(1, (k w (sin theta_r - sin ti))^2), the two cut ends
   radiating like edges (the measured floor is within +0.8 dB of it at its maximum, beam and window, s and p,
@@ -45,12 +45,12 @@ flat PEC plates at 10 pts/lambda against the analytic reflected beam, ``validati
   s +2 to +16 dB from 89 deg on, nearly independent of L (at 89 deg pi L (pi/2 - theta)^2 / 2 < 0.5 for
   L < 1000 lambda: still at the end); the cut infinite-plane current, int_{-L/2}^{L/2} J_inf(x) e^{jkx sin theta}
   dx, predicts the MoM's p to 0.1 dB and its s to 2 dB at 86-89.75 deg (flat PEC, beam, ti = 85 / 88 deg,
-  w = 50 - 150 lambda, 4w and 6w; ``validation/mom_forward_grazing.py``, ``truncated_plane_db``).
+  w = 50 - 150 lambda, 4w and 6w; ``hyde_bsdf/validation/mom_forward_grazing.py``, ``truncated_plane_db``).
 
 Checked: flat PEC, beam, w = 20 / 37.5 / 75 lambda, ti = 70 / 80 / 83 / 85 / 88 deg, L = 4w and 6w: every sigma
 reported valid is within 2.3 dB of the analytic reflected beam (``tests/test_mom_beam.py``); at theta_r = 86-89 deg,
 beam and window, s and p, ti = 80 / 83 / 85 / 87 / 88 deg, w = 37.5 / 75 / 150 / 300 lambda, L = 4w and 6w (160
-cases): within 1.93 dB (``validation/mom_forward_grazing.py``, graded at 3 dB).
+cases): within 1.93 dB (``hyde_bsdf/validation/mom_forward_grazing.py``, graded at 3 dB).
 
 sigma is reported valid where it is at least FLOOR_MARGIN times the estimate: a floor coherent with the true
 field then moves sigma by at most +2.0 / -2.5 dB (within the issue's 3 dB).

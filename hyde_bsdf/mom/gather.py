@@ -96,14 +96,17 @@ def _executor_failure(exc) -> bool:
         type(exc).__name__ in ("KilledWorker", "FutureCancelledError") and _is_dask(type(exc)))
 
 
-def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, what="task", label="hyde-bsdf"):
+def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, what="task", label="hyde-bsdf",
+           on_result=None):
     """[fn(item) for item in items], run on ``executor`` (not shut down here), never waiting blindly.
 
     ``timeout``: seconds without any task finishing after which the run is given up (None: no
     limit while the executor is alive); ``on_done(done_count)`` after every finished task;
     ``heartbeat``: a progress callback (as :func:`hyde_bsdf.progress.as_callback` reads it) called
     every HEARTBEAT_S seconds in which nothing finished; ``what``, ``label``: words for the
-    messages ('partition', 'mom').  Raises ExecutorError (module docstring).
+    messages ('partition', 'mom'); ``on_result(index, result)`` with each task's result as it
+    finishes (a caller checkpoints there, so that a killed run keeps what was done).  Raises
+    ExecutorError (module docstring).
     """
     if timeout is not None and not (timeout > 0):
         raise UsageError(f"timeout must be > 0 seconds or None, got {shorten(timeout)}")
@@ -133,6 +136,8 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, w
                 detail = (str(exc).strip().splitlines() or ["no detail"])[0]
                 raise fail(f"lost {what} {futures[fut] + 1} ({type(exc).__name__}: {detail})") from None
             done_count += 1
+            if on_result is not None:
+                on_result(futures[fut], results[futures[fut]])
             if on_done is not None:
                 on_done(done_count)
         now = time.monotonic()

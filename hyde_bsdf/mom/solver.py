@@ -43,7 +43,7 @@ M01 = (sigma_s - sigma_p)/2, M22 + j M23 = <F_s F_p*> normalised like sigma.
 Absorbed power (Poynting on the vacuum side): P_abs = -(1/k0) int W^2 Im(u v*) dx
 over the incident flux through the windowed surface; energy = reflected + absorbed.
 
-Measured (validation/mom_polarization.py): a flat plate of Infragold, flame-sprayed
+Measured (hyde_bsdf/validation/mom_polarization.py): a flat plate of Infragold, flame-sprayed
 Al or glass reproduces Fresnel |r_s|^2, |r_p|^2 within 0.006 and arg(r_p/r_s)
 within 0.35 deg for theta_i = 0-80 deg at the default 10 points per wavelength.
 
@@ -133,7 +133,7 @@ Eq. 22 below (the paper's Fig. 6 is unchanged).  The windowed current's power is
 in s, its forward-grazing sigma has an artificial floor (-44.5 dB below the specular peak of an 80-deg
 flat plate at L = 4 w: the lit partition ends launch surface waves that reach the window); the beam
 reflects 1.0000 (p) and 1.0026 (s, the sampling) off a flat PEC at any tau and follows the analytic
-reflected beam to -98 dB (validation/mom_forward_grazing.py).
+reflected beam to -98 dB (hyde_bsdf/validation/mom_forward_grazing.py).
 
 and it refuses (ValueError naming the parameter) before allocating when
 * the realised surface is so steep that ``pts_per_wl`` along x gives fewer than
@@ -184,6 +184,7 @@ all incidence angles at once.
 from __future__ import annotations
 
 import concurrent.futures as cf
+import functools
 import math
 import multiprocessing
 import os
@@ -196,9 +197,11 @@ import numpy as np
 
 from hyde_bsdf import resources
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.options import Options
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import NATURAL_INDEX
 from hyde_bsdf.progress import Throttle, as_callback
+from hyde_bsdf.mom import cost as _cost
 from hyde_bsdf.mom.beam import gaussian_beam, window_bias
 from hyde_bsdf.mom.dense import solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, NEAR_WL, FastSolverUnsuitable, block_length_wl, plan_blocks, solve_fast
@@ -209,6 +212,8 @@ from hyde_bsdf.mom.runtime import limit_blas_threads, restore_blas_threads, work
 
 __all__ = [
     "scatter",
+    "MoMOptions",
+    "estimate",
     "MoMResult",
     "MoMAccuracyWarning",
     "SerialExecutor",
@@ -639,6 +644,11 @@ class MoMResult:
     valid_s, valid_p : bool ndarray [n_ti, n_tr], sigma >= FLOOR_MARGIN (20) x the floor: within about 2.5 dB
         of what an untruncated partition gives; ``valid`` the same for the first polarisation.
     floor_reason : str, why a sigma flagged invalid is not the surface's (for legends and summaries).
+    atlas_verdict : dict (a property, computed when first read): the accuracy atlas's verdict on the model at
+        this run's geometry, :func:`hyde_bsdf.model.accuracy.verdict` (``["summary"]``: one line).
+    partition_fields : dict "s" / "p" of complex ndarrays [M, n_ti, n_tr]: each partition's far field on
+        ``theta_r``, scaled so that ``sigma_P = mean(|F|^2, axis=0)`` (and sigma_sp = mean(F_s conj(F_p))) --
+        what any other statistic over partitions (coherent Mueller elements, a jackknife) needs.
     """
 
     theta_i: np.ndarray
@@ -679,10 +689,24 @@ class MoMResult:
     valid_p: np.ndarray = None
     valid: np.ndarray = None
     floor_reason: str = ""
+    partition_fields: dict = None
 
     @property
     def theta_i_deg(self):
         return np.degrees(self.theta_i)
+
+    @functools.cached_property
+    def atlas_verdict(self):
+        """The accuracy atlas's verdict on the model (V-groove, the paper's diffuse term) at this run's geometry:
+        :func:`hyde_bsdf.model.accuracy.verdict` at each theta_i for the run's rms slope, height and index -- how
+        far the model may be from this very kind of result, and the cheapest adequate variant (``["summary"]``,
+        one line; ``["per_angle"]``).  Computed when first read."""
+        from hyde_bsdf.model.accuracy import verdict
+
+        p = self.params
+        if not p.get("rms_height_wl"):
+            return {"per_angle": [], "answers": [], "summary": "accuracy atlas: not applicable (a flat surface)"}
+        return verdict(self.theta_i, p["rms_slope"], p["n"], p["k"], sigma_h_wl=p["rms_height_wl"])
 
     @property
     def theta_r_deg(self):
@@ -774,10 +798,28 @@ MAX_UNKNOWNS = 10000
 MAX_PANELS = 64
 
 
-def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
-            pts_per_wl=10, seed=0, executor=None, *, taper_width_wl=None, progress=None,
-            polarization="s", n=None, k=None, timeout=None, solver="auto", tol=None, incidence="auto"):
+@dataclass(frozen=True)
+class MoMOptions(Options):
+    """How :func:`scatter` samples, solves and runs (each field is also a keyword of :func:`scatter`;
+    its docstring describes them)."""
+
+    pts_per_wl: float = 10
+    seed: int = 0
+    taper_width_wl: float | None = None
+    solver: str = "auto"
+    tol: float | None = None
+    incidence: str = "auto"
+    executor: object = None
+    timeout: float | None = None
+    progress: object = None
+
+
+def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, *,
+            polarization="s", n=None, k=None, options: MoMOptions | None = None, **settings):
     """Incoherent far-field scattering of a 1-D Gaussian rough surface -- paper Eqs. 18-23, both polarisations.
+
+    The sampling, the solver and the executor are a :class:`MoMOptions` (``options``), or its fields
+    given as keywords (``pts_per_wl=8, executor=...``).
 
     Parameters
     ----------
@@ -805,21 +847,21 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         a dask cluster that loses its last worker (for ``gather.NO_WORKER_GRACE_S`` =
         60 s), a closed client or a broken process pool ends in :class:`ExecutorError`
         naming it, and a ``progress`` line reports every 30 s in which no partition finished.
-    taper_width_wl : float in (0, L_p], keyword-only, Eq. 22's w (default L_p / 4); with the beam, its
+    taper_width_wl : float in (0, L_p], Eq. 22's w (default L_p / 4); with the beam, its
         footprint (the incident field's e^-(x/w)^2 on the mean plane).
-    progress : callable progress(message), bool or None, keyword-only (:mod:`hyde_bsdf.progress`): a
+    progress : callable progress(message), bool or None (:mod:`hyde_bsdf.progress`): a
         line "partition done/total, elapsed, left" at most every 3 s; True: on stderr; None: on stderr
         for runs of 10 or more partitions; False: none.  The wait's heartbeat (every 30 s without a finished
         partition) goes to the callback too (None: on stderr).
-    polarization : "s", "p" or ("s", "p"), keyword-only (default "s").  s: E along z
+    polarization : "s", "p" or ("s", "p") (default "s").  s: E along z
         (TM_z, the paper's Fig. 6); p: H along z.  Both on the same surface give
         the cross term and the in-plane Mueller matrix.
-    timeout : float or None, keyword-only: seconds without any partition finishing
+    timeout : float or None: seconds without any partition finishing
         after which the run is given up with :class:`ExecutorError` (None: no limit
         while the executor is alive).
-    n, k : float or None, keyword-only: the paper's complex index eta = n - j k
+    n, k : float or None: the paper's complex index eta = n - j k
         (n > 0, k >= 0; Infragold 0.285, 7.3523).  Neither: a perfect conductor.
-    solver : "auto", "dense" or "fast", keyword-only.  "dense": one LU of the full matrix
+    solver : "auto", "dense" or "fast".  "dense": one LU of the full matrix
         per polarisation (:mod:`hyde_bsdf.mom.dense`, at most MAX_UNKNOWNS per partition);
         "fast": forward-backward sweeps with spectral acceleration (:mod:`hyde_bsdf.mom.fast`,
         O(N) memory, up to MAX_FAST_UNKNOWNS), GMRES where the sweeps diverge or stall and
@@ -827,9 +869,9 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         "auto" (default): fast from AUTO_FAST_UNKNOWNS unknowns per partition on, and
         wherever the dense path would be refused, if the surface suits it (its height
         range against the partition length), else dense.  ``params["solver"]`` says which ran.
-    tol : float or None, keyword-only: the fast solver's relative residual
+    tol : float or None: the fast solver's relative residual
         ||b - A x|| / ||b|| (default ``fast.FAST_TOL`` = 1e-4; 1e-3 is within 0.01 dB).
-    incidence : "auto", "window" or "beam", keyword-only.  "window": the paper's plane wave with the
+    incidence : "auto", "window" or "beam".  "window": the paper's plane wave with the
         current windowed by Eq. 22; "beam": an exact Gaussian beam of footprint w, unwindowed currents
         (:mod:`hyde_bsdf.mom.beam`: no power bias, no forward-grazing floor in s); "auto" (default): the
         beam for theta_i >= BEAM_FROM_DEG = 80 deg, the window below.  ``params["incidence"]`` per theta_i.
@@ -854,14 +896,17 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
     ENERGY_TOLERANCE (the value is in the message).
     """
     t_wall = time.perf_counter()
+    opts = MoMOptions.of(options, settings, "scatter")
     cfg = _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
-                        pts_per_wl, seed, taper_width_wl, polarization, n, k, timeout, solver, tol)
-    cfg["beam"] = _check_incidence(incidence, cfg["ti_deg"])
+                        polarization, n, k, opts)
+    cfg["beam"] = _check_incidence(opts.incidence, cfg["ti_deg"])
+    executor, progress = opts.executor, opts.progress
     own = check_executor(executor) is None
     workers = min(os.cpu_count() or 1, cfg["partitions"]) if own else 1
     surf = _realise_surface(cfg, workers)
     for r in surf["reasons"]:
         warnings.warn("MoM failure risk: " + r, MoMAccuracyWarning, stacklevel=2)
+    _report_estimate(cfg, surf, workers if own else _executor_workers(executor), progress)
     tasks = _partition_tasks(cfg, surf)
     del surf["x"], surf["f"], surf["s"], surf["c"]
     results = _solve_partitions(tasks, executor, workers, cfg, progress)
@@ -874,6 +919,81 @@ def scatter(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, t
         warnings.warn("MoM failure: " + r, MoMAccuracyWarning, stacklevel=2)
     return _result(cfg, surf, results, stats, surf["reasons"] + _solver_reasons(results) + post,
                    time.perf_counter() - t_wall)
+
+
+def estimate(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, *,
+             polarization="s", n=None, k=None, workers=None, options: MoMOptions | None = None, **settings):
+    """What :func:`scatter` with these arguments will cost, without solving anything.
+
+    The surface is realised (as ``scatter`` would: same seed, same resampling, same solver choice), then the cost
+    model of :mod:`hyde_bsdf.mom.cost` gives the CPU seconds per partition.  ``options``/``settings``: as
+    :func:`scatter`'s (a :class:`MoMOptions` or its fields as keywords).  ``workers``: the processes the
+    partitions are spread over (default: one per core, at most one per partition).  Returns a dict: ``cpu_seconds``
+    (all partitions), ``wall_seconds`` (over the workers), ``memory_bytes`` (peak, all workers) and
+    ``memory_text``, ``unknowns`` per partition, ``method``, ``partitions``, ``workers``, ``n_rhs``, ``n_far``,
+    ``features`` (the model's inputs) and ``line`` (the sentence ``scatter`` prints before a long run).
+    Raises what ``scatter`` raises for bad arguments or a run that would not fit in memory.
+    """
+    opts = MoMOptions.of(options, settings, "estimate")
+    cfg = _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg,
+                        polarization, n, k, opts)
+    cfg["beam"] = _check_incidence(opts.incidence, cfg["ti_deg"])
+    workers = max(1, min(int(workers or os.cpu_count() or 1), cfg["partitions"]))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MoMAccuracyWarning)
+        surf = _realise_surface(cfg, workers)
+    return _estimate(cfg, surf, workers)
+
+
+def _estimate(cfg, surf, workers):
+    """The cost model applied to a realised surface (``_realise_surface``'s dict): see :func:`estimate`."""
+    n, dx, part_len, eta, pols = surf["n_part"], surf["dx"], cfg["part_len"], cfg["eta"], cfg["pols"]
+    height = float(np.max(np.ptp(surf["f"].reshape(cfg["partitions"], n), axis=1))) if cfg["rough"] else 0.0
+    stretch = float(np.max(np.hypot(1.0, surf["s"]))) if cfg["rough"] else 1.0
+    feats = _cost.partition_features(n, dx, height, part_len, eta, stretch, surf["method"])
+    n_rhs = cfg["ti_deg"].size * len(pols)
+    n_far = cfg["theta_r"].size + surf["fine"].size
+    if feats["method"] == "fast":
+        per = sum(_cost.fast_seconds(feats, n_rhs, n_far))
+        try:
+            need = _fast_bytes(n, dx, height, part_len, eta)
+        except FastSolverUnsuitable:
+            need = _dense_cost(n, pols, eta)[0]
+    else:
+        need, per = _dense_cost(n, pols, eta)
+        per += _cost.fast_seconds(dict(feats, block=0, waves=0, panels=0), n_rhs, n_far)[2]
+    total = per * cfg["partitions"]
+    memory = need * workers + resources.COSTS.surface_bytes_per_point * n * cfg["partitions"]
+    share = _cost.core_share(workers)
+    est = dict(cpu_seconds=total, wall_seconds=per * math.ceil(cfg["partitions"] / workers) / share,
+               core_share=share, memory_bytes=memory,
+               memory_text=resources.format_bytes(memory), unknowns=n, method=feats["method"], partitions=cfg["partitions"], workers=workers, n_rhs=n_rhs, n_far=n_far,
+               features=feats)
+    est["line"] = _cost.describe(est)
+    return est
+
+
+def _executor_workers(executor):
+    """How many workers a caller's executor spreads the partitions over (1 where it cannot tell)."""
+    count = getattr(executor, "_max_workers", None)
+    if count:
+        return int(count)
+    client = getattr(executor, "_client", None)
+    try:
+        return max(1, len(client.scheduler_info()["workers"])) if client is not None else 1
+    except Exception:  # noqa: BLE001 -- an estimate's worker count is advice; one worker is the safe guess
+        return 1
+
+
+def _report_estimate(cfg, surf, workers, progress):
+    """Before a run expected to take more than cost.REPORT_SECONDS: its estimated time and memory, one line through
+    the progress callback (None: stderr, as the wait's heartbeat; False: nothing)."""
+    report = as_callback(True if progress is None else progress, prefix="mom:")
+    if report is None:
+        return
+    est = _estimate(cfg, surf, max(1, min(workers, cfg["partitions"])))
+    if est["wall_seconds"] > _cost.REPORT_SECONDS:
+        report(est["line"])
 
 
 # ---------------------------------------------------------------------------
@@ -899,9 +1019,11 @@ def _check_incidence(incidence, ti_deg):
     return np.full(ti_deg.size, incidence == "beam")
 
 
-def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, pts_per_wl,
-                  seed, taper_width_wl, polarization, n, k, timeout, solver, tol):
+def _check_inputs(length_wl, partitions, rms_height_wl, corr_length_wl, theta_i_deg, theta_r_deg, polarization, n,
+                  k, opts):
     """Stage 1: every argument checked (ValueError naming it), the partition geometry and the taper."""
+    pts_per_wl, seed, taper_width_wl, timeout, solver, tol = (opts.pts_per_wl, opts.seed, opts.taper_width_wl,
+                                                               opts.timeout, opts.solver, opts.tol)
     length_wl = _check_positive("length_wl", length_wl)
     if isinstance(partitions, bool) or not isinstance(partitions, (int, np.integer, float)) \
             or int(partitions) != partitions or partitions < 1:
@@ -1166,7 +1288,8 @@ def _statistics(results, cfg, surf):
         nominal = np.trapezoid(fine_sig, fine, axis=1) / (2.0 * math.pi * cos_i)
         power = nominal * nominal_flux / sum_flux
         absorbed = sum(r["absorbed_" + pol] for r in results) / sum_flux
-        per[pol] = dict(F=F, sigma=sig, se=se, fine=fine_sig, nominal=nominal, power=power, absorbed=absorbed,
+        per[pol] = dict(F=F, scaled=F * np.sqrt(norm), sigma=sig, se=se, fine=fine_sig, nominal=nominal, power=power,
+                        absorbed=absorbed,
                         energy=power + absorbed, coherent=_coherent(F, P, M, norm),
                         power_coherent=np.trapezoid(_coherent(Ff, Pf, M, norm), fine, axis=1) / (2.0 * math.pi * cos_i))
     for name, d in per.items():
@@ -1251,6 +1374,7 @@ def _result(cfg, surf, results, stats, reasons, wall):
         energy_s=get("s", "energy"), energy_p=get("p", "energy"),
         mueller=stats["mueller"], mueller_std_error=stats["mueller_se"],
         mueller_normalised=stats["mueller_n"], mueller_normalised_std_error=stats["mueller_n_se"],
+        partition_fields={pol: per[pol]["scaled"] for pol in pols},
         **_floors(cfg, per),
     )
 

@@ -144,9 +144,9 @@ class _SceneXML:
         return _PARAM.sub(lambda m: str(self.values.get(m.group(1), m.group(0))), text)
 
     def hint(self, key: str) -> str:
-        """' (set by -D NAME=...)' when the first sensor's ``key`` is a plain ``$NAME``."""
+        """' (the scene's $NAME; set it with `params` NAME=N)' when the first sensor's ``key`` is a plain ``$NAME``."""
         m = _PARAM.fullmatch(self.raw.get(key, "") or "")
-        return f" (the scene's ${m.group(1)}; set it with -D {m.group(1)}=N)" if m else ""
+        return f" (the scene's ${m.group(1)}; set it with `params` {m.group(1)}=N)" if m else ""
 
     def files(self) -> list[Path]:
         """The files the scene names (``<string name="filename" value=...>``, and the ``filename``
@@ -312,7 +312,7 @@ def plan_passes(width: int, height: int, spp: int, chunks: int | None = None) ->
     if n > MAX_PASSES:
         raise UsageError(f"spp={spp} on a {width}x{height} film needs {need} passes of at most {per_pass} "
                          f"spp (at most {MAX_SAMPLES_PER_PASS} samples each); at most {MAX_PASSES} passes "
-                         f"are possible: lower --spp to <= {MAX_PASSES * per_pass}")
+                         f"are possible: lower `spp` to <= {MAX_PASSES * per_pass}")
     return [spp // n + (1 if c < spp % n else 0) for c in range(n)]
 
 
@@ -331,7 +331,7 @@ def _check_film(scene, polarized: bool, info=None) -> tuple[int, int]:
                          f"{MAX_FILM_VALUES // channels:.3g} pixels{hint}")
     per_px = COSTS.render_stokes_bytes_per_pixel if polarized else COSTS.render_colour_bytes_per_pixel
     check_memory(render_bytes(width, height, polarized), f"rendering the {width}x{height} film (~{per_px} B/pixel)",
-                 f"lower the film's width and height{hint or ' (its <film> width/height, or -D)'}")
+                 f"lower the film's width and height{hint or ' (its <film> width/height, or `params`)'}")
     return width, height
 
 

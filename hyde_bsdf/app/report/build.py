@@ -1,19 +1,18 @@
 """``hyde-bsdf validate [--quick] [--scripts DIR] -o DIR``: run every validation script, write one report.
 
-Each script in ``validation/`` has ``validate(outdir, quick=False)`` returning a list of checks
+Each script in ``hyde_bsdf/validation/`` has ``validate(outdir, quick=False)`` returning a list of checks
 ``dict(name, value, tolerance, passed)`` and writes its PNG and CSV files into ``outdir``.  This
 module runs them in order, each as a **child process** -- ``python SCRIPT.py -o OUT [--quick]
---checks-json FILE``, the protocol that ``validation/_common.py`` handles once for every script
+--checks-json FILE``, the protocol that ``hyde_bsdf/validation/_common.py`` handles once for every script
 (the child writes its docstring and checks as JSON to ``FILE``) -- times each one, collects the
 checks and the figures, and writes ``DIR/index.html`` (and ``DIR/checks.csv``): the machine, the
 time each script took, a table of every check with its number, tolerance and verdict, and the
 figures.  A script that crashes, is killed or is missing is reported as a failed check (with the
 last lines of its stderr); the report still completes.  A script's own output is not shown (run
-it alone to see it: ``python validation/STEM.py --quick``).  Ctrl-C (or SIGTERM) ends the
+it alone to see it: ``python hyde_bsdf/validation/STEM.py --quick``).  Ctrl-C (or SIGTERM) ends the
 running script (SIGTERM, then SIGKILL) and the report, which leaves the previous report as it was.
 Exit status: 0 when every check passes, 1 otherwise, 2 for a usage error (an output folder that
-cannot be written or is not a report's, no ``validation/`` scripts: not a source checkout and no
-``--scripts DIR``).
+cannot be written or is not a report's, no validation scripts where ``--scripts DIR`` points).
 
 Why child processes: **isolation** -- one script's Dr.Jit/Mitsuba state (the variant, JIT
 caches, registered plugins) and its memory cannot leak into the next, so a check cannot pass or
@@ -61,16 +60,16 @@ SECTIONS = [
      ["fig4_priest_germer", "fig8_9_mueller", "dhr_convergence", "stability_evaluator"]),
     ("Mitsuba plugin and rendering",
      ["plugin_checks", "render_checks", "furnace", "speed_accuracy_render", "model_economy"]),
-    ("Method of moments (paper Fig. 6)", ["fig6_mom", "mom_convergence", "mom_1d_model", "stability_mom", "mom_polarization", "mom_mueller_1d", "mom_speed_accuracy", "mom_grazing", "mom_forward_grazing"]),
+    ("Method of moments (paper Fig. 6)", ["fig6_mom", "mom_convergence", "mom_1d_model", "stability_mom", "mom_polarization", "mom_mueller_1d", "mom_speed_accuracy", "mom_grazing", "mom_forward_grazing", "mom_reciprocity", "accuracy_atlas"]),
     ("Fitting and inverse rendering (paper Section 4)",
      ["fit_synthetic", "fit_model_selection", "fit_lab_data", "inverse_render", "gradient_check", "svbrdf_inverse", "svbrdf_index",
       "capture_camera", "pbsdf_export"]),
 ]
 
 
-#: Where the validation scripts live by default: ``validation/`` of the source checkout this package
-#: is in (an installed package has none; ``--scripts DIR`` names another folder)
-VALIDATION_DIR = Path(__file__).resolve().parents[3] / "validation"
+#: Where the validation scripts live by default: the package's own ``hyde_bsdf/validation/`` (shipped in
+#: the wheel; ``--scripts DIR`` names another folder, e.g. a clone's newer scripts)
+VALIDATION_DIR = Path(__file__).resolve().parents[2] / "validation"
 #: lines of a crashed script's stderr shown as its failed check's detail
 TAIL_LINES = 20
 #: seconds an interrupted report gives a script to end after SIGTERM before it is killed
@@ -78,17 +77,16 @@ TERMINATE_WAIT = 10.0
 
 
 def validation_dir(scripts=None) -> Path:
-    """The validation scripts' folder (``scripts``, or the checkout's); UsageError when it holds
-    none of the report's scripts (an installed package without ``--scripts``)."""
+    """The validation scripts' folder (``scripts``, or the package's own); UsageError when it holds
+    none of the report's scripts."""
     here = Path(VALIDATION_DIR if scripts is None else scripts)
     missing = [f"{stem}.py" for _, names in SECTIONS for stem in names if not (here / f"{stem}.py").is_file()]
     if not here.is_dir() or len(missing) == sum(len(n) for _, n in SECTIONS):
         if scripts is not None:
             raise UsageError(f"--scripts {str(here)!r} holds none of the validation scripts (fig4_priest_germer.py, "
-                             "...): give the validation/ folder of a hyde-bsdf source checkout")
-        raise UsageError(f"validate needs the validation/ scripts of a source checkout, and {str(here)!r} "
-                         "has none (an installed package does not ship them): clone the repository and run "
-                         "'hyde-bsdf validate --scripts CLONE/validation', or 'pip install -e .' there")
+                             "...): give a folder like hyde_bsdf/validation/ of a hyde-bsdf checkout")
+        raise UsageError(f"the package's validation scripts are missing from {str(here)!r} (an incomplete "
+                         "install): reinstall hyde-bsdf, or give a folder of them with --scripts")
     return here.resolve()
 
 
@@ -154,7 +152,7 @@ def machine_info() -> dict:
 
 def script_command(path: Path, outdir: Path, quick: bool, checks_json: Path) -> list:
     """The child's command line: the script itself, run by this interpreter, answering the
-    protocol of ``validation/_common.py`` (``--checks-json FILE``)."""
+    protocol of ``hyde_bsdf/validation/_common.py`` (``--checks-json FILE``)."""
     cmd = [sys.executable, str(path), "-o", os.path.abspath(outdir), "--checks-json", str(checks_json)]
     return cmd + (["--quick"] if quick else [])
 
@@ -234,7 +232,7 @@ def _run_script(path: Path, outdir: Path, quick: bool):
     last = last if len(last) <= 300 else last[:297] + "..."
     value = f"exit status {status}" + (f": {last}" if last else " (no output on stderr)")
     if status == 0:
-        value += ", and no checks came back (does its __main__ block call validation/_common.py's cli?)"
+        value += ", and no checks came back (does its __main__ block call hyde_bsdf/validation/_common.py's cli?)"
     return [dict(name=f"{path.stem}: ran", value=value, tolerance="no error", passed=False,
                  detail=detail)], seconds, ""
 
@@ -250,7 +248,8 @@ def build_report(outdir, quick=False, progress=True, force=False, scripts=None):
 
     The report is built in a fresh folder and moved into ``outdir`` only once complete (see the
     module docstring); UsageError before any work for an unusable ``outdir`` (a folder that is not
-    a report's, unless ``force``) or no scripts (in ``scripts``, default the checkout's ``validation/``).
+    a report's, unless ``force``) or no scripts (in ``scripts``, default the package's
+    ``hyde_bsdf/validation/``).
     """
     final = check_report_dir(outdir, force)
     vdir = validation_dir(scripts)
@@ -334,8 +333,7 @@ def build_parser() -> Parser:
     ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)")
     ap.add_argument("--quick", action="store_true", help="small sweeps; under 3 minutes on 2 cores")
     ap.add_argument("--scripts", metavar="DIR", default=None,
-                    help="folder of the validation scripts (default: validation/ of the source checkout this "
-                         "package runs from; an installed package has none: give a clone's validation/ folder)")
+                    help="folder of the validation scripts (default: the package's own, hyde_bsdf/validation/)")
     ap.add_argument("--force", action="store_true",
                     help="write into a folder that is not an earlier report; its files are kept, except "
                          "those of the report's names (index.html, checks.csv, the figures), which are replaced")
