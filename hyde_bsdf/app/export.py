@@ -3,7 +3,7 @@
 Command line::
 
     hyde-bsdf export OUT.pbsdf --rms-slope 0.3 (--material Au | --n N[,N,...] --k K[,K,...])
-                     [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none|lambertian]
+                     [--shadowing vgroove|smith|none] [--diffuse reciprocal|paper|none|lambertian]
                      [--diffuse-reflectance A[,A,...]] [--band-index projected|sampled]
     hyde-bsdf export OUT.pbsdf --fit FIT.json [--extrapolate]
                      [--resolution 37x55x55] [--error-samples 20000]
