@@ -2,6 +2,8 @@
 # hyde-bsdf set-up and entry point.  Two commands, both self-installing:
 #   ./run.sh demo   -- the main job: writes the demo pictures into out/demo/
 #   ./run.sh test   -- the whole test suite, on 2 worker processes (extra arguments go to pytest)
+#   ./run.sh wheel  -- the wheel built, installed into a fresh virtual environment, its demo run
+#                      from outside the checkout (tools/check_wheel.sh; --validate adds the quick report)
 # Each one makes .venv/ inside the repository, installs the package with its
 # dependencies, and makes sure a libLLVM >= 16 is present for Dr.Jit's LLVM
 # back end (Debian 12's default libLLVM-15 makes Dr.Jit 1.5 abort).
@@ -42,6 +44,9 @@ case "$cmd" in
         # compilation, so the 2-core CI machine runs it in about half the time; HYDE_TEST_WORKERS=0
         # runs it in this one process
         exec .venv/bin/python -m pytest -n "${HYDE_TEST_WORKERS:-2}" --dist worksteal "$@" ;;
+    wheel)
+        ensure_llvm; ensure_venv
+        exec tools/check_wheel.sh "$@" ;;
     *)
-        echo "usage: ./run.sh demo | ./run.sh test [pytest args]" >&2; exit 2 ;;
+        echo "usage: ./run.sh demo | ./run.sh test [pytest args] | ./run.sh wheel [--validate]" >&2; exit 2 ;;
 esac

@@ -96,7 +96,7 @@ def prose(page: Path) -> str:
 
 def test_pages_exist():
     names = {_rel(p) for p in PAGES}
-    for required in ("docs/index.md", "docs/plugin.md", "docs/conventions.md", "docs/validation.md",
+    for required in ("docs/index.md", "docs/architecture.md", "docs/plugin.md", "docs/conventions.md", "docs/validation.md",
                      "docs/troubleshooting.md"):
         assert required in names
 
@@ -359,8 +359,8 @@ def _check_command(cmd: str, commands: dict) -> list[str]:
             continue
         prog = os.path.basename(tok[0])
         if tok[0] in ("./run.sh", "run.sh"):
-            if len(tok) > 1 and tok[1] not in ("demo", "test"):
-                problems.append(f"{part}: run.sh has only 'demo' and 'test'")
+            if len(tok) > 1 and tok[1] not in ("demo", "test", "wheel"):
+                problems.append(f"{part}: run.sh has only 'demo', 'test' and 'wheel'")
             elif len(tok) > 1 and tok[1] == "test":
                 problems += _check_pytest_args(tok[2:], part)
         elif prog == "hyde-bsdf":

@@ -6,7 +6,7 @@ Physics and format checked:
 - the reader on hand-built tables with NaN, negative-M00 and over-polarized cells: the counts
   are exact and no such cell reaches the fit;
 - the frame conversion against Mitsuba's own C++ ``measured_polarized`` eval (scalar variant),
-  rotated into the paper's bases by ``hyde_bsdf.mitsuba.frames.eval_paper``: the NumPy lookup
+  rotated into the paper's bases by ``hyde_bsdf.validation._frames.eval_paper``: the NumPy lookup
   replica in the paper's bases equals it to 1e-4 (float32 interpolation), including the NaN
   quirks (a NaN in M00 at a corner blacks out the matrix, a NaN elsewhere makes it all NaN);
 - Mitsuba's C++ eval of an exported file against the Python ``hyde`` plugin: the error
@@ -169,7 +169,7 @@ def test_reader_refuses_a_table_mitsuba_would_refuse(tmp_path):
 
 def test_frames_and_lookup_match_mitsubas_measured_polarized(exported, tmp_path):
     mi = _mitsuba()
-    from hyde_bsdf.mitsuba.frames import eval_paper
+    from hyde_bsdf.validation._frames import eval_paper
 
     path, _ = exported
     t = read_pbsdf(path)
@@ -212,7 +212,7 @@ def test_frames_and_lookup_match_mitsubas_measured_polarized(exported, tmp_path)
 def test_cpp_eval_of_the_export_agrees_with_the_hyde_plugin_within_the_reported_error(exported):
     mi = _mitsuba()
     import hyde_bsdf
-    from hyde_bsdf.mitsuba.frames import eval_paper
+    from hyde_bsdf.validation._frames import eval_paper
 
     hyde_bsdf.register("scalar_spectral_polarized")
     path, report = exported
@@ -292,6 +292,25 @@ def test_round_trip_export_read_fit_recovers_the_parameters(exported):
     assert f'"360:{result.n[0]:.6g}, {first}:{result.n[0]:.6g}' in xml
     assert f'{last}:{result.n[-1]:.6g}, 830:{result.n[-1]:.6g}"' in xml
     assert f"over 360-{first} and {last}-830 nm the end values are held (an extrapolation, not measured" in xml
+
+
+def test_a_table_misfit_from_a_held_roughness_is_blamed_on_it(exported):
+    """Issue 30 item 3 for tables: rms_slope held at 0.4 on a table made at 0.25 misfits M00 by far;
+    the verdict names the held parameter and the value it takes when fitted (0.25 to 1e-3) -- not the
+    lobe's shape or the terms it would otherwise suspect.  Two small fits, ~3 s."""
+    import warnings
+
+    from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
+
+    path, _ = exported
+    data = pbsdf_samples(path, max_points=150, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        held = fit_pbsdf(data, fit=("n", "k"), rms_slope=0.4, progress=False)
+    assert not held.verdict.adequate and held.verdict.message.startswith("M00 misfit")
+    assert "the parameter(s) held fixed (rms_slope = 0.4) cause the misfit" in held.verdict.message
+    fitted = float(held.verdict.message.split("(rms_slope = ")[2].split(")")[0])
+    assert fitted == pytest.approx(0.25, rel=1e-3)
 
 
 def test_fit_cli_on_a_pbsdf_file(exported, tmp_path, capsys):

@@ -256,6 +256,82 @@ def test_ctrl_c_terminates_the_running_script(tmp_path):
         __import__("os").kill(pid, 0)
 
 
+#: a fake script's body that writes OUTDIR/STEM.started, then waits (at most 60 s) for OUTDIR/OTHER.started
+MEET = ("open(os.path.join(outdir, '{me}.started'), 'w').close()\n"
+        "    import time\n    t0 = time.monotonic()\n"
+        "    while not os.path.exists(os.path.join(outdir, '{other}.started')) and time.monotonic() - t0 < 60:\n"
+        "        time.sleep(0.02)\n"
+        "    met = os.path.exists(os.path.join(outdir, '{other}.started'))\n"
+        "    import matplotlib\n    matplotlib.use('Agg')\n    import matplotlib.pyplot as plt\n"
+        "    from _common import save_figure\n    save_figure(plt.figure(), os.path.join(outdir, '{me}.png'))\n"
+        "    return [dict(name='ran beside {other}', value=met, tolerance='True', passed=met)]")
+
+
+def test_scripts_run_side_by_side_and_each_keeps_its_own_figures(tmp_path, monkeypatch):
+    """``jobs=2``: two scripts run at the same time (each waits for the other to have started: one
+    after the other, both would wait in vain), yet the report lists the checks in the sections'
+    order and under each script only the figure that script saved (the protocol's "figures", not
+    whatever appeared in the shared folder meanwhile), with its CPU time."""
+    from hyde_bsdf.app.report import build
+
+    vdir = tmp_path / "scripts"
+    _write_fakes(vdir, {"left": MEET.format(me="left", other="right"), "right": MEET.format(me="right", other="left")})
+    monkeypatch.setattr(build, "SECTIONS", [("Fake", ["left", "right"])])
+    monkeypatch.setattr(build, "machine_info", lambda: {"CPU": "test"})
+    ok, rows, _ = build_report(tmp_path / "report", quick=True, progress=False, scripts=vdir, jobs=2)
+    assert ok and [r["script"] for r in rows] == ["left", "right"], rows
+    page = (tmp_path / "report" / "index.html").read_text()
+    left, right = page.split("<h3>left")[1].split("<h3>right")
+    assert "src='left.png'" in left and "right.png" not in left
+    assert "src='right.png'" in right and "left.png" not in right
+    assert left.count("CPU s)") == 1 and right.count("CPU s)") == 1
+
+
+def test_a_script_that_reads_anothers_output_waits_for_it(tmp_path, monkeypatch):
+    """A script of ``AFTER`` (mom_1d_model reads fig6_mom's run) starts only once the script it
+    reads has ended, whatever the number of scripts at once; the others do not wait."""
+    from hyde_bsdf.app.report import build
+
+    vdir = tmp_path / "scripts"
+    _write_fakes(vdir, {
+        "writer": "import time\n    time.sleep(1.0)\n    open(os.path.join(outdir, 'run.txt'), 'w').write('done')\n"
+                  "    return [dict(name='wrote', value=1, tolerance='-', passed=True)]",
+        "reader": "p = os.path.join(outdir, 'run.txt')\n    got = open(p).read() if os.path.exists(p) else 'nothing'\n"
+                  "    return [dict(name='read the writer', value=got, tolerance='done', passed=got == 'done')]"})
+    monkeypatch.setattr(build, "SECTIONS", [("Fake", ["writer", "reader"])])
+    monkeypatch.setattr(build, "AFTER", {"reader": "writer"})
+    monkeypatch.setattr(build, "machine_info", lambda: {"CPU": "test"})
+    ok, rows, _ = build_report(tmp_path / "report", quick=True, progress=False, scripts=vdir, jobs=2)
+    assert ok and rows[1]["value"] == "done", rows
+
+
+def test_ctrl_c_terminates_every_running_script(tmp_path):
+    """Two scripts at once: Ctrl-C (the second script sends SIGINT to the report once both run)
+    interrupts the report, and both children are terminated and reaped."""
+    from hyde_bsdf.app.report.build import _run_all
+
+    sleep = "    while True:\n        signal.pause()"
+    _write_fakes(tmp_path, {
+        "one": "open(os.path.join(outdir, 'one.tmp'), 'w').write(str(os.getpid()))\n"
+               "    os.replace(os.path.join(outdir, 'one.tmp'), os.path.join(outdir, 'one.pid'))\n" + sleep,
+        "two": "open(os.path.join(outdir, 'two.pid'), 'w').write(str(os.getpid()))\n"
+               "    while not os.path.exists(os.path.join(outdir, 'one.pid')):\n        pass\n"
+               "    os.kill(os.getppid(), signal.SIGINT)\n" + sleep})
+    with pytest.raises(KeyboardInterrupt):
+        _run_all([tmp_path / "one.py", tmp_path / "two.py"], tmp_path, quick=True, jobs=2)
+    for name in ("one.pid", "two.pid"):
+        with pytest.raises(ProcessLookupError):       # terminated and reaped (not a zombie)
+            __import__("os").kill(int((tmp_path / name).read_text()), 0)
+
+
+def test_jobs_must_be_a_whole_number_of_at_least_one(tmp_path, capsys):
+    """``--jobs 0`` is one line naming the option, exit 2, before any work."""
+    assert cli_main(["-o", str(tmp_path / "r"), "--jobs", "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--jobs" in err[0] and "expected an integer >= 1, got 0" in err[0], err
+    assert not (tmp_path / "r").exists()
+
+
 def test_scripts_option_names_the_folder_and_refuses_one_without_scripts(tmp_path, capsys):
     """``validate --scripts DIR`` (an installed package: a clone's hyde_bsdf/validation/ folder): a folder
     without the report's scripts is refused before any work, exit 2, in one line naming it."""

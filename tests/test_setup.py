@@ -67,3 +67,26 @@ def test_cli_lists_commands():
     assert out.returncode == 0
     for cmd in ("demo", "render", "fit", "invert", "validate"):
         assert cmd in out.stdout
+
+
+def test_the_wheel_carries_every_file_of_the_package():
+    """Issue 34 item 6: ``pip install`` of the wheel is enough -- it carries the data tables, the
+    scenes and the validation scripts.  setuptools puts into the wheel the ``.py`` files of every
+    package (a folder with ``__init__.py``: pyproject's ``packages.find``) and the files that
+    pyproject's ``package-data`` patterns name; any other file of ``hyde_bsdf/`` would be missing
+    after ``pip install``.  (CI builds, installs and runs the wheel itself: tools/check_wheel.sh.)"""
+    import tomllib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    package = root / "hyde_bsdf"
+    setup = tomllib.loads((root / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    assert setup["packages"]["find"]["include"] == ["hyde_bsdf*"]
+    files = {p for p in package.rglob("*") if p.is_file() and "__pycache__" not in p.parts}
+    code = {p for p in files if p.suffix == ".py"
+            and all((d / "__init__.py").is_file() for d in [p.parent, *p.parent.parents] if package in [d, *d.parents])}
+    data = {p for pattern in setup["package-data"]["hyde_bsdf"] for p in package.glob(pattern) if p.is_file()}
+    assert sorted(str(p.relative_to(root)) for p in files - code - data) == []
+    needed = [package / "data" / name for name in ("dhr_table.npz", "accuracy_atlas.npz")] + \
+        [package / "data" / "scenes" / "demo.xml", package / "validation" / "_common.py"]
+    assert [str(p.relative_to(root)) for p in needed if p not in code | data] == []

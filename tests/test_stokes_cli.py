@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hyde_bsdf.app.cli import main
-from hyde_bsdf.inverse.analyzer import CameraNoise, simulate_mosaic
+from hyde_bsdf.model.polarimetry import CameraNoise, simulate_mosaic
 from hyde_bsdf.io.stokes_exr import read_camera_stokes
 
 
@@ -84,7 +84,7 @@ def test_invert_reads_a_linear_camera_exr(tmp_path, capsys):
     import mitsuba as mi
 
     from hyde_bsdf import inverse as inv
-    from hyde_bsdf.inverse.analyzer import simulate_capture, write_stokes_estimate
+    from hyde_bsdf.model.polarimetry import simulate_capture, write_stokes_estimate
 
     inv.prepare(inv.observations.MAP_VARIANT)
     mi.Bitmap(np.full((2, 2, 1), 0.3, np.float32)).write(str(tmp_path / "a.exr"))

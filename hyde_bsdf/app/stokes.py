@@ -1,5 +1,5 @@
 """``hyde-bsdf stokes``: raw analyzer frames -> a Stokes EXR with per-component sigma and a mask, plus
-intensity, DoLP and AoLP charts (:mod:`hyde_bsdf.inverse.analyzer`).
+intensity, DoLP and AoLP charts (:mod:`hyde_bsdf.model.polarimetry`).
 
     hyde-bsdf stokes (--mosaic RAW [--layout 90,45,135,0] [--demosaic superpixel|bilinear]
                       | --frames F1 F2 F3 [...] --angles 0,45,90[,...] [--retarder FAST,RETARDANCE])
@@ -134,7 +134,7 @@ def _check_room(est, out: Path, charts) -> None:
 
 def _estimate(args):
     """The Stokes estimate of --mosaic or --frames, in the units of --dn-per-unit."""
-    from hyde_bsdf.inverse.analyzer import CameraNoise, analysis_matrix, stokes_from_frames, stokes_from_mosaic
+    from hyde_bsdf.model.polarimetry import CameraNoise, analysis_matrix, stokes_from_frames, stokes_from_mosaic
 
     noise = CameraNoise(args.gain, args.read_noise, args.full_well, args.black_level)
     A = None
@@ -165,7 +165,7 @@ def _estimate(args):
 def _write(est, out: Path, stem: Path, dn_per_unit: float) -> dict:
     """The EXR, then its charts (each file replaces its old version once complete)."""
     from hyde_bsdf.app.pictures import save_polarization_pngs
-    from hyde_bsdf.inverse.analyzer import chart_stokes, write_stokes_estimate
+    from hyde_bsdf.model.polarimetry import chart_stokes, write_stokes_estimate
 
     paths = {"exr": write_stokes_estimate(est, out, metadata={"dn_per_unit": f"{dn_per_unit:g}"})}
     paths.update(save_polarization_pngs(chart_stokes(est), stem, out.stem, charts=CHARTS))

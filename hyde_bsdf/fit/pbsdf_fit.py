@@ -46,7 +46,7 @@ from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
 from hyde_bsdf.fit.spectral import spectrum_element, wavelength_note
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
-from hyde_bsdf.model.parameters import NATURAL_INDEX, RMS_SLOPE
+from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.model.terms import DIFFUSE_TERMS, check_pair
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 
@@ -96,9 +96,8 @@ class PbsdfFitResult:
                      diffuse=self.diffuse)
 
     def plugin_xml(self, indent: str = "") -> str:
-        """A ``<bsdf type="hyde">`` with eta and k as spectra over the table's bands only (nothing held or
-        extrapolated beyond them: :mod:`hyde_bsdf.fit.spectral`), and a comment on what Mitsuba does
-        elsewhere."""
+        """A ``<bsdf type="hyde">`` with eta and k as spectra at the table's bands, their end values held
+        out to Mitsuba's 360-830 nm and a comment saying so (:mod:`hyde_bsdf.fit.spectral`)."""
         wl = [float(w) for w in self.wavelengths]
         return "\n".join([f'{indent}<bsdf type="hyde">',
                           f'{indent}    <float name="rms_slope" value="{self.rms_slope:.6g}"/>',
@@ -270,6 +269,8 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     stages.counter.done()
 
     cov, corr, err, diag, verdict = _uncertainty(res, prob, free, values, data)
+    if not verdict.adequate and len(fit) < len(FIT_PARAMETERS):
+        _blame_held(verdict, data, fit, values, shadowing, diffuse)
     if not res.success:
         diag.append(f"the optimizer did not converge: {res.message}")
     r = res.fun
@@ -288,6 +289,31 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         verdict=verdict)
     raise_or_warn(verdict, diag, strict, stacklevel=3)
     return result
+
+
+def _blame_held(verdict, data, fit, values, shadowing, diffuse):
+    """A misfit with parameters held (not in ``fit``): the same model with all three fitted, started
+    from these values.  When that one describes the table, the held parameters cause the misfit --
+    not the lobe's shape or the terms the verdict would otherwise suspect -- and ``verdict``'s cause
+    and message are rewritten to name them and the values they take when fitted."""
+    import warnings
+
+    mid = data.wavelengths.size // 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        free = fit_pbsdf(data, shadowing=shadowing, diffuse=diffuse, progress=False,
+                         start={"rms_slope": values["rms_slope"], "n": values[("n", mid)], "k": values[("k", mid)]})
+    if not free.verdict.adequate:
+        return
+    wl = f" at {data.wavelengths[mid]:g} nm"
+    held = [q for q in FIT_PARAMETERS if q not in fit]
+    was = ", ".join(f"{q} = {values[q]:.4g}" if q == "rms_slope" else f"{q} = {values[(q, mid)]:.4g} (every band)"
+                    for q in held)
+    now = ", ".join(f"{q} = {free.rms_slope:.4g}" if q == "rms_slope" else f"{q} = {getattr(free, q)[mid]:.4g}{wl}"
+                    for q in held)
+    verdict.cause = (f"the parameter(s) held fixed ({was}) cause the misfit: with them fitted the model describes "
+                     f"the table ({now})")
+    verdict.message = f"{verdict.message.split(': ', 1)[0]}: {verdict.cause}; fit them"
 
 
 def _initial_values(K, rms_slope, n0, k0) -> dict:

@@ -7,7 +7,7 @@ pixels.  :func:`camera_reference` accepts
 * a Stokes EXR path: Mitsuba's channel names (``S0.R ... S3.B``), plain mono ``S0, S1, S2[, S3]``, any
   colour or spectral suffixes (``S0.550nm``), with optional ``S0_sigma...`` layers and a ``mask``
   channel (:func:`hyde_bsdf.io.stokes_exr.read_camera_stokes`; what ``hyde-bsdf stokes`` writes);
-* a :class:`~hyde_bsdf.inverse.analyzer.StokesEstimate` (from raw analyzer frames);
+* a :class:`~hyde_bsdf.model.polarimetry.StokesEstimate` (from raw analyzer frames);
 * a dict ``{"S0": array, "S1": ..., ["sigma": {"S0": ...}], ["mask": (H, W)]}`` of arrays (H, W) or
   (H, W, C);
 * a NumPy array (M, H, W[, C]) of the first M components, or of those named by ``measured``;
@@ -17,9 +17,9 @@ names, sigma (4, H, W) (or None) and the mask.  Colour channels reduce to one: `
 default) is the Rec. 709 luminance of R, G, B -- what the inverse's renders compare against -- and
 sigma follows as sqrt(sum w_i^2 sigma_i^2) (independent channels); ``channel="R"`` (or any suffix)
 picks one channel, which matches the renders only when the scene's lights and sample are grey, or
-the camera is mono.  ``noise`` (a :class:`~hyde_bsdf.inverse.analyzer.CameraNoise`) gives sigma when
+the camera is mono.  ``noise`` (a :class:`~hyde_bsdf.model.polarimetry.CameraNoise`) gives sigma when
 the data carry none: the data are then in DN above black, and sigma is what ideal DoFP analyzers
-(0/45/90/135 deg) with that noise give (:func:`~hyde_bsdf.inverse.analyzer.stokes_sigma`).
+(0/45/90/135 deg) with that noise give (:func:`~hyde_bsdf.model.polarimetry.stokes_sigma`).
 """
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.inverse._common import Y_WEIGHTS
-from hyde_bsdf.inverse.analyzer import StokesEstimate, stokes_sigma
+from hyde_bsdf.model.polarimetry import StokesEstimate, stokes_sigma
 from hyde_bsdf.inverse.loss import interior_mask
 from hyde_bsdf.inverse.observations import Observation
 
@@ -84,7 +84,7 @@ def camera_reference(data, *, channel: str = "Y", measured=None, noise=None, ana
 
     Returns ``{"reference": (4, H, W), "measured": names, "sigma": (4, H, W) or None, "mask": (H, W)
     bool or None}``; sigma is 0 on unmeasured components.  ``noise`` + ``analysis``: see
-    :func:`~hyde_bsdf.inverse.analyzer.stokes_sigma` (used only when the data carry no sigma)."""
+    :func:`~hyde_bsdf.model.polarimetry.stokes_sigma` (used only when the data carry no sigma)."""
     stokes, sigma, mask, colours, what = _as_layers(data, measured)
     if "S0" not in stokes:
         raise UsageError(f"{what} has no S0: the intensity is needed (got {sorted(stokes)})")

@@ -18,7 +18,7 @@ stay zero.
 Camera data (``measured``, ``sigma``).  A camera measures some of the components: a linear
 polarization camera S0, S1, S2 only.  ``measured`` names them; the others are not in the loss (their
 reference values are ignored).  With per-pixel noise ``sigma`` (4, H, W) or (4,) -- standard
-deviations of the reference's components, from :mod:`hyde_bsdf.inverse.analyzer` or a noise model --
+deviations of the reference's components, from :mod:`hyde_bsdf.model.polarimetry` or a noise model --
 each term is weighted by its inverse variance (the maximum-likelihood weights) and the loss is::
 
     L = sum_{c measured} <m (Sc - Rc)^2 / sigma_c^2>  /  <m R0^2 / sigma_0^2>

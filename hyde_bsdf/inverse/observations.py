@@ -88,7 +88,7 @@ class Observation:
     share of the data loss.  ``measured``: the Stokes components the camera measured (a linear
     polarization camera: ("S0", "S1", "S2")); the others are not in the loss and their reference
     values are ignored.  ``sigma``: the reference's noise standard deviation per component, (4,) or
-    (4, H, W) (e.g. from :mod:`hyde_bsdf.inverse.analyzer`): the loss's weights (1 / sigma^2) and the
+    (4, H, W) (e.g. from :mod:`hyde_bsdf.model.polarimetry`): the loss's weights (1 / sigma^2) and the
     noise of the standard errors (:class:`~hyde_bsdf.inverse.loss.StokesLoss`); :func:`camera_observation`
     builds one from camera data.  Several observations may share a scene (one per sensor) or use
     different scenes (e.g. one per light: one light per render avoids the light-selection noise

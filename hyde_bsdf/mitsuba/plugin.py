@@ -162,7 +162,7 @@ Stokes sign convention.  Mitsuba's Stokes vectors use the reference axis
 x = ``stokes_basis(k)`` with y = k x x, and the same S0..S3 definitions as the
 paper's bases (s, p, k) with S3 = -2 Im(E_s E_p*) for e^{+j w t}: rotating
 Mitsuba's bases into the paper's (``mi.mueller.rotate_mueller_basis``, see
-:mod:`hyde_bsdf.mitsuba.frames`) reproduces all 16 elements of
+:mod:`hyde_bsdf.validation._frames`) reproduces all 16 elements of
 :func:`hyde_bsdf.pbrdf`, S3 rows and columns included - no sign conversion is
 needed at this boundary.  At normal incidence r_p = -r_s (Mitsuba's Fresnel
 signs), so a mirror gives F00 diag(1, 1, -1, -1) in the paper's bases.

@@ -6,8 +6,11 @@ partition's floor) drawn grey with the reason.
 child process, ``python hyde_bsdf/validation/STEM.py -o OUTDIR [--quick] --checks-json FILE``, and reads
 ``FILE`` back.  Every script's ``__main__`` block goes through :func:`cli`, which handles that
 option here, once: it runs ``validate(OUTDIR, quick)`` and writes (atomically)
-``{"doc": <the script's docstring>, "checks": [dict(name, value, tolerance, passed[, detail]), ...]}``
+``{"doc": <the script's docstring>, "checks": [dict(name, value, tolerance, passed[, detail]), ...],
+"figures": [<the PNG files saved by save_figure>], "cpu_seconds": <its CPU time>}``
 as JSON (NumPy scalars as Python numbers, anything else unknown as its ``str``), then exits 0.
+The report shows the figures a script names (several scripts may write into the folder at once),
+so every figure goes through :func:`save_figure`.
 No ``FILE`` after the child ends means the script crashed: the report shows the last lines of its
 stderr as a failed check.  A script with its own command line passes it as ``cli(validate,
 __doc__, main)``: without ``--checks-json`` its ``main()`` runs as before.
@@ -17,10 +20,13 @@ import json
 import math
 import sys
 import textwrap
+import time
 
 import numpy as np
 
 CLASSES = ("accurate", "degrades", "refuses", "fails")
+#: the PNG files :func:`save_figure` wrote in this process, in order (the protocol's "figures")
+FIGURES = []
 COLOURS = {"accurate": "#2ca02c", "degrades": "#ff7f0e", "refuses": "#7f7f7f", "fails": "#d62728"}
 
 
@@ -55,14 +61,41 @@ def _plain(value):
     return str(value)
 
 
+def cpu_seconds():
+    """This process's CPU time so far (user + system, every thread), with that of the processes it
+    started and waited for (the MoM's worker pool)."""
+    try:
+        import resource
+    except ImportError:             # not on POSIX: this process only
+        return time.process_time()
+    return sum(r.ru_utime + r.ru_stime for r in (resource.getrusage(resource.RUSAGE_SELF),
+                                                  resource.getrusage(resource.RUSAGE_CHILDREN)))
+
+
 def write_checks_json(path, doc, checks):
-    """The report's protocol: ``{"doc": ..., "checks": [...]}`` written atomically to ``path``."""
+    """The report's protocol: ``{"doc": ..., "checks": [...], "figures": [...], "cpu_seconds": ...}``
+    written atomically to ``path``."""
     from hyde_bsdf.io.atomic import atomic_open
 
     data = {"doc": (doc or "").strip(),
-            "checks": [{k: _plain(v) for k, v in dict(c).items()} for c in checks]}
+            "checks": [{k: _plain(v) for k, v in dict(c).items()} for c in checks],
+            "figures": list(FIGURES), "cpu_seconds": cpu_seconds()}
     with atomic_open(path, "w", encoding="utf-8") as f:
         json.dump(data, f)
+
+
+def db(x):
+    """10 log10(x), a zero held at -300 dB (a curve's zero, not an error)."""
+    return 10.0 * np.log10(np.maximum(x, 1e-30))
+
+
+def mom_parser(doc, outdir="out/validation/"):
+    """The MoM scripts' shared options: ``-o OUTDIR``, ``--pts-per-wl``, ``--seed``."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("-o", "--outdir", default=outdir)
+    ap.add_argument("--pts-per-wl", type=float, default=10.0)
+    ap.add_argument("--seed", type=int, default=0)
+    return ap
 
 
 def write_csv(path, header, rows):
@@ -77,9 +110,13 @@ def write_csv(path, header, rows):
         w.writerows(rows)
 
 
-def save_figure(fig, path, dpi=130):
-    """Save a matplotlib figure as PNG (atomically) and close it."""
+def save_figure(fig, path, dpi=130, tight=False):
+    """Save a matplotlib figure as PNG (atomically), close it, and name it in the report's
+    protocol (:data:`FIGURES`); ``tight``: lay it out tightly first."""
     import matplotlib.pyplot as plt
+
+    if tight:
+        fig.tight_layout()
 
     from hyde_bsdf.io.atomic import atomic_path
     try:
@@ -87,6 +124,19 @@ def save_figure(fig, path, dpi=130):
             fig.savefig(tmp, dpi=dpi, format="png")
     finally:
         plt.close(fig)
+    FIGURES.append(str(path))
+
+
+def sweep_chart(sweeps, path, title, **kw):
+    """Run each stability sweep ``(title, values, fn)`` (``fn(value)`` -> (class, error, message)), draw
+    them with :func:`stability_chart` and return the CSV rows [title, value, class, error, message]."""
+    rows, panels = [], []
+    for name, values, fn in sweeps:
+        res = [fn(v) for v in values]
+        panels.append((name, values, res))
+        rows += [[name, v, c, e, msg] for v, (c, e, msg) in zip(values, res)]
+    stability_chart(panels, path, title, **kw)
+    return rows
 
 
 def stability_chart(panels, path, title, err_label="rel. err", err_ylim=(1e-17, 1.0), text_errors=False):

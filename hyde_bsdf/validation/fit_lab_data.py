@@ -495,8 +495,7 @@ def _plot(path, summaries, rows):
                         for s in summaries], rotation=30, fontsize=7, ha="right")
     ax.set_ylabel("reduced chi^2 of the chosen model (this script's test)")
     ax.set_title("green: adequate; orange: the fit warns; red: a silent misfit", fontsize=9)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110, tight=True)
 
 
 if __name__ == "__main__":

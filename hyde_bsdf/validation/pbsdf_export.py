@@ -75,7 +75,7 @@ def cpp_check(path, report, samples, seed):
     from hyde_bsdf.fit.pbsdf_export import _query_geometries, error_statistics
     from hyde_bsdf.fit.pbsdf_samples import paper_angles, table_to_paper
     from hyde_bsdf.io.pbsdf_file import read_pbsdf
-    from hyde_bsdf.mitsuba.frames import eval_paper
+    from hyde_bsdf.validation._frames import eval_paper
     from hyde_bsdf.mitsuba.variants import set_variant
 
     set_variant("scalar_spectral_polarized", fallback=False)

@@ -37,9 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.io.atomic import atomic_open, atomic_path
+from hyde_bsdf.io.atomic import atomic_open
 from hyde_bsdf import inverse as inv
 from hyde_bsdf.progress import stderr_lines
+from hyde_bsdf.validation._common import save_figure
 
 _log = stderr_lines("[invert]")
 
@@ -179,9 +180,7 @@ def _plot(path, truth, runs, seen, stats, bsdf, res, iterations):
     fig.suptitle(f"{bsdf}: 32x32 alpha map from 3 views x 2 point lights ({res} px per view, 4 spp, "
                  f"{iterations} Adam iterations from alpha = {START_ALPHA}); index known (eta {ETA}, k {K})",
                  fontsize=9)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
 
 
 def main(argv=None):

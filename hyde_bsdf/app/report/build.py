@@ -1,26 +1,31 @@
-"""``hyde-bsdf validate [--quick] [--scripts DIR] -o DIR``: run every validation script, write one report.
+"""``hyde-bsdf validate [--quick] [--jobs N] [--scripts DIR] -o DIR``: run every validation script, write one report.
 
 Each script in ``hyde_bsdf/validation/`` has ``validate(outdir, quick=False)`` returning a list of checks
 ``dict(name, value, tolerance, passed)`` and writes its PNG and CSV files into ``outdir``.  This
-module runs them in order, each as a **child process** -- ``python SCRIPT.py -o OUT [--quick]
+module runs them, each as a **child process** -- ``python SCRIPT.py -o OUT [--quick]
 --checks-json FILE``, the protocol that ``hyde_bsdf/validation/_common.py`` handles once for every script
-(the child writes its docstring and checks as JSON to ``FILE``) -- times each one, collects the
-checks and the figures, and writes ``DIR/index.html`` (and ``DIR/checks.csv``): the machine, the
-time each script took, a table of every check with its number, tolerance and verdict, and the
-figures.  A script that crashes, is killed or is missing is reported as a failed check (with the
-last lines of its stderr); the report still completes.  A script's own output is not shown (run
-it alone to see it: ``python hyde_bsdf/validation/STEM.py --quick``).  Ctrl-C (or SIGTERM) ends the
-running script (SIGTERM, then SIGKILL) and the report, which leaves the previous report as it was.
+(the child writes its docstring, its checks, the figures it saved and its CPU time as JSON to
+``FILE``) -- ``--jobs N`` of them at once (default one per core, at most :data:`MAX_JOBS`), times
+each one, collects the checks and the figures, and writes ``DIR/index.html`` (and
+``DIR/checks.csv``): the machine, the time each script took, a table of every check with its
+number, tolerance and verdict, and the figures, in the sections' order whatever order the scripts
+ended in.  A script that reads another's output (:data:`AFTER`) starts after it.  A script that
+crashes, is killed or is missing is reported as a failed check (with the last lines of its
+stderr); the report still completes.  A script's own output is not shown (run it alone to see it:
+``python hyde_bsdf/validation/STEM.py --quick``).  Ctrl-C (or SIGTERM) ends the running scripts
+(SIGTERM, then SIGKILL) and the report, which leaves the previous report as it was.
 Exit status: 0 when every check passes, 1 otherwise, 2 for a usage error (an output folder that
 cannot be written or is not a report's, no validation scripts where ``--scripts DIR`` points).
 
 Why child processes: **isolation** -- one script's Dr.Jit/Mitsuba state (the variant, JIT
 caches, registered plugins) and its memory cannot leak into the next, so a check cannot pass or
 fail because of the scripts that ran before it (an order-dependent failure class the in-process
-report had); and **layering** -- the package imports nothing outside itself: the scripts are
-files it runs, not modules it loads, so ``hyde_bsdf`` installs and imports without a checkout.
-The price is one interpreter start and its imports per script (1.2-1.3 CPU s each: +22 % CPU
-on the quick report, its wall time within the machine's load noise; docs/validation.md).
+report had); and **layering** -- the package loads no file as code: the scripts are files it
+runs, not modules it loads.  The price is one interpreter start and its imports per script
+(about 1 CPU s each); the gain, besides, is that scripts run side by side: most of them are
+single-threaded Python and NumPy, so several at once keep every core busy (docs/validation.md,
+"The report's run time").  With several at once, BLAS and OpenMP get their share of
+the cores (:data:`THREAD_VARIABLES`); a time ratio a check reports is measured inside one script.
 
 Nothing is ever deleted.  The report is built in a fresh hidden folder beside ``DIR`` and its
 files are moved into ``DIR`` at the end, one rename each (:func:`hyde_bsdf.io.atomic.atomic_folder`):
@@ -45,7 +50,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from hyde_bsdf.app.args import Parser, quiet_option
+from hyde_bsdf.app.args import Parser, positive_int, quiet_option
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.atomic import TEMP_NAME_RE, atomic_folder, atomic_open
 from hyde_bsdf.io.output_gate import check_output_dir
@@ -74,6 +79,11 @@ VALIDATION_DIR = Path(__file__).resolve().parents[2] / "validation"
 TAIL_LINES = 20
 #: seconds an interrupted report gives a script to end after SIGTERM before it is killed
 TERMINATE_WAIT = 10.0
+#: scripts that read another's output in the report folder, and the script they wait for
+#: (mom_1d_model reuses fig6_mom's MoM run, fig6_mom.npz, instead of running it again)
+AFTER = {"mom_1d_model": "fig6_mom"}
+#: most scripts at once by default (each script's own threads -- Dr.Jit's, BLAS's -- share the cores)
+MAX_JOBS = 4
 
 
 def validation_dir(scripts=None) -> Path:
@@ -157,38 +167,80 @@ def script_command(path: Path, outdir: Path, quick: bool, checks_json: Path) -> 
     return cmd + (["--quick"] if quick else [])
 
 
-def _child_env() -> dict:
+#: the thread pools of NumPy's BLAS and OpenMP: with several scripts at once each child gets its
+#: share of the cores (a user's own setting is kept)
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _child_env(jobs: int = 1) -> dict:
     """The report's environment; when this package runs from a source tree, that tree goes first
-    on the child's PYTHONPATH, so the scripts import the same ``hyde_bsdf`` as the report."""
+    on the child's PYTHONPATH, so the scripts import the same ``hyde_bsdf`` as the report.  With
+    ``jobs`` scripts at once, BLAS and OpenMP get ``cores // jobs`` threads each (a spinning
+    BLAS thread pool on a core another script needs slows both)."""
     env = dict(os.environ)
     root = Path(__file__).resolve().parents[3]
     if (root / "pyproject.toml").is_file():
         env["PYTHONPATH"] = os.pathsep.join([str(root)] + [p for p in [env.get("PYTHONPATH")] if p])
+    if jobs > 1:
+        for name in THREAD_VARIABLES:
+            env.setdefault(name, str(max(1, (os.cpu_count() or 1) // jobs)))
     return env
 
 
-def _wait(cmd: list, stderr) -> int:
-    """Run ``cmd`` to its end (stdout discarded, stderr into the file ``stderr``); its exit status.
+class _Child:
+    """One script running as a child process, its stderr in a file and the protocol's file in a
+    private temporary folder; :meth:`result` reads them once it has ended."""
 
-    On any interruption of the report (Ctrl-C, SIGTERM as :class:`~hyde_bsdf.app.signals.Terminated`)
-    the child is terminated -- SIGTERM, then SIGKILL after :data:`TERMINATE_WAIT` s -- and reaped
-    before the interruption goes on; a child that itself died of SIGINT (Ctrl-C reached it
-    first) interrupts the report the same way."""
-    child = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=stderr,
-                             env=_child_env())
-    try:
-        status = child.wait()
-    except BaseException:
-        child.terminate()
+    def __init__(self, path: Path, outdir: Path, quick: bool, jobs: int = 1):
+        self.path, self.outdir, self.t0 = path, Path(outdir), time.perf_counter()
+        self.work = tempfile.TemporaryDirectory(prefix="hyde-validate-")
+        self.stderr = tempfile.TemporaryFile(dir=self.work.name)
+        self.checks_json = Path(self.work.name) / f"{path.stem}.checks.json"
         try:
-            child.wait(TERMINATE_WAIT)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
-        raise
-    if status == -signal.SIGINT:
-        raise KeyboardInterrupt
-    return status
+            self.proc = subprocess.Popen(script_command(path, outdir, quick, self.checks_json),
+                                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self.stderr,
+                                         env=_child_env(jobs))
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self):
+        self.stderr.close()
+        self.work.cleanup()
+
+    def stop(self):
+        """Terminate the child (SIGTERM, then SIGKILL after :data:`TERMINATE_WAIT` s) and reap it."""
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(TERMINATE_WAIT)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        self.close()
+
+    def result(self) -> dict:
+        """The ended child's checks, wall and CPU seconds, docstring and figures (see
+        :func:`_run_script`); KeyboardInterrupt when it died of SIGINT (Ctrl-C reached it first)."""
+        status = self.proc.returncode
+        seconds = time.perf_counter() - self.t0
+        if status == -signal.SIGINT:
+            self.close()
+            raise KeyboardInterrupt
+        got = _read_checks(self.checks_json) if status == 0 else None
+        detail = _tail(self.stderr) if got is None else ""
+        self.close()
+        if got is not None:
+            checks, doc, names, cpu = got
+            figures = [self.outdir / n for n in dict.fromkeys(names) if (self.outdir / n).is_file()]
+            return dict(checks=checks, seconds=seconds, doc=doc, figures=figures, cpu=cpu)
+        last = (detail.splitlines() or [""])[-1].strip()
+        last = last if len(last) <= 300 else last[:297] + "..."
+        value = f"exit status {status}" + (f": {last}" if last else " (no output on stderr)")
+        if status == 0:
+            value += ", and no checks came back (does its __main__ block call hyde_bsdf/validation/_common.py's cli?)"
+        return dict(checks=[dict(name=f"{self.path.stem}: ran", value=value, tolerance="no error", passed=False,
+                                 detail=detail)], seconds=seconds, doc="", figures=[], cpu=None)
 
 
 def _tail(stderr, lines: int = TAIL_LINES) -> str:
@@ -200,41 +252,72 @@ def _tail(stderr, lines: int = TAIL_LINES) -> str:
 
 
 def _read_checks(path: Path):
-    """(checks, doc) from a child's ``--checks-json`` file; None when it is absent or malformed."""
+    """(checks, doc, figure names, CPU seconds) from a child's ``--checks-json`` file; None when it
+    is absent or malformed.  Figures: the PNG files the script saved in its output folder."""
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
         checks = [dict(c) for c in data["checks"]]
         if not all("name" in c and "passed" in c for c in checks):
             return None
-        return [dict(c, passed=bool(c["passed"])) for c in checks], str(data.get("doc") or "")
+        names = [Path(str(f)).name for f in data.get("figures", [])]
+        cpu = data.get("cpu_seconds")
+        return ([dict(c, passed=bool(c["passed"])) for c in checks], str(data.get("doc") or ""), names,
+                float(cpu) if isinstance(cpu, (int, float)) else None)
     except (OSError, ValueError, KeyError, TypeError):
         return None
+
+
+def _missing(path: Path) -> dict:
+    return dict(checks=[dict(name=f"{path.stem}: script present", value="missing", tolerance="present",
+                             passed=False)], seconds=0.0, doc="", figures=[], cpu=None)
+
+
+def _run_all(paths: list, outdir: Path, quick: bool, jobs: int = 1, progress=None) -> dict:
+    """Run the scripts ``paths``, ``jobs`` at a time, in their order (a script of :data:`AFTER`
+    waits for the one it reads); {stem: result} (see :func:`_run_script`).  On any interruption
+    (Ctrl-C, SIGTERM as :class:`~hyde_bsdf.app.signals.Terminated`, a child that died of SIGINT)
+    every running child is terminated and reaped before the interruption goes on."""
+    pending, running, results = list(paths), [], {}
+    stems = {p.stem for p in paths}
+    try:
+        while pending or running:
+            ready = [p for p in pending if AFTER.get(p.stem) not in stems or AFTER[p.stem] in results]
+            while ready and len(running) < jobs:
+                path = ready.pop(0)
+                pending.remove(path)
+                if progress:
+                    progress(f"{len(paths) - len(pending)}/{len(paths)} {path.stem} ...")
+                if not path.is_file():
+                    results[path.stem] = _missing(path)
+                    continue
+                running.append(_Child(path, outdir, quick, jobs))
+            if not running:
+                continue
+            ended = [c for c in running if c.proc.poll() is not None]
+            if not ended:
+                time.sleep(0.05)
+                continue
+            for child in ended:
+                running.remove(child)
+                got = results[child.path.stem] = child.result()
+                if progress:
+                    bad = sum(not c["passed"] for c in got["checks"])
+                    cpu = "" if got["cpu"] is None else f" ({got['cpu']:.1f} CPU s)"
+                    progress(f"   {child.path.stem}: {got['seconds']:.1f} s{cpu}, {len(got['checks'])} checks, "
+                             f"{bad} failed")
+    except BaseException:
+        for child in running:
+            child.stop()
+        raise
+    return results
 
 
 def _run_script(path: Path, outdir: Path, quick: bool):
     """Run one script as a child process: (checks, seconds, docstring).  A missing script, or one
     that ends without its checks (a crash, a kill), is one failed check; the last lines of its
     stderr are that check's detail.  The protocol's files live in a private temporary folder."""
-    if not path.is_file():
-        return [dict(name=f"{path.stem}: script present", value="missing", tolerance="present",
-                     passed=False)], 0.0, ""
-    t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="hyde-validate-") as work, \
-            tempfile.TemporaryFile(dir=work) as stderr:
-        checks_json = Path(work) / f"{path.stem}.checks.json"
-        status = _wait(script_command(path, outdir, quick, checks_json), stderr)
-        seconds = time.perf_counter() - t0
-        got = _read_checks(checks_json) if status == 0 else None
-        if got is not None:
-            return got[0], seconds, got[1]
-        detail = _tail(stderr)
-    last = (detail.splitlines() or [""])[-1].strip()
-    last = last if len(last) <= 300 else last[:297] + "..."
-    value = f"exit status {status}" + (f": {last}" if last else " (no output on stderr)")
-    if status == 0:
-        value += ", and no checks came back (does its __main__ block call hyde_bsdf/validation/_common.py's cli?)"
-    return [dict(name=f"{path.stem}: ran", value=value, tolerance="no error", passed=False,
-                 detail=detail)], seconds, ""
+    got = _run_all([path], outdir, quick)[path.stem]
+    return got["checks"], got["seconds"], got["doc"]
 
 
 def _fmt(v):
@@ -243,44 +326,47 @@ def _fmt(v):
     return html.escape(str(v))
 
 
-def build_report(outdir, quick=False, progress=True, force=False, scripts=None):
-    """Run all scripts into ``outdir``; return (all_passed, rows, seconds).
+def default_jobs() -> int:
+    """Scripts at once by default: one per core, at most :data:`MAX_JOBS`."""
+    return max(1, min(MAX_JOBS, os.cpu_count() or 1))
+
+
+def build_report(outdir, quick=False, progress=True, force=False, scripts=None, jobs=None):
+    """Run all scripts into ``outdir``, ``jobs`` at a time (default :func:`default_jobs`); return
+    (all_passed, rows, seconds).
 
     The report is built in a fresh folder and moved into ``outdir`` only once complete (see the
     module docstring); UsageError before any work for an unusable ``outdir`` (a folder that is not
-    a report's, unless ``force``) or no scripts (in ``scripts``, default the package's
-    ``hyde_bsdf/validation/``).
+    a report's, unless ``force``), no scripts (in ``scripts``, default the package's
+    ``hyde_bsdf/validation/``) or ``jobs`` below 1.
     """
+    jobs = default_jobs() if jobs is None else jobs
+    if not isinstance(jobs, int) or isinstance(jobs, bool) or jobs < 1:
+        raise UsageError(f"jobs must be a whole number >= 1, got {jobs!r}")
     final = check_report_dir(outdir, force)
     vdir = validation_dir(scripts)
     with OutputLock([final], "--outdir"), atomic_folder(final) as out:     # one report run per folder
-        return _build(out, vdir, quick, as_callback(progress, "[validate]"))
+        return _build(out, vdir, quick, as_callback(progress, "[validate]"), jobs)
 
 
-def _build(out: Path, vdir: Path, quick: bool, progress: bool):
+def _build(out: Path, vdir: Path, quick: bool, progress, jobs: int):
     info = machine_info()
     t_start = time.perf_counter()
+    stems = [s for _, names in SECTIONS for s in names]
+    results = _run_all([vdir / f"{stem}.py" for stem in stems], out, quick, jobs, progress)
+    total = time.perf_counter() - t_start
     rows, sections = [], []
-    scripts = [s for _, names in SECTIONS for s in names]
-    done = 0
     for title, names in SECTIONS:
         entries = []
         for stem in names:
-            if progress:
-                progress(f"{done + 1}/{len(scripts)} {stem} ...")
-            before = set(out.glob("*.png"))
-            checks, seconds, doc = _run_script(vdir / f"{stem}.py", out, quick)
-            figures = sorted(set(out.glob("*.png")) - before)
-            if progress:
-                bad = sum(not c["passed"] for c in checks)
-                progress(f"   {seconds:.1f} s, {len(checks)} checks, {bad} failed")
-            for c in checks:
+            got = results[stem]
+            for c in got["checks"]:
                 rows.append(dict(script=stem, **{k: c.get(k, "") for k in ("name", "value", "tolerance", "passed")}))
-            entries.append((stem, doc, seconds, checks, figures))
-            done += 1
+            entries.append((stem, got))
         sections.append((title, entries))
-    total = time.perf_counter() - t_start
-    info["report run time"] = f"{total:.0f} s ({'quick' if quick else 'full'} mode)"
+    cpu = [results[s]["cpu"] for s in stems if results[s]["cpu"] is not None]
+    info["report run time"] = (f"{total:.0f} s ({'quick' if quick else 'full'} mode, {jobs} script(s) at once; "
+                               f"the scripts' CPU time {sum(cpu):.0f} s)")
     all_passed = all(r["passed"] for r in rows)
     _write_html(out, info, sections, rows, all_passed, quick)
     with atomic_open(out / "checks.csv", "w", newline="") as f:
@@ -314,14 +400,15 @@ def _write_html(out, info, sections, rows, all_passed, quick):
     parts.append("</table>")
     for title, entries in sections:
         parts.append(f"<h2>{html.escape(title)}</h2>")
-        for stem, doc, seconds, checks, figures in entries:
-            parts.append(f"<h3>{stem} <small>({seconds:.1f} s)</small></h3>")
-            if doc:
-                parts.append(f"<pre>{html.escape(doc)}</pre>")
-            for c in checks:
+        for stem, got in entries:
+            cpu = "" if got["cpu"] is None else f", {got['cpu']:.1f} CPU s"
+            parts.append(f"<h3>{stem} <small>({got['seconds']:.1f} s{cpu})</small></h3>")
+            if got["doc"]:
+                parts.append(f"<pre>{html.escape(got['doc'])}</pre>")
+            for c in got["checks"]:
                 if c.get("detail"):
                     parts.append(f"<pre>{html.escape(c['detail'])}</pre>")
-            for fig in figures:
+            for fig in got["figures"]:
                 parts.append(f"<img src='{html.escape(fig.name)}' alt='{html.escape(fig.stem)}'>")
     parts.append("</body></html>")
     with atomic_open(out / "index.html", "w", encoding="utf-8") as f:
@@ -334,6 +421,9 @@ def build_parser() -> Parser:
     ap.add_argument("--quick", action="store_true", help="small sweeps; under 3 minutes on 2 cores")
     ap.add_argument("--scripts", metavar="DIR", default=None,
                     help="folder of the validation scripts (default: the package's own, hyde_bsdf/validation/)")
+    ap.add_argument("--jobs", "-j", type=positive_int, default=None, metavar="N",
+                    help=f"scripts run at once (default: one per core, at most {MAX_JOBS}; 1 runs them one after "
+                         "another)")
     ap.add_argument("--force", action="store_true",
                     help="write into a folder that is not an earlier report; its files are kept, except "
                          "those of the report's names (index.html, checks.csv, the figures), which are replaced")
@@ -345,7 +435,7 @@ def cli_main(argv=None) -> int:
     """``hyde-bsdf validate``: 0 when every check passes, 1 otherwise; user errors raise UsageError."""
     a = build_parser().parse_args(argv)
     ok, rows, seconds = build_report(a.outdir, quick=a.quick, force=a.force, progress=not a.quiet,
-                                     scripts=a.scripts)
+                                     scripts=a.scripts, jobs=a.jobs)
     n_fail = sum(not r["passed"] for r in rows)
     print(f"{len(rows) - n_fail} of {len(rows)} checks pass in {seconds:.0f} s; report: {Path(a.outdir) / 'index.html'}")
     for r in rows:
