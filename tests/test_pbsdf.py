@@ -306,7 +306,8 @@ def test_a_table_misfit_from_a_held_roughness_is_blamed_on_it(exported):
     data = pbsdf_samples(path, max_points=150, seed=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        held = fit_pbsdf(data, fit=("n", "k"), rms_slope=0.4, progress=False)
+        held = fit_pbsdf(data, fit=("n", "k"), rms_slope=0.4, shadowing=RENDER_DEFAULT[0],
+                         diffuse=RENDER_DEFAULT[1], progress=False)        # the table's terms (the export's default)
     assert not held.verdict.adequate and held.verdict.message.startswith("M00 misfit")
     assert "the parameter(s) held fixed (rms_slope = 0.4) cause the misfit" in held.verdict.message
     fitted = float(held.verdict.message.split("(rms_slope = ")[2].split(")")[0])

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.validation._common import cli, save_figure, write_csv  # noqa: E402
+from hyde_bsdf.validation._common import FIGURES, cli, save_figure, write_csv  # noqa: E402
 
 TARGET_L1 = 0.01
 TARGET_POL_P95 = 0.02
@@ -302,6 +302,7 @@ def validate(outdir="out/validation", quick=False):
         checks.append(dict(name="round trip export -> read -> fit: largest relative error of rms_slope, n, k (5 bands)",
                            value=f"{worst:.2e}", tolerance="<= 1e-4", passed=bool(worst <= 1e-4 and fit.success)))
         plot_pbsdf_fit(fit, data, out / "pbsdf_export_fit.png", title=f"round trip: {path.name} ({'x'.join(map(str, res))})")
+        FIGURES.append(str(out / "pbsdf_export_fit.png"))      # saved by app.plots: named for the report here
 
         # ---- 4. render time, one run
         if quick:
