@@ -22,6 +22,8 @@ Physics and format checked:
 """
 import math
 
+import json
+
 import numpy as np
 import pytest
 
@@ -316,10 +318,19 @@ def test_a_table_misfit_from_a_held_roughness_is_blamed_on_it(exported):
 
 def test_fit_cli_on_a_pbsdf_file(exported, tmp_path, capsys):
     path, _ = exported
-    code = main(["fit", str(path), "--max-points", "40", "--n0", "0.6", "--k0", "2.6", "-q"])
+    js = tmp_path / "fit.json"
+    code = main(["fit", str(path), "--max-points", "40", "--n0", "0.6", "--k0", "2.6", "--json", str(js), "-q"])
     out = capsys.readouterr().out
     assert code == 0
     assert "rms_slope = 0.25" in out and "0 with NaN/inf" in out and '<bsdf type="hyde">' in out
+    # issue 30 item 4 for tables: the lab fit's JSON schema, n and k per band at its wavelength
+    d = json.loads(js.read_text())
+    assert set(d) == {"model", "parameters", "covariance", "verdict", "models"}
+    bands = [p["wavelength_nm"] for p in d["parameters"] if p["name"] == "n"]
+    assert len(bands) == 5 and d["parameters"][-1]["name"] == "rms_slope"
+    assert d["parameters"][-1]["value"] == pytest.approx(0.25, rel=1e-3)
+    assert np.shape(d["covariance"]["matrix"]) == (11, 11) and len(d["covariance"]["names"]) == 11
+    assert sum(m["chosen"] for m in d["models"]) == 1 and d["verdict"]["p_value"] is None
     assert main(["fit", str(path), "--tolerance", "2", "-q"]) == 2          # refused before fitting
     assert "tolerance" in capsys.readouterr().err
     assert main(["fit", str(tmp_path / "missing.pbsdf")]) == 2

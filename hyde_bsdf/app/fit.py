@@ -10,12 +10,13 @@ Command lines::
     hyde-bsdf fit FILE.pbsdf [--fit n,k,rms_slope] [--rms-slope 0.3] [--n0 N] [--k0 K]
                   [--model auto|fixed] [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
                   [--max-points 3000] [--theta-max 80] [--tolerance 0.05] [--seed 0]
-                  [--sigma-h-um UM | --sigma-h-wl H] [--strict] [-o fit.png] [-q]
+                  [--sigma-h-um UM | --sigma-h-wl H] [--json FILE] [--strict] [-o fit.png] [-q]
 
 A CSV (M00 in 1/sr optional, several wavelengths in one file) is fitted by
 :func:`hyde_bsdf.fit.lab.fit_lab`: everything the data determine unless ``--fit`` names fewer,
 one joint fit over the wavelengths; ``--json FILE`` writes the machine-readable result
-(``-``: to stdout, the summary then on stderr).  Without ``--shadowing`` and ``--diffuse`` the model is chosen (``--model auto``,
+(``-``: to stdout, the summary then on stderr) -- a table's too, in the same schema (n and k per
+band at the band's wavelength).  Without ``--shadowing`` and ``--diffuse`` the model is chosen (``--model auto``,
 :mod:`hyde_bsdf.fit.model_selection`): every shadowing x diffuse model is fitted and the smallest
 adequate one kept; the table of models is printed and, with ``-o``, plotted (misfit against model
 size) beside the fit as ``NAME_models.EXT``.  Every fit prints its verdict
@@ -316,6 +317,9 @@ def pbsdf_parser() -> Parser:
     ap.add_argument("--tolerance", type=float, default=0.05,
                     help="a cell with |M_jk| or a degree of polarization above (1 + tolerance) M00 is non-physical")
     ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
+    ap.add_argument("--json", default=None, metavar="FILE",
+                    help="write the result as JSON (values per band, standard errors, covariance, verdict, the "
+                         "table of models); '-' for stdout (the summary then goes to stderr)")
     add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
     ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element; "
@@ -350,28 +354,31 @@ def _pbsdf_run(args) -> int:
     table = read_pbsdf(args.data)
     data = pbsdf_samples(table, max_points=args.max_points, theta_max=math.radians(args.theta_max),
                          tolerance=args.tolerance, seed=args.seed, progress=_progress(args))
+    out = sys.stderr if args.json == "-" else sys.stdout
     print(f"data: {args.data} ({table.resolution} phi_d x theta_d x theta_h, bands "
-          f"{', '.join(f'{w:g}' for w in table.wavelengths)} nm)")
-    print(f"  {data.counts.summary()}")
+          f"{', '.join(f'{w:g}' for w in table.wavelengths)} nm)", file=out)
+    print(f"  {data.counts.summary()}", file=out)
     print(f"  fitting {len(data)} of {data.usable_geometries} geometries usable in every band "
-          f"(theta <= {args.theta_max:g} deg, seed {args.seed})")
+          f"(theta <= {args.theta_max:g} deg, seed {args.seed})", file=out)
     opts = dict(fit=fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0, progress=_progress(args))
     sel = _quiet_fit(select_model_pbsdf, data, **opts) if auto else None
     result = sel.result if auto else _quiet_fit(fit_pbsdf, data, shadowing=shadowing, diffuse=diffuse, **opts)
     if sel is not None:
-        print(for_command_line(sel.summary()))
-    print(for_command_line(result.summary()))
+        print(for_command_line(sel.summary()), file=out)
+    print(for_command_line(result.summary()), file=out)
     for line in pbsdf_verdict_lines(data.theta_i, result, args):
-        print(line)
+        print(line, file=out)
     _warn_verdict(result)
-    print("\nMitsuba material (hyde plugin):")
-    print(result.plugin_xml(indent="    "))
+    print("\nMitsuba material (hyde plugin):", file=out)
+    print(result.plugin_xml(indent="    "), file=out)
     caveat = extrapolation_warning([float(w) for w in result.wavelengths])
     if caveat:
         warnings.warn(caveat, UserWarning, stacklevel=1)
+    if args.json:
+        _write_json(sel.to_dict() if sel is not None else result.to_dict(), args.json)
     if args.output:
         plot_pbsdf_fit(result, data, args.output, title=str(args.data))
-        print(f"\nplot: {args.output}")
+        print(f"\nplot: {args.output}", file=out)
         if sel is not None:
-            print(f"models plot: {plot_selection(sel, _models_path(args.output), title=str(args.data))}")
+            print(f"models plot: {plot_selection(sel, _models_path(args.output), title=str(args.data))}", file=out)
     return _finish(result, args.strict)

@@ -39,7 +39,7 @@ __all__ = ["Verdict", "InadequateModelWarning", "InadequateModelError", "ERRORS_
            "M00_TOLERANCE", "ELEMENT_TOLERANCE", "Z_LIMIT", "NEIGHBOURS",
            "half_angles", "neighbour_index", "residual_structure", "angle_trends", "geometry_clusters", "cluster_covariance",
            "correlation", "larger_errors",
-           "chi2_verdict", "floor_verdict", "birge_scaling", "blame_fixed_parameters", "SIGMAS_OR_MODEL"]
+           "chi2_verdict", "floor_verdict", "birge_scaling", "blame_fixed_parameters", "SIGMAS_OR_MODEL", "json_number"]
 
 #: chi^2 tail probability below which a fit with error bars is inadequate
 P_LIMIT = 1e-3
@@ -344,3 +344,9 @@ def blame_fixed_parameters(verdict: Verdict, notes: list, chi2, dof, free, held:
     verdict.message = f"{red}: {verdict.cause}; fit them"
     notes[:] = [n.replace(SIGMAS_OR_MODEL, fixed) for n in notes]
     return True
+
+
+def json_number(x):
+    """A number as a fit's JSON result carries it: a float, None where it is not finite."""
+    x = float(x)
+    return x if math.isfinite(x) else None

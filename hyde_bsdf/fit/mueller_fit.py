@@ -81,7 +81,8 @@ from hyde_bsdf.model.parameters import FIT_PARAMETERS, INDEX_MIN, NATURAL_INDEX,
 from hyde_bsdf.model.terms import check_pair
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
                                     birge_scaling, blame_fixed_parameters, chi2_verdict, cluster_covariance,
-                                    correlation, floor_verdict, geometry_clusters, half_angles, larger_errors)
+                                    correlation, floor_verdict, geometry_clusters, half_angles, json_number,
+                                    larger_errors)
 from hyde_bsdf.io.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index,
                                        impossible_limit)
 
@@ -304,6 +305,27 @@ class FitResult:
         return float(self.correlation[self.fitted.index(a), self.fitted.index(b)])
 
     # ---- loading the fitted material into a scene
+    def to_dict(self, models: list | None = None) -> dict:
+        """The machine-readable result in a lab fit's schema (:meth:`hyde_bsdf.fit.lab.LabFitResult.to_dict`):
+        n, k, rms_slope (no wavelength; stderr None where held fixed), the covariance of the fitted
+        ones, the verdict (p_value None without sigmas), the warnings.  ``models``: a model
+        selection's table (:meth:`~hyde_bsdf.fit.model_selection.ModelSelection.to_dict`), else this
+        fit alone."""
+        params = [{"name": q, "wavelength_nm": None, "value": json_number(self.params[q]),
+                   "stderr": json_number(self.stderr[q]) if q in self.fitted else None} for q in PARAMETERS]
+        row = {"shadowing": self.shadowing, "diffuse": self.diffuse, "dielectric": "k" not in self.fitted and
+               self.params["k"] == 0, "free_parameters": len(self.fitted), "adequate": bool(self.verdict.adequate),
+               "chosen": True, "values": {q: float(self.params[q]) for q in PARAMETERS}}
+        return {"model": {"shadowing": self.shadowing, "diffuse": self.diffuse},
+                "parameters": params,
+                "covariance": {"names": list(self.fitted),
+                               "matrix": [[json_number(x) for x in r] for r in np.asarray(self.covariance, float)]},
+                "verdict": {"adequate": bool(self.verdict.adequate), "chi2_reduced": json_number(self.reduced_chi2),
+                            "p_value": json_number(self.p_value) if self.sigma_given else None,
+                            "warnings": list(self.data_warnings) + list(self.warnings)
+                            + ([] if self.verdict.adequate else [self.verdict.message])},
+                "models": [row] if models is None else models}
+
     def plugin_dict(self) -> dict:
         """The ``hyde`` plugin's dict for ``mi.load_dict``.
 

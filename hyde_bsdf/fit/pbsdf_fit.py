@@ -40,7 +40,7 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, Verdict, cluster_covariance, correlation, floor_verdict,
-                                    geometry_clusters, half_angles, larger_errors)
+                                    geometry_clusters, half_angles, json_number, larger_errors)
 from hyde_bsdf.fit.mueller_fit import DEFAULT_STARTS, raise_or_warn
 from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
 from hyde_bsdf.fit.spectral import spectrum_element, wavelength_note
@@ -108,6 +108,38 @@ class PbsdfFitResult:
                           f'{indent}    <string name="shadowing" value="{self.shadowing}"/>',
                           f'{indent}    <string name="diffuse" value="{self.diffuse}"/>',
                           f"{indent}</bsdf>"])
+
+    def to_dict(self, models: list | None = None) -> dict:
+        """The machine-readable result in a lab fit's schema (:meth:`hyde_bsdf.fit.lab.LabFitResult.to_dict`;
+        what ``hyde-bsdf fit FILE.pbsdf --json FILE`` writes): n and k per band at its wavelength,
+        rms_slope (stderr None where held fixed), the covariance of the fitted parameters, the verdict
+        (chi2_reduced with the scatter estimated from the residuals; p_value None: a table has no
+        sigmas).  ``models``: a model selection's table (:meth:`ModelSelection.to_dict
+        <hyde_bsdf.fit.model_selection.ModelSelection.to_dict>`), else this fit alone."""
+        wl = [float(w) for w in self.wavelengths]
+        err = {"rms_slope": self.stderr["rms_slope"]}
+        params = []
+        for q in ("n", "k"):
+            for b, w in enumerate(wl):
+                err[f"{q}@{w:g}nm"] = self.stderr[q][b]
+                params.append({"name": q, "wavelength_nm": w, "value": json_number(getattr(self, q)[b]),
+                               "stderr": json_number(self.stderr[q][b]) if q in self.fitted else None})
+        params.append({"name": "rms_slope", "wavelength_nm": None, "value": json_number(self.rms_slope),
+                       "stderr": json_number(self.stderr["rms_slope"]) if "rms_slope" in self.fitted else None})
+        e = np.array([err[name] for name in self.names], float)
+        cov = np.asarray(self.correlation, float) * np.outer(e, e)
+        v = self.verdict
+        row = {"shadowing": self.shadowing, "diffuse": self.diffuse, "dielectric": "k" not in self.fitted and
+               not np.any(self.k), "free_parameters": len(self.names), "adequate": bool(v.adequate), "chosen": True,
+               "values": {"rms_slope": float(self.rms_slope), **{f"{q}@{w:g}nm": float(getattr(self, q)[b])
+                                                                  for q in ("n", "k") for b, w in enumerate(wl)}}}
+        return {"model": {"shadowing": self.shadowing, "diffuse": self.diffuse},
+                "parameters": params,
+                "covariance": {"names": list(self.names), "matrix": [[json_number(x) for x in r] for r in cov]},
+                "verdict": {"adequate": bool(v.adequate), "chi2_reduced": json_number(self.chi2 / self.dof)
+                            if self.dof > 0 else None, "p_value": None,
+                            "warnings": list(self.warnings) + ([] if v.adequate else [v.message])},
+                "models": [row] if models is None else models}
 
     def summary(self) -> str:
         def pm(v, e):
