@@ -3,7 +3,7 @@
 Command line::
 
     hyde-bsdf export OUT.pbsdf --rms-slope 0.3 (--material Au | --n N[,N,...] --k K[,K,...])
-                     [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none|lambertian]
+                     [--shadowing vgroove|smith|none] [--diffuse reciprocal|paper|none|lambertian]
                      [--diffuse-reflectance A[,A,...]] [--band-index projected|sampled]
     hyde-bsdf export OUT.pbsdf --fit FIT.json [--extrapolate]
                      [--resolution 37x55x55] [--error-samples 20000]
@@ -29,7 +29,7 @@ from hyde_bsdf.fit.pbsdf_export import DEFAULT_RESOLUTION, export_pbsdf
 from hyde_bsdf.io.input_gate import read_input
 from hyde_bsdf.io.output_gate import check_not_input
 from hyde_bsdf.io.pbsdf_file import KAIST_WAVELENGTHS
-from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
+from hyde_bsdf.model.terms import DIFFUSE, RENDER_DEFAULT, SHADOWING
 from hyde_bsdf.progress import stderr_lines
 
 __all__ = ["build_parser", "cli_main"]
@@ -60,7 +60,7 @@ def _material(args) -> dict:
             bands = choose_bands(index_spectrum(args.material), bands, "sampled")
         return dict(rms_slope=args.rms_slope, n=None if args.n is None else _floats(args.n, "n"),
                     k=None if args.k is None else _floats(args.k, "k"), material=args.material,
-                    shadowing=args.shadowing, diffuse=args.diffuse or DIFFUSE[0], diffuse_reflectance=albedo,
+                    shadowing=args.shadowing, diffuse=args.diffuse or RENDER_DEFAULT[1], diffuse_reflectance=albedo,
                     bands=bands)
     named = [f for f, v in (("--rms-slope", args.rms_slope), ("--material", args.material), ("--n", args.n),
                             ("--k", args.k), ("--diffuse", args.diffuse), ("--diffuse-reflectance", albedo),
@@ -98,11 +98,12 @@ def build_parser() -> Parser:
     ap.add_argument("--material", default=None, help="a Mitsuba data/ior material (Au, Ag, Al, Cu, ...)")
     ap.add_argument("--n", default=None, help="real part of the index: one value or 5 (one per band)")
     ap.add_argument("--k", default=None, help="imaginary part (paper's kappa >= 0): one value or 5")
-    ap.add_argument("--shadowing", default=SHADOWING[0], choices=SHADOWING,
+    ap.add_argument("--shadowing", default=RENDER_DEFAULT[0], choices=SHADOWING,
                     help="shadowing-masking: the paper's V-groove, Smith's for Beckmann, or none (default %(default)s)")
     ap.add_argument("--diffuse", default=None, choices=DIFFUSE,
-                    help=f"diffuse term: the paper's, a reciprocal variant, none, or a Lambertian term with its own albedo "
-                         f"(default {DIFFUSE[0]})")
+                    help=f"diffuse term (default {RENDER_DEFAULT[1]}: the plugin's default, which conserves energy in a "
+                         f"path tracer); paper: Eq. 17 as written, which gains energy at grazing angles there "
+                         f"(docs/plugin.md); none; or a Lambertian term with its own albedo")
     ap.add_argument("--diffuse-reflectance", default=None,
                     help="the Lambertian term's albedo: one value or 5 (one per band); required with --diffuse lambertian")
     ap.add_argument("--resolution", default="x".join(map(str, DEFAULT_RESOLUTION)),

@@ -64,7 +64,7 @@ SECTIONS = [
     ("NumPy evaluator and DHR (paper Figs. 4, 8, 9; Eqs. 6-17)",
      ["fig4_priest_germer", "fig8_9_mueller", "dhr_convergence", "stability_evaluator"]),
     ("Mitsuba plugin and rendering",
-     ["plugin_checks", "render_checks", "speed_accuracy_render", "model_economy"]),
+     ["plugin_checks", "render_checks", "furnace", "speed_accuracy_render", "model_economy"]),
     ("Method of moments (paper Fig. 6)", ["fig6_mom", "mom_convergence", "mom_1d_model", "stability_mom", "mom_polarization", "mom_mueller_1d", "mom_speed_accuracy", "mom_grazing", "mom_forward_grazing", "mom_reciprocity", "accuracy_atlas"]),
     ("Fitting and inverse rendering (paper Section 4)",
      ["fit_synthetic", "fit_model_selection", "fit_lab_data", "inverse_render", "gradient_check", "svbrdf_inverse", "svbrdf_index",
