@@ -276,6 +276,10 @@ CLI_ROWS = [
      "the Stokes images of 3 frame(s), 276480000 raw values (128 B each): about 33 GiB of memory needed", "lowmem"),
     ("render: a texture whose PNG header claims 100000x100000 (new)", ["render", "{in33}/hugetex.xml", "-o",
      "{tmp}/hugetex.exr"], 2, "hugetex.png' (100000x100000x1): about 37.3 GiB of memory needed", "lowmem"),
+    ("invert --tiles 1000x1000 on a 6x6 map: refused before any scene loads (was after)", ["invert", "--maps",
+     "--scene", "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json",
+     "--reference", "{tmp}/invscene16/ref.exr", "--tiles", "1000x1000", "-o", "{tmp}/tiles"], 2,
+     "--tiles 1000x1000: the scene's textures are at most 6x6 texels ('alpha.exr')", "in"),
     # --- issue 33: a signal is one line whatever it is and wherever it lands
     ("render: SIGHUP (the terminal closed) removes the temporaries (new)", ["render", "{tiny}", "-o",
      "{tmp}/sighup.exr", "--spp", "200000", "--chunks", "20000"], 129, "hyde-bsdf render: terminated (SIGHUP)",
@@ -569,6 +573,7 @@ def _issue33_files(tmp):
         write_measurements(d / name, synthetic_measurements(th, th, np.full(th.size, np.pi), n=1.5, k=3.0,
                                                             rms_slope=0.3))
     (d / "fit.pbsdf").write_text(json.dumps({"note": "a fit result under a table's name"}))
+    (d / "cam.json").write_text(json.dumps({"width": 16, "height": 16}))     # read after the --tiles check
     np.save(d / "dark.npy", np.full((8, 8), 3, np.uint16))
     np.save(d / "mosaic.npy", np.full((8, 8), 500, np.uint16))
     np.save(d / "zeros16.npy", np.zeros((16, 16)))
