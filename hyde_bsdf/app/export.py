@@ -21,12 +21,13 @@ from __future__ import annotations
 import json
 import warnings
 
-from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.args import Parser, quiet_option, reads, run_inputs, user_input, writes
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.lab import material_at
 from hyde_bsdf.fit.pbsdf_bands import BAND_INDEX, check_wavelengths, choose_bands, index_spectrum
 from hyde_bsdf.fit.pbsdf_export import DEFAULT_RESOLUTION, export_pbsdf
 from hyde_bsdf.io.input_gate import read_input
+from hyde_bsdf.io.output_gate import check_not_input
 from hyde_bsdf.io.pbsdf_file import KAIST_WAVELENGTHS
 from hyde_bsdf.model.terms import DIFFUSE, RENDER_DEFAULT, SHADOWING
 from hyde_bsdf.progress import stderr_lines
@@ -85,12 +86,12 @@ def build_parser() -> Parser:
                              "renderer (mitsuba executable, CUDA without Python) renders in *_spectral_polarized "
                              "variants; prints the measured interpolation error and the <bsdf> element to use. "
                              "Index: the paper's eta = n - jk (the plugin's eta = n, k = k).")
-    ap.add_argument("output", help="the .pbsdf file to write (atomically)")
+    writes(ap.add_argument("output", help="the .pbsdf file to write (atomically)"))
     ap.add_argument("--rms-slope", type=float, default=None,
                     help="the paper's rms_slope = sqrt(2) sigma_h/ell (required unless --fit)")
-    ap.add_argument("--fit", default=None, metavar="FIT.json",
-                    help="the material of a fit's JSON result (hyde-bsdf fit --json): roughness, terms, albedo and "
-                         "the index per wavelength, interpolated at the bands")
+    reads(ap.add_argument("--fit", default=None, metavar="FIT.json",
+                          help="the material of a fit's JSON result (hyde-bsdf fit --json): roughness, terms, albedo "
+                               "and the index per wavelength, interpolated at the bands"))
     ap.add_argument("--extrapolate", action="store_true",
                     help="with --fit: hold the nearest measured index at bands outside the fit's wavelengths (a guess; "
                          "warned) instead of refusing")
@@ -123,8 +124,10 @@ def build_parser() -> Parser:
 
 def cli_main(argv=None) -> int:
     """``hyde-bsdf export``: write the table, print the summary and the XML element."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     with user_input():
+        check_not_input([args.output], run_inputs(parser, args), "the .pbsdf output")    # --fit FIT.json
         opts = _material(args)
         report = export_pbsdf(args.output, **opts, resolution=args.resolution,
                               error_samples=args.error_samples, alpha_sample=args.alpha_sample,

@@ -379,8 +379,10 @@ class ExportReport:
 
     def xml(self, indent: str = "") -> str:
         """The ``<bsdf type="measured_polarized">`` element that loads the file."""
+        from xml.sax.saxutils import quoteattr
+
         return (f'{indent}<bsdf type="measured_polarized">\n'
-                f'{indent}    <string name="filename" value="{self.path.name}"/>\n'
+                f'{indent}    <string name="filename" value={quoteattr(self.path.name)}/>\n'
                 f'{indent}    <float name="alpha_sample" value="{self.alpha_sample:.4g}"/>\n'
                 f'{indent}</bsdf>')
 
