@@ -279,7 +279,8 @@ CLI_ROWS = [
     ("invert --tiles 1000x1000 on a 6x6 map: refused before any scene loads (was after)", ["invert", "--maps",
      "--scene", "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json",
      "--reference", "{tmp}/invscene16/ref.exr", "--tiles", "1000x1000", "-o", "{tmp}/tiles"], 2,
-     "--tiles 1000x1000: the scene's textures are at most 6x6 texels ('alpha.exr')", "in"),
+     "--tiles must be 1..6 x 1..6 for a 6 x 6-texel map, got 1000 x 1000 (the scene's largest texture, "
+     "'alpha.exr', read before any scene loads)", "in"),
     # --- issue 33: a signal is one line whatever it is and wherever it lands
     ("render: SIGHUP (the terminal closed) removes the temporaries (new)", ["render", "{tiny}", "-o",
      "{tmp}/sighup.exr", "--spp", "200000", "--chunks", "20000"], 129, "hyde-bsdf render: terminated (SIGHUP)",

@@ -240,8 +240,9 @@ def _check_tile_grid(grid, scene) -> None:
     sizes = {p: s for p, s in sizes.items() if s is not None}
     if sizes and not any(h >= grid[0] and w >= grid[1] for h, w, *_ in sizes.values()):
         biggest = max(sizes, key=lambda p: sizes[p][0] * sizes[p][1])
-        raise UsageError(f"--tiles {grid[0]}x{grid[1]}: the scene's textures are at most {sizes[biggest][0]}x"
-                         f"{sizes[biggest][1]} texels ({shorten(biggest.name)}): give at most that many tiles")
+        h, w = sizes[biggest][:2]
+        raise UsageError(f"--tiles must be 1..{h} x 1..{w} for a {h} x {w}-texel map, got {grid[0]} x {grid[1]} "
+                         f"(the scene's largest texture, {shorten(biggest.name)}, read before any scene loads)")
 
 
 #: invert_maps' default samples per pixel of the uncertainty step (its forward-mode renders; memory check)
