@@ -247,6 +247,39 @@ CLI_ROWS = [
     ("invert --maps --scene: no room for maps of the scene's texture size (refused before the inversion)",
      ["invert", "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--reference", "{tmp}/invscene16/ref.exr", "-o",
       "{tmp}/dfull_scene"], 2, "dfull_scene' (6x6 maps): about 64", "diskfull"),
+    # --- issue 33: no output replaces an input (each option that names a file: tests/test_cli_inputs.py) ---
+    ("stokes: a chart named like a frame (new)", ["stokes", "--frames", "{in33}/s_dolp.png", "{in33}/f1.png",
+     "{in33}/f2.png", "--angles", "0,45,90", "-o", "{in33}/s.exr"], 2, "s_dolp.png' is the input", "in"),
+    ("fit --json the data file itself (new)", ["fit", "{in33}/twelve.csv", "--json", "{in33}/twelve.csv", "-q"], 2,
+     "twelve.csv' is the input", "in"),
+    ("export: the table is the --fit result it reads (new)", ["export", "{in33}/fit.pbsdf", "--fit",
+     "{in33}/fit.pbsdf"], 2, "fit.pbsdf' is the input", "in"),
+    # --- issue 33: no silent empty or degenerate answer ---
+    ("fit: 2 geometries for 3 parameters (was 'adequate')", ["fit", "{in33}/two.csv", "-q"], 0,
+     "warning: 2 distinct geometries cannot determine the 3 fitted parameter(s)", "in"),
+    ("stokes: every pixel below the black level (new)", ["stokes", "--mosaic", "{in33}/dark.npy", "--black-level",
+     "64", "--read-noise", "2", "-o", "{tmp}/dark.exr"], 2,
+     "dark.npy: every pixel is below the black level 64 DN beyond the read noise (the brightest is 3 DN)", "in"),
+    ("invert --mask of zeros (new)", ["invert", "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--reference",
+     "{tmp}/invscene16/ref.exr", "--mask", "{in33}/zeros16.npy", "-o", "{tmp}/zeromask"], 2,
+     "zeros16.npy' leaves out every pixel: nothing to fit", "in"),
+    # --- issue 33: sizes known before memory is taken; no library exception reaches the user ---
+    ("stokes --analysis whose .npy header lies (new)", ["stokes", "--mosaic", "{in33}/mosaic.npy", "--analysis",
+     "{in33}/lie.npy", "-o", "{tmp}/lie.exr"], 2,
+     "lie.npy': its header says 100000x100000x4x4 float64 values (1.16 TiB), but the file holds 8 B", "in"),
+    ("stokes: a truncated PNG frame (new)", ["stokes", "--frames", "{in33}/trunc.png", "{in33}/f1.png",
+     "{in33}/f2.png", "--angles", "0,45,90", "-o", "{tmp}/trunc.exr"], 2,
+     "trunc.png': cannot read it (image file is truncated)", "in"),
+    ("stokes: three 9600x9600 frames, 2 GiB available (was an allocation error after 20 s)", ["stokes", "--frames",
+     "{in33}/big.png", "{in33}/big.png", "{in33}/big.png", "--angles", "0,45,90", "-o", "{tmp}/big.exr"], 2,
+     "the Stokes images of 3 frame(s), 276480000 raw values (128 B each): about 33 GiB of memory needed", "lowmem"),
+    ("render: a texture whose PNG header claims 100000x100000 (new)", ["render", "{in33}/hugetex.xml", "-o",
+     "{tmp}/hugetex.exr"], 2, "hugetex.png' (100000x100000x1): about 37.3 GiB of memory needed", "lowmem"),
+    # --- issue 33: control characters in an output name never reach the terminal or the XML ---
+    ("render -o with an ESC in the name (new)", ["render", "{tiny}", "-o", "{tmp}/a\x1b[31mred.exr"], 2,
+     "the name holds control characters (\\x1b); give a name without them", "in"),
+    ("fit -o with a newline in the name (new)", ["fit", "{csv}", "-o", "{tmp}/plot\nname.png"], 2,
+     "the name holds control characters (\\n)", "in"),
 ]
 
 
@@ -499,11 +532,55 @@ def _gate_files(tmp):
     (tmp / "data_as.png").write_bytes((tmp / "meas.csv").read_bytes())   # a CSV under a plot's name
     (tmp / "inref").mkdir()
     _stokes_exr(tmp / "inref" / "invert.png", 16, 1.0)
-    return {"fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
+    return {"in33": _issue33_files(tmp),
+            "fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
             "huge": _huge_table(tmp.parent / f"{tmp.name}_sparse"),
             "devtex": scene("devtex", bitmap.format("/dev/zero")),
             "dotdotmat": scene("dotdotmat", '<bsdf type="hyde"><string name="material" value="../ior/Au"/></bsdf>'),
             "longmat": scene("longmat", f'<bsdf type="hyde"><string name="material" value="{"A" * 100_000}"/></bsdf>')}
+
+
+def _issue33_files(tmp):
+    """Frames, CSVs, arrays and images for the issue 33 rows, in tmp/in33."""
+    import json
+    import struct
+    import zlib
+
+    import numpy as np
+    from PIL import Image
+
+    from hyde_bsdf.fit.mueller_fit import synthetic_measurements
+    from hyde_bsdf.io.measurements import write_measurements
+
+    d = tmp / "in33"
+    d.mkdir()
+    for i, name in enumerate(("s_dolp.png", "f1.png", "f2.png")):
+        Image.fromarray(np.full((8, 8), 100 + i, np.uint8)).save(d / name)
+    for name, deg in (("two.csv", [20.0, 40.0]), ("twelve.csv", np.linspace(10.0, 70.0, 12))):
+        th = np.radians(deg)
+        write_measurements(d / name, synthetic_measurements(th, th, np.full(th.size, np.pi), n=1.5, k=3.0,
+                                                            rms_slope=0.3))
+    (d / "fit.pbsdf").write_text(json.dumps({"note": "a fit result under a table's name"}))
+    np.save(d / "dark.npy", np.full((8, 8), 3, np.uint16))
+    np.save(d / "mosaic.npy", np.full((8, 8), 500, np.uint16))
+    np.save(d / "zeros16.npy", np.zeros((16, 16)))
+    with open(d / "lie.npy", "wb") as fh:
+        np.lib.format.write_array_header_1_0(fh, {"descr": "<f8", "fortran_order": False,
+                                                  "shape": (100000, 100000, 4, 4)})
+        fh.write(b"\0" * 8)
+
+    def png(path, width, height, data):           # a grey PNG whose header claims width x height
+        chunk = lambda kind, body: (struct.pack(">I", len(body)) + kind + body
+                                    + struct.pack(">I", zlib.crc32(kind + body)))
+        path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+                         + chunk(b"IDAT", data))
+
+    png(d / "trunc.png", 64, 64, zlib.compress(b"\0" * 10)[:5])
+    png(d / "big.png", 9600, 9600, zlib.compress(b"\0" * 64))
+    png(d / "hugetex.png", 100000, 100000, zlib.compress(b"\0" * 64))
+    (d / "hugetex.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', '<bsdf type="diffuse"><texture type="bitmap" '
+                                   'name="reflectance"><string name="filename" value="hugetex.png"/></texture></bsdf>'))
+    return d
 
 
 def _snapshot(folder):

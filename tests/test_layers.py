@@ -28,7 +28,7 @@ LAYER = {"errors": None, "progress": None, "resources": None, "options": None, "
 ROOT_NAMES = {"register": "mitsuba", "pbrdf": "model", "dhr_specular_pec": "model", "rms_slope_from": "model",
               "alpha_from_rms_slope": "model", "rms_slope_from_alpha": "model"}
 #: third-party packages the io layer may use (the last three only inside the function that needs them)
-IO_THIRD_PARTY = {"numpy", "OpenEXR", "mitsuba", "drjit"}
+IO_THIRD_PARTY = {"numpy", "OpenEXR", "PIL", "mitsuba", "drjit"}
 #: what only the application (``app``) and the validation scripts above it may import
 APP_ONLY = {"argparse", "matplotlib"}
 

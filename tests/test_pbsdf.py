@@ -30,6 +30,7 @@ import pytest
 from hyde_bsdf import pbrdf
 from hyde_bsdf.app.cli import main
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.model.terms import RENDER_DEFAULT
 from hyde_bsdf.fit.pbsdf_export import (_query_geometries, check_table_size, error_statistics,
                                         export_pbsdf, grids)
 from hyde_bsdf.io.pbsdf_file import (PbsdfFileError, directions_to_rusinkiewicz, read_pbsdf,
@@ -79,7 +80,8 @@ def test_reader_on_an_exported_file_gives_the_model_at_every_node(exported):
     assert len(s) == s.usable_geometries > 100
     assert np.all(s.theta_i <= math.radians(80) + 1e-9) and np.all(s.theta_r <= math.radians(80) + 1e-9)
     for b in range(5):
-        F = pbrdf(s.theta_i, s.theta_r, s.phi, rms_slope=0.25, n=PARAMS["n"][b], k=PARAMS["k"][b])
+        F = pbrdf(s.theta_i, s.theta_r, s.phi, rms_slope=0.25, n=PARAMS["n"][b], k=PARAMS["k"][b],
+                  shadowing=RENDER_DEFAULT[0], diffuse=RENDER_DEFAULT[1])     # the export's default model
         err = np.abs(s.F[b] - F).max(axis=(1, 2)) / F[:, 0, 0]
         assert err.max() < 2e-6, (b, err.max())
 
@@ -280,7 +282,7 @@ def test_round_trip_export_read_fit_recovers_the_parameters(exported):
 
     path, _ = exported
     data = pbsdf_samples(path, max_points=150, seed=1)
-    result = fit_pbsdf(data, rms_slope=0.4, progress=False)
+    result = fit_pbsdf(data, rms_slope=0.4, shadowing=RENDER_DEFAULT[0], diffuse=RENDER_DEFAULT[1], progress=False)
     assert result.success and not result.warnings
     assert result.rms_slope == pytest.approx(0.25, rel=1e-4)
     assert np.allclose(result.n, PARAMS["n"], rtol=1e-4) and np.allclose(result.k, PARAMS["k"], rtol=1e-4)
@@ -306,7 +308,8 @@ def test_a_table_misfit_from_a_held_roughness_is_blamed_on_it(exported):
     data = pbsdf_samples(path, max_points=150, seed=1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        held = fit_pbsdf(data, fit=("n", "k"), rms_slope=0.4, progress=False)
+        held = fit_pbsdf(data, fit=("n", "k"), rms_slope=0.4, shadowing=RENDER_DEFAULT[0],
+                         diffuse=RENDER_DEFAULT[1], progress=False)        # the table's terms (the export's default)
     assert not held.verdict.adequate and held.verdict.message.startswith("M00 misfit")
     assert "the parameter(s) held fixed (rms_slope = 0.4) cause the misfit" in held.verdict.message
     fitted = float(held.verdict.message.split("(rms_slope = ")[2].split(")")[0])

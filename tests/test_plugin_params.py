@@ -155,7 +155,7 @@ def test_defaults_and_xml():
     mi = mitsuba_with_hyde("scalar_spectral_polarized")
     b = mi.load_string('<bsdf version="3.0.0" type="hyde"/>')
     text = str(b)
-    for w in ("rms_slope=0.3", "shadowing='vgroove'", "diffuse='paper'", "sample_visible=True"):
+    for w in ("rms_slope=0.3", "shadowing='vgroove'", "diffuse='reciprocal'", "sample_visible=True"):
         assert w in text
     b = mi.load_string('<bsdf version="3.0.0" type="hyde"><float name="alpha" value="0.2"/>'
                        '<string name="material" value="Al"/><string name="shadowing" value="smith"/>'

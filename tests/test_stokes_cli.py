@@ -42,7 +42,7 @@ def test_stokes_writes_the_exr_and_the_charts(raw, tmp_path, capsys):
     (["--frames", "RAW", "RAW", "RAW"], "--frames needs --angles"),
     (["--mosaic", "RAW", "--layout", "0,45,90"], "--layout needs 4 angles"),
     (["--mosaic", "RAW", "--full-well", "100"], "at or above the saturation level"),
-    (["--mosaic", "missing.npy"], "no such file"),
+    (["--mosaic", "missing.npy"], "does not exist"),      # the input gate's words (issue 33: read_array)
 ])
 def test_stokes_bad_input_is_one_line(args, message, raw, tmp_path, capsys):
     argv = ["stokes"] + [str(raw) if a == "RAW" else a for a in args] + ["-o", str(tmp_path / "x.exr")]

@@ -42,7 +42,7 @@ from pathlib import Path
 
 from hyde_bsdf.app.accuracy import (add_height_options, check_height_options, height_wl, lab_verdict_lines,
                                     pbsdf_verdict_lines)
-from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.args import Parser, quiet_option, reads, run_inputs, user_input, writes
 from hyde_bsdf.app.flags import for_command_line
 from hyde_bsdf.app.plots import (PLOT_FORMATS, check_plot_path, plot_lab_fit, plot_lab_selection, plot_pbsdf_fit,
                                  plot_selection)
@@ -183,7 +183,7 @@ def csv_parser() -> Parser:
                     "model chosen. The index is the paper's eta = n - jk (the plugin's eta = n, k = k). "
                     "Exit status: 0 fitted, 1 not converged, or with --strict an inadequate model or an ill-posed "
                     "fit, 2 bad input.")
-    ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M00, M00_sigma, M01, ...)")
+    reads(ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M00, M00_sigma, M01, ...)"))
     ap.add_argument("--fit", default=None, help="comma-separated parameters to fit, from rms_slope,n,k,"
                     "diffuse_reflectance (default: all the data determine); the others are held at their values")
     ap.add_argument("--rms-slope", type=float, default=None,
@@ -200,14 +200,14 @@ def csv_parser() -> Parser:
     ap.add_argument("--albedo", default=None, choices=("shared", "per-wavelength"),
                     help="the Lambertian albedo: one for every wavelength, or one per wavelength (default: as the "
                          "data decide with --model auto, else shared)")
-    ap.add_argument("--json", default=None, metavar="FILE",
-                    help="write the result as JSON (values, standard errors, covariance, verdict, the table of "
-                         "models); '-' for stdout (the summary then goes to stderr)")
+    writes(ap.add_argument("--json", default=None, metavar="FILE",
+                           help="write the result as JSON (values, standard errors, covariance, verdict, the table "
+                                "of models); '-' for stdout (the summary then goes to stderr)"))
     add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
-    ap.add_argument("-o", "--output", default=None,
-                    help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)}); with --model "
-                         "auto also NAME_models.EXT, misfit against model size")
+    writes(ap.add_argument("-o", "--output", default=None,
+                           help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)}); with "
+                                "--model auto also NAME_models.EXT, misfit against model size"))
     quiet_option(ap)
     return ap
 
@@ -218,12 +218,13 @@ def csv_main(argv=None) -> int:
     Options and the output paths are checked before the file is read.  Exit status 0 fitted, 1 not
     converged (an ill-posed fit with ``--strict`` raises, 1 too); user errors raise UsageError.
     """
-    args = csv_parser().parse_args(argv)
-    with _output_gate(args):       # the output gate's refusal comes before the file is read
+    parser = csv_parser()
+    args = parser.parse_args(argv)
+    with _output_gate(args, parser):       # the output gate's refusal comes before the file is read
         return _csv_run(args)
 
 
-def _output_gate(args):
+def _output_gate(args, parser):
     """The output gate on ``-o`` (and, when the model is chosen, its ``_models`` plot) and on
     ``--json FILE`` for the whole run: not the data file, one writer at a time, room for each
     (:data:`~hyde_bsdf.resources.COSTS`)."""
@@ -235,7 +236,7 @@ def _output_gate(args):
     outputs = plots + ([json_file] if json_file and json_file != "-" else [])
     if not outputs:
         return contextlib.nullcontext()
-    return output_gate(outputs, inputs=[args.data], need_bytes=COSTS.plot_file_bytes * max(len(outputs), 1),
+    return output_gate(outputs, inputs=run_inputs(parser, args), need_bytes=COSTS.plot_file_bytes * max(len(outputs), 1),
                        what="-o plot" if plots else "--json file")
 
 
@@ -305,7 +306,7 @@ def pbsdf_parser() -> Parser:
         "counts (NaN, non-physical, below the horizon), the fit with standard errors, and the hyde <bsdf>. "
         "Index: the paper's eta = n - jk (the plugin's eta = n, k = k). Exit status: 0 fitted, 1 not converged, "
         "or with --strict an inadequate model or an ill-posed fit, 2 bad input."))
-    ap.add_argument("data", help="the measured_polarized table (.pbsdf)")
+    reads(ap.add_argument("data", help="the measured_polarized table (.pbsdf)"))
     ap.add_argument("--fit", default="n,k,rms_slope", help="parameters to fit (default n,k,rms_slope)")
     ap.add_argument("--rms-slope", type=float, default=0.3, help="start (or fixed) rms_slope (default 0.3)")
     ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n of every band; default: several")
@@ -317,21 +318,22 @@ def pbsdf_parser() -> Parser:
     ap.add_argument("--tolerance", type=float, default=0.05,
                     help="a cell with |M_jk| or a degree of polarization above (1 + tolerance) M00 is non-physical")
     ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
-    ap.add_argument("--json", default=None, metavar="FILE",
-                    help="write the result as JSON (values per band, standard errors, covariance, verdict, the "
-                         "table of models); '-' for stdout (the summary then goes to stderr)")
+    writes(ap.add_argument("--json", default=None, metavar="FILE",
+                           help="write the result as JSON (values per band, standard errors, covariance, verdict, "
+                                "the table of models); '-' for stdout (the summary then goes to stderr)"))
     add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
-    ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element; "
-                    "with --model auto also NAME_models.EXT, misfit against model size")
+    writes(ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller "
+                           "element; with --model auto also NAME_models.EXT, misfit against model size"))
     quiet_option(ap)
     return ap
 
 
 def pbsdf_main(argv=None) -> int:
     """``hyde-bsdf fit FILE.pbsdf``: read, mask, subsample, fit, print, plot."""
-    args = pbsdf_parser().parse_args(argv)
-    with _output_gate(args):
+    parser = pbsdf_parser()
+    args = parser.parse_args(argv)
+    with _output_gate(args, parser):
         return _pbsdf_run(args)
 
 

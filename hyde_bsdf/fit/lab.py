@@ -37,7 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.fit.adequacy import ERRORS_NOTE, InadequateModelError, InadequateModelWarning, json_number
+from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, json_number,
+                                    without_advice)
 from hyde_bsdf.fit.lab_data import lab_data
 from hyde_bsdf.fit.lab_fit import BOUNDS, PARAMETERS, LabModel, ModelFit, blame_fixed, check_enough, fit_model
 from hyde_bsdf.fit.lab_selection import Selection, model_size, select
@@ -378,6 +379,7 @@ def fit_lab(data, *, fit=None, shadowing=None, diffuse=None, albedo=None, rms_sl
         counter.stage = "fitting every candidate model"
         sel = select(d, fit=opts["fit"], values=values, albedo=albedo, lambertian=lambertian, tick=counter.tick)
         chosen = sel.choice.fit
+        without_advice(chosen.verdict)           # every model was tried: no "try --model auto"
     else:
         model = LabModel(shadowing or SHADOWING[0], diffuse or DIFFUSE[0], albedo or "shared")
         counter.stage = f"fitting {model.label}"

@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.fit.adequacy import ELEMENT_TOLERANCE, M00_TOLERANCE, InadequateModelWarning, json_number
+from hyde_bsdf.fit.adequacy import (ELEMENT_TOLERANCE, M00_TOLERANCE, InadequateModelWarning, json_number,
+                                    without_advice)
 from hyde_bsdf.model.terms import DIFFUSE_TERMS, SHADOWING_TERMS, allowed, model_size
 
 __all__ = ["CANDIDATES", "ModelRow", "ModelSelection", "select_model", "select_model_pbsdf"]
@@ -255,6 +256,7 @@ def _csv_candidate(model, dielectric, names, start, rms_slope, n0, k0, data, kwa
 
 def _finish(sel, strict):
     res = sel.result
+    without_advice(res.verdict)                  # every model was tried: no "try --model auto"
     if not res.verdict.adequate:
         if strict:
             from hyde_bsdf.fit.adequacy import InadequateModelError

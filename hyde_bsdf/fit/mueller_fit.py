@@ -77,7 +77,8 @@ from hyde_bsdf.options import Options
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
-from hyde_bsdf.model.parameters import FIT_PARAMETERS, INDEX_MIN, NATURAL_INDEX, RMS_SLOPE
+from hyde_bsdf.model.index import admissible
+from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.model.terms import check_pair
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
                                     birge_scaling, blame_fixed_parameters, chi2_verdict, cluster_covariance,
@@ -720,9 +721,7 @@ class _Objective:
     def unpack(self, x) -> dict:
         vals = dict(self.given)
         vals.update(zip(self.fitted, (float(v) for v in x)))
-        # eta = 0 exactly is not a material (the evaluator refuses |eta| < INDEX_MIN)
-        if math.hypot(vals["n"], vals["k"]) < INDEX_MIN:
-            vals["n"] = INDEX_MIN
+        vals["n"], vals["k"] = admissible(vals["n"], vals["k"])      # eta = 0 is not a material
         return vals
 
     def residual(self, sel):
@@ -857,8 +856,11 @@ def _parameter_notes(vals, stderr, corr, fitted, corr_limit, m, dof) -> list:
 
 
 def raise_or_warn(verdict, diag, strict, stacklevel=3):
-    """An inadequate model and an ill-posed fit: raise (``strict``) or warn, in that order."""
-    if not verdict.adequate:
+    """An inadequate model and an ill-posed fit: raise (``strict``) or warn, in that order.  Too few
+    geometries for the parameters is an ill-posed fit (:func:`~hyde_bsdf.fit.adequacy.too_few_geometries`)."""
+    if verdict.cause == "too few geometries":
+        diag = [verdict.message, *diag]
+    elif not verdict.adequate:
         if strict:
             raise InadequateModelError(verdict.message)
         warnings.warn(verdict.message, InadequateModelWarning, stacklevel=stacklevel)
@@ -873,8 +875,9 @@ def _adequacy(r, J, cov, ti, tr, ph, n_elements, chi2, dof, sigma_given):
     """The verdict (chi^2 with sigmas, the data's floor without) and the covariance: where the
     misfit is systematic, each error the larger of the classic and the cluster-robust one."""
     R = r.reshape(n_elements, -1)
-    verdict = (chi2_verdict(chi2, dof, R, ti, tr, ph) if sigma_given
-               else floor_verdict(None, R[None], ti, tr, ph))
+    p = np.shape(J)[-1]
+    verdict = (chi2_verdict(chi2, dof, R, ti, tr, ph, parameters=p) if sigma_given
+               else floor_verdict(None, R[None], ti, tr, ph, parameters=p))
     if verdict.errors == "classic" or not np.all(np.isfinite(cov)):
         return verdict, cov
     th, td = half_angles(ti, tr, ph)

@@ -45,7 +45,7 @@ from hyde_bsdf.fit.mueller_fit import DEFAULT_STARTS, raise_or_warn
 from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
 from hyde_bsdf.fit.spectral import spectrum_element, wavelength_note
 from hyde_bsdf.model.evaluator import pbrdf
-from hyde_bsdf.model.index import Index
+from hyde_bsdf.model.index import Index, admissible
 from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.model.terms import DIFFUSE_TERMS, check_pair
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
@@ -214,7 +214,8 @@ class _Problem:
         v = self.values(x)
         r00, rel = [], []
         for i, b in enumerate(self.bands):
-            F = pbrdf(self.ti, self.tr, self.ph, rms_slope=v["rms_slope"], n=v[("n", b)], k=v[("k", b)], **self.opts)
+            n, k = admissible(v[("n", b)], v[("k", b)])     # the optimiser's step to eta = 0
+            F = pbrdf(self.ti, self.tr, self.ph, rms_slope=v["rms_slope"], n=n, k=k, **self.opts)
             m00 = F[:, 0, 0]
             r00.append(np.log(m00 + self.floor[i]) - self.log_data[i])
             N = F / np.where(m00 > 0, m00, np.inf)[:, None, None]   # F00 underflows far from a lobe without diffuse
@@ -448,7 +449,8 @@ def _uncertainty(res, prob, free, values, data):
     sv = np.linalg.svd(J, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
     r00, rel = prob.parts(res.x)
-    verdict = floor_verdict(r00, rel, prob.ti, prob.tr, prob.ph)
+    verdict = floor_verdict(r00, rel, prob.ti, prob.tr, prob.ph,     # per band: rms_slope, n, k
+                            parameters=len({q if isinstance(q, str) else q[0] for q in free}))
     if not math.isfinite(cond) or cond > 1e12:
         cov = np.full((p, p), np.inf)
         corr = np.eye(p)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.inverse.loss import interior_mask, stokes_images
+from hyde_bsdf.inverse.loss import as_mask, interior_mask, stokes_images
 from hyde_bsdf.inverse.scalar import RANGES, _unique_key
 from hyde_bsdf.model.parameters import ALPHA, INVERSE_K_LOG_FLOOR, INVERSE_SCALE
 
@@ -175,7 +175,7 @@ def _target_shape(scene, prefix):
 
 def _obs_mask(obs: Observation) -> np.ndarray:
     ref = np.asarray(obs.reference, dtype=np.float64)
-    mask = interior_mask(ref[0]) if obs.mask is None else np.asarray(obs.mask, bool)
+    mask = interior_mask(ref[0]) if obs.mask is None else as_mask(obs.mask, "the observation's mask")
     if mask.shape != ref.shape[1:]:
         raise UsageError(f"mask shape {mask.shape} differs from the reference's {ref.shape[1:]}")
     return mask
