@@ -13,7 +13,8 @@ before the output paths and the scene have been checked.
   ``python -m hyde_bsdf.app.cli`` (where a crash or signal is the point); ``"lowmem"`` is ``"in"``
   with ``MemAvailable`` read as 2 GiB; ``"noscripts"`` is ``"in"`` with the validation scripts'
   folder missing; ``"sigint"`` sends Ctrl-C once the render's progress line appears;
-  ``"pipe"`` closes the reader of stdout at once (``hyde-bsdf fit ... | head -0``);
+  ``"sighup"`` sends SIGHUP there, ``"sigint-group"`` Ctrl-C to the run's whole process group (as a
+  terminal does); ``"pipe"`` closes the reader of stdout at once (``hyde-bsdf fit ... | head -0``);
   ``"cuda"`` is ``"in"``, run only on a machine without a CUDA GPU (hardware-dependent);
   ``"diskfull"`` is ``"in"`` with every file system reporting 50 KB free and a render pass failing
   the test (so a refusal proves the free space was checked before the first pass).
@@ -275,6 +276,18 @@ CLI_ROWS = [
      "the Stokes images of 3 frame(s), 276480000 raw values (128 B each): about 33 GiB of memory needed", "lowmem"),
     ("render: a texture whose PNG header claims 100000x100000 (new)", ["render", "{in33}/hugetex.xml", "-o",
      "{tmp}/hugetex.exr"], 2, "hugetex.png' (100000x100000x1): about 37.3 GiB of memory needed", "lowmem"),
+    ("invert --tiles 1000x1000 on a 6x6 map: refused before any scene loads (was after)", ["invert", "--maps",
+     "--scene", "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json",
+     "--reference", "{tmp}/invscene16/ref.exr", "--tiles", "1000x1000", "-o", "{tmp}/tiles"], 2,
+     "--tiles must be 1..6 x 1..6 for a 6 x 6-texel map, got 1000 x 1000 (the scene's largest texture, "
+     "'alpha.exr', read before any scene loads)", "in"),
+    # --- issue 33: a signal is one line whatever it is and wherever it lands
+    ("render: SIGHUP (the terminal closed) removes the temporaries (new)", ["render", "{tiny}", "-o",
+     "{tmp}/sighup.exr", "--spp", "200000", "--chunks", "20000"], 129, "hyde-bsdf render: terminated (SIGHUP)",
+     "sighup"),
+    ("render: Ctrl-C to the whole process group, as a terminal sends it (new)", ["render", "{tiny}", "-o",
+     "{tmp}/sigint-group.exr", "--spp", "200000", "--chunks", "20000"], 130, "hyde-bsdf render: interrupted",
+     "sigint-group"),
     # --- issue 33: control characters in an output name never reach the terminal or the XML ---
     ("render -o with an ESC in the name (new)", ["render", "{tiny}", "-o", "{tmp}/a\x1b[31mred.exr"], 2,
      "the name holds control characters (\\x1b); give a name without them", "in"),
@@ -561,6 +574,7 @@ def _issue33_files(tmp):
         write_measurements(d / name, synthetic_measurements(th, th, np.full(th.size, np.pi), n=1.5, k=3.0,
                                                             rms_slope=0.3))
     (d / "fit.pbsdf").write_text(json.dumps({"note": "a fit result under a table's name"}))
+    (d / "cam.json").write_text(json.dumps({"width": 16, "height": 16}))     # read after the --tiles check
     np.save(d / "dark.npy", np.full((8, 8), 3, np.uint16))
     np.save(d / "mosaic.npy", np.full((8, 8), 500, np.uint16))
     np.save(d / "zeros16.npy", np.zeros((16, 16)))
@@ -616,8 +630,10 @@ def _subprocess(argv, how, timeout=None):
         proc.stdout.close()                       # the reader went away before any output
         err = proc.stderr.read()
         return proc.wait(timeout=timeout), "", err
-    if how in ("sigint", "sigterm"):
-        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    if how in ("sigint", "sigterm", "sighup", "sigint-group"):
+        group = how == "sigint-group"             # Ctrl-C in a terminal reaches the whole process group
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                start_new_session=group)
         watchdog = threading.Timer(timeout, proc.kill)
         watchdog.start()
         err = ""
@@ -627,7 +643,8 @@ def _subprocess(argv, how, timeout=None):
                 if not line:
                     break
                 err += line
-            proc.send_signal(signal.SIGINT if how == "sigint" else signal.SIGTERM)
+            sig = {"sigint": signal.SIGINT, "sighup": signal.SIGHUP}.get(how, signal.SIGTERM)
+            os.killpg(proc.pid, signal.SIGINT) if group else proc.send_signal(sig)
             out, rest = proc.communicate(timeout=timeout)
         finally:
             watchdog.cancel()
@@ -667,7 +684,7 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     if how == "locked":                           # another run holds the outputs (same pid here)
         from hyde_bsdf.resources import OutputLock
         lock = OutputLock([paths["tmp"] / "locked.exr", paths["tmp"] / "locked.png", paths["tmp"] / "lockedreport"])
-    if how in ("sub", "sigint", "sigterm", "pipe"):
+    if how in ("sub", "sigint", "sigterm", "sighup", "sigint-group", "pipe"):
         got, out, err = _subprocess(argv, how)
     else:
         if how == "lowmem":
@@ -703,7 +720,7 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     after = _snapshot(paths["tmp"])
     assert {f: b for f, b in after.items() if f in before} == before, "an existing file changed or was lost"
     assert not [f for f in after if TEMP_NAME_RE.match(Path(f).name)], "a temporary was left behind"
-    if how in ("sigint", "sigterm"):
+    if how in ("sigint", "sigterm", "sighup", "sigint-group"):
         assert not (paths["tmp"] / f"{how}.exr").exists()
         assert not list(paths["tmp"].glob(f".{how}.exr.*"))   # no temporary left behind
     if how == "stale":

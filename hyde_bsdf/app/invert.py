@@ -221,10 +221,28 @@ def _check_tiles_args(args):
     if len(parts) > 2 or not all(p.strip().isdigit() and int(p) >= 1 for p in parts):
         raise UsageError(f"--tiles must be N or RxC with integers >= 1 (e.g. 4 or 4x8), got {shorten(args.tiles)}")
     args.tile_grid = (int(parts[0]), int(parts[-1]))
+    if args.scene:
+        _check_tile_grid(args.tile_grid, args.scene[0])
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be an integer >= 1, got {args.workers}")
     if args.workers is not None and args.scheduler is not None:
         raise UsageError("give --workers (a process pool here) or --scheduler (a dask cluster), not both")
+
+
+def _check_tile_grid(grid, scene) -> None:
+    """--tiles RxC refused before any scene loads when no texture of the scene's file graph has R rows
+    and C columns of texels (the map is one of them; each tile needs a texel).  Sizes from the files'
+    headers; a scene whose textures are not files (or not images) is checked once it is loaded."""
+    from hyde_bsdf.io.arrays import image_shape
+    from hyde_bsdf.io.scene_files import scene_files
+
+    sizes = {p: image_shape(p) for p in scene_files(scene)[1:] if p.is_file()}
+    sizes = {p: s for p, s in sizes.items() if s is not None}
+    if sizes and not any(h >= grid[0] and w >= grid[1] for h, w, *_ in sizes.values()):
+        biggest = max(sizes, key=lambda p: sizes[p][0] * sizes[p][1])
+        h, w = sizes[biggest][:2]
+        raise UsageError(f"--tiles must be 1..{h} x 1..{w} for a {h} x {w}-texel map, got {grid[0]} x {grid[1]} "
+                         f"(the scene's largest texture, {shorten(biggest.name)}, read before any scene loads)")
 
 
 #: invert_maps' default samples per pixel of the uncertainty step (its forward-mode renders; memory check)

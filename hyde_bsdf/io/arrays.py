@@ -19,7 +19,7 @@ from hyde_bsdf.errors import InputFileError, UsageError, one_line, shorten
 from hyde_bsdf.io.input_gate import check_dimensions, check_input
 from hyde_bsdf.resources import format_bytes
 
-__all__ = ["array_header", "read_array", "exr_shape", "check_image_memory", "IMAGE_DTYPES"]
+__all__ = ["array_header", "read_array", "exr_shape", "image_shape", "check_image_memory", "IMAGE_DTYPES"]
 
 #: PIL image mode -> (dtype, values per pixel)
 IMAGE_DTYPES = {"1": (np.bool_, 1), "L": (np.uint8, 1), "P": (np.uint8, 1), "I;16": (np.uint16, 1),
@@ -105,16 +105,21 @@ def exr_shape(path, what: str = "EXR file") -> tuple[int, int, int]:
 PIL_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".tga", ".ppm", ".pgm")
 
 
+def image_shape(path, what: str = "image") -> tuple | None:
+    """(height, width, channels) of an EXR or a PIL-readable image from its header; None for other files."""
+    name = str(path).lower()
+    if name.endswith(".exr"):
+        return exr_shape(path, what)
+    if name.endswith(PIL_SUFFIXES):
+        with _image(path, what) as im:
+            return im.height, im.width, len(im.getbands())
+    return None
+
+
 def check_image_memory(path, what: str = "image") -> None:
     """A texture or image file's decoded size (float32 per channel, as a renderer holds it), from its
     header, against the available memory; other files pass.  A header that claims 100000 x 100000 is
     one line before the renderer allocates it."""
-    name = str(path).lower()
-    if name.endswith(".exr"):
-        shape = exr_shape(path, what)
-    elif name.endswith(PIL_SUFFIXES):
-        with _image(path, what) as im:
-            shape = (im.height, im.width, len(im.getbands()))
-    else:
-        return
-    check_dimensions(shape, 4, f"{what} {shorten(str(path))}", option="give a smaller image")
+    shape = image_shape(path, what)
+    if shape is not None:
+        check_dimensions(shape, 4, f"{what} {shorten(str(path))}", option="give a smaller image")
