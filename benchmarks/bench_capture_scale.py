@@ -10,7 +10,7 @@ centre -- so 256^2 texels IS the 5-megapixel run.  The capture is simulated as i
 hyde_bsdf/validation/capture_camera.py (its camera noise model NOISE and exposure SIGNAL): the truth rendered
 through the calibrated sensor (2 passes of 4 spp), put on the raw DoFP mosaic (Sony layout) with shot
 and read noise, and estimated back by super-pixel with propagated sigma
-(:func:`hyde_bsdf.inverse.analyzer.simulate_capture`).  Then :func:`invert_maps_tiled` fits alpha with
+(:func:`hyde_bsdf.model.polarimetry.simulate_capture`).  Then :func:`invert_maps_tiled` fits alpha with
 tiles of ~64 x 64 texels (``--tile-texels``), one after the other in the process
 (:class:`~hyde_bsdf.mom.solver.SerialExecutor`), ``--iterations`` Adam iterations per tile at 4 spp
 (the first two of each tile record the frozen step and are left out of the time per iteration), with
@@ -103,7 +103,7 @@ def simulate(n: int, folder: Path, seed: int = 0):
     import mitsuba as mi
 
     from hyde_bsdf.validation.capture_camera import NOISE, SIGNAL
-    from hyde_bsdf.inverse.analyzer import simulate_capture
+    from hyde_bsdf.model.polarimetry import simulate_capture
     from hyde_bsdf.inverse.camera_data import camera_reference
     from hyde_bsdf.inverse.observations import render_stokes_np
     from hyde_bsdf.inverse.tiles import Capture

@@ -162,6 +162,50 @@ def surface():
     return {"surface_bytes_per_point": peak / points}
 
 
+def stokes():
+    """Peak bytes per raw value of the Stokes step (tracemalloc): 4 frames of 1000x1000 through the
+    least squares, and a 2000x2000 mosaic demosaicked superpixel and bilinear."""
+    import tracemalloc
+
+    import numpy as np
+
+    from hyde_bsdf.model.polarimetry import CameraNoise, stokes_from_frames, stokes_from_mosaic
+
+    rng, noise = np.random.default_rng(0), CameraNoise(read_noise=2.0, black_level=64.0)
+    out = {}
+    for key, values, run in (
+            ("stokes_bytes_per_value", 4 * 10**6,
+             lambda raw: stokes_from_frames(list(raw.reshape(4, 1000, 1000)), [0.0, 45.0, 90.0, 135.0], noise=noise)),
+            ("stokes_bytes_per_value (mosaic, superpixel)", 4 * 10**6,
+             lambda raw: stokes_from_mosaic(raw.reshape(2000, 2000), noise=noise)),
+            ("stokes_bilinear_bytes_per_value", 4 * 10**6,
+             lambda raw: stokes_from_mosaic(raw.reshape(2000, 2000), method="bilinear", noise=noise))):
+        raw = rng.uniform(500.0, 3000.0, values).round()
+        tracemalloc.start()
+        run(raw)
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        out[key] = peak / values
+    return out
+
+
+def pbrdf():
+    """Peak bytes per direction of the evaluator beyond its inputs (tracemalloc, 10^6 directions)."""
+    import tracemalloc
+
+    import numpy as np
+
+    from hyde_bsdf import pbrdf as evaluate
+
+    rng = np.random.default_rng(0)
+    ti, tr, ph = rng.uniform(0.0, 1.5, (3, 10**6))
+    tracemalloc.start()
+    evaluate(ti, tr, ph, rms_slope=0.3, n=1.5)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return {"pbrdf_bytes_per_direction": peak / ti.size}
+
+
 LOADER = r"""
 import os, sys
 import mitsuba as mi
@@ -187,7 +231,7 @@ def pbsdf(tmp):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--only", default="render,ad,forward,dense,fast,surface,pbsdf")
+    ap.add_argument("--only", default="render,ad,forward,dense,fast,surface,stokes,pbrdf,pbsdf")
     args = ap.parse_args(argv)
     from hyde_bsdf.resources import COSTS
 
@@ -197,7 +241,7 @@ def main(argv=None):
         steps = {"render": lambda: {**render(tmp, "llvm_ad_spectral_polarized", True),
                                     **render(tmp, "llvm_ad_rgb", False)},
                  "ad": lambda: ad(tmp), "forward": lambda: forward(tmp), "dense": dense, "fast": fast,
-                 "surface": surface, "pbsdf": lambda: pbsdf(tmp)}
+                 "surface": surface, "stokes": stokes, "pbrdf": pbrdf, "pbsdf": lambda: pbsdf(tmp)}
         for name in args.only.split(","):
             t0 = time.perf_counter()
             measured.update(steps[name]())

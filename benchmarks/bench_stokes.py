@@ -24,7 +24,7 @@ import time
 def _one(method: str, width: int, height: int, rounds: int) -> dict:
     import numpy as np
 
-    from hyde_bsdf.inverse.analyzer import CameraNoise, simulate_mosaic, stokes_from_mosaic
+    from hyde_bsdf.model.polarimetry import CameraNoise, simulate_mosaic, stokes_from_mosaic
 
     noise = CameraNoise(gain=1.0, read_noise=3.0, full_well=30000.0, black_level=64.0)
     S = np.zeros((4, height // 2, width // 2))

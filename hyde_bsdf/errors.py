@@ -15,8 +15,8 @@ Python callers can keep catching ``ValueError`` or ``OSError``:
 
 The command line converts them in one place, :func:`hyde_bsdf.app.cli.main`: a UsageError, an
 OSError or an OutputError is one line ``hyde-bsdf COMMAND: error: MESSAGE`` on stderr and exit
-status 2; a RejectedResult is one line and exit status 1; any other exception is a bug and keeps
-its traceback.  Messages that echo a value the user gave cut it with :func:`shorten`.
+status 2; a RejectedResult is one line and exit status 1; any other exception (a library's, or a
+bug) is one line naming its type and where, exit status 2 (``HYDE_BSDF_TRACEBACK=1`` shows its traceback).  Messages that echo a value the user gave cut it with :func:`shorten`.
 """
 from __future__ import annotations
 

@@ -38,7 +38,9 @@ def stderr_lines(prefix: str = "[hyde-bsdf]"):
         if _QUIET[0]:
             return
         try:
-            print(f"{prefix} {message}" if prefix else message, file=sys.stderr, flush=True)
+            # one write of the whole line: a kill between the text and its newline would glue the next line to it
+            sys.stderr.write((f"{prefix} {message}" if prefix else message) + "\n")
+            sys.stderr.flush()
         except (OSError, ValueError):      # a closed stderr does not stop the work
             pass
 

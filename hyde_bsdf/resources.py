@@ -8,6 +8,8 @@
   refuses work before its allocation with one line naming what needs the memory, both sizes in
   units that show them (never "0.00 GiB") and the parameter that makes it smaller.
 * :class:`OutputLock`: one writer per output at a time (a second run fails at once, one line).
+* :func:`wait_limit`: how long each kind of wait may last (:data:`TIMEOUTS`, changed by environment
+  variables); every wait on a network peer, a task or a child process is bounded by one.
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from pathlib import Path
 from hyde_bsdf.errors import UsageError, shorten
 
 __all__ = ["Costs", "COSTS", "available_memory", "total_memory", "format_bytes", "check_memory", "render_bytes",
-           "inversion_bytes", "dense_solve_cost", "OutputLock", "MEMINFO"]
+           "inversion_bytes", "dense_solve_cost", "OutputLock", "MEMINFO", "TIMEOUTS", "wait_limit"]
 
 MiB = 2**20
 
@@ -67,6 +69,13 @@ class Costs:
     far_field_seconds: float = 5.65e-10
     #: ``export``: Mitsuba's loader holds this many copies of a ``.pbsdf`` table
     pbsdf_loader_copies: int = 2
+    #: ``pbrdf``: peak bytes per direction beyond the caller's angle arrays (the (4, 4) float64 result, the
+    #: raveled angles, the diffuse term's temporaries, the finiteness check; measured 161-185 B at 10^6)
+    pbrdf_bytes_per_direction: int = 224
+    #: ``stokes``: peak bytes per raw value (pixel x frame) of frames or a superpixel mosaic, and of a
+    #: bilinear (full-resolution) mosaic (measured 72-94 B and 270 B at 1-12 million values)
+    stokes_bytes_per_value: int = 128
+    stokes_bilinear_bytes_per_value: int = 384
     #: disk, upper bounds: one plot file (the largest raster figure, a 16-element fit at 120 dpi, is
     #: 10.6 MB of RGBA; the largest vector one, the .pbsdf fit, ~30 MB), one history-CSV row
     plot_file_bytes: int = 64 * MiB
@@ -148,6 +157,29 @@ def check_memory(need, what: str, remedy: str, fraction: float = 1.0) -> int:
         raise UsageError(f"{what}: about {format_bytes(need)} of memory needed, but only "
                          f"{format_bytes(fraction * avail)} is available{share}; {remedy}")
     return need
+
+
+# ---------------------------------------------------------------------------
+# waits
+
+#: the longest wait of each kind (seconds); HYDE_BSDF_<KIND>_TIMEOUT overrides: "connect" a dask
+#: scheduler's connection and each question to it, "task" a pool or cluster without any task
+#: finishing, "script" one validation script
+TIMEOUTS = {"connect": 10.0, "task": 3600.0, "script": 3600.0}
+
+
+def wait_limit(kind: str) -> tuple[float, str]:
+    """(seconds, the environment variable that sets them) of a wait of ``kind`` (:data:`TIMEOUTS`);
+    a value that is not a number > 0 is a UsageError naming the variable."""
+    name = f"HYDE_BSDF_{kind.upper()}_TIMEOUT"
+    text = os.environ.get(name, "").strip()
+    try:
+        seconds = float(text) if text else TIMEOUTS[kind]
+    except ValueError:
+        seconds = -1.0
+    if not 0 < seconds < float("inf"):
+        raise UsageError(f"{name} must be a number of seconds > 0, got {shorten(text)}")
+    return seconds, name
 
 
 # ---------------------------------------------------------------------------

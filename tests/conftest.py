@@ -120,3 +120,16 @@ def library_modules(root=None) -> list:
 
     root = Path(root) if root is not None else Path(__file__).resolve().parent.parent / "hyde_bsdf"
     return sorted(p for p in root.rglob("*.py") if p.relative_to(root).parts[0] != "validation")
+
+
+def mitsuba_with_hyde(variant: str):
+    """Mitsuba set to ``variant`` (no fallback to another) with the ``hyde`` plugin registered in it:
+    the plugin tests' one set-up.  Returns the ``mitsuba`` module."""
+    import mitsuba as mi
+
+    import hyde_bsdf
+    from hyde_bsdf.mitsuba.variants import set_variant
+
+    set_variant(variant, fallback=False)
+    hyde_bsdf.register(variant)
+    return mi

@@ -13,7 +13,8 @@ before the output paths and the scene have been checked.
   ``python -m hyde_bsdf.app.cli`` (where a crash or signal is the point); ``"lowmem"`` is ``"in"``
   with ``MemAvailable`` read as 2 GiB; ``"noscripts"`` is ``"in"`` with the validation scripts'
   folder missing; ``"sigint"`` sends Ctrl-C once the render's progress line appears;
-  ``"pipe"`` closes the reader of stdout at once (``hyde-bsdf fit ... | head -0``);
+  ``"sighup"`` sends SIGHUP there, ``"sigint-group"`` Ctrl-C to the run's whole process group (as a
+  terminal does); ``"pipe"`` closes the reader of stdout at once (``hyde-bsdf fit ... | head -0``);
   ``"cuda"`` is ``"in"``, run only on a machine without a CUDA GPU (hardware-dependent);
   ``"diskfull"`` is ``"in"`` with every file system reporting 50 KB free and a render pass failing
   the test (so a refusal proves the free space was checked before the first pass).
@@ -247,6 +248,51 @@ CLI_ROWS = [
     ("invert --maps --scene: no room for maps of the scene's texture size (refused before the inversion)",
      ["invert", "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--reference", "{tmp}/invscene16/ref.exr", "-o",
       "{tmp}/dfull_scene"], 2, "dfull_scene' (6x6 maps): about 64", "diskfull"),
+    # --- issue 33: no output replaces an input (each option that names a file: tests/test_cli_inputs.py) ---
+    ("stokes: a chart named like a frame (new)", ["stokes", "--frames", "{in33}/s_dolp.png", "{in33}/f1.png",
+     "{in33}/f2.png", "--angles", "0,45,90", "-o", "{in33}/s.exr"], 2, "s_dolp.png' is the input", "in"),
+    ("fit --json the data file itself (new)", ["fit", "{in33}/twelve.csv", "--json", "{in33}/twelve.csv", "-q"], 2,
+     "twelve.csv' is the input", "in"),
+    ("export: the table is the --fit result it reads (new)", ["export", "{in33}/fit.pbsdf", "--fit",
+     "{in33}/fit.pbsdf"], 2, "fit.pbsdf' is the input", "in"),
+    # --- issue 33: no silent empty or degenerate answer ---
+    ("fit: 2 geometries for 3 parameters (was 'adequate')", ["fit", "{in33}/two.csv", "-q"], 0,
+     "warning: 2 distinct geometries cannot determine the 3 fitted parameter(s)", "in"),
+    ("stokes: every pixel below the black level (new)", ["stokes", "--mosaic", "{in33}/dark.npy", "--black-level",
+     "64", "--read-noise", "2", "-o", "{tmp}/dark.exr"], 2,
+     "dark.npy: every pixel is below the black level 64 DN beyond the read noise (the brightest is 3 DN)", "in"),
+    ("invert --mask of zeros (new)", ["invert", "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--reference",
+     "{tmp}/invscene16/ref.exr", "--mask", "{in33}/zeros16.npy", "-o", "{tmp}/zeromask"], 2,
+     "zeros16.npy' leaves out every pixel: nothing to fit", "in"),
+    # --- issue 33: sizes known before memory is taken; no library exception reaches the user ---
+    ("stokes --analysis whose .npy header lies (new)", ["stokes", "--mosaic", "{in33}/mosaic.npy", "--analysis",
+     "{in33}/lie.npy", "-o", "{tmp}/lie.exr"], 2,
+     "lie.npy': its header says 100000x100000x4x4 float64 values (1.16 TiB), but the file holds 8 B", "in"),
+    ("stokes: a truncated PNG frame (new)", ["stokes", "--frames", "{in33}/trunc.png", "{in33}/f1.png",
+     "{in33}/f2.png", "--angles", "0,45,90", "-o", "{tmp}/trunc.exr"], 2,
+     "trunc.png': cannot read it (image file is truncated)", "in"),
+    ("stokes: three 9600x9600 frames, 2 GiB available (was an allocation error after 20 s)", ["stokes", "--frames",
+     "{in33}/big.png", "{in33}/big.png", "{in33}/big.png", "--angles", "0,45,90", "-o", "{tmp}/big.exr"], 2,
+     "the Stokes images of 3 frame(s), 276480000 raw values (128 B each): about 33 GiB of memory needed", "lowmem"),
+    ("render: a texture whose PNG header claims 100000x100000 (new)", ["render", "{in33}/hugetex.xml", "-o",
+     "{tmp}/hugetex.exr"], 2, "hugetex.png' (100000x100000x1): about 37.3 GiB of memory needed", "lowmem"),
+    ("invert --tiles 1000x1000 on a 6x6 map: refused before any scene loads (was after)", ["invert", "--maps",
+     "--scene", "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json",
+     "--reference", "{tmp}/invscene16/ref.exr", "--tiles", "1000x1000", "-o", "{tmp}/tiles"], 2,
+     "--tiles must be 1..6 x 1..6 for a 6 x 6-texel map, got 1000 x 1000 (the scene's largest texture, "
+     "'alpha.exr', read before any scene loads)", "in"),
+    # --- issue 33: a signal is one line whatever it is and wherever it lands
+    ("render: SIGHUP (the terminal closed) removes the temporaries (new)", ["render", "{tiny}", "-o",
+     "{tmp}/sighup.exr", "--spp", "200000", "--chunks", "20000"], 129, "hyde-bsdf render: terminated (SIGHUP)",
+     "sighup"),
+    ("render: Ctrl-C to the whole process group, as a terminal sends it (new)", ["render", "{tiny}", "-o",
+     "{tmp}/sigint-group.exr", "--spp", "200000", "--chunks", "20000"], 130, "hyde-bsdf render: interrupted",
+     "sigint-group"),
+    # --- issue 33: control characters in an output name never reach the terminal or the XML ---
+    ("render -o with an ESC in the name (new)", ["render", "{tiny}", "-o", "{tmp}/a\x1b[31mred.exr"], 2,
+     "the name holds control characters (\\x1b); give a name without them", "in"),
+    ("fit -o with a newline in the name (new)", ["fit", "{csv}", "-o", "{tmp}/plot\nname.png"], 2,
+     "the name holds control characters (\\n)", "in"),
 ]
 
 
@@ -499,11 +545,56 @@ def _gate_files(tmp):
     (tmp / "data_as.png").write_bytes((tmp / "meas.csv").read_bytes())   # a CSV under a plot's name
     (tmp / "inref").mkdir()
     _stokes_exr(tmp / "inref" / "invert.png", 16, 1.0)
-    return {"fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
+    return {"in33": _issue33_files(tmp),
+            "fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
             "huge": _huge_table(tmp.parent / f"{tmp.name}_sparse"),
             "devtex": scene("devtex", bitmap.format("/dev/zero")),
             "dotdotmat": scene("dotdotmat", '<bsdf type="hyde"><string name="material" value="../ior/Au"/></bsdf>'),
             "longmat": scene("longmat", f'<bsdf type="hyde"><string name="material" value="{"A" * 100_000}"/></bsdf>')}
+
+
+def _issue33_files(tmp):
+    """Frames, CSVs, arrays and images for the issue 33 rows, in tmp/in33."""
+    import json
+    import struct
+    import zlib
+
+    import numpy as np
+    from PIL import Image
+
+    from hyde_bsdf.fit.mueller_fit import synthetic_measurements
+    from hyde_bsdf.io.measurements import write_measurements
+
+    d = tmp / "in33"
+    d.mkdir()
+    for i, name in enumerate(("s_dolp.png", "f1.png", "f2.png")):
+        Image.fromarray(np.full((8, 8), 100 + i, np.uint8)).save(d / name)
+    for name, deg in (("two.csv", [20.0, 40.0]), ("twelve.csv", np.linspace(10.0, 70.0, 12))):
+        th = np.radians(deg)
+        write_measurements(d / name, synthetic_measurements(th, th, np.full(th.size, np.pi), n=1.5, k=3.0,
+                                                            rms_slope=0.3))
+    (d / "fit.pbsdf").write_text(json.dumps({"note": "a fit result under a table's name"}))
+    (d / "cam.json").write_text(json.dumps({"width": 16, "height": 16}))     # read after the --tiles check
+    np.save(d / "dark.npy", np.full((8, 8), 3, np.uint16))
+    np.save(d / "mosaic.npy", np.full((8, 8), 500, np.uint16))
+    np.save(d / "zeros16.npy", np.zeros((16, 16)))
+    with open(d / "lie.npy", "wb") as fh:
+        np.lib.format.write_array_header_1_0(fh, {"descr": "<f8", "fortran_order": False,
+                                                  "shape": (100000, 100000, 4, 4)})
+        fh.write(b"\0" * 8)
+
+    def png(path, width, height, data):           # a grey PNG whose header claims width x height
+        chunk = lambda kind, body: (struct.pack(">I", len(body)) + kind + body
+                                    + struct.pack(">I", zlib.crc32(kind + body)))
+        path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+                         + chunk(b"IDAT", data))
+
+    png(d / "trunc.png", 64, 64, zlib.compress(b"\0" * 10)[:5])
+    png(d / "big.png", 9600, 9600, zlib.compress(b"\0" * 64))
+    png(d / "hugetex.png", 100000, 100000, zlib.compress(b"\0" * 64))
+    (d / "hugetex.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', '<bsdf type="diffuse"><texture type="bitmap" '
+                                   'name="reflectance"><string name="filename" value="hugetex.png"/></texture></bsdf>'))
+    return d
 
 
 def _snapshot(folder):
@@ -539,8 +630,10 @@ def _subprocess(argv, how, timeout=None):
         proc.stdout.close()                       # the reader went away before any output
         err = proc.stderr.read()
         return proc.wait(timeout=timeout), "", err
-    if how in ("sigint", "sigterm"):
-        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    if how in ("sigint", "sigterm", "sighup", "sigint-group"):
+        group = how == "sigint-group"             # Ctrl-C in a terminal reaches the whole process group
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                start_new_session=group)
         watchdog = threading.Timer(timeout, proc.kill)
         watchdog.start()
         err = ""
@@ -550,7 +643,8 @@ def _subprocess(argv, how, timeout=None):
                 if not line:
                     break
                 err += line
-            proc.send_signal(signal.SIGINT if how == "sigint" else signal.SIGTERM)
+            sig = {"sigint": signal.SIGINT, "sighup": signal.SIGHUP}.get(how, signal.SIGTERM)
+            os.killpg(proc.pid, signal.SIGINT) if group else proc.send_signal(sig)
             out, rest = proc.communicate(timeout=timeout)
         finally:
             watchdog.cancel()
@@ -590,7 +684,7 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     if how == "locked":                           # another run holds the outputs (same pid here)
         from hyde_bsdf.resources import OutputLock
         lock = OutputLock([paths["tmp"] / "locked.exr", paths["tmp"] / "locked.png", paths["tmp"] / "lockedreport"])
-    if how in ("sub", "sigint", "sigterm", "pipe"):
+    if how in ("sub", "sigint", "sigterm", "sighup", "sigint-group", "pipe"):
         got, out, err = _subprocess(argv, how)
     else:
         if how == "lowmem":
@@ -626,7 +720,7 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     after = _snapshot(paths["tmp"])
     assert {f: b for f, b in after.items() if f in before} == before, "an existing file changed or was lost"
     assert not [f for f in after if TEMP_NAME_RE.match(Path(f).name)], "a temporary was left behind"
-    if how in ("sigint", "sigterm"):
+    if how in ("sigint", "sigterm", "sighup", "sigint-group"):
         assert not (paths["tmp"] / f"{how}.exr").exists()
         assert not list(paths["tmp"].glob(f".{how}.exr.*"))   # no temporary left behind
     if how == "stale":

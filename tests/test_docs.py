@@ -96,7 +96,7 @@ def prose(page: Path) -> str:
 
 def test_pages_exist():
     names = {_rel(p) for p in PAGES}
-    for required in ("docs/index.md", "docs/plugin.md", "docs/conventions.md", "docs/validation.md",
+    for required in ("docs/index.md", "docs/architecture.md", "docs/plugin.md", "docs/conventions.md", "docs/validation.md",
                      "docs/troubleshooting.md"):
         assert required in names
 

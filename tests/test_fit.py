@@ -367,3 +367,8 @@ def test_default_fits_everything_the_elements_determine_and_a_fixed_roughness_ta
     assert "held fixed (rms_slope = 0.3) cause the misfit, not the sigmas" in held.verdict.message
     assert "rms_slope = 0.44" in held.verdict.message
     assert not any("underestimate" in t for t in [held.verdict.message] + held.data_warnings)
+    d = held.to_dict()              # the lab fit's JSON schema (issue 30 item 4)
+    assert set(d) == {"model", "parameters", "covariance", "verdict", "models"}
+    assert [(p["name"], p["stderr"] is None) for p in d["parameters"]] == [("n", False), ("k", False),
+                                                                           ("rms_slope", True)]
+    assert not d["verdict"]["adequate"] and "held fixed" in d["verdict"]["warnings"][-1]

@@ -1,11 +1,11 @@
-"""Raw analyzer frames -> Stokes (hyde_bsdf.inverse.analyzer): the least-squares estimate recovers a
+"""Raw analyzer frames -> Stokes (hyde_bsdf.model.polarimetry): the least-squares estimate recovers a
 known Stokes field, its propagated sigma matches the scatter over repeated noisy frames, and bad input
 is refused with one line naming the frame and the problem."""
 import numpy as np
 import pytest
 
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.inverse.analyzer import (CameraNoise, analysis_matrix, retarder_mueller, simulate_frames,
+from hyde_bsdf.model.polarimetry import (CameraNoise, analysis_matrix, retarder_mueller, simulate_frames,
                                         simulate_mosaic, stokes_from_frames, stokes_from_mosaic)
 
 NOISE = CameraNoise(gain=0.5, read_noise=3.0, full_well=20000.0, black_level=64.0)
@@ -143,7 +143,7 @@ def test_saturated_pixels_can_be_masked_instead():
 def test_written_estimate_is_what_the_inverse_reads(tmp_path):
     """The EXR of a DoFP estimate reads back (camera_reference) as the linear-only luminance reference
     with its sigma and mask."""
-    from hyde_bsdf.inverse.analyzer import write_stokes_estimate
+    from hyde_bsdf.model.polarimetry import write_stokes_estimate
     from hyde_bsdf.inverse.camera_data import camera_reference
 
     rng = np.random.default_rng(4)

@@ -15,7 +15,7 @@ import pytest
 
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.inverse._common import Y_WEIGHTS
-from hyde_bsdf.inverse.analyzer import CameraNoise, stokes_from_mosaic, simulate_mosaic
+from hyde_bsdf.model.polarimetry import CameraNoise, stokes_from_mosaic, simulate_mosaic
 from hyde_bsdf.inverse.camera_data import camera_reference
 from hyde_bsdf.io.stokes_exr import read_camera_stokes, write_camera_stokes, write_stokes_exr
 
@@ -198,7 +198,7 @@ def test_calibrated_rig_recovers_an_alpha_map():
     pytest.importorskip("mitsuba")
     from hyde_bsdf import inverse as inv
     from hyde_bsdf.inverse import acquisition as acqm
-    from hyde_bsdf.inverse.analyzer import simulate_capture
+    from hyde_bsdf.model.polarimetry import simulate_capture
     from hyde_bsdf.inverse.camera_data import calibrated_observations
     from hyde_bsdf.inverse.observations import render_stokes_np
     from hyde_bsdf.render.camera import Calibration, calibrated_scene, light_dict

@@ -138,7 +138,8 @@ def test_json_result_has_the_issue_schema(lab_fit, tmp_path, capsys):
     csv = write_measurements(tmp_path / "lab.csv", lab_measurements())
     out = tmp_path / "fit.json"
     assert main(["fit", str(csv), "--shadowing", "smith", "--diffuse", "lambertian", "--json", str(out), "-q"]) == 0
-    assert "<spectrum name=\"eta\" value=\"632.8:" in capsys.readouterr().out
+    xml = capsys.readouterr().out      # measured at 632.8 and 1550 nm: held from 360 nm up, said so
+    assert '<spectrum name="eta" value="360:' in xml and "over 360-632.8 nm the end values are held" in xml
     cli = json.loads(out.read_text())
     assert cli["model"] == d["model"]
     for a, b in zip(cli["parameters"], d["parameters"]):
@@ -207,3 +208,52 @@ def test_export_takes_a_fits_index_per_wavelength_and_refuses_outside_it(tmp_pat
     assert "diffuse_reflectance must be given with diffuse='lambertian'" in capsys.readouterr().err
     assert main(plain + ["--diffuse-reflectance", "0.1"]) == 0
     assert "diffuse_reflectance = 0.1" in capsys.readouterr().out
+
+
+def test_normalized_rows_are_whitened_with_their_shared_m00_noise():
+    """Without M00 a row's ratios M_jk/M00 share M00's noise: covariance C = diag(own^2) + s s^T per
+    row (s = delta r, own^2 = sigma^2 - s^2).  ``LabData.whiten`` (Sherman-Morrison, one dot product
+    per row) gives e^T C^-1 e, the chi^2 of the dense covariance, to 1e-10 relative, and whitens
+    Jacobian columns the same way; rows whose sigmas imply M00 is not above 0 within 3 sigma are left
+    out and counted.  < 1 s."""
+    from hyde_bsdf.fit.lab_data import RATIO_DELTA, lab_data
+
+    meas = lab_measurements(with_m00=False, n=40)
+    data = lab_data(meas)
+    data = data.with_shared(data.y * (1.0 + 0.1 * np.sin(np.arange(data.y.size))))   # a model's r, not the data's
+    C, N = len(data.columns), data.geometries
+    own2 = np.maximum(data.w ** 2 - data.shared ** 2, (0.1 * data.w) ** 2).reshape(C, N)
+    s = data.shared.reshape(C, N)
+    e = np.random.default_rng(3).standard_normal(data.y.size) * data.w
+    E = e.reshape(C, N)
+    dense = sum(E[:, i] @ np.linalg.solve(np.diag(own2[:, i]) + np.outer(s[:, i], s[:, i]), E[:, i])
+                for i in range(N))
+    assert float(data.whiten(e) @ data.whiten(e)) == pytest.approx(dense, rel=1e-10)
+    J = np.stack([e, 2 * e], axis=1)
+    assert np.allclose(data.whiten(J), np.stack([data.whiten(e), 2 * data.whiten(e)], axis=1), rtol=1e-12)
+    # a row whose M00 is noise (every sigma large): left out, counted, named in the fit's notes
+    noisy = lab_measurements(with_m00=False, n=40)
+    for e_ in noisy.sigma:
+        noisy.sigma[e_][:3] = 2 * RATIO_DELTA * np.hypot(1.0, noisy.values[e_][:3])
+    kept = lab_data(noisy)
+    assert kept.groups[0].uninformative == 3 and kept.groups[0].rows_in == 40
+
+
+def test_index_spectra_are_held_over_mitsubas_colour_range_and_say_so():
+    """An index measured at 450-650 nm, written as it was measured, is 0 outside in spectral variants
+    and the wrong colour in RGB ones (Mitsuba integrates the spectrum over 360-830 nm: a constant 0.5
+    becomes the RGB index (0.42, 0.53, 0.25)).  spectrum_element holds the end values out to 360 and
+    830 nm, so the RGB index of a flat measurement is that value to 0.2 %, and the note says where it
+    extrapolates.  < 1 s."""
+    from hyde_bsdf.fit.spectral import extrapolation_warning, spectrum_element
+    from hyde_bsdf.mitsuba.variants import set_variant
+    import mitsuba as mi
+
+    wl = [450.0, 550.0, 650.0]
+    xml = spectrum_element("eta", wl, [0.5, 0.5000001, 0.5])
+    assert xml.startswith('<spectrum name="eta" value="360:0.5, 450:0.5') and xml.endswith('650:0.5, 830:0.5"/>')
+    set_variant("scalar_rgb", fallback=False)
+    params = mi.traverse(mi.load_string(f'<bsdf version="3.0.0" type="roughconductor">{xml}</bsdf>'))
+    assert np.allclose(np.asarray(params["eta.value"]), 0.5, rtol=2e-3)
+    assert "over 360-450 and 650-830 nm the end values are held" in extrapolation_warning(wl)
+    assert extrapolation_warning([300.0, 900.0]) is None

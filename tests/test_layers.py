@@ -8,8 +8,8 @@ imported from anywhere and import nothing of the package but ``errors``.  Every 
 functions too (they are parsed, not run).  The bottom layer, ``io``, imports only the standard
 library, NumPy and (lazily) the file-format packages; the library below ``app`` does no argparse
 and no plotting.  ``validation`` (the validation scripts, run by ``hyde-bsdf validate`` as child
-processes) is the top layer: nothing else imports it.  This test reads the source only: it checks the rule of docs/index.md's
-"Package layout" in a fraction of a second.
+processes) is the top layer: nothing else imports it.  This test reads the source only: it checks the rule of
+docs/architecture.md in a fraction of a second.
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ LAYER = {"errors": None, "progress": None, "resources": None, "options": None, "
 ROOT_NAMES = {"register": "mitsuba", "pbrdf": "model", "dhr_specular_pec": "model", "rms_slope_from": "model",
               "alpha_from_rms_slope": "model", "rms_slope_from_alpha": "model"}
 #: third-party packages the io layer may use (the last three only inside the function that needs them)
-IO_THIRD_PARTY = {"numpy", "OpenEXR", "mitsuba", "drjit"}
+IO_THIRD_PARTY = {"numpy", "OpenEXR", "PIL", "mitsuba", "drjit"}
 #: what only the application (``app``) and the validation scripts above it may import
 APP_ONLY = {"argparse", "matplotlib"}
 
@@ -91,7 +91,7 @@ def _violations(path: Path, root: Path = PACKAGE) -> list[str]:
             if target == "" or target == own or LAYER.get(target, 0) is None:
                 continue
             if target not in LAYER:
-                out.append(f"{where}: {target!r} is in no layer (add it to LAYER and docs/index.md)")
+                out.append(f"{where}: {target!r} is in no layer (add it to LAYER and docs/architecture.md)")
             elif layer is None:
                 out.append(f"{where}: {own}.py must import nothing of the package")
             elif LAYER[target] >= layer:

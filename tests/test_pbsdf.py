@@ -6,7 +6,7 @@ Physics and format checked:
 - the reader on hand-built tables with NaN, negative-M00 and over-polarized cells: the counts
   are exact and no such cell reaches the fit;
 - the frame conversion against Mitsuba's own C++ ``measured_polarized`` eval (scalar variant),
-  rotated into the paper's bases by ``hyde_bsdf.mitsuba.frames.eval_paper``: the NumPy lookup
+  rotated into the paper's bases by ``hyde_bsdf.validation._frames.eval_paper``: the NumPy lookup
   replica in the paper's bases equals it to 1e-4 (float32 interpolation), including the NaN
   quirks (a NaN in M00 at a corner blacks out the matrix, a NaN elsewhere makes it all NaN);
 - Mitsuba's C++ eval of an exported file against the Python ``hyde`` plugin: the error
@@ -22,12 +22,15 @@ Physics and format checked:
 """
 import math
 
+import json
+
 import numpy as np
 import pytest
 
 from hyde_bsdf import pbrdf
 from hyde_bsdf.app.cli import main
 from hyde_bsdf.errors import UsageError
+from hyde_bsdf.model.terms import RENDER_DEFAULT
 from hyde_bsdf.fit.pbsdf_export import (_query_geometries, check_table_size, error_statistics,
                                         export_pbsdf, grids)
 from hyde_bsdf.io.pbsdf_file import (PbsdfFileError, directions_to_rusinkiewicz, read_pbsdf,
@@ -77,7 +80,8 @@ def test_reader_on_an_exported_file_gives_the_model_at_every_node(exported):
     assert len(s) == s.usable_geometries > 100
     assert np.all(s.theta_i <= math.radians(80) + 1e-9) and np.all(s.theta_r <= math.radians(80) + 1e-9)
     for b in range(5):
-        F = pbrdf(s.theta_i, s.theta_r, s.phi, rms_slope=0.25, n=PARAMS["n"][b], k=PARAMS["k"][b])
+        F = pbrdf(s.theta_i, s.theta_r, s.phi, rms_slope=0.25, n=PARAMS["n"][b], k=PARAMS["k"][b],
+                  shadowing=RENDER_DEFAULT[0], diffuse=RENDER_DEFAULT[1])     # the export's default model
         err = np.abs(s.F[b] - F).max(axis=(1, 2)) / F[:, 0, 0]
         assert err.max() < 2e-6, (b, err.max())
 
@@ -167,7 +171,7 @@ def test_reader_refuses_a_table_mitsuba_would_refuse(tmp_path):
 
 def test_frames_and_lookup_match_mitsubas_measured_polarized(exported, tmp_path):
     mi = _mitsuba()
-    from hyde_bsdf.mitsuba.frames import eval_paper
+    from hyde_bsdf.validation._frames import eval_paper
 
     path, _ = exported
     t = read_pbsdf(path)
@@ -210,7 +214,7 @@ def test_frames_and_lookup_match_mitsubas_measured_polarized(exported, tmp_path)
 def test_cpp_eval_of_the_export_agrees_with_the_hyde_plugin_within_the_reported_error(exported):
     mi = _mitsuba()
     import hyde_bsdf
-    from hyde_bsdf.mitsuba.frames import eval_paper
+    from hyde_bsdf.validation._frames import eval_paper
 
     hyde_bsdf.register("scalar_spectral_polarized")
     path, report = exported
@@ -278,23 +282,55 @@ def test_round_trip_export_read_fit_recovers_the_parameters(exported):
 
     path, _ = exported
     data = pbsdf_samples(path, max_points=150, seed=1)
-    result = fit_pbsdf(data, rms_slope=0.4, progress=False)
+    result = fit_pbsdf(data, rms_slope=0.4, shadowing=RENDER_DEFAULT[0], diffuse=RENDER_DEFAULT[1], progress=False)
     assert result.success and not result.warnings
     assert result.rms_slope == pytest.approx(0.25, rel=1e-4)
     assert np.allclose(result.n, PARAMS["n"], rtol=1e-4) and np.allclose(result.k, PARAMS["k"], rtol=1e-4)
     xml = result.plugin_xml()
     assert result.stderr["rms_slope"] < 1e-4 and "spectrum" in xml
-    # the index at the table's bands only: nothing held out to 360 or 830 nm, and the XML says so
-    first = f"{result.wavelengths[0]:g}:"
-    assert f'"{first}' in xml and "360:" not in xml and "830:" not in xml and "reads these spectra as 0" in xml
+    # the index at the table's bands, the end values held out to Mitsuba's 360-830 nm (else 0 there in
+    # spectral variants, a wrong colour in RGB ones) -- explicitly: the XML says where it extrapolates
+    first, last = (f"{w:g}" for w in (result.wavelengths[0], result.wavelengths[-1]))
+    assert f'"360:{result.n[0]:.6g}, {first}:{result.n[0]:.6g}' in xml
+    assert f'{last}:{result.n[-1]:.6g}, 830:{result.n[-1]:.6g}"' in xml
+    assert f"over 360-{first} and {last}-830 nm the end values are held (an extrapolation, not measured" in xml
+
+
+def test_a_table_misfit_from_a_held_roughness_is_blamed_on_it(exported):
+    """Issue 30 item 3 for tables: rms_slope held at 0.4 on a table made at 0.25 misfits M00 by far;
+    the verdict names the held parameter and the value it takes when fitted (0.25 to 1e-3) -- not the
+    lobe's shape or the terms it would otherwise suspect.  Two small fits, ~3 s."""
+    import warnings
+
+    from hyde_bsdf.fit.pbsdf_fit import fit_pbsdf
+
+    path, _ = exported
+    data = pbsdf_samples(path, max_points=150, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        held = fit_pbsdf(data, fit=("n", "k"), rms_slope=0.4, shadowing=RENDER_DEFAULT[0],
+                         diffuse=RENDER_DEFAULT[1], progress=False)        # the table's terms (the export's default)
+    assert not held.verdict.adequate and held.verdict.message.startswith("M00 misfit")
+    assert "the parameter(s) held fixed (rms_slope = 0.4) cause the misfit" in held.verdict.message
+    fitted = float(held.verdict.message.split("(rms_slope = ")[2].split(")")[0])
+    assert fitted == pytest.approx(0.25, rel=1e-3)
 
 
 def test_fit_cli_on_a_pbsdf_file(exported, tmp_path, capsys):
     path, _ = exported
-    code = main(["fit", str(path), "--max-points", "40", "--n0", "0.6", "--k0", "2.6", "-q"])
+    js = tmp_path / "fit.json"
+    code = main(["fit", str(path), "--max-points", "40", "--n0", "0.6", "--k0", "2.6", "--json", str(js), "-q"])
     out = capsys.readouterr().out
     assert code == 0
     assert "rms_slope = 0.25" in out and "0 with NaN/inf" in out and '<bsdf type="hyde">' in out
+    # issue 30 item 4 for tables: the lab fit's JSON schema, n and k per band at its wavelength
+    d = json.loads(js.read_text())
+    assert set(d) == {"model", "parameters", "covariance", "verdict", "models"}
+    bands = [p["wavelength_nm"] for p in d["parameters"] if p["name"] == "n"]
+    assert len(bands) == 5 and d["parameters"][-1]["name"] == "rms_slope"
+    assert d["parameters"][-1]["value"] == pytest.approx(0.25, rel=1e-3)
+    assert np.shape(d["covariance"]["matrix"]) == (11, 11) and len(d["covariance"]["names"]) == 11
+    assert sum(m["chosen"] for m in d["models"]) == 1 and d["verdict"]["p_value"] is None
     assert main(["fit", str(path), "--tolerance", "2", "-q"]) == 2          # refused before fitting
     assert "tolerance" in capsys.readouterr().err
     assert main(["fit", str(tmp_path / "missing.pbsdf")]) == 2

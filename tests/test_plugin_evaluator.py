@@ -20,7 +20,7 @@ import zlib
 import numpy as np
 import pytest
 
-from hyde_bsdf.mitsuba.variants import set_variant
+from conftest import mitsuba_with_hyde
 
 RTOL = 1e-5
 ATOL = 1e-7            # sr^-1, far below any visible BRDF value
@@ -37,14 +37,6 @@ INDICES = [("Au", {"material": "Au"}), ("glass", {"eta": 1.5, "k": 0.0}),
            ("large-k", {"eta": 1.2, "k": 10.4})]
 
 
-def _setup(variant):
-    import mitsuba as mi
-    import hyde_bsdf
-
-    set_variant(variant, fallback=False)
-    hyde_bsdf.register()
-    return mi
-
 
 def _index_at(mi, bsdf_params, wavelength):
     """(n, k) that the plugin's eta/k textures hold at ``wavelength`` (for the evaluator)."""
@@ -59,7 +51,7 @@ def _index_at(mi, bsdf_params, wavelength):
 
 
 def _directions(n, seed, theta_max_deg=89.0):
-    from hyde_bsdf.mitsuba import frames as pf
+    from hyde_bsdf.validation import _frames as pf
 
     rng = np.random.default_rng(seed)
     ti, tr, ph, phi_i = pf.random_angles(n, rng, math.radians(theta_max_deg))
@@ -73,7 +65,7 @@ def _directions(n, seed, theta_max_deg=89.0):
 
 def _compare(mi, params, n_dirs, seed, mode="radiance", wavelength=633.0):
     import hyde_bsdf
-    from hyde_bsdf.mitsuba import frames as pf
+    from hyde_bsdf.validation import _frames as pf
 
     dirs, (ti, tr, ph) = _directions(n_dirs, seed)
     bsdf = mi.load_dict({"type": "hyde", **params})
@@ -126,7 +118,7 @@ ALBEDO = 0.2
 
 @pytest.mark.parametrize("label,shadowing,diffuse,rms,mode", LLVM_CASES)
 def test_llvm_polarized_matches_evaluator(label, shadowing, diffuse, rms, mode):
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     index = dict(INDICES)[label]
     params = {"rms_slope": rms, "shadowing": shadowing, "diffuse": diffuse, **index}
     if diffuse == "lambertian":
@@ -142,7 +134,7 @@ def test_llvm_polarized_matches_evaluator(label, shadowing, diffuse, rms, mode):
     ("large-k", "vgroove", "reciprocal", 0.8, "radiance"),
 ])
 def test_scalar_polarized_matches_evaluator(label, shadowing, diffuse, rms, mode):
-    mi = _setup("scalar_spectral_polarized")
+    mi = mitsuba_with_hyde("scalar_spectral_polarized")
     index = dict(INDICES)[label]
     params = {"rms_slope": rms, "shadowing": shadowing, "diffuse": diffuse, **index}
     F_plugin, F_eval = _compare(mi, params, 10_000, seed=7, mode=mode)   # ~2 s per case
@@ -151,7 +143,7 @@ def test_scalar_polarized_matches_evaluator(label, shadowing, diffuse, rms, mode
 
 def test_smith_matches_evaluator_within_rational_g1_error():
     """Smith: Mitsuba's rational G1 approximation vs the evaluator's exact erf form."""
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     params = {"rms_slope": 0.3, "shadowing": "smith", "diffuse": "paper", "material": "Au"}
     F_plugin, F_eval = _compare(mi, params, 10_000, seed=3)
     worst = _check(F_plugin, F_eval, "paper", "smith", rtol=SMITH_RTOL)
@@ -163,7 +155,7 @@ def test_dhr_texture_matches_evaluator_table():
     from hyde_bsdf.model.evaluator import diffuse_pbrdf
     from hyde_bsdf.mitsuba import plugin as plugin_mod
 
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     rng = np.random.default_rng(11)
     theta = np.arccos(rng.uniform(math.cos(math.radians(89.0)), 1.0, 20_000))
     for shadowing in ("vgroove", "smith", "none"):
@@ -181,9 +173,9 @@ def test_normal_incidence_mirror_is_diag_1_1_m1_m1(variant):
     """Paper's convention check without the evaluator: at normal incidence and normal
     observation r_p = -r_s, so any metal's Mueller matrix in the paper's bases is
     F00 diag(1, 1, -1, -1) (COMMON.md); this also exercises the collinear-frame fallback."""
-    from hyde_bsdf.mitsuba import frames as pf
+    from hyde_bsdf.validation import _frames as pf
 
-    mi = _setup(variant)
+    mi = mitsuba_with_hyde(variant)
     bsdf = mi.load_dict({"type": "hyde", "rms_slope": 0.1, "material": "Au", "diffuse": "none"})
     om_i, om_r, s_i, s_r = pf.paper_geometry([0.0], [0.0], [math.pi], [0.0])
     for mode in ("radiance", "importance"):

@@ -6,18 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from hyde_bsdf.mitsuba.variants import set_variant
+from conftest import mitsuba_with_hyde
 
 GLASS = '<spectrum name="eta" value="400:1.53, 700:1.51"/><float name="k" value="0"/>'
 
-
-def _setup(variant):
-    import mitsuba as mi
-    import hyde_bsdf
-
-    set_variant(variant, fallback=False)
-    hyde_bsdf.register(variant)
-    return mi
 
 
 def _xml(mi, body):
@@ -35,7 +27,7 @@ def test_dielectric_spectrum_gives_the_fresnel_reflectance_of_glass(variant):
     Mueller matrix is F diag(1, 1, -1, -1) in Mitsuba's bases, per wavelength."""
     import drjit as dr
 
-    mi = _setup(variant)
+    mi = mitsuba_with_hyde(variant)
     rms = 0.2
     with pytest.warns(RuntimeWarning, match="eta and k are both 0 at 360-390 nm, 710-830 nm"):
         b = _xml(mi, f'<float name="rms_slope" value="{rms}"/>{GLASS}<string name="diffuse" value="none"/>')
@@ -58,7 +50,7 @@ def test_dielectric_spectrum_equals_roughconductor_with_the_same_index():
     """hyde (smith, no diffuse) and roughconductor with eta = the glass spectrum, k = 0."""
     import drjit as dr
 
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     with pytest.warns(RuntimeWarning):
         hyde = _xml(mi, f'<float name="alpha" value="0.3"/>{GLASS}<string name="shadowing" value="smith"/>'
                         f'<string name="diffuse" value="none"/>')
@@ -87,13 +79,13 @@ def test_dielectric_spectrum_equals_roughconductor_with_the_same_index():
 
 
 def test_only_an_index_that_really_is_zero_is_refused():
-    mi = _setup("scalar_spectral_polarized")
+    mi = mitsuba_with_hyde("scalar_spectral_polarized")
     zero = '<spectrum name="eta" value="400:0, 700:0"/><float name="k" value="0"/>'
     with pytest.raises(Exception, match="hyde: parameter 'eta'.*eta and k both 0"):
         _xml(mi, zero)
     _xml(mi, '<spectrum name="eta" value="300:1.5, 900:1.5"/><float name="k" value="0"/>')  # no warning
     _xml(mi, '<rgb name="eta" value="1.5, 1.5, 1.5"/><float name="k" value="0"/>')
-    rgb = _setup("llvm_ad_rgb")
+    rgb = mitsuba_with_hyde("llvm_ad_rgb")
     rgb.load_string('<bsdf version="3.0.0" type="hyde"><rgb name="eta" value="1.5, 1.4, 1.3"/>'
                     '<float name="k" value="0"/></bsdf>')
     with pytest.raises(Exception, match="eta and k cannot both be 0"):
@@ -102,7 +94,7 @@ def test_only_an_index_that_really_is_zero_is_refused():
 
 
 def test_sample_visible_string_is_parsed():
-    mi = _setup("scalar_rgb")
+    mi = mitsuba_with_hyde("scalar_rgb")
     for text, want in (("false", False), ("False", False), ("true", True)):
         b = _xml(mi, f'<string name="sample_visible" value="{text}"/>')
         assert b.m_sample_visible is want

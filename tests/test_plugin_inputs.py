@@ -22,17 +22,10 @@ import numpy as np
 import pytest
 
 from hyde_bsdf.mitsuba.variants import set_variant
+from conftest import mitsuba_with_hyde
 
 ALL_KINDS = ["scalar_rgb", "llvm_ad_rgb", "llvm_ad_mono_polarized", "llvm_ad_spectral_polarized"]
 
-
-def _setup(variant):
-    import mitsuba as mi
-    import hyde_bsdf
-
-    set_variant(variant, fallback=False)
-    hyde_bsdf.register(variant)
-    return mi
 
 
 def _si(mi, uv, wi=(0.3, 0.1, 0.95)):
@@ -67,7 +60,7 @@ def png(tmp_path_factory):
 @pytest.mark.parametrize("variant", ALL_KINDS)
 @pytest.mark.parametrize("raw", [True, False])
 def test_8bit_png_roughness_is_checked_and_used_as_eval_returns_it(variant, raw, png):
-    mi = _setup(variant)
+    mi = mitsuba_with_hyde(variant)
     tex = {"type": "bitmap", "filename": png, "raw": raw, "filter_type": "nearest"}
     bsdf = mi.load_dict({"type": "hyde", "alpha": tex, "material": "Au", "diffuse": "none",
                          "shadowing": "smith"})
@@ -92,7 +85,7 @@ def test_8bit_png_roughness_is_checked_and_used_as_eval_returns_it(variant, raw,
     ("specular_reflectance", -0.5, "'specular_reflectance' must be finite and >= 0"),
 ])
 def test_bad_texels_of_the_index_and_scale_are_refused(variant, name, texel, needle):
-    mi = _setup(variant)
+    mi = mitsuba_with_hyde(variant)
     data = np.full((3, 3, 1), 1.5 if name == "eta" else 0.5, np.float32)
     data[1, 2, 0] = texel
     tex = {"type": "bitmap", "raw": True, "data": mi.TensorXf(data)}
@@ -103,7 +96,7 @@ def test_bad_texels_of_the_index_and_scale_are_refused(variant, name, texel, nee
 
 
 def test_alpha_zero_renders_as_the_lower_bound_with_one_warning():
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     from hyde_bsdf.model.parameters import ALPHA
 
     si = _si(mi, (0.25, 0.25), wi=(0.3, 0.0, 0.954))
@@ -127,7 +120,7 @@ def test_alpha_zero_renders_as_the_lower_bound_with_one_warning():
 
 
 def test_material_none_is_roughconductors_spelling():
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     si = _si(mi, (0.5, 0.5))
     default = _eval(mi, mi.load_dict({"type": "hyde"}), si)
     assert np.array_equal(_eval(mi, mi.load_dict({"type": "hyde", "material": "none"}), si), default)
@@ -149,7 +142,7 @@ def _quad_ply(path, r, e):
 def test_mesh_attribute_values_are_clamped_at_eval_never_nan_never_energy_gain(tmp_path):
     import drjit as dr
 
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     path = tmp_path / "quad.ply"
     _quad_ply(path, r=[math.nan, -1.0, 1e9, 0.3], e=[-1.5, math.nan, 1e12, 1.5])
     with warnings.catch_warnings(record=True) as caught:
@@ -189,7 +182,7 @@ def test_mesh_attribute_values_are_clamped_at_eval_never_nan_never_energy_gain(t
                                        ("eta.value", -1.0), ("k.value", 1e9),
                                        ("specular_reflectance.value", -1.0)])
 def test_refused_update_leaves_the_bsdf_as_it_was(key, value):
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     b = mi.load_dict({"type": "hyde", "alpha": 0.3, "eta": 0.5, "k": 3.0})
     si = _si(mi, (0.5, 0.5))
     before = _eval(mi, b, si)
@@ -207,7 +200,7 @@ def test_refused_update_leaves_the_bsdf_as_it_was(key, value):
 
 
 def test_refused_bitmap_update_restores_every_texel():
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     data = np.full((2, 3, 1), 0.3, np.float32)
     data[0, 1, 0] = 0.6
     b = mi.load_dict({"type": "hyde", "rms_slope": {"type": "bitmap", "raw": True, "filter_type": "nearest",
@@ -232,7 +225,7 @@ def test_update_checks_read_an_8bit_png_through_eval_and_a_float_bitmap_from_its
     alpha 0.78 raw, 0.58 sRGB-decoded: accepted, although 200 is outside [0, 70.71])."""
     import drjit as dr
 
-    mi = _setup("llvm_ad_mono_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_mono_polarized")
     png_tex = {"type": "bitmap", "filename": png, "raw": raw, "filter_type": "nearest"}
     params = mi.traverse(mi.load_dict({"type": "hyde", "alpha": png_tex, "material": "Au"}))
     for _ in range(2):

@@ -13,16 +13,8 @@ import math
 import numpy as np
 import pytest
 
-from hyde_bsdf.mitsuba.variants import set_variant
+from conftest import mitsuba_with_hyde
 
-
-def _setup(variant):
-    import mitsuba as mi
-    import hyde_bsdf
-
-    set_variant(variant, fallback=False)
-    hyde_bsdf.register()
-    return mi
 
 
 def _query(mi, theta_i=0.5, theta_o=0.9, phi=0.4, uv=(0.5, 0.5)):
@@ -42,7 +34,7 @@ def _bsdf(mi, **extra):
 
 
 def test_the_albedo_adds_to_the_unpolarized_element_only():
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     si, wo = _query(mi)
     with_term = np.array(_bsdf(mi, diffuse="lambertian", diffuse_reflectance=0.2).eval(mi.BSDFContext(), si, wo))
     without = np.array(_bsdf(mi, diffuse="none").eval(mi.BSDFContext(), si, wo))
@@ -54,7 +46,7 @@ def test_the_albedo_adds_to_the_unpolarized_element_only():
 def test_the_albedo_is_differentiable():
     """d eval / d diffuse_reflectance = cos(theta_o) / pi (rgb variant, every channel)."""
     import drjit as dr
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     bsdf = _bsdf(mi, diffuse="lambertian", diffuse_reflectance=0.2)
     params = mi.traverse(bsdf)
     assert "diffuse_reflectance.value" in params.keys()
@@ -68,7 +60,7 @@ def test_the_albedo_is_differentiable():
 
 
 def test_a_bitmap_albedo_is_read_per_shading_point(tmp_path):
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     data = np.array([[[0.1], [0.4]]], np.float32)          # 1 x 2 texels: 0.1 on the left, 0.4 on the right
     tex = {"type": "bitmap", "bitmap": mi.Bitmap(data), "filter_type": "nearest", "raw": True}
     lam, base = _bsdf(mi, diffuse="lambertian", diffuse_reflectance=tex), _bsdf(mi, diffuse="none")
@@ -83,7 +75,7 @@ def test_a_bitmap_albedo_is_read_per_shading_point(tmp_path):
     (dict(diffuse="paper", diffuse_reflectance=0.2), r"diffuse_reflectance is the albedo of diffuse='lambertian'"),
 ])
 def test_a_wrong_albedo_is_refused_in_one_line(extra, match):
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     with pytest.raises(Exception, match=match) as info:      # Mitsuba's load_dict re-raises as RuntimeError
         _bsdf(mi, **extra)
     assert str(info.value).strip().splitlines()[-1].startswith("UsageError: hyde:")

@@ -15,20 +15,12 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import scaled
+from conftest import mitsuba_with_hyde, scaled
 
 from hyde_bsdf.mitsuba.variants import set_variant
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-
-def _setup(variant):
-    import mitsuba as mi
-    import hyde_bsdf
-
-    set_variant(variant, fallback=False)
-    hyde_bsdf.register()
-    return mi
 
 
 def _dirs(mi, n, seed, zmin=0.1):
@@ -135,7 +127,7 @@ BAD = [
 
 @pytest.mark.parametrize("params,words", BAD, ids=[",".join(p) for p, _ in BAD])
 def test_bad_parameters_raise_naming_them(params, words):
-    mi = _setup("scalar_rgb")
+    mi = mitsuba_with_hyde("scalar_rgb")
     from hyde_bsdf.mitsuba.plugin import plugin_class
 
     props = mi.Properties("hyde")
@@ -151,7 +143,7 @@ def test_bad_parameters_raise_naming_them(params, words):
 
 
 def test_roughness_spellings_are_the_same_surface():
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     wi, wo = _dirs(mi, 2000, 1)
     ref = _eval_batch(mi, mi.load_dict({"type": "hyde", "rms_slope": 0.3, "material": "Au"}), wi, wo)
     for spelling in ({"alpha": 0.3 * math.sqrt(2)}, {"sigma_h": 0.3, "ell": math.sqrt(2)}):
@@ -160,10 +152,10 @@ def test_roughness_spellings_are_the_same_surface():
 
 
 def test_defaults_and_xml():
-    mi = _setup("scalar_spectral_polarized")
+    mi = mitsuba_with_hyde("scalar_spectral_polarized")
     b = mi.load_string('<bsdf version="3.0.0" type="hyde"/>')
     text = str(b)
-    for w in ("rms_slope=0.3", "shadowing='vgroove'", "diffuse='paper'", "sample_visible=True"):
+    for w in ("rms_slope=0.3", "shadowing='vgroove'", "diffuse='reciprocal'", "sample_visible=True"):
         assert w in text
     b = mi.load_string('<bsdf version="3.0.0" type="hyde"><float name="alpha" value="0.2"/>'
                        '<string name="material" value="Al"/><string name="shadowing" value="smith"/>'
@@ -174,7 +166,7 @@ def test_defaults_and_xml():
 
 @pytest.mark.parametrize("variant", ["scalar_rgb", "llvm_ad_spectral_polarized"])
 def test_parameter_scenes_load(variant):
-    mi = _setup(variant)
+    mi = mitsuba_with_hyde(variant)
     files = sorted(glob.glob(os.path.join(ROOT, "hyde_bsdf", "data", "scenes", "plugin_*.xml")))
     assert len(files) >= 5
     for f in files:
@@ -182,7 +174,7 @@ def test_parameter_scenes_load(variant):
 
 
 def test_parameter_scene_renders_finite():
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     scene = mi.load_file(os.path.join(ROOT, "hyde_bsdf", "data", "scenes", "plugin_diffuse.xml"), width=48, height=16, spp=2)
     img = np.array(mi.render(scene))
     assert np.isfinite(img).all() and img.mean() > 0.01
@@ -197,10 +189,10 @@ def test_parameter_scene_renders_finite():
 def test_unpolarized_variants_give_m00_of_polarized(variant, shadowing, diffuse):
     params = {"type": "hyde", "rms_slope": 0.25, "eta": 0.6, "k": 4.2, "shadowing": shadowing,
               "diffuse": diffuse}
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     wi, wo = _dirs(mi, 300, 3)
     ref = _eval_batch(mi, mi.load_dict(params), wi, wo)[:, 0, 0]
-    mi = _setup(variant)
+    mi = mitsuba_with_hyde(variant)
     b = mi.load_dict(params)
     got = _eval_batch(mi, b, wi, wo)
     if mi.is_polarized:   # mono_polarized: its own Mueller matrix's M00
@@ -214,7 +206,7 @@ def test_unpolarized_variants_give_m00_of_polarized(variant, shadowing, diffuse)
 # ------------------------------------------------------------------ traverse and AD
 
 def test_traverse_exposes_differentiable_roughness_and_index():
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     b = mi.load_dict({"type": "hyde", "rms_slope": 0.3, "eta": 0.5, "k": 3.0})
     params = mi.traverse(b)
     assert set(params.keys()) == {"rms_slope.value", "eta.value", "k.value", "specular_reflectance.value"}
@@ -235,7 +227,7 @@ def test_gradients_match_finite_differences(component):
     """d/dp of a weighted sum of Mueller elements, p in (rms_slope, eta, k), vs central differences."""
     import drjit as dr
 
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     b = mi.load_dict({"type": "hyde", "rms_slope": 0.3, "eta": 0.5, "k": 3.0, "diffuse": "reciprocal"})
     params = mi.traverse(b)
     wi, wo = _dirs(mi, 64, 0, zmin=0.2)

@@ -20,20 +20,12 @@ import math
 import numpy as np
 import pytest
 
-from hyde_bsdf.mitsuba.variants import set_variant
+from conftest import mitsuba_with_hyde
 
 RTOL = 1e-5
 ATOL = 1e-7
 EPS32 = 2.0 ** -24
 
-
-def _setup(variant):
-    import mitsuba as mi
-    import hyde_bsdf
-
-    set_variant(variant, fallback=False)
-    hyde_bsdf.register()
-    return mi
 
 
 def _pair(mi, alpha, index, sample_visible):
@@ -89,7 +81,7 @@ CASES = [  # (alpha, index, sample_visible, mode)
 def test_llvm_eval_pdf_sample_equal_roughconductor(alpha, index, visible, mode):
     import drjit as dr
 
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     hyde, rc = _pair(mi, alpha, index, visible)
     n = 10_000
     wi, wo = _directions(mi, n, seed=int(alpha * 1000))
@@ -130,7 +122,7 @@ def test_llvm_eval_pdf_sample_equal_roughconductor(alpha, index, visible, mode):
 
 
 def test_scalar_eval_pdf_sample_equal_roughconductor():
-    mi = _setup("scalar_spectral_polarized")
+    mi = mitsuba_with_hyde("scalar_spectral_polarized")
     hyde, rc = _pair(mi, 0.25, {"material": "Cu"}, True)
     rng = np.random.default_rng(2)
     wi_all, wo_all = _directions(mi, 200, seed=9)

@@ -3,7 +3,7 @@
 Physics checked: the directions ``sample`` draws (visible-normal Beckmann sampling
 of the specular lobe mixed with cosine sampling of the diffuse lobe) follow the
 density ``pdf`` reports - Mitsuba's chi^2 test on the sphere (``mitsuba.chi2``,
-with the polarization-aware adapter ``hyde_bsdf.mitsuba.chi2``) at 13 (rms_slope,
+with the polarization-aware adapter ``hyde_bsdf.validation._chi2``) at 13 (rms_slope,
 theta_i) configurations spanning rms_slope 0.02-1.5 and theta_i 0-85 deg, for
 several shadowing/diffuse/sample_visible settings, in an unpolarized and a
 polarized LLVM variant; and the returned Mueller weight is eval/pdf.
@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pytest
 
-from hyde_bsdf.mitsuba.variants import set_variant
+from conftest import mitsuba_with_hyde
 
 CONFIGS = [(0.02, 30), (0.02, 60), (0.05, 0), (0.05, 45), (0.1, 0), (0.1, 85), (0.3, 45),
            (0.3, 80), (0.6, 10), (0.6, 70), (1.0, 30), (1.5, 0), (1.5, 85)]
@@ -30,22 +30,14 @@ CASES = [(v, m, c) for v, ms in MODELS.items() for m in ms for c in CONFIGS]
 CASES += [("llvm_ad_rgb", ("smith", "lambertian", True), c) for c in ((0.02, 30), (0.3, 80), (1.0, 30))]
 
 
-def _setup(variant):
-    import mitsuba as mi
-    import hyde_bsdf
-
-    set_variant(variant, fallback=False)
-    hyde_bsdf.register()
-    return mi
-
 
 @pytest.mark.parametrize("variant,model,config", CASES,
                          ids=[f"{v}-{m[0]}-{m[1]}-{'vis' if m[2] else 'all'}-{c[0]}-{c[1]}deg"
                               for v, m, c in CASES])
 def test_chi2(variant, model, config):
-    from hyde_bsdf.mitsuba.chi2 import chi2_test
+    from hyde_bsdf.validation._chi2 import chi2_test
 
-    mi = _setup(variant)
+    mi = mitsuba_with_hyde(variant)
     shadowing, diffuse, visible = model
     rms, theta_deg = config
     bsdf = mi.load_dict({"type": "hyde", "rms_slope": rms, "material": "Au", "shadowing": shadowing,
@@ -64,7 +56,7 @@ def test_weight_is_eval_over_pdf_polarized(mode, diffuse, visible):
     """sample() returns wo, pdf(wo) and the full Mueller weight eval(wo)/pdf(wo)."""
     import drjit as dr
 
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     bsdf = mi.load_dict({"type": "hyde", "rms_slope": 0.4, "material": "Al", "diffuse": diffuse,
                          "sample_visible": visible})
     n = 20_000

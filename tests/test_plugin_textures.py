@@ -12,16 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from hyde_bsdf.mitsuba.variants import set_variant
+from conftest import mitsuba_with_hyde
 
-
-def _setup(variant):
-    import mitsuba as mi
-    import hyde_bsdf
-
-    set_variant(variant, fallback=False)
-    hyde_bsdf.register(variant)
-    return mi
 
 
 def _bitmap(mi, values, filter_type="bilinear"):
@@ -71,7 +63,7 @@ VARIANTS = ["llvm_ad_spectral_polarized", "llvm_ad_rgb"]
 @pytest.mark.parametrize("variant", VARIANTS)
 @pytest.mark.parametrize("key", ["rms_slope", "alpha"])
 def test_constant_textures_equal_the_float(variant, key):
-    mi = _setup(variant)
+    mi = mitsuba_with_hyde(variant)
     si, wo, _ = _si(mi, 3000, 1)
     base = {"type": "hyde", "material": "Au", "diffuse": "reciprocal"}
     ref = _eval(mi, mi.load_dict({**base, key: 0.3}), si, wo)
@@ -87,7 +79,7 @@ def test_bitmap_and_checkerboard_give_the_roughness_of_the_texel(variant):
     """Each half of a 2x1 nearest-filtered bitmap, each checker square, is its own surface."""
     import drjit as dr
 
-    mi = _setup(variant)
+    mi = mitsuba_with_hyde(variant)
     base = {"type": "hyde", "eta": 0.4, "k": 3.5, "diffuse": "paper"}
     cases = [("rms_slope", _bitmap(mi, [[0.1, 0.6]], "nearest"), {(0.25, 0.5): 0.1, (0.75, 0.5): 0.6}),
              ("alpha", {"type": "checkerboard", "color0": 0.2, "color1": 0.5},
@@ -117,7 +109,7 @@ def test_bitmap_and_checkerboard_give_the_roughness_of_the_texel(variant):
 
 
 def test_keys_follow_the_scene_spelling_and_update_like_a_fresh_load():
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     si, wo, _ = _si(mi, 1000, 4)
     b = mi.load_dict({"type": "hyde", "alpha": 0.3, "eta": 0.5, "k": 3.0})
     params = mi.traverse(b)
@@ -130,7 +122,7 @@ def test_keys_follow_the_scene_spelling_and_update_like_a_fresh_load():
     tex = mi.load_dict({"type": "hyde", "rms_slope": _bitmap(mi, np.full((2, 2), 0.3)), "material": "Au"})
     keys = set(mi.traverse(tex).keys())
     assert {"rms_slope.data", "eta.values", "eta.wavelengths", "k.values", "k.wavelengths"} <= keys
-    rgb = _setup("llvm_ad_rgb")
+    rgb = mitsuba_with_hyde("llvm_ad_rgb")
     keys = set(rgb.traverse(rgb.load_dict({"type": "hyde", "material": "Au"})).keys())
     assert {"rms_slope.value", "eta.value", "k.value"} <= keys
 
@@ -142,7 +134,7 @@ def test_keys_follow_the_scene_spelling_and_update_like_a_fresh_load():
     ("eta.value", 0.0, ["eta", "k", "0"]),
 ])
 def test_update_is_validated_as_at_load(key, value, words):
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     b = mi.load_dict({"type": "hyde", "alpha": 0.3, "eta": 0.5, "k": 0.0 if key == "eta.value" else 3.0})
     params = mi.traverse(b)
     params[key] = value
@@ -153,7 +145,7 @@ def test_update_is_validated_as_at_load(key, value, words):
 
 
 def test_update_of_bitmap_texels_is_validated():
-    mi = _setup("llvm_ad_rgb")
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
     b = mi.load_dict({"type": "hyde", "rms_slope": _bitmap(mi, np.full((2, 3), 0.3))})
     params = mi.traverse(b)
     data = np.full((2, 3, 1), 0.3, np.float32)
@@ -170,7 +162,7 @@ def test_gradients_reach_each_texel(key, diffuse):
     """d loss / d texel of a bilinear 2x2 roughness bitmap: AD against central differences."""
     import drjit as dr
 
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     x0 = np.array([[0.2, 0.35], [0.5, 0.8]]) * (math.sqrt(2) if key == "alpha" else 1.0)
     b = mi.load_dict({"type": "hyde", key: _bitmap(mi, x0), "eta": 0.5, "k": 3.0, "diffuse": diffuse})
     params = mi.traverse(b)
@@ -206,7 +198,7 @@ def test_gradients_reach_each_texel(key, diffuse):
 def test_specular_reflectance_scales_the_bsdf_and_is_differentiable():
     import drjit as dr
 
-    mi = _setup("llvm_ad_spectral_polarized")
+    mi = mitsuba_with_hyde("llvm_ad_spectral_polarized")
     si, wo, _ = _si(mi, 500, 6)
     one = mi.load_dict({"type": "hyde", "rms_slope": 0.3, "material": "Cu"})
     half = mi.load_dict({"type": "hyde", "rms_slope": 0.3, "material": "Cu", "specular_reflectance": 0.5})
@@ -222,6 +214,6 @@ def test_specular_reflectance_scales_the_bsdf_and_is_differentiable():
 
 
 def test_sigma_h_and_ell_stay_scalar_with_a_message_saying_so():
-    mi = _setup("scalar_rgb")
+    mi = mitsuba_with_hyde("scalar_rgb")
     with pytest.raises(Exception, match="sigma_h and ell are scalars; give rms_slope or alpha for a texture"):
         mi.load_dict({"type": "hyde", "sigma_h": {"type": "checkerboard"}, "ell": 1.0})

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hyde_bsdf.app.cli import main
-from hyde_bsdf.inverse.analyzer import CameraNoise, simulate_mosaic
+from hyde_bsdf.model.polarimetry import CameraNoise, simulate_mosaic
 from hyde_bsdf.io.stokes_exr import read_camera_stokes
 
 
@@ -42,7 +42,7 @@ def test_stokes_writes_the_exr_and_the_charts(raw, tmp_path, capsys):
     (["--frames", "RAW", "RAW", "RAW"], "--frames needs --angles"),
     (["--mosaic", "RAW", "--layout", "0,45,90"], "--layout needs 4 angles"),
     (["--mosaic", "RAW", "--full-well", "100"], "at or above the saturation level"),
-    (["--mosaic", "missing.npy"], "no such file"),
+    (["--mosaic", "missing.npy"], "does not exist"),      # the input gate's words (issue 33: read_array)
 ])
 def test_stokes_bad_input_is_one_line(args, message, raw, tmp_path, capsys):
     argv = ["stokes"] + [str(raw) if a == "RAW" else a for a in args] + ["-o", str(tmp_path / "x.exr")]
@@ -84,7 +84,7 @@ def test_invert_reads_a_linear_camera_exr(tmp_path, capsys):
     import mitsuba as mi
 
     from hyde_bsdf import inverse as inv
-    from hyde_bsdf.inverse.analyzer import simulate_capture, write_stokes_estimate
+    from hyde_bsdf.model.polarimetry import simulate_capture, write_stokes_estimate
 
     inv.prepare(inv.observations.MAP_VARIANT)
     mi.Bitmap(np.full((2, 2, 1), 0.3, np.float32)).write(str(tmp_path / "a.exr"))

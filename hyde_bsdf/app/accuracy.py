@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.args import Parser, quiet_option, reads, user_input
 from hyde_bsdf.model.accuracy import TOLERANCE, TOLERANCE_DB, accuracy, load_atlas
 from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
 
@@ -47,7 +47,7 @@ def build_parser() -> Parser:
     ap.add_argument("--tol", type=float, default=TOLERANCE,
                     help="tolerance of the normalised elements Mij/M00 (default %(default)g)")
     ap.add_argument("--json", action="store_true", help="print the answer as JSON")
-    ap.add_argument("--atlas", default=None, metavar="FILE", help="another atlas table (default: the shipped one)")
+    reads(ap.add_argument("--atlas", default=None, metavar="FILE", help="another atlas table (default: the shipped one)"))
     quiet_option(ap)
     return ap
 

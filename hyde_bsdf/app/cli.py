@@ -14,15 +14,16 @@ What happens when things go wrong, for every sub-command (handled once here):
   or a numerical failure (``FloatingPointError``: a loss that became NaN) -- one line, exit 1;
 * an operating-system error on a file (missing, no permission, disk full, ...) -- one line, exit 2;
 * a missing optional Python package -- one line naming it, exit 2;
-* Ctrl-C -- ``hyde-bsdf COMMAND: interrupted``, exit 130 (outputs are atomic: the old files stay),
-  also when Mitsuba hands it back wrapped in a RuntimeError;
-* SIGTERM / SIGHUP -- ``hyde-bsdf COMMAND: terminated (SIGTERM)``, exit 143 / 129: the signal
-  unwinds like Ctrl-C, so hidden temporary files are removed (:mod:`hyde_bsdf.app.signals`;
-  after a SIGKILL the next run's output checks remove them);
+* Ctrl-C -- ``hyde-bsdf COMMAND: interrupted``, exit 130; SIGTERM / SIGHUP -- ``hyde-bsdf COMMAND:
+  terminated (SIGTERM)``, exit 143 / 129, at any moment: the command runs as a child process that
+  this one stops, removing its temporaries (:mod:`hyde_bsdf.app.signals`); the old files stay;
+* a closed standard output (``>&-``) -- refused before the work, one line, exit 2;
 * a failed write (disk full, quota, I/O error) -- one line naming the file, exit 2; that file is
   unchanged (:class:`hyde_bsdf.io.atomic.OutputWriteError`);
 * a closed output pipe (``hyde-bsdf fit data.csv | head``) -- quiet, exit 141 (as for SIGPIPE);
-* anything else is a bug and keeps its Python traceback (exit 1).
+* anything else (a library's exception: NumPy's LinAlgError, a MemoryError, Mitsuba's RuntimeError, or a
+  bug) -- one line naming its type and where in the package it was raised, exit 2
+  (:func:`unexpected`; ``HYDE_BSDF_TRACEBACK=1`` shows the traceback instead).
 
 Each sub-command raises; none converts an exception itself.  A Python warning is one line
 ``hyde-bsdf COMMAND: warning: MESSAGE``.  ``-q``/``--quiet`` (every sub-command has it) silences
@@ -35,9 +36,12 @@ Documented exit codes of the commands themselves stay: 1 for "fit did not conver
 """
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 import sys
+
+from hyde_bsdf.app.signals import SUPERVISOR_ENV, handle_signals, supervise, work_setup
 
 #: sub-command -> (module, one-line help)
 COMMANDS = {
@@ -71,8 +75,11 @@ def _error(command: str, message: str) -> None:
     from hyde_bsdf.app.flags import for_command_line
     from hyde_bsdf.errors import shorten_values
 
+    if sys.stderr is None:          # closed: print(file=None) would write to standard output
+        return
     try:
-        print(f"hyde-bsdf {command}: {shorten_values(for_command_line(message))}", file=sys.stderr, flush=True)
+        sys.stderr.write(f"hyde-bsdf {command}: {shorten_values(for_command_line(message))}\n")   # one write
+        sys.stderr.flush()
     except (OSError, ValueError):
         pass
 
@@ -116,8 +123,12 @@ def _one_line_warnings(command):
 def _run(command: str, argv: list) -> int:
     import warnings
 
+    from hyde_bsdf.errors import UsageError
+
     from hyde_bsdf.progress import set_quiet
 
+    if sys.stdout is None:
+        raise UsageError(CLOSED_STDOUT)
     quiet = any(a in ("-q", "--quiet") for a in argv)
     old_quiet, old_show = set_quiet(quiet), warnings.showwarning
     warnings.showwarning = _one_line_warnings(command)
@@ -133,15 +144,51 @@ def _run(command: str, argv: list) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """``hyde-bsdf COMMAND ...``: run the sub-command and turn what it raises into one line and
-    an exit status (the module docstring lists them)."""
+    an exit status (the module docstring lists them).  From the console (no ``argv``) the command
+    runs as a child process that this one waits on, so that a signal ends it at any moment with
+    one line (:mod:`hyde_bsdf.app.signals`); with ``argv`` it runs in this process."""
+    work = os.environ.pop(SUPERVISOR_ENV, None)
+    console = argv is None
     argv = list(sys.argv[1:] if argv is None else argv)
     command = argv[0] if argv else ""
     if command not in COMMANDS:
         return _usage(argv, command)
-    from hyde_bsdf.app.signals import handle_signals
+    if console and work is None:
+        if _closed_stdout():
+            _error(command, f"error: {CLOSED_STDOUT}")
+            return EXIT_USAGE
+        supervise(command, argv[1:], lambda message: _error(command, message))
+    if work is not None:
+        from hyde_bsdf.io import atomic
 
+        atomic.on_temporary = work_setup(work)
     with handle_signals():          # in-process callers (tests) get their handlers back
-        return _convert(command, argv[1:])
+        code = _convert(command, argv[1:])
+    if work is not None:            # no wait for threads a library left running (dask's)
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(code)
+    return code
+
+
+#: the refusal of a run whose standard output is closed (``>&-``)
+CLOSED_STDOUT = ("standard output is closed (>&-): the results printed there would be lost; redirect it "
+                 "(>/dev/null to discard them)")
+
+
+def _closed_stdout() -> bool:
+    """Whether standard output is closed; a closed standard input or error is opened on /dev/null
+    (so that no file this run opens takes their place)."""
+    closed = []
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            closed.append(fd)
+            if fd != 1:
+                os.open(os.devnull, os.O_RDONLY if fd == 0 else os.O_WRONLY)
+    return 1 in closed
 
 
 def _convert(command: str, argv: list) -> int:
@@ -174,13 +221,38 @@ def _convert(command: str, argv: list) -> int:
         where = f": {exc.filename!r}" if getattr(exc, "filename", None) else ""
         _error(command, f"error: {exc.strerror or one_line(exc)}{where}")
         return EXIT_USAGE
-    except RuntimeError as exc:
-        cause = _interrupt_in(exc)
-        if cause is None:
+    except Exception as exc:  # noqa: BLE001 -- a library's exception (or a bug): one line, never a traceback
+        cause = _interrupt_in(exc)          # Mitsuba wraps a Ctrl-C / SIGTERM in a RuntimeError
+        if cause is not None:
+            message, code = outcome(cause)
+            _error(command, message)
+            return code
+        if os.environ.get(TRACEBACK_ENV):
             raise
-        message, code = outcome(cause)
-        _error(command, message)
-        return code
+        _error(command, f"error: {unexpected(exc)}")
+        return EXIT_USAGE
+
+
+#: set (to anything) to see the traceback of an unexpected exception instead of its one line
+TRACEBACK_ENV = "HYDE_BSDF_TRACEBACK"
+
+
+def unexpected(exc: BaseException) -> str:
+    """The one line of an exception no part of the package turned into a message: what it is, where
+    it was raised (the innermost frame in hyde_bsdf), and how to see the rest."""
+    import traceback
+
+    from hyde_bsdf.errors import one_line
+
+    if isinstance(exc, MemoryError):
+        what = "out of memory" + (f" ({one_line(exc)})" if str(exc) else "") + ": give smaller inputs"
+    elif isinstance(exc, RecursionError):
+        what = "an input is nested too deeply to be read (RecursionError)"
+    else:
+        what = f"{type(exc).__name__}: {one_line(exc) or 'no message'}"
+    ours = [f for f in traceback.extract_tb(exc.__traceback__) if f"{os.sep}hyde_bsdf{os.sep}" in f.filename]
+    where = f" in {ours[-1].filename.rsplit(os.sep + 'hyde_bsdf' + os.sep, 1)[1]}:{ours[-1].lineno}" if ours else ""
+    return f"{what} (unexpected{where}; {TRACEBACK_ENV}=1 shows the traceback -- please report it)"
 
 
 if __name__ == "__main__":

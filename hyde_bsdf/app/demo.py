@@ -32,14 +32,14 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.app.args import Parser, positive_int, quiet_option
+from hyde_bsdf.app.args import Parser, positive_int, quiet_option, reads, writes
 from hyde_bsdf.app.pictures import (png_bytes, polarization_png_paths, save_png, save_polarization_pngs,
                                     save_rgb_png)
 from hyde_bsdf.app.render import output_bytes, room_for
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.input_gate import check_input
-from hyde_bsdf.io.output_gate import check_output_dir, check_output_path
-from hyde_bsdf.resources import OutputLock
+from hyde_bsdf.io.output_gate import check_output_dir, check_output_path, output_gate
+from hyde_bsdf.io.scene_files import scene_files
 from hyde_bsdf.io.stokes_exr import write_stokes_exr
 from hyde_bsdf.progress import stderr_lines
 from hyde_bsdf.render.polarization import polarization_quantities, tonemap
@@ -67,11 +67,6 @@ def render_demo(outdir, width=None, height=None, spp=None, variant=DEFAULT_VARIA
     :data:`DEFAULTS_SCALAR` when the variant falls back to scalar.  One run at a time writes the
     set (the output gate's lock): a second fails at once with one line.
     """
-    with OutputLock(demo_outputs(Path(outdir), str(variant).endswith("_polarized")), "demo output"):
-        return _render_demo(outdir, width, height, spp, variant, seed, bsdf, scene)
-
-
-def _render_demo(outdir, width, height, spp, variant, seed, bsdf, scene) -> dict:
     if bsdf not in ("hyde", "roughconductor"):
         raise UsageError(f"bsdf must be 'hyde' or 'roughconductor', got {bsdf!r}")
     scene = Path(scene)
@@ -79,8 +74,12 @@ def _render_demo(outdir, width, height, spp, variant, seed, bsdf, scene) -> dict
         raise UsageError(f"demo scene {str(scene)!r} not found: pass --scene")
     check_input(scene, "demo scene", stdin=False)          # a FIFO or a device: one line, never opened
     outdir = check_output_dir(outdir, "--outdir")
-    for path in demo_outputs(outdir, str(variant).endswith("_polarized")):
-        check_output_path(path, "output file")
+    outputs = [check_output_path(p, "output file") for p in demo_outputs(outdir, str(variant).endswith("_polarized"))]
+    with output_gate(outputs, inputs=scene_files(scene), what="demo output"):
+        return _render_demo(outdir, width, height, spp, variant, seed, bsdf, scene)
+
+
+def _render_demo(outdir, width, height, spp, variant, seed, bsdf, scene) -> dict:
     chosen = prepare_variant(variant)
     defaults = DEFAULTS_SCALAR if chosen.startswith("scalar_") else DEFAULTS_LLVM
     if chosen.startswith("scalar_") and None in (width, height, spp):
@@ -185,7 +184,7 @@ def _overview(stokes: dict, path: Path, title: str) -> Path:
 
 def build_parser() -> Parser:
     p = Parser(prog="hyde-bsdf demo", description=__doc__.split("\n\n")[0])
-    p.add_argument("-o", "--outdir", default="out/demo", help="output folder (default out/demo)")
+    writes(p.add_argument("-o", "--outdir", default="out/demo", help="output folder (default out/demo)"))
     p.add_argument("--width", type=positive_int, default=None,
                    help="image width in pixels (default %d; %d on the scalar fallback)"
                    % (DEFAULTS_LLVM[0], DEFAULTS_SCALAR[0]))
@@ -201,7 +200,8 @@ def build_parser() -> Parser:
     p.add_argument("--seed", type=int, default=0, help="random seed 0..32767 (default 0)")
     p.add_argument("--bsdf", choices=("hyde", "roughconductor"), default="hyde",
                    help="BSDF of the metals and the floor (default hyde; roughconductor to compare)")
-    p.add_argument("--scene", default=str(DEMO_SCENE), help="scene file (default hyde_bsdf/data/scenes/demo.xml)")
+    reads(p.add_argument("--scene", default=str(DEMO_SCENE),
+                         help="scene file (default hyde_bsdf/data/scenes/demo.xml)"), "scene")
     quiet_option(p)
     return p
 

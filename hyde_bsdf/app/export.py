@@ -3,7 +3,7 @@
 Command line::
 
     hyde-bsdf export OUT.pbsdf --rms-slope 0.3 (--material Au | --n N[,N,...] --k K[,K,...])
-                     [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none|lambertian]
+                     [--shadowing vgroove|smith|none] [--diffuse reciprocal|paper|none|lambertian]
                      [--diffuse-reflectance A[,A,...]] [--band-index projected|sampled]
     hyde-bsdf export OUT.pbsdf --fit FIT.json [--extrapolate]
                      [--resolution 37x55x55] [--error-samples 20000]
@@ -21,14 +21,15 @@ from __future__ import annotations
 import json
 import warnings
 
-from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.args import Parser, quiet_option, reads, run_inputs, user_input, writes
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.fit.lab import material_at
 from hyde_bsdf.fit.pbsdf_bands import BAND_INDEX, check_wavelengths, choose_bands, index_spectrum
 from hyde_bsdf.fit.pbsdf_export import DEFAULT_RESOLUTION, export_pbsdf
 from hyde_bsdf.io.input_gate import read_input
+from hyde_bsdf.io.output_gate import check_not_input
 from hyde_bsdf.io.pbsdf_file import KAIST_WAVELENGTHS
-from hyde_bsdf.model.terms import DIFFUSE, SHADOWING
+from hyde_bsdf.model.terms import DIFFUSE, RENDER_DEFAULT, SHADOWING
 from hyde_bsdf.progress import stderr_lines
 
 __all__ = ["build_parser", "cli_main"]
@@ -59,7 +60,7 @@ def _material(args) -> dict:
             bands = choose_bands(index_spectrum(args.material), bands, "sampled")
         return dict(rms_slope=args.rms_slope, n=None if args.n is None else _floats(args.n, "n"),
                     k=None if args.k is None else _floats(args.k, "k"), material=args.material,
-                    shadowing=args.shadowing, diffuse=args.diffuse or DIFFUSE[0], diffuse_reflectance=albedo,
+                    shadowing=args.shadowing, diffuse=args.diffuse or RENDER_DEFAULT[1], diffuse_reflectance=albedo,
                     bands=bands)
     named = [f for f, v in (("--rms-slope", args.rms_slope), ("--material", args.material), ("--n", args.n),
                             ("--k", args.k), ("--diffuse", args.diffuse), ("--diffuse-reflectance", albedo),
@@ -85,23 +86,24 @@ def build_parser() -> Parser:
                              "renderer (mitsuba executable, CUDA without Python) renders in *_spectral_polarized "
                              "variants; prints the measured interpolation error and the <bsdf> element to use. "
                              "Index: the paper's eta = n - jk (the plugin's eta = n, k = k).")
-    ap.add_argument("output", help="the .pbsdf file to write (atomically)")
+    writes(ap.add_argument("output", help="the .pbsdf file to write (atomically)"))
     ap.add_argument("--rms-slope", type=float, default=None,
                     help="the paper's rms_slope = sqrt(2) sigma_h/ell (required unless --fit)")
-    ap.add_argument("--fit", default=None, metavar="FIT.json",
-                    help="the material of a fit's JSON result (hyde-bsdf fit --json): roughness, terms, albedo and "
-                         "the index per wavelength, interpolated at the bands")
+    reads(ap.add_argument("--fit", default=None, metavar="FIT.json",
+                          help="the material of a fit's JSON result (hyde-bsdf fit --json): roughness, terms, albedo "
+                               "and the index per wavelength, interpolated at the bands"))
     ap.add_argument("--extrapolate", action="store_true",
                     help="with --fit: hold the nearest measured index at bands outside the fit's wavelengths (a guess; "
                          "warned) instead of refusing")
     ap.add_argument("--material", default=None, help="a Mitsuba data/ior material (Au, Ag, Al, Cu, ...)")
     ap.add_argument("--n", default=None, help="real part of the index: one value or 5 (one per band)")
     ap.add_argument("--k", default=None, help="imaginary part (paper's kappa >= 0): one value or 5")
-    ap.add_argument("--shadowing", default=SHADOWING[0], choices=SHADOWING,
+    ap.add_argument("--shadowing", default=RENDER_DEFAULT[0], choices=SHADOWING,
                     help="shadowing-masking: the paper's V-groove, Smith's for Beckmann, or none (default %(default)s)")
     ap.add_argument("--diffuse", default=None, choices=DIFFUSE,
-                    help=f"diffuse term: the paper's, a reciprocal variant, none, or a Lambertian term with its own albedo "
-                         f"(default {DIFFUSE[0]})")
+                    help=f"diffuse term (default {RENDER_DEFAULT[1]}: the plugin's default, which conserves energy in a "
+                         f"path tracer); paper: Eq. 17 as written, which gains energy at grazing angles there "
+                         f"(docs/plugin.md); none; or a Lambertian term with its own albedo")
     ap.add_argument("--diffuse-reflectance", default=None,
                     help="the Lambertian term's albedo: one value or 5 (one per band); required with --diffuse lambertian")
     ap.add_argument("--resolution", default="x".join(map(str, DEFAULT_RESOLUTION)),
@@ -122,8 +124,10 @@ def build_parser() -> Parser:
 
 def cli_main(argv=None) -> int:
     """``hyde-bsdf export``: write the table, print the summary and the XML element."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
     with user_input():
+        check_not_input([args.output], run_inputs(parser, args), "the .pbsdf output")    # --fit FIT.json
         opts = _material(args)
         report = export_pbsdf(args.output, **opts, resolution=args.resolution,
                               error_samples=args.error_samples, alpha_sample=args.alpha_sample,

@@ -10,12 +10,13 @@ Command lines::
     hyde-bsdf fit FILE.pbsdf [--fit n,k,rms_slope] [--rms-slope 0.3] [--n0 N] [--k0 K]
                   [--model auto|fixed] [--shadowing vgroove|smith|none] [--diffuse paper|reciprocal|none]
                   [--max-points 3000] [--theta-max 80] [--tolerance 0.05] [--seed 0]
-                  [--sigma-h-um UM | --sigma-h-wl H] [--strict] [-o fit.png] [-q]
+                  [--sigma-h-um UM | --sigma-h-wl H] [--json FILE] [--strict] [-o fit.png] [-q]
 
 A CSV (M00 in 1/sr optional, several wavelengths in one file) is fitted by
 :func:`hyde_bsdf.fit.lab.fit_lab`: everything the data determine unless ``--fit`` names fewer,
 one joint fit over the wavelengths; ``--json FILE`` writes the machine-readable result
-(``-``: to stdout, the summary then on stderr).  Without ``--shadowing`` and ``--diffuse`` the model is chosen (``--model auto``,
+(``-``: to stdout, the summary then on stderr) -- a table's too, in the same schema (n and k per
+band at the band's wavelength).  Without ``--shadowing`` and ``--diffuse`` the model is chosen (``--model auto``,
 :mod:`hyde_bsdf.fit.model_selection`): every shadowing x diffuse model is fitted and the smallest
 adequate one kept; the table of models is printed and, with ``-o``, plotted (misfit against model
 size) beside the fit as ``NAME_models.EXT``.  Every fit prints its verdict
@@ -41,7 +42,7 @@ from pathlib import Path
 
 from hyde_bsdf.app.accuracy import (add_height_options, check_height_options, height_wl, lab_verdict_lines,
                                     pbsdf_verdict_lines)
-from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.args import Parser, quiet_option, reads, run_inputs, user_input, writes
 from hyde_bsdf.app.flags import for_command_line
 from hyde_bsdf.app.plots import (PLOT_FORMATS, check_plot_path, plot_lab_fit, plot_lab_selection, plot_pbsdf_fit,
                                  plot_selection)
@@ -182,7 +183,7 @@ def csv_parser() -> Parser:
                     "model chosen. The index is the paper's eta = n - jk (the plugin's eta = n, k = k). "
                     "Exit status: 0 fitted, 1 not converged, or with --strict an inadequate model or an ill-posed "
                     "fit, 2 bad input.")
-    ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M00, M00_sigma, M01, ...)")
+    reads(ap.add_argument("data", help="measurement CSV (theta_i_deg, theta_r_deg, phi_deg, M00, M00_sigma, M01, ...)"))
     ap.add_argument("--fit", default=None, help="comma-separated parameters to fit, from rms_slope,n,k,"
                     "diffuse_reflectance (default: all the data determine); the others are held at their values")
     ap.add_argument("--rms-slope", type=float, default=None,
@@ -199,14 +200,14 @@ def csv_parser() -> Parser:
     ap.add_argument("--albedo", default=None, choices=("shared", "per-wavelength"),
                     help="the Lambertian albedo: one for every wavelength, or one per wavelength (default: as the "
                          "data decide with --model auto, else shared)")
-    ap.add_argument("--json", default=None, metavar="FILE",
-                    help="write the result as JSON (values, standard errors, covariance, verdict, the table of "
-                         "models); '-' for stdout (the summary then goes to stderr)")
+    writes(ap.add_argument("--json", default=None, metavar="FILE",
+                           help="write the result as JSON (values, standard errors, covariance, verdict, the table "
+                                "of models); '-' for stdout (the summary then goes to stderr)"))
     add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
-    ap.add_argument("-o", "--output", default=None,
-                    help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)}); with --model "
-                         "auto also NAME_models.EXT, misfit against model size")
+    writes(ap.add_argument("-o", "--output", default=None,
+                           help=f"save a plot of data against the model here ({', '.join(PLOT_FORMATS)}); with "
+                                "--model auto also NAME_models.EXT, misfit against model size"))
     quiet_option(ap)
     return ap
 
@@ -217,12 +218,13 @@ def csv_main(argv=None) -> int:
     Options and the output paths are checked before the file is read.  Exit status 0 fitted, 1 not
     converged (an ill-posed fit with ``--strict`` raises, 1 too); user errors raise UsageError.
     """
-    args = csv_parser().parse_args(argv)
-    with _output_gate(args):       # the output gate's refusal comes before the file is read
+    parser = csv_parser()
+    args = parser.parse_args(argv)
+    with _output_gate(args, parser):       # the output gate's refusal comes before the file is read
         return _csv_run(args)
 
 
-def _output_gate(args):
+def _output_gate(args, parser):
     """The output gate on ``-o`` (and, when the model is chosen, its ``_models`` plot) and on
     ``--json FILE`` for the whole run: not the data file, one writer at a time, room for each
     (:data:`~hyde_bsdf.resources.COSTS`)."""
@@ -234,7 +236,7 @@ def _output_gate(args):
     outputs = plots + ([json_file] if json_file and json_file != "-" else [])
     if not outputs:
         return contextlib.nullcontext()
-    return output_gate(outputs, inputs=[args.data], need_bytes=COSTS.plot_file_bytes * max(len(outputs), 1),
+    return output_gate(outputs, inputs=run_inputs(parser, args), need_bytes=COSTS.plot_file_bytes * max(len(outputs), 1),
                        what="-o plot" if plots else "--json file")
 
 
@@ -304,7 +306,7 @@ def pbsdf_parser() -> Parser:
         "counts (NaN, non-physical, below the horizon), the fit with standard errors, and the hyde <bsdf>. "
         "Index: the paper's eta = n - jk (the plugin's eta = n, k = k). Exit status: 0 fitted, 1 not converged, "
         "or with --strict an inadequate model or an ill-posed fit, 2 bad input."))
-    ap.add_argument("data", help="the measured_polarized table (.pbsdf)")
+    reads(ap.add_argument("data", help="the measured_polarized table (.pbsdf)"))
     ap.add_argument("--fit", default="n,k,rms_slope", help="parameters to fit (default n,k,rms_slope)")
     ap.add_argument("--rms-slope", type=float, default=0.3, help="start (or fixed) rms_slope (default 0.3)")
     ap.add_argument("--n0", type=float, default=None, help="start (or fixed) n of every band; default: several")
@@ -316,18 +318,22 @@ def pbsdf_parser() -> Parser:
     ap.add_argument("--tolerance", type=float, default=0.05,
                     help="a cell with |M_jk| or a degree of polarization above (1 + tolerance) M00 is non-physical")
     ap.add_argument("--seed", type=int, default=0, help="seed of the subsample (default 0)")
+    writes(ap.add_argument("--json", default=None, metavar="FILE",
+                           help="write the result as JSON (values per band, standard errors, covariance, verdict, "
+                                "the table of models); '-' for stdout (the summary then goes to stderr)"))
     add_height_options(ap)
     ap.add_argument("--strict", action="store_true", help=STRICT_HELP)
-    ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller element; "
-                    "with --model auto also NAME_models.EXT, misfit against model size")
+    writes(ap.add_argument("-o", "--output", default=None, help="plot of the fit against the table per Mueller "
+                           "element; with --model auto also NAME_models.EXT, misfit against model size"))
     quiet_option(ap)
     return ap
 
 
 def pbsdf_main(argv=None) -> int:
     """``hyde-bsdf fit FILE.pbsdf``: read, mask, subsample, fit, print, plot."""
-    args = pbsdf_parser().parse_args(argv)
-    with _output_gate(args):
+    parser = pbsdf_parser()
+    args = parser.parse_args(argv)
+    with _output_gate(args, parser):
         return _pbsdf_run(args)
 
 
@@ -350,28 +356,31 @@ def _pbsdf_run(args) -> int:
     table = read_pbsdf(args.data)
     data = pbsdf_samples(table, max_points=args.max_points, theta_max=math.radians(args.theta_max),
                          tolerance=args.tolerance, seed=args.seed, progress=_progress(args))
+    out = sys.stderr if args.json == "-" else sys.stdout
     print(f"data: {args.data} ({table.resolution} phi_d x theta_d x theta_h, bands "
-          f"{', '.join(f'{w:g}' for w in table.wavelengths)} nm)")
-    print(f"  {data.counts.summary()}")
+          f"{', '.join(f'{w:g}' for w in table.wavelengths)} nm)", file=out)
+    print(f"  {data.counts.summary()}", file=out)
     print(f"  fitting {len(data)} of {data.usable_geometries} geometries usable in every band "
-          f"(theta <= {args.theta_max:g} deg, seed {args.seed})")
+          f"(theta <= {args.theta_max:g} deg, seed {args.seed})", file=out)
     opts = dict(fit=fit, rms_slope=args.rms_slope, n0=args.n0, k0=args.k0, progress=_progress(args))
     sel = _quiet_fit(select_model_pbsdf, data, **opts) if auto else None
     result = sel.result if auto else _quiet_fit(fit_pbsdf, data, shadowing=shadowing, diffuse=diffuse, **opts)
     if sel is not None:
-        print(for_command_line(sel.summary()))
-    print(for_command_line(result.summary()))
+        print(for_command_line(sel.summary()), file=out)
+    print(for_command_line(result.summary()), file=out)
     for line in pbsdf_verdict_lines(data.theta_i, result, args):
-        print(line)
+        print(line, file=out)
     _warn_verdict(result)
-    print("\nMitsuba material (hyde plugin):")
-    print(result.plugin_xml(indent="    "))
+    print("\nMitsuba material (hyde plugin):", file=out)
+    print(result.plugin_xml(indent="    "), file=out)
     caveat = extrapolation_warning([float(w) for w in result.wavelengths])
     if caveat:
         warnings.warn(caveat, UserWarning, stacklevel=1)
+    if args.json:
+        _write_json(sel.to_dict() if sel is not None else result.to_dict(), args.json)
     if args.output:
         plot_pbsdf_fit(result, data, args.output, title=str(args.data))
-        print(f"\nplot: {args.output}")
+        print(f"\nplot: {args.output}", file=out)
         if sel is not None:
-            print(f"models plot: {plot_selection(sel, _models_path(args.output), title=str(args.data))}")
+            print(f"models plot: {plot_selection(sel, _models_path(args.output), title=str(args.data))}", file=out)
     return _finish(result, args.strict)

@@ -36,12 +36,13 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.app.args import Parser, quiet_option, user_input
+from hyde_bsdf.app.args import Parser, quiet_option, reads, run_inputs, user_input, writes
 from hyde_bsdf.app.flags import for_command_line
 from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
-from hyde_bsdf.inverse.loss import StokesLoss, check_reference_scale
+from hyde_bsdf.inverse.camera_data import impossible_pixels
+from hyde_bsdf.inverse.loss import StokesLoss, as_mask, check_reference_scale, interior_mask
 from hyde_bsdf.inverse.maps import invert_maps
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, Observation, example_maps,
                                             map_keys, plane_scene_dict, render_stokes_np)
@@ -51,9 +52,8 @@ from hyde_bsdf.io.atomic import atomic_path
 from hyde_bsdf.io.input_gate import check_input
 from hyde_bsdf.io.output_gate import check_free_space, check_output_path, output_gate
 from hyde_bsdf.io.stokes_exr import exr_bytes
-from hyde_bsdf.render.renderer import scene_inputs
 from hyde_bsdf.progress import stderr_lines
-from hyde_bsdf.resources import COSTS, check_memory, inversion_bytes
+from hyde_bsdf.resources import COSTS, check_memory, inversion_bytes, wait_limit
 
 __all__ = ["cli_main", "build_parser"]
 
@@ -90,15 +90,15 @@ def build_parser():
                     "texture-valued roughness (alpha or rms_slope bitmap), optionally index maps, from "
                     "one or more images (llvm_ad_mono_polarized).")
     ap.add_argument("--maps", action="store_true", help="texture-valued mode: fit per-texel maps")
-    ap.add_argument("--scene", action="append", default=None,
+    reads(ap.add_argument("--scene", action="append", default=None,
                     help="Mitsuba XML scene holding the BSDF (repeat for several scenes, e.g. one per light; "
-                         "default: the built-in sphere (scalar) or textured plane, 3 views x 2 lights (--maps))")
-    ap.add_argument("--reference", action="append", default=None,
+                         "default: the built-in sphere (scalar) or textured plane, 3 views x 2 lights (--maps))"), "scene")
+    reads(ap.add_argument("--reference", action="append", default=None,
                     help="reference Stokes EXR of the matching --scene (hyde-bsdf render or stokes output: "
                          "S0.R..S3.B or mono S0, S1, S2[, S3], with optional _sigma layers and mask; same film "
-                         "size); default: render one at --truth (built-in truth map with --maps)")
-    ap.add_argument("--mask", action="append", default=None,
-                    help="--maps: PNG or .npy of the pixels to use for the matching --reference (non-zero = use)")
+                         "size); default: render one at --truth (built-in truth map with --maps)"))
+    reads(ap.add_argument("--mask", action="append", default=None,
+                          help="--maps: PNG or .npy of the pixels to use for the matching --reference (non-zero = use)"))
     _calibrated_options(ap)
     ap.add_argument("--sensor", type=int, default=0, help="index of the sensor of each --scene (default 0)")
     ap.add_argument("--target", default=None, help="key prefix of the BSDF to recover when the scene has "
@@ -133,17 +133,17 @@ def build_parser():
     ap.add_argument("--weight", type=float, default=0.0, help="--maps: regulariser weight lambda (loss units "
                     "per map unit (tv) or squared map unit (l2); 0.1 mild, >= 1 flattens; default 0)")
     ap.add_argument("--seed", type=int, default=0, help="random seed (integer >= 0)")
-    ap.add_argument("-o", "--output", default="out/invert", help="output folder (default out/invert)")
+    writes(ap.add_argument("-o", "--output", default="out/invert", help="output folder (default out/invert)"))
     quiet_option(ap)
     return ap
 
 
 def _calibrated_options(ap):
     """--camera, --light (the calibrated rig), --tiles, --workers, --scheduler (tiles as tasks), --channel."""
-    ap.add_argument("--camera", default=None, help="--maps: camera calibration JSON (CV pinhole: world-to-camera R, t; "
-                    "fx, fy, cx, cy; see hyde_bsdf.render.camera): the sensors of the one --scene (the sample only)")
-    ap.add_argument("--light", default=None, help="--maps with --camera: light JSON (point positions or directional "
-                    "towards_light, optional polarizer/retarder); one scene per light, --reference light-major")
+    reads(ap.add_argument("--camera", default=None, help="--maps: camera calibration JSON (CV pinhole: world-to-camera R, t; "
+                    "fx, fy, cx, cy; see hyde_bsdf.render.camera): the sensors of the one --scene (the sample only)"))
+    reads(ap.add_argument("--light", default=None, help="--maps with --camera: light JSON (point positions or directional "
+                    "towards_light, optional polarizer/retarder); one scene per light, --reference light-major"))
     ap.add_argument("--tiles", default=None, help="--maps with --camera: split the map into tiles of texels, N (N x N) "
                     "or RxC, each fitted from the film crop of the pixels wholly inside it, as an independent task "
                     "(memory: the largest tile's crop instead of the whole picture; see hyde_bsdf.inverse.tiles)")
@@ -221,10 +221,28 @@ def _check_tiles_args(args):
     if len(parts) > 2 or not all(p.strip().isdigit() and int(p) >= 1 for p in parts):
         raise UsageError(f"--tiles must be N or RxC with integers >= 1 (e.g. 4 or 4x8), got {shorten(args.tiles)}")
     args.tile_grid = (int(parts[0]), int(parts[-1]))
+    if args.scene:
+        _check_tile_grid(args.tile_grid, args.scene[0])
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be an integer >= 1, got {args.workers}")
     if args.workers is not None and args.scheduler is not None:
         raise UsageError("give --workers (a process pool here) or --scheduler (a dask cluster), not both")
+
+
+def _check_tile_grid(grid, scene) -> None:
+    """--tiles RxC refused before any scene loads when no texture of the scene's file graph has R rows
+    and C columns of texels (the map is one of them; each tile needs a texel).  Sizes from the files'
+    headers; a scene whose textures are not files (or not images) is checked once it is loaded."""
+    from hyde_bsdf.io.arrays import image_shape
+    from hyde_bsdf.io.scene_files import scene_files
+
+    sizes = {p: image_shape(p) for p in scene_files(scene)[1:] if p.is_file()}
+    sizes = {p: s for p, s in sizes.items() if s is not None}
+    if sizes and not any(h >= grid[0] and w >= grid[1] for h, w, *_ in sizes.values()):
+        biggest = max(sizes, key=lambda p: sizes[p][0] * sizes[p][1])
+        h, w = sizes[biggest][:2]
+        raise UsageError(f"--tiles must be 1..{h} x 1..{w} for a {h} x {w}-texel map, got {grid[0]} x {grid[1]} "
+                         f"(the scene's largest texture, {shorten(biggest.name)}, read before any scene loads)")
 
 
 #: invert_maps' default samples per pixel of the uncertainty step (its forward-mode renders; memory check)
@@ -272,12 +290,8 @@ def _scene_map_shape(observations, fit, args) -> tuple[int, int]:
 
 
 def _run_inputs(args) -> list:
-    """Every file this run reads -- each --scene and the files it names, --reference, --mask --
-    which no output may overwrite (``invert --maps -o .`` beside a scene's alpha.exr)."""
-    inputs = []
-    for scene in args.scene or []:
-        inputs += scene_inputs(scene)
-    return inputs + list(args.reference or []) + list(args.mask or [])
+    """Every file this run reads (:func:`~hyde_bsdf.app.args.run_inputs`), which no output may replace."""
+    return run_inputs(build_parser(), args)
 
 
 def _check_out(path):
@@ -348,23 +362,15 @@ def _calibrated(args, fit):
 
 
 def _read_mask(path, shape):
-    path = Path(path)
-    try:
-        if path.suffix.lower() == ".npy":
-            m = np.load(path)
-        else:
-            import matplotlib.image as mpimg
+    """The --mask file (PNG, TIFF or .npy; sized from its header first) as booleans of ``shape``."""
+    from hyde_bsdf.io.arrays import array_header, read_array
 
-            m = mpimg.imread(str(path))
-    except (OSError, ValueError) as exc:
-        raise UsageError(f"--mask {str(path)!r}: cannot read it ({one_line(exc)}); give a PNG or .npy") from None
-    m = np.asarray(m)
-    if m.ndim == 3:
-        m = m[..., :3].max(axis=2)
-    if m.shape != tuple(shape):
-        raise UsageError(f"--mask {str(path)!r} is {m.shape[1]}x{m.shape[0]} pixels but the film is "
+    size = array_header(path, "--mask")[0][:2]
+    if size != tuple(shape):
+        raise UsageError(f"--mask {str(path)!r} is {size[1]}x{size[0]} pixels but the film is "
                          f"{shape[1]}x{shape[0]}")
-    return m != 0
+    m = read_array(path, "--mask")
+    return as_mask(m[..., :3].max(axis=2) if m.ndim == 3 else m, f"--mask {shorten(str(path))}")
 
 
 def _load_user_scene(path):
@@ -391,7 +397,7 @@ def _cli(argv):
         return _cli_maps(args)
     truth = {**TRUTH, **_parse_values(args.truth or "", "--truth")}
     start = {**START, **_parse_values(args.start or "", "--start")}
-    fit = tuple(s.strip() for s in (args.fit or ",".join(PARAMETERS)).split(",") if s.strip())
+    fit = tuple(s.strip() for s in (",".join(PARAMETERS) if args.fit is None else args.fit).split(",") if s.strip())
     bad = [p for p in fit if p not in PARAMETERS]
     if bad or not fit:
         raise UsageError(f"--fit must list parameters from {', '.join(PARAMETERS)}, got {args.fit!r}")
@@ -414,15 +420,18 @@ def _scalar_run(args, truth, start, fit, paths):
         parameter_keys(mi.traverse(scene), PARAMETERS, args.target)   # exactly one hyde BSDF, or a clear error
     W, H = scene.sensors()[0].film().crop_size()
     _check_step_memory(W, H, args, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
+    mask = None
     if args.reference:
         ref = _read_reference(args.reference[0], W, H)
         truth_known = args.truth is not None
+        bad = impossible_pixels(ref, None, f"--reference {shorten(args.reference[0])}")
+        mask = interior_mask(ref[0]) & ~bad if bad.any() else None
     else:
         _log(f"rendering the reference at {truth} ({args.spp_ref} spp)")
         ref = render_reference(scene, truth, args.spp_ref, seed=args.seed, prefix=args.target)
         truth_known = True
     with user_input("--reference"):
-        loss_fn = StokesLoss(ref, components=args.loss)
+        loss_fn = StokesLoss(ref, mask=mask, components=args.loss)
     with warnings.catch_warnings(record=True) as caught:      # printed once each below, as WARNING: lines
         warnings.simplefilter("always")
         res = invert(scene, loss_fn, start, fit=fit, iterations=args.iterations, lr=args.lr, spp=args.spp,
@@ -450,7 +459,8 @@ def _maps_fit_and_start(args):
     names = tuple(MAP_PARAMETERS)
     ranges = {n: MAP_PARAMETERS[n][1] for n in names}
     preset_fit = {"dielectric": "alpha,eta", "metal": "alpha,eta,k"}
-    fit = tuple(s.strip() for s in (args.fit or preset_fit.get(args.preset, "alpha")).split(",") if s.strip())
+    text = preset_fit.get(args.preset, "alpha") if args.fit is None else args.fit      # "" is no parameter, not the default
+    fit = tuple(s.strip() for s in text.split(",") if s.strip())
     bad = [p for p in fit if p not in names]
     if bad or not fit:
         raise UsageError(f"--fit must list parameters from {', '.join(names)}, got {shorten(args.fit)}")
@@ -612,16 +622,16 @@ def _tiled_run(args, fit, start, paths):
     the stitched maps written and reported as the untiled run's."""
     from hyde_bsdf.inverse.tiles import Capture, invert_maps_tiled
 
-    capture = Capture.from_files(args.scene[0], args.camera, args.light, args.reference, channel=args.channel,
-                                 spp=args.spp)
-    for k, d in enumerate(r for row in capture.references for r in row):
-        with user_input():
-            check_reference_scale(d["reference"], f"--reference {shorten(args.reference[k])}")
-        if args.mask:
-            m = _read_mask(args.mask[k], d["reference"].shape[1:])
-            d["mask"] = m if d["mask"] is None else d["mask"] & m
-    client = _dask_client(args.scheduler) if args.scheduler else None
+    client = _dask_client(args.scheduler) if args.scheduler else None     # before the work: a dead address
     try:
+        capture = Capture.from_files(args.scene[0], args.camera, args.light, args.reference, channel=args.channel,
+                                     spp=args.spp)
+        for k, d in enumerate(r for row in capture.references for r in row):
+            with user_input():
+                check_reference_scale(d["reference"], f"--reference {shorten(args.reference[k])}")
+            if args.mask:
+                m = _read_mask(args.mask[k], d["reference"].shape[1:])
+                d["mask"] = m if d["mask"] is None else d["mask"] & m
         with user_input(), warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             res = invert_maps_tiled(capture, start, fit=fit, tiles=args.tile_grid, workers=args.workers,
@@ -631,7 +641,7 @@ def _tiled_run(args, fit, start, paths):
                                     uncertainty=not args.no_uncertainty)
     finally:
         if client is not None:
-            client.close()
+            client.close(timeout=wait_limit("connect")[0])
     messages = list(dict.fromkeys(res.warnings + [str(w.message) for w in caught
                                                   if issubclass(w.category, UserWarning)]))
     _write_map_outputs(res, paths, args)
@@ -642,15 +652,31 @@ def _tiled_run(args, fit, start, paths):
 
 
 def _dask_client(address):
-    """A dask.distributed Client of the scheduler at --scheduler ADDRESS (a UsageError naming it otherwise)."""
+    """A dask.distributed Client of the scheduler at --scheduler ADDRESS, connected within
+    HYDE_BSDF_CONNECT_TIMEOUT seconds (a UsageError naming it otherwise).  The connection is made
+    in a thread of its own: a peer that accepts and never answers holds that thread, not the run."""
+    import threading
+
     try:
         from distributed import Client
     except ImportError:
         raise UsageError("--scheduler needs dask.distributed: pip install 'hyde-bsdf[distributed]'") from None
-    try:
-        return Client(address, timeout=10)
-    except (OSError, TimeoutError, ValueError) as exc:
-        raise UsageError(f"--scheduler {shorten(address)}: no dask scheduler answers there ({one_line(exc)})") from None
+    seconds, name = wait_limit("connect")
+    box = {}
+
+    def connect():
+        try:
+            box["client"] = Client(address, timeout=seconds, set_as_default=False)
+        except Exception as exc:  # noqa: BLE001 -- reported below
+            box["error"] = exc
+
+    thread = threading.Thread(target=connect, name="dask-connect", daemon=True)
+    thread.start()
+    thread.join(seconds + 1.0)
+    if "client" in box:
+        return box["client"]
+    why = one_line(box["error"]) if "error" in box else f"no answer within {seconds:g} s ({name})"
+    raise UsageError(f"--scheduler {shorten(address)}: no dask scheduler answers there ({why})")
 
 
 def _load_map_scenes(paths, fit) -> list:

@@ -21,14 +21,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from hyde_bsdf.app.args import Parser, positive_int, quiet_option
+from hyde_bsdf.app.args import Parser, positive_int, quiet_option, reads, run_inputs, writes
 from hyde_bsdf.app.pictures import chart_bytes, polarization_png_paths, save_polarization_pngs, save_rgb_png
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.io.input_gate import check_input
 from hyde_bsdf.io.output_gate import check_free_space, check_output_path, output_gate
 from hyde_bsdf.io.stokes_exr import COLOURS, exr_bytes, exr_channel_names, write_stokes_exr
 from hyde_bsdf.progress import stderr_lines
-from hyde_bsdf.render.renderer import DEFAULT_VARIANT, MAX_SEED, render_stokes, scene_inputs
+from hyde_bsdf.render.renderer import DEFAULT_VARIANT, MAX_SEED, render_stokes
 
 __all__ = ["build_parser", "check_outputs", "output_bytes", "room_for", "cli_main"]
 
@@ -48,8 +48,8 @@ def build_parser() -> Parser:
         description="Render a Mitsuba scene to a Stokes EXR (R,G,B,S0.R..S3.B, float32) and PNG "
                     "charts of intensity, DoLP, AoLP and DoCP.  The scene may use the 'hyde' BSDF.  "
                     "An unpolarized --variant writes the colour image only.")
-    p.add_argument("scene", help="Mitsuba 3 scene (.xml)")
-    p.add_argument("-o", "--output", required=True, help="output EXR path (must end in .exr)")
+    reads(p.add_argument("scene", help="Mitsuba 3 scene (.xml)"), "scene")
+    writes(p.add_argument("-o", "--output", required=True, help="output EXR path (must end in .exr)"))
     p.add_argument("--variant", default=DEFAULT_VARIANT,
                    help=f"Mitsuba variant (default {DEFAULT_VARIANT}; falls back to "
                         "scalar_spectral_polarized without a usable libLLVM); unpolarized variants "
@@ -97,12 +97,12 @@ def room_for(folder, what: str, bytes_of, option: str = "free some space or choo
     return check
 
 
-def _run(args) -> int:
+def _run(args, parser) -> int:
     out = Path(args.output)
     polarized = str(args.variant).endswith("_polarized")
     paths = check_outputs(out, polarized, png=not args.no_png)
     check_input(args.scene, "scene file", stdin=False)      # the input gate, before any work
-    inputs = scene_inputs(args.scene, dict(args.define))
+    inputs = run_inputs(parser, args, dict(args.define))
     # the output gate: no output is an input of this run; one writer per output set at a time
     with output_gate(paths, inputs=inputs, what="render output"):
         return _render_and_write(args, out)
@@ -131,4 +131,5 @@ def _render_and_write(args, out: Path) -> int:
 def cli_main(argv=None) -> int:
     """``hyde-bsdf render``: 0 on success; a bad argument, input or output path raises
     :class:`~hyde_bsdf.errors.UsageError` (one line and exit 2 from :func:`hyde_bsdf.app.cli.main`)."""
-    return _run(build_parser().parse_args(argv))
+    parser = build_parser()
+    return _run(parser.parse_args(argv), parser)

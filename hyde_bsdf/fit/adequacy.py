@@ -17,6 +17,13 @@ Every fit (:func:`hyde_bsdf.fit.fit_mueller`, :func:`hyde_bsdf.fit.fit_pbsdf`) c
   in M00, :data:`ELEMENT_TOLERANCE` in the normalized elements): a misfit smaller than that is no
   reason to change the model, but it still biases the parameters.
 
+Too few geometries: a fit is never adequate when its data have no more distinct geometries than the
+parameters one wavelength's data must determine (a lobe through as many points as it has parameters
+shows nothing about the model), nor, without error bars, fewer than :data:`MIN_GEOMETRIES` (each
+residual is then judged against its :data:`NEIGHBOURS` neighbours': a lobe sampled at a handful of
+points fits any roughness with an error bar of nothing -- one geometry of a table gave rms_slope
+1.48 +- 7.8e-5).  The verdict says that the data cannot determine the parameters.
+
 Standard errors: the usual ones, sqrt(diag((J^T J)^-1)) scaled by the residual scatter, assume the
 misfit is independent noise.  When a systematic misfit dominates the scatter they are too small
 (a smooth 0.2 % misfit of M00 over theta_h leaves the true rms_slope 70 of them away); then
@@ -38,8 +45,8 @@ from hyde_bsdf.errors import RejectedResult
 __all__ = ["Verdict", "InadequateModelWarning", "InadequateModelError", "ERRORS_NOTE", "P_LIMIT",
            "M00_TOLERANCE", "ELEMENT_TOLERANCE", "Z_LIMIT", "NEIGHBOURS",
            "half_angles", "neighbour_index", "residual_structure", "angle_trends", "geometry_clusters", "cluster_covariance",
-           "correlation", "larger_errors",
-           "chi2_verdict", "floor_verdict", "birge_scaling", "blame_fixed_parameters", "SIGMAS_OR_MODEL"]
+           "correlation", "larger_errors", "MIN_GEOMETRIES", "too_few_geometries", "MODEL_ADVICE", "without_advice",
+           "chi2_verdict", "floor_verdict", "birge_scaling", "blame_fixed_parameters", "SIGMAS_OR_MODEL", "json_number"]
 
 #: chi^2 tail probability below which a fit with error bars is inadequate
 P_LIMIT = 1e-3
@@ -53,6 +60,11 @@ Z_LIMIT = 5.0
 FLOAT32_FLOOR = 1e-6
 #: neighbours whose residuals define the systematic part
 NEIGHBOURS = 8
+#: what an inadequate verdict of one fixed model advises (the command line says ``--model auto``:
+#: hyde_bsdf.app.flags); model selection, which tried them all, drops it (:func:`without_advice`)
+MODEL_ADVICE = "; try `select_model`"
+#: fewest distinct geometries a verdict without error bars can be "adequate" at (module docstring)
+MIN_GEOMETRIES = NEIGHBOURS + 2
 #: quantile bins of theta_h and of theta_d for the trends
 BINS = 4
 #: ... and for the clusters of the robust covariance: 2 x 2 = 4 clusters (low/high theta_h x
@@ -227,14 +239,40 @@ def _cause(trends, elements_bad, m00_bad):
     return "the model does not fit"
 
 
-def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi, neighbours=None):
+def without_advice(verdict: Verdict) -> Verdict:
+    """``verdict`` without :data:`MODEL_ADVICE` (for a model chosen among all of them)."""
+    verdict.message = verdict.message.replace(MODEL_ADVICE, "")
+    return verdict
+
+
+def too_few_geometries(theta_i, theta_r, phi, parameters: int = 0, test: str = "floor") -> Verdict | None:
+    """An inadequate Verdict when the data have no more distinct geometries than ``parameters`` (what one
+    wavelength's data must determine) or, for the ``"floor"`` test (no error bars), fewer than
+    :data:`MIN_GEOMETRIES` (module docstring); None when there are enough."""
+    geometries = np.unique(np.round(np.stack(np.broadcast_arrays(theta_i, theta_r, phi), axis=-1), 9), axis=0)
+    n = len(geometries)
+    need = max(2, int(parameters) + 1, MIN_GEOMETRIES if test == "floor" else 0)
+    if n >= need:
+        return None
+    what = f"the {parameters} fitted parameter(s)" if parameters else "the parameters"
+    return Verdict(False, test, "lower bounds", {"geometries": n, "needed": need},
+                   f"{n} distinct geometr{'y' if n == 1 else 'ies'} cannot determine {what} nor show whether the "
+                   f"model describes the data (at least {need} needed{'' if test != 'floor' else ' without sigma'}): "
+                   "the values and their errors are not measurements; add geometries", "too few geometries")
+
+
+def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi, neighbours=None, parameters: int = 0):
     """Verdict from chi^2 with error bars; ``r`` (E, N) weighted residuals of E elements.
-    ``neighbours``: the geometries' neighbour index when already known (:func:`neighbour_index`)."""
+    ``neighbours``: the geometries' neighbour index when already known (:func:`neighbour_index`);
+    ``parameters``: what one wavelength's data must determine (:func:`too_few_geometries`)."""
     from scipy.stats import chi2 as chi2_dist
 
+    few = too_few_geometries(theta_i, theta_r, phi, parameters, "chi2")
+    if few is not None:
+        return few
     if dof <= 0:
-        return Verdict(True, "chi2", "classic", {"chi2": chi2, "dof": dof},
-                       "no degrees of freedom: the fit cannot be checked")
+        return Verdict(False, "chi2", "lower bounds", {"chi2": chi2, "dof": dof},
+                       "no degrees of freedom: the fit cannot be checked; add data", "no degrees of freedom")
     p = float(chi2_dist.sf(chi2, dof))
     red = chi2 / dof
     nb = neighbour_index(theta_i, theta_r, phi) if neighbours is None else neighbours
@@ -250,15 +288,19 @@ def chi2_verdict(chi2, dof, r, theta_i, theta_r, phi, neighbours=None):
              f"{st['scatter']:.3g} sigma") if structured else \
         (f"the residuals are scatter without a trend ({st['scatter']:.3g} sigma rms): the sigmas underestimate "
          "the noise")
-    msg = (f"reduced chi^2 = {red:.4g} (chi^2 = {chi2:.4g} for {dof} dof, p = {p:.3g}): {cause}; "
-           "try `select_model`" + ("" if structured else ", or check the sigmas"))
+    msg = (f"reduced chi^2 = {red:.4g} (chi^2 = {chi2:.4g} for {dof} dof, p = {p:.3g}): {cause}"
+           + ("" if structured else "; check the sigmas") + MODEL_ADVICE)
     return Verdict(False, "chi2", "lower bounds", figs, msg, cause)
 
 
-def floor_verdict(m00, elements, theta_i, theta_r, phi, neighbours=None):
+def floor_verdict(m00, elements, theta_i, theta_r, phi, neighbours=None, parameters: int = 0):
     """Verdict without error bars.  ``m00``: log residuals of M00 (B, N) (None: not fitted, as
     for a CSV); ``elements``: residuals of the normalized elements (B, E, N); B bands, N geometries.
-    ``neighbours``: the geometries' neighbour index when already known (:func:`neighbour_index`)."""
+    ``neighbours``: the geometries' neighbour index when already known (:func:`neighbour_index`);
+    ``parameters``: what one wavelength's data must determine (:func:`too_few_geometries`)."""
+    few = too_few_geometries(theta_i, theta_r, phi, parameters)
+    if few is not None:
+        return few
     nb = neighbour_index(theta_i, theta_r, phi) if neighbours is None else neighbours
     th, td = half_angles(theta_i, theta_r, phi)
     figs, bad, trends = {}, [], {}
@@ -287,7 +329,7 @@ def floor_verdict(m00, elements, theta_i, theta_r, phi, neighbours=None):
     pct = (lambda v: f"{100 * v:.3g} %") if lead == "M00" else (lambda v: f"{v:.3g}")
     msg = (f"{lead} misfit {pct(figs[f'{lead}_rms'])} rms (systematic {pct(figs[f'{lead}_systematic'])}, the data's "
            f"floor {pct(figs[f'{lead}_scatter'])}; tolerance {pct(M00_TOLERANCE if lead == 'M00' else ELEMENT_TOLERANCE)}): "
-           f"{cause}; try `select_model`")
+           f"{cause}" + MODEL_ADVICE)
     figs.update({f"trend_{k}": v for k, v in trends.items()})
     return Verdict(False, "floor", "lower bounds", figs, msg, cause)
 
@@ -344,3 +386,9 @@ def blame_fixed_parameters(verdict: Verdict, notes: list, chi2, dof, free, held:
     verdict.message = f"{red}: {verdict.cause}; fit them"
     notes[:] = [n.replace(SIGMAS_OR_MODEL, fixed) for n in notes]
     return True
+
+
+def json_number(x):
+    """A number as a fit's JSON result carries it: a float, None where it is not finite."""
+    x = float(x)
+    return x if math.isfinite(x) else None

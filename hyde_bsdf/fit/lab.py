@@ -37,7 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.fit.adequacy import ERRORS_NOTE, InadequateModelError, InadequateModelWarning
+from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, json_number,
+                                    without_advice)
 from hyde_bsdf.fit.lab_data import lab_data
 from hyde_bsdf.fit.lab_fit import BOUNDS, PARAMETERS, LabModel, ModelFit, blame_fixed, check_enough, fit_model
 from hyde_bsdf.fit.lab_selection import Selection, model_size, select
@@ -128,12 +129,6 @@ def _values(given: dict, groups: int) -> dict:
     return out
 
 
-def _finite(x):
-    """A number for JSON: None where it is not finite."""
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
 @dataclass
 class LabFitResult:
     """The result of :func:`fit_lab`: the chosen model's fit, the table of candidates, the warnings."""
@@ -190,20 +185,20 @@ class LabFitResult:
             q, g = key
             wl = None if g is None else self.fit.data.groups[g].wavelength
             e = self.fit.stderr.get(key)
-            out.append({"name": q, "wavelength_nm": wl, "value": _finite(v),
-                        "stderr": None if e is None else _finite(e)})
+            out.append({"name": q, "wavelength_nm": wl, "value": json_number(v),
+                        "stderr": None if e is None else json_number(e)})
         order = {q: i for i, q in enumerate(PARAMETERS)}
         return sorted(out, key=lambda p: (order[p["name"]], -1 if p["wavelength_nm"] is None else p["wavelength_nm"]))
 
     def to_dict(self) -> dict:
         """The machine-readable result (module docstring; what ``--json FILE`` writes)."""
         f = self.fit
-        cov = [[_finite(x) for x in row] for row in np.asarray(f.covariance, float)]
+        cov = [[json_number(x) for x in row] for row in np.asarray(f.covariance, float)]
         return {"model": {"shadowing": self.model.shadowing, "diffuse": self.model.diffuse},
                 "parameters": self.parameters(),
                 "covariance": {"names": [f.name(k) for k in f.free], "matrix": cov},
-                "verdict": {"adequate": bool(f.verdict.adequate), "chi2_reduced": _finite(f.reduced_chi2),
-                            "p_value": _finite(f.p_value) if f.data.sigma_given else None,
+                "verdict": {"adequate": bool(f.verdict.adequate), "chi2_reduced": json_number(f.reduced_chi2),
+                            "p_value": json_number(f.p_value) if f.data.sigma_given else None,
                             "warnings": list(self.warnings) + list(self.notes)},
                 "models": [_row_dict(r) for r in self.selection.rows] if self.selection else [_fit_dict(f, True)]}
 
@@ -259,13 +254,13 @@ def _fit_dict(f: ModelFit, chosen: bool) -> dict:
     m = f.model
     return {"shadowing": m.shadowing, "diffuse": m.diffuse, "albedo": m.albedo if m.lambertian else None,
             "dielectric": m.dielectric, "free_parameters": len(f.free), "size": model_size(m, len(f.free)),
-            "chi2": _finite(f.chi2), "dof": f.dof, "chi2_reduced": _finite(f.reduced_chi2),
-            "p_value": _finite(f.p_value) if f.data.sigma_given else None, "adequate": bool(f.verdict.adequate),
-            "chosen": chosen, "values": {f.name(k): _finite(v) for k, v in f.values.items()}}
+            "chi2": json_number(f.chi2), "dof": f.dof, "chi2_reduced": json_number(f.reduced_chi2),
+            "p_value": json_number(f.p_value) if f.data.sigma_given else None, "adequate": bool(f.verdict.adequate),
+            "chosen": chosen, "values": {f.name(k): json_number(v) for k, v in f.values.items()}}
 
 
 def _row_dict(row) -> dict:
-    return {**_fit_dict(row.fit, row.chosen), "bic": _finite(row.bic)}
+    return {**_fit_dict(row.fit, row.chosen), "bic": json_number(row.bic)}
 
 
 def _table(sel: Selection) -> str:
@@ -384,6 +379,7 @@ def fit_lab(data, *, fit=None, shadowing=None, diffuse=None, albedo=None, rms_sl
         counter.stage = "fitting every candidate model"
         sel = select(d, fit=opts["fit"], values=values, albedo=albedo, lambertian=lambertian, tick=counter.tick)
         chosen = sel.choice.fit
+        without_advice(chosen.verdict)           # every model was tried: no "try --model auto"
     else:
         model = LabModel(shadowing or SHADOWING[0], diffuse or DIFFUSE[0], albedo or "shared")
         counter.stage = f"fitting {model.label}"

@@ -497,8 +497,9 @@ def _uncertainty(problem: _Problem, res) -> ModelFit:
         scale, cov = birge_scaling(chi2, dof, cov, notes)
     ti, tr, ph = data.angles()
     if data.sigma_given:
-        verdict = chi2_verdict(chi2, dof, r.reshape(len(data.columns), -1), ti, tr, ph, data.neighbours())
-        if not verdict.adequate:
+        verdict = chi2_verdict(chi2, dof, r.reshape(len(data.columns), -1), ti, tr, ph, data.neighbours(),
+                               parameters=len({q for q, _ in problem.free}))
+        if not verdict.adequate and "p_value" in verdict.figures:     # (too few geometries: no chi^2 test)
             _name_the_columns(verdict, data, r)
     else:
         verdict = _floor_verdict(problem, res.x, ti, tr, ph)
@@ -563,7 +564,7 @@ def _floor_verdict(problem: _Problem, x, ti, tr, ph) -> Verdict:
         m00 = (resid[0] / np.maximum(np.abs(data.y[:N]), 1e-300))[None]
         resid = resid[1:] / np.maximum(f[:N], 1e-300)        # absolute elements: as normalized ones
     elements = resid[None] if resid.shape[0] else np.zeros((1, 1, N))
-    return floor_verdict(m00, elements, ti, tr, ph, data.neighbours())
+    return floor_verdict(m00, elements, ti, tr, ph, data.neighbours(), parameters=len({q for q, _ in problem.free}))
 
 
 def _parameter_notes(values, stderr, corr, free, names, dof) -> list:

@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hyde_bsdf.fit.adequacy import ELEMENT_TOLERANCE, M00_TOLERANCE, InadequateModelWarning
+from hyde_bsdf.fit.adequacy import (ELEMENT_TOLERANCE, M00_TOLERANCE, InadequateModelWarning, json_number,
+                                    without_advice)
 from hyde_bsdf.model.terms import DIFFUSE_TERMS, SHADOWING_TERMS, allowed, model_size
 
 __all__ = ["CANDIDATES", "ModelRow", "ModelSelection", "select_model", "select_model_pbsdf"]
@@ -105,6 +106,18 @@ class ModelSelection:
             out.append(f"  {r.label:22s} {r.n_params:6d} {r.size:4d} {r.bic:12.6g} {mis:>22s} "
                        f"{r.params['rms_slope']:9.4g} {r.params['n']:8.4g} {r.params['k']:8.4g}  {tag}")
         return "\n".join(out)
+
+    def to_dict(self) -> dict:
+        """The chosen fit's machine-readable result (its ``to_dict``: a table fit's,
+        :meth:`hyde_bsdf.fit.pbsdf_fit.PbsdfFitResult.to_dict`) with this table of candidates as its
+        ``models``: shadowing, diffuse, dielectric, free parameters, size, BIC, misfit, adequate, the
+        stage its verdict was made at ("screen", "full" or "undefined"), chosen, and the values."""
+        rows = [{"shadowing": r.shadowing, "diffuse": r.diffuse, "dielectric": r.dielectric,
+                 "free_parameters": r.n_params, "size": r.size, "bic": json_number(r.bic),
+                 "misfit": {q: json_number(x) for q, x in r.misfit.items()}, "adequate": bool(r.adequate),
+                 "stage": r.stage, "chosen": i == self.chosen, "values": {q: json_number(x) for q, x in r.params.items()}}
+                for i, r in enumerate(self.rows)]
+        return self.result.to_dict(models=rows)
 
     def summary(self) -> str:
         return "\n".join([f"model selection ({len([r for r in self.rows if r.stage != 'undefined'])} models; "
@@ -243,6 +256,7 @@ def _csv_candidate(model, dielectric, names, start, rms_slope, n0, k0, data, kwa
 
 def _finish(sel, strict):
     res = sel.result
+    without_advice(res.verdict)                  # every model was tried: no "try --model auto"
     if not res.verdict.adequate:
         if strict:
             from hyde_bsdf.fit.adequacy import InadequateModelError

@@ -77,11 +77,13 @@ from hyde_bsdf.options import Options
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
-from hyde_bsdf.model.parameters import FIT_PARAMETERS, INDEX_MIN, NATURAL_INDEX, RMS_SLOPE
+from hyde_bsdf.model.index import admissible
+from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.model.terms import check_pair
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
                                     birge_scaling, blame_fixed_parameters, chi2_verdict, cluster_covariance,
-                                    correlation, floor_verdict, geometry_clusters, half_angles, larger_errors)
+                                    correlation, floor_verdict, geometry_clusters, half_angles, json_number,
+                                    larger_errors)
 from hyde_bsdf.io.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index,
                                        impossible_limit)
 
@@ -304,6 +306,27 @@ class FitResult:
         return float(self.correlation[self.fitted.index(a), self.fitted.index(b)])
 
     # ---- loading the fitted material into a scene
+    def to_dict(self, models: list | None = None) -> dict:
+        """The machine-readable result in a lab fit's schema (:meth:`hyde_bsdf.fit.lab.LabFitResult.to_dict`):
+        n, k, rms_slope (no wavelength; stderr None where held fixed), the covariance of the fitted
+        ones, the verdict (p_value None without sigmas), the warnings.  ``models``: a model
+        selection's table (:meth:`~hyde_bsdf.fit.model_selection.ModelSelection.to_dict`), else this
+        fit alone."""
+        params = [{"name": q, "wavelength_nm": None, "value": json_number(self.params[q]),
+                   "stderr": json_number(self.stderr[q]) if q in self.fitted else None} for q in PARAMETERS]
+        row = {"shadowing": self.shadowing, "diffuse": self.diffuse, "dielectric": "k" not in self.fitted and
+               self.params["k"] == 0, "free_parameters": len(self.fitted), "adequate": bool(self.verdict.adequate),
+               "chosen": True, "values": {q: float(self.params[q]) for q in PARAMETERS}}
+        return {"model": {"shadowing": self.shadowing, "diffuse": self.diffuse},
+                "parameters": params,
+                "covariance": {"names": list(self.fitted),
+                               "matrix": [[json_number(x) for x in r] for r in np.asarray(self.covariance, float)]},
+                "verdict": {"adequate": bool(self.verdict.adequate), "chi2_reduced": json_number(self.reduced_chi2),
+                            "p_value": json_number(self.p_value) if self.sigma_given else None,
+                            "warnings": list(self.data_warnings) + list(self.warnings)
+                            + ([] if self.verdict.adequate else [self.verdict.message])},
+                "models": [row] if models is None else models}
+
     def plugin_dict(self) -> dict:
         """The ``hyde`` plugin's dict for ``mi.load_dict``.
 
@@ -595,9 +618,10 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
         data_diag.append(f"rms_slope is not identified: without a diffuse term the normalized elements do not depend "
                          f"on it; it is held at rms_slope = {vals['rms_slope']:.4g} (give the value you know: a "
                          "material needs it) -- M00 in 1/sr determines it (hyde_bsdf.fit.lab.fit_lab)")
-    if not verdict.adequate and len(fitted) < len(PARAMETERS):
+    determined = _check_fit_names(None, mode)      # what the elements depend on: freeing the rest cannot help
+    if not verdict.adequate and set(determined) - set(fitted):
         _blame_fixed(verdict, data_diag, vals, fitted, chi2, dof, lambda v: fit_mueller(
-            theta_i, theta_r, phi, measured, sigma=sigma, fit=PARAMETERS, rms_slope=v["rms_slope"], n0=v["n"],
+            theta_i, theta_r, phi, measured, sigma=sigma, fit=determined, rms_slope=v["rms_slope"], n0=v["n"],
             k0=v["k"], shadowing=shadowing, diffuse=diffuse, corr_limit=corr_limit, progress=False))
     result = FitResult(
         params=vals, fitted=fitted, stderr=stderr, covariance=cov, correlation=corr,
@@ -614,19 +638,19 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
 
 
 def _blame_fixed(verdict, notes, vals, fitted, chi2, dof, refit):
-    """A misfit with parameters held fixed: ``refit(vals)`` fits all three from these values; when
-    that removes the misfit the verdict and the notes name the fixed parameters as its cause
-    (:func:`hyde_bsdf.fit.adequacy.blame_fixed_parameters`).  Returns the free fit, or None."""
+    """A misfit with parameters held fixed: ``refit(vals)`` fits every parameter the elements depend
+    on, from these values; when that removes the misfit the verdict and the notes name the held
+    parameters it freed as its cause (:func:`hyde_bsdf.fit.adequacy.blame_fixed_parameters`)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
             free = refit(vals)
-        except UsageError:          # fewer values than three parameters: nothing to compare
-            return None
-    held = ", ".join(f"{q} = {vals[q]:.4g}" for q in PARAMETERS if q not in fitted)
-    freed = ", ".join(f"{q} = {free.params[q]:.4g}" for q in PARAMETERS if q not in fitted)
-    named = blame_fixed_parameters(verdict, notes, chi2, dof, (free.chi2, free.dof, free.verdict.adequate), held, freed)
-    return free if named else None
+        except UsageError:          # fewer values than parameters: nothing to compare
+            return
+    freed = [q for q in free.fitted if q not in fitted]
+    blame_fixed_parameters(verdict, notes, chi2, dof, (free.chi2, free.dof, free.verdict.adequate),
+                           ", ".join(f"{q} = {vals[q]:.4g}" for q in freed),
+                           ", ".join(f"{q} = {free.params[q]:.4g}" for q in freed))
 
 
 @dataclass
@@ -697,9 +721,7 @@ class _Objective:
     def unpack(self, x) -> dict:
         vals = dict(self.given)
         vals.update(zip(self.fitted, (float(v) for v in x)))
-        # eta = 0 exactly is not a material (the evaluator refuses |eta| < INDEX_MIN)
-        if math.hypot(vals["n"], vals["k"]) < INDEX_MIN:
-            vals["n"] = INDEX_MIN
+        vals["n"], vals["k"] = admissible(vals["n"], vals["k"])      # eta = 0 is not a material
         return vals
 
     def residual(self, sel):
@@ -834,8 +856,11 @@ def _parameter_notes(vals, stderr, corr, fitted, corr_limit, m, dof) -> list:
 
 
 def raise_or_warn(verdict, diag, strict, stacklevel=3):
-    """An inadequate model and an ill-posed fit: raise (``strict``) or warn, in that order."""
-    if not verdict.adequate:
+    """An inadequate model and an ill-posed fit: raise (``strict``) or warn, in that order.  Too few
+    geometries for the parameters is an ill-posed fit (:func:`~hyde_bsdf.fit.adequacy.too_few_geometries`)."""
+    if verdict.cause == "too few geometries":
+        diag = [verdict.message, *diag]
+    elif not verdict.adequate:
         if strict:
             raise InadequateModelError(verdict.message)
         warnings.warn(verdict.message, InadequateModelWarning, stacklevel=stacklevel)
@@ -850,8 +875,9 @@ def _adequacy(r, J, cov, ti, tr, ph, n_elements, chi2, dof, sigma_given):
     """The verdict (chi^2 with sigmas, the data's floor without) and the covariance: where the
     misfit is systematic, each error the larger of the classic and the cluster-robust one."""
     R = r.reshape(n_elements, -1)
-    verdict = (chi2_verdict(chi2, dof, R, ti, tr, ph) if sigma_given
-               else floor_verdict(None, R[None], ti, tr, ph))
+    p = np.shape(J)[-1]
+    verdict = (chi2_verdict(chi2, dof, R, ti, tr, ph, parameters=p) if sigma_given
+               else floor_verdict(None, R[None], ti, tr, ph, parameters=p))
     if verdict.errors == "classic" or not np.all(np.isfinite(cov)):
         return verdict, cov
     th, td = half_angles(ti, tr, ph)

@@ -65,7 +65,7 @@ from hyde_bsdf.io.pbsdf_file import (KAIST_WAVELENGTHS, PbsdfTable, read_pbsdf, 
 from hyde_bsdf.model.evaluator import pbrdf
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.parameters import ALPHA_SAMPLE, DIFFUSE_REFLECTANCE, INDEX_MIN, N, RMS_SLOPE
-from hyde_bsdf.model.terms import check_pair, term_arguments
+from hyde_bsdf.model.terms import RENDER_DEFAULT, check_pair, term_arguments
 from hyde_bsdf.options import Options
 from hyde_bsdf.progress import PROGRESS_SECONDS, Throttle, as_callback
 from hyde_bsdf.resources import COSTS, OutputLock, check_memory, format_bytes
@@ -379,8 +379,10 @@ class ExportReport:
 
     def xml(self, indent: str = "") -> str:
         """The ``<bsdf type="measured_polarized">`` element that loads the file."""
+        from xml.sax.saxutils import quoteattr
+
         return (f'{indent}<bsdf type="measured_polarized">\n'
-                f'{indent}    <string name="filename" value="{self.path.name}"/>\n'
+                f'{indent}    <string name="filename" value={quoteattr(self.path.name)}/>\n'
                 f'{indent}    <float name="alpha_sample" value="{self.alpha_sample:.4g}"/>\n'
                 f'{indent}</bsdf>')
 
@@ -462,9 +464,9 @@ class ExportOptions(Options):
     progress: object = None
 
 
-def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="vgroove", diffuse="paper",
-                 diffuse_reflectance=None, bands=None, options: ExportOptions | None = None,
-                 **settings) -> ExportReport:
+def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing=RENDER_DEFAULT[0],
+                 diffuse=RENDER_DEFAULT[1], diffuse_reflectance=None, bands=None,
+                 options: ExportOptions | None = None, **settings) -> ExportReport:
     """Write the ``hyde`` model as a ``measured_polarized`` table (see the module docstring).
 
     The table's size and the reporting are an :class:`ExportOptions` (``options``), or its fields given as
@@ -472,7 +474,8 @@ def export_pbsdf(path, *, rms_slope, n=None, k=None, material=None, shadowing="v
 
     Parameters: ``rms_slope`` (the paper's), the index as ``n``/``k`` (eta = n - jk; one value or
     one per band) or ``material`` (Mitsuba ``data/ior`` name), ``shadowing``, ``diffuse`` (as
-    :func:`hyde_bsdf.pbrdf`), ``resolution`` (N_phi_d, N_theta_d, N_theta_h) or "37x55x55",
+    :func:`hyde_bsdf.pbrdf`; default the renderers' material, ``terms.RENDER_DEFAULT``: the plugin's
+    default, which conserves energy in a path tracer), ``resolution`` (N_phi_d, N_theta_d, N_theta_h) or "37x55x55",
     ``error_samples`` geometries for the error estimate (0: skip it), ``alpha_sample`` (default:
     :func:`suggest_alpha_sample`), ``seed`` of the error geometries, ``progress`` a callback
     ``progress(message)`` (True: lines on stderr; :mod:`hyde_bsdf.progress`), ``bands`` the five

@@ -40,13 +40,13 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, Verdict, cluster_covariance, correlation, floor_verdict,
-                                    geometry_clusters, half_angles, larger_errors)
+                                    geometry_clusters, half_angles, json_number, larger_errors)
 from hyde_bsdf.fit.mueller_fit import DEFAULT_STARTS, raise_or_warn
 from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
 from hyde_bsdf.fit.spectral import spectrum_element, wavelength_note
 from hyde_bsdf.model.evaluator import pbrdf
-from hyde_bsdf.model.index import Index
-from hyde_bsdf.model.parameters import NATURAL_INDEX, RMS_SLOPE
+from hyde_bsdf.model.index import Index, admissible
+from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.model.terms import DIFFUSE_TERMS, check_pair
 from hyde_bsdf.progress import PROGRESS_SECONDS, EvaluationCounter, as_callback, check_progress
 
@@ -96,9 +96,8 @@ class PbsdfFitResult:
                      diffuse=self.diffuse)
 
     def plugin_xml(self, indent: str = "") -> str:
-        """A ``<bsdf type="hyde">`` with eta and k as spectra over the table's bands only (nothing held or
-        extrapolated beyond them: :mod:`hyde_bsdf.fit.spectral`), and a comment on what Mitsuba does
-        elsewhere."""
+        """A ``<bsdf type="hyde">`` with eta and k as spectra at the table's bands, their end values held
+        out to Mitsuba's 360-830 nm and a comment saying so (:mod:`hyde_bsdf.fit.spectral`)."""
         wl = [float(w) for w in self.wavelengths]
         return "\n".join([f'{indent}<bsdf type="hyde">',
                           f'{indent}    <float name="rms_slope" value="{self.rms_slope:.6g}"/>',
@@ -109,6 +108,38 @@ class PbsdfFitResult:
                           f'{indent}    <string name="shadowing" value="{self.shadowing}"/>',
                           f'{indent}    <string name="diffuse" value="{self.diffuse}"/>',
                           f"{indent}</bsdf>"])
+
+    def to_dict(self, models: list | None = None) -> dict:
+        """The machine-readable result in a lab fit's schema (:meth:`hyde_bsdf.fit.lab.LabFitResult.to_dict`;
+        what ``hyde-bsdf fit FILE.pbsdf --json FILE`` writes): n and k per band at its wavelength,
+        rms_slope (stderr None where held fixed), the covariance of the fitted parameters, the verdict
+        (chi2_reduced with the scatter estimated from the residuals; p_value None: a table has no
+        sigmas).  ``models``: a model selection's table (:meth:`ModelSelection.to_dict
+        <hyde_bsdf.fit.model_selection.ModelSelection.to_dict>`), else this fit alone."""
+        wl = [float(w) for w in self.wavelengths]
+        err = {"rms_slope": self.stderr["rms_slope"]}
+        params = []
+        for q in ("n", "k"):
+            for b, w in enumerate(wl):
+                err[f"{q}@{w:g}nm"] = self.stderr[q][b]
+                params.append({"name": q, "wavelength_nm": w, "value": json_number(getattr(self, q)[b]),
+                               "stderr": json_number(self.stderr[q][b]) if q in self.fitted else None})
+        params.append({"name": "rms_slope", "wavelength_nm": None, "value": json_number(self.rms_slope),
+                       "stderr": json_number(self.stderr["rms_slope"]) if "rms_slope" in self.fitted else None})
+        e = np.array([err[name] for name in self.names], float)
+        cov = np.asarray(self.correlation, float) * np.outer(e, e)
+        v = self.verdict
+        row = {"shadowing": self.shadowing, "diffuse": self.diffuse, "dielectric": "k" not in self.fitted and
+               not np.any(self.k), "free_parameters": len(self.names), "adequate": bool(v.adequate), "chosen": True,
+               "values": {"rms_slope": float(self.rms_slope), **{f"{q}@{w:g}nm": float(getattr(self, q)[b])
+                                                                  for q in ("n", "k") for b, w in enumerate(wl)}}}
+        return {"model": {"shadowing": self.shadowing, "diffuse": self.diffuse},
+                "parameters": params,
+                "covariance": {"names": list(self.names), "matrix": [[json_number(x) for x in r] for r in cov]},
+                "verdict": {"adequate": bool(v.adequate), "chi2_reduced": json_number(self.chi2 / self.dof)
+                            if self.dof > 0 else None, "p_value": None,
+                            "warnings": list(self.warnings) + ([] if v.adequate else [v.message])},
+                "models": [row] if models is None else models}
 
     def summary(self) -> str:
         def pm(v, e):
@@ -183,7 +214,8 @@ class _Problem:
         v = self.values(x)
         r00, rel = [], []
         for i, b in enumerate(self.bands):
-            F = pbrdf(self.ti, self.tr, self.ph, rms_slope=v["rms_slope"], n=v[("n", b)], k=v[("k", b)], **self.opts)
+            n, k = admissible(v[("n", b)], v[("k", b)])     # the optimiser's step to eta = 0
+            F = pbrdf(self.ti, self.tr, self.ph, rms_slope=v["rms_slope"], n=n, k=k, **self.opts)
             m00 = F[:, 0, 0]
             r00.append(np.log(m00 + self.floor[i]) - self.log_data[i])
             N = F / np.where(m00 > 0, m00, np.inf)[:, None, None]   # F00 underflows far from a lobe without diffuse
@@ -270,6 +302,8 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
     stages.counter.done()
 
     cov, corr, err, diag, verdict = _uncertainty(res, prob, free, values, data)
+    if not verdict.adequate and len(fit) < len(FIT_PARAMETERS):
+        _blame_held(verdict, data, fit, values, shadowing, diffuse)
     if not res.success:
         diag.append(f"the optimizer did not converge: {res.message}")
     r = res.fun
@@ -288,6 +322,31 @@ def fit_pbsdf(data, *, fit=("n", "k", "rms_slope"), rms_slope: float = 0.3, n0=N
         verdict=verdict)
     raise_or_warn(verdict, diag, strict, stacklevel=3)
     return result
+
+
+def _blame_held(verdict, data, fit, values, shadowing, diffuse):
+    """A misfit with parameters held (not in ``fit``): the same model with all three fitted, started
+    from these values.  When that one describes the table, the held parameters cause the misfit --
+    not the lobe's shape or the terms the verdict would otherwise suspect -- and ``verdict``'s cause
+    and message are rewritten to name them and the values they take when fitted."""
+    import warnings
+
+    mid = data.wavelengths.size // 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        free = fit_pbsdf(data, shadowing=shadowing, diffuse=diffuse, progress=False,
+                         start={"rms_slope": values["rms_slope"], "n": values[("n", mid)], "k": values[("k", mid)]})
+    if not free.verdict.adequate:
+        return
+    wl = f" at {data.wavelengths[mid]:g} nm"
+    held = [q for q in FIT_PARAMETERS if q not in fit]
+    was = ", ".join(f"{q} = {values[q]:.4g}" if q == "rms_slope" else f"{q} = {values[(q, mid)]:.4g} (every band)"
+                    for q in held)
+    now = ", ".join(f"{q} = {free.rms_slope:.4g}" if q == "rms_slope" else f"{q} = {getattr(free, q)[mid]:.4g}{wl}"
+                    for q in held)
+    verdict.cause = (f"the parameter(s) held fixed ({was}) cause the misfit: with them fitted the model describes "
+                     f"the table ({now})")
+    verdict.message = f"{verdict.message.split(': ', 1)[0]}: {verdict.cause}; fit them"
 
 
 def _initial_values(K, rms_slope, n0, k0) -> dict:
@@ -390,7 +449,8 @@ def _uncertainty(res, prob, free, values, data):
     sv = np.linalg.svd(J, compute_uv=False)
     cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
     r00, rel = prob.parts(res.x)
-    verdict = floor_verdict(r00, rel, prob.ti, prob.tr, prob.ph)
+    verdict = floor_verdict(r00, rel, prob.ti, prob.tr, prob.ph,     # per band: rms_slope, n, k
+                            parameters=len({q if isinstance(q, str) else q[0] for q in free}))
     if not math.isfinite(cond) or cond > 1e12:
         cov = np.full((p, p), np.inf)
         corr = np.eye(p)

@@ -85,7 +85,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.inverse.analyzer import retarder_mueller, simulate_capture
+from hyde_bsdf.model.polarimetry import retarder_mueller, simulate_capture
 
 __all__ = ["Configuration", "Acquisition", "design_acquisition", "acquisition_scene_dict", "synthetic_observations", "example_material", "fixed_rig_acquisition",
            "PRESETS",
@@ -274,7 +274,7 @@ def fixed_rig_acquisition(preset: str = "dielectric", *, facet_angle: float = 50
 def _input_stokes(config: Configuration) -> np.ndarray:
     """The light's Stokes vector after the configuration's polarizer and retarder (unit S0 before
     them; an ideal polarizer passes half of unpolarized light; the retarder is a quarter-wave plate,
-    :func:`~hyde_bsdf.inverse.analyzer.retarder_mueller`)."""
+    :func:`~hyde_bsdf.model.polarimetry.retarder_mueller`)."""
     if config.polarizer is None:
         return np.array([1.0, 0.0, 0.0, 0.0])
     a = math.radians(2.0 * config.polarizer)
@@ -434,10 +434,10 @@ def synthetic_observations(acquisition: Acquisition, truth: dict, start: dict, *
     :class:`~hyde_bsdf.inverse.observations.Observation`, each carrying the noise standard
     deviation it was given in ``.noise_std`` (0 when ``noise`` is 0).
 
-    ``noise`` a :class:`~hyde_bsdf.inverse.analyzer.CameraNoise` instead of a number: the
+    ``noise`` a :class:`~hyde_bsdf.model.polarimetry.CameraNoise` instead of a number: the
     reference goes through the acquisition's camera instead -- raw frames at ``signal`` DN (median lit
     S0) with that noise, a DoFP mosaic for a ``"linear"`` camera or six analyzer frames for a
-    ``"stokes"`` one, and the least-squares Stokes step (:func:`~hyde_bsdf.inverse.analyzer.simulate_capture`);
+    ``"stokes"`` one, and the least-squares Stokes step (:func:`~hyde_bsdf.model.polarimetry.simulate_capture`);
     the observation then carries the step's sigma maps and the measured components.
 
     ``fit_filter_type``: the bitmap filter of the fit's scenes when it differs from the reference's

@@ -7,7 +7,7 @@ pixels.  :func:`camera_reference` accepts
 * a Stokes EXR path: Mitsuba's channel names (``S0.R ... S3.B``), plain mono ``S0, S1, S2[, S3]``, any
   colour or spectral suffixes (``S0.550nm``), with optional ``S0_sigma...`` layers and a ``mask``
   channel (:func:`hyde_bsdf.io.stokes_exr.read_camera_stokes`; what ``hyde-bsdf stokes`` writes);
-* a :class:`~hyde_bsdf.inverse.analyzer.StokesEstimate` (from raw analyzer frames);
+* a :class:`~hyde_bsdf.model.polarimetry.StokesEstimate` (from raw analyzer frames);
 * a dict ``{"S0": array, "S1": ..., ["sigma": {"S0": ...}], ["mask": (H, W)]}`` of arrays (H, W) or
   (H, W, C);
 * a NumPy array (M, H, W[, C]) of the first M components, or of those named by ``measured``;
@@ -17,9 +17,9 @@ names, sigma (4, H, W) (or None) and the mask.  Colour channels reduce to one: `
 default) is the Rec. 709 luminance of R, G, B -- what the inverse's renders compare against -- and
 sigma follows as sqrt(sum w_i^2 sigma_i^2) (independent channels); ``channel="R"`` (or any suffix)
 picks one channel, which matches the renders only when the scene's lights and sample are grey, or
-the camera is mono.  ``noise`` (a :class:`~hyde_bsdf.inverse.analyzer.CameraNoise`) gives sigma when
+the camera is mono.  ``noise`` (a :class:`~hyde_bsdf.model.polarimetry.CameraNoise`) gives sigma when
 the data carry none: the data are then in DN above black, and sigma is what ideal DoFP analyzers
-(0/45/90/135 deg) with that noise give (:func:`~hyde_bsdf.inverse.analyzer.stokes_sigma`).
+(0/45/90/135 deg) with that noise give (:func:`~hyde_bsdf.model.polarimetry.stokes_sigma`).
 """
 from __future__ import annotations
 
@@ -29,13 +29,45 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.inverse._common import Y_WEIGHTS
-from hyde_bsdf.inverse.analyzer import StokesEstimate, stokes_sigma
-from hyde_bsdf.inverse.loss import interior_mask
+from hyde_bsdf.model.polarimetry import StokesEstimate, stokes_sigma
+from hyde_bsdf.inverse.loss import as_mask, interior_mask
 from hyde_bsdf.inverse.observations import Observation
 
-__all__ = ["camera_reference", "camera_observation", "calibrated_observations", "observations_from_files", "camera_files"]
+__all__ = ["camera_reference", "camera_observation", "calibrated_observations", "observations_from_files", "camera_files",
+           "impossible_pixels", "ReferenceDataWarning"]
 
 STOKES = ("S0", "S1", "S2", "S3")
+
+
+class ReferenceDataWarning(UserWarning):
+    """Pixels of a reference that no light can give (negative S0, a degree of polarization > 1) or whose
+    sigma is unusable; they are left out of the fit."""
+
+
+def impossible_pixels(ref, sigma=None, what: str = "the reference", sigma_bad=None) -> np.ndarray:
+    """(H, W) bool: the pixels of ``ref`` (4, H, W) that no light gives -- S0 < 0, or a degree of
+    polarization sqrt(S1^2 + S2^2 + S3^2) / S0 > 1 -- beyond 5 sigma (``sigma`` (4, H, W); without it,
+    beyond float32 rounding), and ``sigma_bad`` (pixels whose sigma is negative, zero or NaN).  Each
+    kind is one :class:`ReferenceDataWarning` naming ``what`` and the share of its pixels."""
+    import warnings
+
+    ref = np.asarray(ref, np.float64)
+    peak = float(np.abs(ref[0]).max()) if ref.size else 0.0
+    if sigma is None:                                  # a rendering: float32 rounding only
+        tol0 = tolp = 1e-5 * np.abs(ref[0]) + 1e-7 * peak
+    else:
+        sig = np.nan_to_num(np.abs(np.asarray(sigma, np.float64)))
+        tol0, tolp = 5.0 * sig[0], 5.0 * np.sqrt((sig ** 2).sum(axis=0))   # 5 sigma: no false alarm in 1e6 px
+    negative = ref[0] < -tol0
+    kinds = [(negative, "a negative S0 beyond the noise"),
+             (~negative & (np.sqrt((ref[1:] ** 2).sum(axis=0)) - ref[0] > tolp),
+              "a degree of polarization > 1 beyond the noise (sqrt(S1^2 + S2^2 + S3^2) > S0)"),
+             (np.zeros(ref.shape[1:], bool) if sigma_bad is None else sigma_bad, "a negative, zero or NaN sigma")]
+    for bad, why in kinds:
+        if bad.any():
+            warnings.warn(f"{what}: {100 * bad.mean():.3g} % of the pixels ({int(bad.sum())} of {bad.size}) have "
+                          f"{why}: no light gives that; they are left out", ReferenceDataWarning, stacklevel=3)
+    return kinds[0][0] | kinds[1][0] | kinds[2][0]
 
 
 def _as_layers(data, measured):
@@ -84,7 +116,7 @@ def camera_reference(data, *, channel: str = "Y", measured=None, noise=None, ana
 
     Returns ``{"reference": (4, H, W), "measured": names, "sigma": (4, H, W) or None, "mask": (H, W)
     bool or None}``; sigma is 0 on unmeasured components.  ``noise`` + ``analysis``: see
-    :func:`~hyde_bsdf.inverse.analyzer.stokes_sigma` (used only when the data carry no sigma)."""
+    :func:`~hyde_bsdf.model.polarimetry.stokes_sigma` (used only when the data carry no sigma)."""
     stokes, sigma, mask, colours, what = _as_layers(data, measured)
     if "S0" not in stokes:
         raise UsageError(f"{what} has no S0: the intensity is needed (got {sorted(stokes)})")
@@ -102,16 +134,23 @@ def camera_reference(data, *, channel: str = "Y", measured=None, noise=None, ana
     H, W = shape[:2]
     ref = np.zeros((4, H, W))
     sig = np.zeros((4, H, W)) if sigma else None
+    sigma_bad = np.zeros((H, W), bool)
     for c in names:
         i = STOKES.index(c)
         ref[i], w = _reduce(stokes[c], colours, channel, what)
         if sig is not None:
             s = np.asarray(sigma[c], np.float64)
+            bad = ~(s > 0) | ~np.isfinite(s)                       # NaN, negative or zero
+            sigma_bad |= bad if s.ndim == 2 else bad[..., w > 0].any(axis=-1)
             sig[i] = s if s.ndim == 2 else np.sqrt(s ** 2 @ w ** 2)     # independent channels
     if mask is not None and np.shape(mask) != (H, W):
         raise UsageError(f"{what}: the mask is {np.shape(mask)[::-1]}, the image {W}x{H}")
-    return {"reference": ref, "measured": names, "sigma": sig,
-            "mask": None if mask is None else np.asarray(mask, bool)}
+    mask = None if mask is None else as_mask(mask, f"{what}: its mask")
+    inside = np.ones((H, W), bool) if mask is None else mask      # (sigma is 0 where the data mask a pixel)
+    bad = impossible_pixels(ref, sig, what, sigma_bad & inside) & inside
+    if bad.any():
+        mask = ~bad if mask is None else mask & ~bad
+    return {"reference": ref, "measured": names, "sigma": sig, "mask": mask}
 
 
 def camera_observation(scene, data, *, sensor: int = 0, weight: float = 1.0, mask=None, **kwargs) -> Observation:
@@ -128,7 +167,7 @@ def camera_observation(scene, data, *, sensor: int = 0, weight: float = 1.0, mas
         if extra is not None:
             if np.shape(extra) != m.shape:
                 raise UsageError(f"mask is {np.shape(extra)[::-1]} but the reference is {m.shape[1]}x{m.shape[0]}")
-            m &= np.asarray(extra, bool)
+            m &= as_mask(extra)
     return Observation(scene, ref["reference"], sensor=sensor, mask=m, weight=weight, measured=ref["measured"],
                        sigma=ref["sigma"])
 
@@ -194,7 +233,8 @@ def camera_files(cameras, lights, references, *, masks=None, channel: str = "Y")
         for k, m in enumerate(masks):
             j, i = divmod(k, len(cams))
             d = data[j][i]
-            d["mask"] = np.asarray(m, bool) if d["mask"] is None else d["mask"] & np.asarray(m, bool)
+            m = as_mask(m, f"the mask of --reference {refs[k]!r}")
+            d["mask"] = m if d["mask"] is None else d["mask"] & m
     return cams, lts, data
 
 

@@ -18,7 +18,7 @@ stay zero.
 Camera data (``measured``, ``sigma``).  A camera measures some of the components: a linear
 polarization camera S0, S1, S2 only.  ``measured`` names them; the others are not in the loss (their
 reference values are ignored).  With per-pixel noise ``sigma`` (4, H, W) or (4,) -- standard
-deviations of the reference's components, from :mod:`hyde_bsdf.inverse.analyzer` or a noise model --
+deviations of the reference's components, from :mod:`hyde_bsdf.model.polarimetry` or a noise model --
 each term is weighted by its inverse variance (the maximum-likelihood weights) and the loss is::
 
     L = sum_{c measured} <m (Sc - Rc)^2 / sigma_c^2>  /  <m R0^2 / sigma_0^2>
@@ -35,7 +35,7 @@ from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
 
 __all__ = ["stokes_images", "channel_names", "interior_mask", "StokesLoss", "smoothness", "REFERENCE_RANGE",
-           "check_reference_scale"]
+           "check_reference_scale", "as_mask"]
 
 #: accepted range of a reference's peak |S0| (radiance in the scene's units).  The loss squares
 #: differences in float32 (largest 3.4e38): a peak of 1e10 leaves 18 orders of magnitude of headroom
@@ -61,6 +61,21 @@ def check_reference_scale(ref, what: str = "the reference") -> float:
                          f" beyond what a rendering can match); rescale it or fix its units")
     return peak
 
+
+
+def as_mask(mask, what: str = "mask") -> np.ndarray:
+    """``mask`` as booleans (non-zero: use the pixel); UsageError for NaN or infinite values (NaN != 0
+    would count as "use": an all-NaN mask would mean every pixel) and for a mask that uses no pixel."""
+    m = np.asarray(mask)
+    if m.dtype != bool:
+        bad = ~np.isfinite(m.astype(np.float64))
+        if bad.any():
+            raise UsageError(f"{what} has NaN or infinite values in {int(bad.sum())} of {bad.size} pixels: a mask "
+                             "is 0 (leave the pixel out) or non-zero (use it)")
+        m = m != 0
+    if m.size and not m.any():
+        raise UsageError(f"{what} leaves out every pixel: nothing to fit")
+    return m
 
 
 def stokes_images(img, channel_names):
@@ -127,9 +142,7 @@ class StokesLoss:
             raise UsageError(f"components must be 'stokes' or 's0', got {shorten(components)}")
         ref = np.asarray(ref, dtype=np.float64)
         check_reference_scale(ref)
-        if mask is None:
-            mask = interior_mask(ref[0])
-        mask = np.asarray(mask, bool)
+        mask = interior_mask(ref[0]) if mask is None else as_mask(mask)
         active = _measured_indices(measured) if components == "stokes" else (0,)
         if sigma is not None:
             sig = _sigma_maps(sigma, ref.shape[1:])

@@ -93,6 +93,14 @@ class MapInversionResult:
         return z[self.seen] if self.seen is not None else z.ravel()
 
 
+def _check_seen(seen):
+    """``seen``, refused (before the work) when no texel is seen: all-NaN maps are no answer."""
+    if seen is not None and not np.any(seen):
+        raise UsageError(f"no picture sees the sample: texels seen 0 of {np.size(seen)} (check where the cameras "
+                         "look, the --camera/--light files, and the references' masks)")
+    return seen
+
+
 @dataclass
 class MapProblem:
     """Step 1, the observation set-up: the checked observations, their losses and weights, the
@@ -168,7 +176,7 @@ class MapProblem:
                       [film_channels(o.scene, o.sensor) for o in observations], None, prefix, components)
         if seen is None and problem.map_shape is not None:
             seen = sum(texel_coverage(o, problem.map_shape, prefix) for o in observations) > 0
-        problem.seen = seen
+        problem.seen = _check_seen(seen)
         problem.bilinear = problem._bilinear_maps()
         if problem.bilinear:
             problem._to_nearest()

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.inverse.loss import interior_mask, stokes_images
+from hyde_bsdf.inverse.loss import as_mask, interior_mask, stokes_images
 from hyde_bsdf.inverse.scalar import RANGES, _unique_key
 from hyde_bsdf.model.parameters import ALPHA, INVERSE_K_LOG_FLOOR, INVERSE_SCALE
 
@@ -88,7 +88,7 @@ class Observation:
     share of the data loss.  ``measured``: the Stokes components the camera measured (a linear
     polarization camera: ("S0", "S1", "S2")); the others are not in the loss and their reference
     values are ignored.  ``sigma``: the reference's noise standard deviation per component, (4,) or
-    (4, H, W) (e.g. from :mod:`hyde_bsdf.inverse.analyzer`): the loss's weights (1 / sigma^2) and the
+    (4, H, W) (e.g. from :mod:`hyde_bsdf.model.polarimetry`): the loss's weights (1 / sigma^2) and the
     noise of the standard errors (:class:`~hyde_bsdf.inverse.loss.StokesLoss`); :func:`camera_observation`
     builds one from camera data.  Several observations may share a scene (one per sensor) or use
     different scenes (e.g. one per light: one light per render avoids the light-selection noise
@@ -175,7 +175,7 @@ def _target_shape(scene, prefix):
 
 def _obs_mask(obs: Observation) -> np.ndarray:
     ref = np.asarray(obs.reference, dtype=np.float64)
-    mask = interior_mask(ref[0]) if obs.mask is None else np.asarray(obs.mask, bool)
+    mask = interior_mask(ref[0]) if obs.mask is None else as_mask(obs.mask, "the observation's mask")
     if mask.shape != ref.shape[1:]:
         raise UsageError(f"mask shape {mask.shape} differs from the reference's {ref.shape[1:]}")
     return mask

@@ -96,12 +96,14 @@ class Capture:
                                           "crop_width": int(crop[2]), "crop_height": int(crop[3])}
         return calibrated_scene(self.scene, [self.cameras[camera]], self.lights[light], spp=self.spp, film=film)
 
-    def observations(self) -> list:
+    def observations(self, first=None) -> list:
         """The whole pictures as observations, light-major, one scene each (sensor 0); the loss mask is
-        :func:`~hyde_bsdf.inverse.camera_data.camera_observation`'s."""
+        :func:`~hyde_bsdf.inverse.camera_data.camera_observation`'s.  ``first``: the scene of light 0,
+        camera 0 when already loaded."""
         from hyde_bsdf.inverse.camera_data import _stokes_dict, camera_observation
 
-        return [camera_observation(self.scene_of(j, i), _stokes_dict(self.references[j][i]))
+        return [camera_observation(first if first is not None and (j, i) == (0, 0) else self.scene_of(j, i),
+                                   _stokes_dict(self.references[j][i]))
                 for j in range(len(self.lights)) for i in range(len(self.cameras))]
 
 
@@ -176,13 +178,14 @@ def plan_tiles(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2, 2), p
     that no picture sees wholly get none), built in this process from the whole pictures."""
     import mitsuba as mi
 
-    observations = capture.observations()
-    params = mi.traverse(observations[0].scene)
+    first = capture.scene_of(0, 0)             # the map's size and the tiles checked before the other scenes load
+    params = mi.traverse(first)
     keys = map_keys(params, tuple(fit), prefix)
     shape = next((tuple(params[keys[n]].shape[:2]) for n in fit if isinstance(params[keys[n]], mi.TensorXf)), None)
     if shape is None:
         raise UsageError(f"tiles need a texture-valued fitted parameter; {', '.join(fit)} are constants in the scene")
     bounds = tile_bounds(shape, tiles)
+    observations = capture.observations(first)
     light_cam = [(j, i) for j in range(len(capture.lights)) for i in range(len(capture.cameras))]
     owner = [pixel_tiles(o, shape, bounds, prefix) for o in observations]
     bare = dataclasses.replace(capture, references=())
@@ -258,9 +261,10 @@ def _concurrency(executor, workers) -> int:
         return 1
     if hasattr(executor, "_max_workers"):
         return int(executor._max_workers)
-    client = getattr(executor, "_client", None)
+    from hyde_bsdf.mom.gather import scheduler_identity
+
     try:
-        info = client.scheduler_info()
+        info = scheduler_identity(executor._client)
         threads = [int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()] or [1]
         local = any(h in str(info.get("address", "")) for h in ("inproc", "127.0.0.1", "localhost"))
         return sum(threads) if local else max(threads)
@@ -314,7 +318,9 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
                          "`cameras`/`lights` files and the references' masks)")
     spp = int(options.get("spp", 4))
     unc_spp = int(options.get("uncertainty_spp", 16)) if options.get("uncertainty", True) else 0
-    largest, concurrent = max(t.pixels for t in tasks), _concurrency(executor, workers)
+    if workers is not None:
+        workers = min(workers, len(tasks))          # 1000 workers for 4 tiles: 4 processes, 4 tiles at once
+    largest, concurrent = max(t.pixels for t in tasks), min(_concurrency(executor, workers), len(tasks))
     estimate = check_memory(inversion_bytes(largest, spp, unc_spp) * concurrent,
                             f"{concurrent} tile(s) at once, the largest with {largest} px of film crops at {spp} spp",
                             "use more `tiles` (smaller crops), a lower `spp` or fewer `workers`")
@@ -327,12 +333,15 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
         say(f"{len(tasks)} tile task(s) of {shape[0]}x{shape[1]} texels, largest crop set "
             f"{max(t.pixels for t in tasks)} px, on {type(ex).__name__}")
     done = (lambda k: say(f"tile {k}/{len(tasks)} done ({time.perf_counter() - t0:.1f} s)")) if say else None
+    results = None
     try:
         results = gather(ex, run_tile, tasks, timeout=timeout, on_done=done, heartbeat=bool(say), what="tile",
                          label="invert_maps_tiled")
     finally:
-        if own:
-            ex.shutdown(wait=True, cancel_futures=True)
+        if own:          # after a failure, no wait for a running tile: its worker is ended
+            ex.shutdown(wait=results is not None, cancel_futures=True)
+            for proc in list((getattr(ex, "_processes", None) or {}).values()) if results is None else ():
+                proc.kill()
     res = stitch_tiles(results, shape, start, tuple(fit), components=options.get("components", "stokes"),
                        threshold=options.get("threshold", STDERR_THRESHOLD),
                        convergence=options.get("convergence", CONVERGENCE_THRESHOLD),

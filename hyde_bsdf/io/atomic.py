@@ -30,7 +30,7 @@ from pathlib import Path
 from hyde_bsdf.errors import OutputError, UsageError, shorten
 
 __all__ = ["atomic_path", "atomic_open", "atomic_folder", "OutputWriteError", "remove_stale_temporaries",
-           "TEMP_NAME_RE"]
+           "TEMP_NAME_RE", "on_temporary"]
 
 _HOST = f"{zlib.crc32(socket.gethostname().encode()) & 0xffff:04x}"
 #: the package's temporary names
@@ -47,6 +47,16 @@ def _temp_path(path: Path, keep_suffix: bool = True) -> Path:
     head = os.fsdecode(os.fsencode(path.name)[:100])
     suffix = path.suffix if keep_suffix and 1 < len(path.suffix) <= 17 else ""
     return path.with_name(f".{head}.tmp-{_HOST}-{os.getpid()}-{secrets.token_hex(3)}{suffix}")
+
+
+#: called with each temporary's path before it is made, or None (the command line's waiting
+#: process removes them when it stops the work on a signal: :mod:`hyde_bsdf.app.signals`)
+on_temporary = None
+
+
+def _announce(tmp: Path) -> None:
+    if on_temporary is not None:
+        on_temporary(tmp)
 
 
 def remove_stale_temporaries(folder) -> list[Path]:
@@ -104,6 +114,7 @@ def atomic_path(path, mode: int | None = None):
     tmp = _temp_path(path)
     try:
         try:
+            _announce(tmp)
             os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
             yield tmp
             if mode is None:
@@ -144,6 +155,7 @@ def atomic_folder(path):
     on an exception it is removed and ``path`` is left as it was."""
     path = Path(path)
     tmp = _temp_path(path, keep_suffix=False)
+    _announce(tmp)
     tmp.mkdir(0o700)
     try:
         yield tmp

@@ -3,7 +3,8 @@
 Rules (``docs/troubleshooting.md``, "The file gates"), each refusal one
 :class:`~hyde_bsdf.errors.UsageError` naming the file and the reason:
 
-* the folder exists (or can be created) and is writable; the name fits the file system;
+* the folder exists (or can be created) and is writable; the name fits the file system and holds no
+  control character (an ESC or a newline would reach the terminal and the XML snippets raw);
 * an existing target is a regular file: a FIFO, a device (``/dev/null``), a socket or a folder is
   never replaced; a symlink is followed while it stays inside its folder (the file it names is
   written, the link kept) and refused where it leaves it (``/proc/self/fd/1``, ``../elsewhere``);
@@ -20,6 +21,7 @@ import contextlib
 import os
 import shutil
 import stat
+import unicodedata
 from pathlib import Path
 
 from hyde_bsdf.errors import UsageError, shorten
@@ -32,7 +34,12 @@ __all__ = ["check_output_path", "check_output_dir", "check_target", "check_not_i
 
 
 def _fits(path: Path, what: str) -> Path:
-    """UsageError when a part of ``path`` is longer than NAME_MAX, or the path than PATH_MAX."""
+    """UsageError when ``path`` holds a control character, a part of it is longer than NAME_MAX, or the
+    path than PATH_MAX."""
+    control = sorted({c for c in str(path) if unicodedata.category(c) == "Cc"})
+    if control:        # a pasted ESC or newline: it would reach the terminal ("wrote ...") and XML raw
+        raise UsageError(f"{what} {shorten(str(path))}: the name holds control characters "
+                         f"({', '.join(repr(c)[1:-1] for c in control)}); give a name without them")
     probe = next((p for p in (path.parent, *path.parent.parents) if os.path.isdir(p)), Path("."))
     name_max, path_max = os.pathconf(probe, "PC_NAME_MAX"), os.pathconf(probe, "PC_PATH_MAX")
     for part in path.parts:

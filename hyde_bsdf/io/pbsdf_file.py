@@ -393,7 +393,7 @@ def read_pbsdf(path) -> PbsdfTable:
             try:
                 extra[f] = json.loads(bytes(np.asarray(a)).decode("utf-8"))
                 continue
-            except (ValueError, UnicodeDecodeError):
+            except (ValueError, UnicodeDecodeError, RecursionError):      # not our JSON: kept as bytes
                 pass
         extra[f] = a
     return PbsdfTable(theta_h=th, theta_d=td, phi_d=pd, wavelengths=wv, M=M, source=name, extra=extra)

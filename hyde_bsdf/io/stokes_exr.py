@@ -36,9 +36,11 @@ import numpy as np
 
 from hyde_bsdf.io.atomic import atomic_path
 from hyde_bsdf.errors import InputFileError, UsageError
-from hyde_bsdf.io.input_gate import check_input
+from hyde_bsdf.io.input_gate import check_dimensions, check_input
+
 
 __all__ = [
+    "open_exr",
     "STOKES_NAMES",
     "COLOURS",
     "exr_channel_names",
@@ -49,6 +51,21 @@ __all__ = [
     "write_camera_stokes",
     "read_camera_stokes",
 ]
+
+
+def open_exr(path, what: str = "EXR file"):
+    """``OpenEXR.File`` of ``path`` with its channels read separately, once its header's size (width x
+    height x channels, 4 bytes each) has passed the memory check; UsageError for an unreadable file."""
+    import OpenEXR
+
+    from hyde_bsdf.io.arrays import exr_shape
+
+    check_dimensions(exr_shape(path, what), 4, f"{what} {str(path)!r}", option="give a smaller image")
+    try:
+        return OpenEXR.File(str(path), separate_channels=True)
+    except Exception as exc:  # noqa: BLE001 -- any unreadable file is a user's input problem
+        raise InputFileError(f"{what} {str(path)!r}: not a readable OpenEXR file ({type(exc).__name__})") from None
+
 
 STOKES_NAMES = ("S0", "S1", "S2", "S3")
 COLOURS = ("R", "G", "B")
@@ -270,11 +287,9 @@ def read_camera_stokes(path, what: str = "camera Stokes EXR") -> dict:
     or None, "metadata": {...}}`` -- only the components present (the camera's measured ones).  The
     file passes the input gate first; UsageError naming it when S0 is missing or the components'
     channel suffixes differ."""
-    import OpenEXR
-
     path = check_input(path, what, stdin=False)        # the input gate: a regular file, no FIFO
+    f = open_exr(path, what)                           # its size from its header first
     try:
-        f = OpenEXR.File(str(path), separate_channels=True)
         chans = {name: ch.pixels for name, ch in f.channels().items()}
     except Exception as exc:  # noqa: BLE001 -- any unreadable file is a user's input problem
         raise InputFileError(f"{path}: not a readable OpenEXR file ({type(exc).__name__})") from None

@@ -33,6 +33,7 @@ __all__ = [
     "facet_fresnel",
     "fresnel_mueller_entries",
     "fresnel_average",
+    "smith_g1_exact",
     "vgroove_g",
     "DHRLookup",
 ]
@@ -175,9 +176,56 @@ def fresnel_mueller_entries(rs_re, rs_im, rp_re, rp_im):
 
 
 def fresnel_average(cos_beta, n, k):
-    """Unpolarized facet reflectance M00(beta; eta) = (|r_s|^2 + |r_p|^2)/2 (Eq. 11, M00/2)."""
-    rs_re, rs_im, rp_re, rp_im = facet_fresnel(cos_beta, n, k)
-    return 0.5 * (rs_re * rs_re + rs_im * rs_im + rp_re * rp_re + rp_im * rp_im)
+    """Unpolarized facet reflectance M00(beta; eta) = (|r_s|^2 + |r_p|^2)/2 (paper Eq. 11, M00/2).
+
+    The amplitudes of :func:`facet_fresnel` in real arithmetic, their squared moduli taken directly
+    (|c - u|^2 / |c + u|^2 and |eta^2 c - u|^2 / |eta^2 c + u|^2 with u = eta cos(theta_t) = a - i b from
+    the same cancellation-free square root): 41 traced operations in place of 70 (host cost per
+    render and per instance, ``benchmarks/bench_render.py --instances``), the same float32 accuracy.
+    """
+    c = cos_beta
+    sin2 = dr.maximum(1.0 - c * c, 0.0)
+    nk = n * k
+    e_re = (n - k) * (n + k)            # eta^2 = (n - ik)^2
+    e_im = -2.0 * nk
+    zr = e_re - sin2
+    # u = sqrt(eta^2 - sin^2 beta) = a - i b, a, b >= 0: complex_sqrt_lower written out
+    t1 = dr.sqrt(0.5 * (dr.sqrt(dr.fma(zr, zr, e_im * e_im)) + dr.abs(zr)))
+    t2 = dr.abs(nk) / dr.maximum(t1, 1e-30)      # |Im z| / (2 t1); t1 = 0 only where z = 0, and then nk = 0
+    zr_pos = zr >= 0
+    a = dr.select(zr_pos, t1, t2)
+    b = dr.select(zr_pos, t2, t1)
+    b2 = b * b
+    cm, cp = c - a, c + a
+    rs2 = dr.fma(cm, cm, b2) / dr.fma(cp, cp, b2)
+    p_re, p_im = e_re * c, e_im * c                 # eta^2 cos beta
+    pm, pp = p_re - a, p_re + a
+    rp2 = dr.fma(pm, pm, dr.square(p_im + b)) / dr.fma(pp, pp, dr.square(p_im - b))
+    return 0.5 * (rs2 + rp2)
+
+
+#: 1 / sqrt(pi)
+_INV_SQRT_PI = 0.5641895835477563
+
+
+def smith_g1_exact(v, m, alpha):
+    """Smith's masking G1(v, m) of the Beckmann distribution in its exact form,
+    2 / (1 + erf(a) + exp(-a^2) / (a sqrt(pi))), a = cos(theta_v) / (alpha sin(theta_v)); 0 where ``v``
+    sees the back of ``m`` (v.m v.z <= 0), 1 along the normal.
+
+    Mitsuba's ``MicrofacetDistribution.smith_g1`` is a rational fit of it (up to 0.31 % off, at
+    a = 0.56 and 1.34), while Mitsuba's visible-normal sampler draws from the density that the *exact*
+    G1 normalizes: a pdf written with the fit is off the sampled density by that much, and so is every
+    sampling weight (measured: the mean weight of roughconductor's ``sample`` is 0.3 % above its
+    ``eval``'s integral at theta 75 deg, alpha 0.54).
+    """
+    xy2 = dr.fma(v.x, v.x, v.y * v.y)
+    normal = xy2 == 0.0
+    # a -> 0 (the horizon): G1 -> 0; the floor (also below the horizon, zeroed below) keeps the
+    # denominator >= 1 and scalar variants from dividing by 0
+    a = dr.maximum(v.z / (alpha * dr.sqrt(dr.select(normal, 1.0, xy2))), 1e-30)
+    g = 2.0 / (1.0 + dr.erf(a) + dr.exp(-a * a) * _INV_SQRT_PI / a)
+    return dr.select(dr.dot(v, m) * v.z <= 0.0, 0.0, dr.select(normal, 1.0, g))
 
 
 def vgroove_g(wi, wo, h):
@@ -248,8 +296,9 @@ class DHRLookup:
 
     def one_minus_rho(self, cos_theta, u_slope):
         """1 - rho^{s,PEC} at polar angle acos(cos_theta) and slope coordinate u_slope."""
-        # x = 1 - sqrt(cos theta); the clamp keeps sqrt real for slightly negative rounding
-        x = 1.0 - dr.sqrt(dr.clip(cos_theta, 0.0, 1.0))
+        # x = 1 - sqrt(cos theta); the max keeps sqrt real for slightly negative rounding (cos theta <= 1
+        # for a unit vector; 1 + eps lands below the first texel centre, read as x = 0 by the clamped border)
+        x = 1.0 - dr.sqrt(dr.maximum(cos_theta, 0.0))
         v = (x * (self.nt - 1) + 0.5) / self.nt
         return self.tex.eval(mi.Point2f(u_slope, v))[0]
 

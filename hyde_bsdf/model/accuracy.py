@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
+from hyde_bsdf.io.input_gate import check_input
 
 __all__ = ["accuracy", "verdict", "load_atlas", "Atlas", "ATLAS_PATH", "TOLERANCE_DB", "TOLERANCE", "ELEMENTS_16"]
 
@@ -63,7 +64,7 @@ class Atlas:
     """The atlas's arrays (:mod:`hyde_bsdf.mom.atlas_errors` documents each) and its provenance."""
 
     def __init__(self, path):
-        path = Path(path)
+        path = Path(check_input(path, "accuracy atlas", stdin=False))     # a regular file: no FIFO, no device
         try:
             with np.load(path, allow_pickle=False) as data:
                 self.arrays = {k: data[k] for k in data.files}

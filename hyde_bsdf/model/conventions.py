@@ -18,7 +18,7 @@ Mitsuba (the plugin ``hyde``, roughconductor):
 * roughness: alpha = sqrt(2) x rms_slope (:func:`hyde_bsdf.model.parameters.alpha_from_rms_slope`);
 * index: ``eta``, ``k`` are n, k (n + ik), the same numbers;
 * Stokes bases: Mitsuba's ``stokes_basis(-wo_hat)`` in, ``stokes_basis(wi_hat)`` out, rotated into
-  the paper's s/p bases by :mod:`hyde_bsdf.mitsuba.frames`; the S3 sign is the paper's (no flip).
+  the paper's s/p bases by :mod:`hyde_bsdf.validation._frames`; the S3 sign is the paper's (no flip).
 """
 from __future__ import annotations
 

@@ -46,7 +46,7 @@ import numpy as np
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.model.checks import broadcast_named, real_array
 from hyde_bsdf.model.dhr import DHRHemisphere
-from hyde_bsdf.model.facet_geometry import angle_trig, cos_alpha_beta, rotation_terms
+from hyde_bsdf.model.facet_geometry import HORIZON_COS, angle_trig, cos_alpha_beta, rotation_terms
 from hyde_bsdf.model.fresnel import fresnel_mueller_terms
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.jones_mueller import rotated_fresnel_mueller
@@ -90,6 +90,17 @@ def specular_pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False
 _BLOCK = 8192
 
 
+def _check_memory(size: int) -> None:
+    """UsageError before the allocation when ``size`` directions need more than the available memory
+    (:data:`~hyde_bsdf.resources.COSTS`); below 64 MiB nothing is read (the fits call this often)."""
+    from hyde_bsdf.resources import COSTS, check_memory
+
+    need = size * COSTS.pbrdf_bytes_per_direction
+    if need > 64 * 2**20:
+        check_memory(need, f"pbrdf of {size} directions ({COSTS.pbrdf_bytes_per_direction} B each)",
+                     "evaluate fewer directions at once (in blocks)")
+
+
 def _specular(theta_i, theta_r, phi, s, index, shadowing):
     """F^s and M_00(beta) for broadcast angles, an :class:`Index` and a shadowing record; returns
     (F, M00, above).
@@ -100,6 +111,7 @@ def _specular(theta_i, theta_r, phi, s, index, shadowing):
     """
     ti, tr, ph = np.broadcast_arrays(theta_i, theta_r, phi)
     shape = ti.shape
+    _check_memory(ti.size)
     ti, tr, ph = ti.ravel(), tr.ravel(), ph.ravel()
     size = ti.size
     buf = np.empty((4, 4, size))
@@ -109,7 +121,7 @@ def _specular(theta_i, theta_r, phi, s, index, shadowing):
         for lo in range(0, size, _BLOCK):
             sl = slice(lo, lo + _BLOCK)
             si, ci, sr, cr, sh, ch = trig = angle_trig(ti[sl], tr[sl], ph[sl])
-            up = (ci > 0.0) & (cr > 0.0)                       # below the horizon: F = 0
+            up = (ci > HORIZON_COS) & (cr > HORIZON_COS)       # at or below the horizon: F = 0
             cos_a, cos_b, tan2_a = cos_alpha_beta(*trig)
             G = shadowing.g(cos_a, cos_b, ci, cr, s)
             # Eq. 6: F^s = P M G / (4 cos ti cos tr cos alpha)

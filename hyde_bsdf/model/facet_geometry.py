@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["angle_trig", "half_angle_terms", "cos_alpha_beta", "rotation_terms"]
+__all__ = ["HORIZON_COS", "angle_trig", "half_angle_terms", "cos_alpha_beta", "rotation_terms"]
 
 #: polar angle used in place of an exact 0 when the bases' orientation is needed:
 #: the s/p bases at theta = 0 are defined as the limit at fixed azimuth.
@@ -34,6 +34,12 @@ def half_angle_terms(sin_i, cos_i, sin_r, cos_r, cos_half_phi_sq):
     hxy2 = (sin_i - sin_r) ** 2 + 4.0 * sin_i * sin_r * cos_half_phi_sq
     hz = cos_i + cos_r
     return hxy2, hz
+
+
+#: cos(theta) at or below which a direction is on the horizon (theta within ~1e-15 rad of 90 deg): there
+#: cos is rounding, not geometry (pi/2 is no double: its cos comes out 1e-16), and Eq. 6's 1/(cos ti cos tr)
+#: would give 1e31; at the horizon the matrix is 0, as below it (and as in Mitsuba's BSDFs)
+HORIZON_COS = 1e-15
 
 
 def angle_trig(theta_i, theta_r, phi):

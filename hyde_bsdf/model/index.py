@@ -26,7 +26,7 @@ from hyde_bsdf.errors import UsageError, UsageTypeError, shorten
 from hyde_bsdf.model.checks import check_bool
 from hyde_bsdf.model.parameters import INDEX_MIN, K, N
 
-__all__ = ["Index", "PEC"]
+__all__ = ["Index", "PEC", "admissible"]
 
 
 @dataclass(frozen=True)
@@ -109,3 +109,10 @@ class Index:
 
 #: the perfect electric conductor: the limit k -> infinity (r_s = -1, r_p = +1 at every angle)
 PEC = Index(0.0, math.inf)
+
+
+def admissible(n: float, k: float) -> tuple[float, float]:
+    """(n, k), with n raised to INDEX_MIN where |n + ik| < INDEX_MIN: the nearest index the model accepts.
+    For optimisers, whose search box (n, k >= 0) holds eta = 0 -- their step there is no user's mistake
+    (was reported as one: "|eta| must be >= 1e-06, got n=3.8e-33")."""
+    return (max(n, INDEX_MIN), k) if math.hypot(n, k) < INDEX_MIN else (n, k)

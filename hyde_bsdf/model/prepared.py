@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from hyde_bsdf.model.evaluator import diffuse_pbrdf
-from hyde_bsdf.model.facet_geometry import angle_trig, cos_alpha_beta, rotation_terms
+from hyde_bsdf.model.facet_geometry import HORIZON_COS, angle_trig, cos_alpha_beta, rotation_terms
 from hyde_bsdf.model.fresnel import fresnel_mueller_terms
 from hyde_bsdf.model.index import Index
 from hyde_bsdf.model.jones_mueller import rotated_fresnel_mueller
@@ -42,7 +42,7 @@ class PreparedGeometry:
         with np.errstate(divide="ignore", invalid="ignore"):
             trig = angle_trig(ti, tr, ph)
             self.cos_i, self.cos_r = trig[1], trig[3]
-            self.above = (self.cos_i > 0.0) & (self.cos_r > 0.0)
+            self.above = (self.cos_i > HORIZON_COS) & (self.cos_r > HORIZON_COS)
             self.cos_a, cos_b, self.tan2_a = cos_alpha_beta(*trig)
             self.cos_b = np.where(self.above, cos_b, 1.0)
             self.rotation = rotation_terms(*trig)

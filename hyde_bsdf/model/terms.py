@@ -31,7 +31,7 @@ from hyde_bsdf.model import diffuse as _diffuse
 from hyde_bsdf.model import shadowing as _shadowing
 
 __all__ = ["ShadowingTerm", "DiffuseTerm", "SHADOWING_TERMS", "DIFFUSE_TERMS", "SHADOWING", "DIFFUSE",
-           "PARAMETER_DEFAULTS", "shadowing_term", "diffuse_term", "check_pair", "allowed", "term_arguments",
+           "PARAMETER_DEFAULTS", "RENDER_DEFAULT", "shadowing_term", "diffuse_term", "check_pair", "allowed", "term_arguments",
            "model_size"]
 
 
@@ -107,9 +107,15 @@ DIFFUSE_TERMS = (
                 _diffuse.f00_lambertian, reads_dhr=False, parameters=("diffuse_reflectance",), rank=3),
 )
 
-#: the names, in the registry's order (the first is the default)
+#: the names, in the registry's order (the first is the default of the evaluator and the fits: the paper's model)
 SHADOWING = tuple(t.name for t in SHADOWING_TERMS)
 DIFFUSE = tuple(t.name for t in DIFFUSE_TERMS)
+#: (shadowing, diffuse) of the renderers' default material -- the ``hyde`` plugin and ``hyde-bsdf export``
+#: (a table Mitsuba renders): the paper's V-groove with the reciprocal diffuse term, whose white-furnace albedo
+#: stays <= 1 in both transport modes at every roughness and angle; the paper's Eq. 17 term returns up to
+#: 1.94x the light of the furnace in a path tracer (docs/plugin.md, "Energy: the default material";
+#: hyde_bsdf/validation/furnace.py)
+RENDER_DEFAULT = ("vgroove", "reciprocal")
 _BY_NAME = {"shadowing": {t.name: t for t in SHADOWING_TERMS}, "diffuse": {t.name: t for t in DIFFUSE_TERMS}}
 
 

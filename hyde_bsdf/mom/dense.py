@@ -17,9 +17,11 @@ import time
 import numpy as np
 import scipy.linalg
 
+from hyde_bsdf.errors import UsageError
+
 from hyde_bsdf.mom.kernels import K0, layer_matrices
 
-__all__ = ["solve_dense"]
+__all__ = ["solve_dense", "check_finite_surface"]
 
 
 def _banded_solve(A, B, band):
@@ -45,6 +47,17 @@ def _band_sparse(A, band):
     return scipy.sparse.diags(diags, offsets, shape=(n, n), format="csr")
 
 
+def check_finite_surface(x, y, fp, fpp, psi) -> None:
+    """UsageError unless the surface profile (x, y, y', y'') and the incident field are finite: a NaN
+    there would come out as NaN fields, silently."""
+    for name, a in (("x", x), ("the height y", y), ("the slope y'", fp), ("the curvature y''", fpp),
+                    ("the incident field", psi)):
+        bad = ~np.isfinite(np.asarray(a))
+        if bad.any():
+            raise UsageError(f"the surface profile has {int(bad.sum())} NaN or infinite value(s) in {name} (first "
+                             f"at index {int(np.argmax(bad.ravel()))}); a MoM solve needs a finite surface")
+
+
 def solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock=time.process_time):
     """Surface fields u, v of one partition by dense LU.
 
@@ -53,6 +66,7 @@ def solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock=time.process_time):
     Returns a dict with ``u_P``, ``v_P`` [N, n_ti] per polarisation (None where zero: a PEC)
     and ``times`` = (fill, factor, solve) in ``clock`` seconds.
     """
+    check_finite_surface(x, y, fp, fpp, psi)
     t0 = clock()
     n = x.size
     half = 0.5 * np.eye(n)

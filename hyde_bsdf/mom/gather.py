@@ -5,8 +5,9 @@ pool, :class:`~hyde_bsdf.mom.solver.SerialExecutor`, or a dask.distributed
 ``client.get_executor()``) and collects the results in order.  It waits at most ``POLL_S``
 seconds at a time, and between waits it checks that the executor can still run tasks (a dask
 cluster whose client is closed, or which has had no worker for ``NO_WORKER_GRACE_S`` seconds, is
-dead; a process pool that lost a worker is broken), enforces the caller's ``timeout`` (seconds
-without any task finishing), and reports a heartbeat line every ``HEARTBEAT_S`` seconds without a
+dead; a process pool that lost a worker is broken), enforces ``timeout`` (seconds without any task
+finishing; by default ``HYDE_BSDF_TASK_TIMEOUT``, 3600 s: :func:`hyde_bsdf.resources.wait_limit`),
+asks a dask scheduler nothing without a limit (:func:`scheduler_identity`), and reports a heartbeat line every ``HEARTBEAT_S`` seconds without a
 finished task.  A dead executor, a task killed with its worker, or the timeout ends in one
 :class:`ExecutorError` line naming the executor and how many tasks had finished; the pending
 tasks are cancelled.  An exception raised *by a task* reaches the caller unchanged.
@@ -18,8 +19,10 @@ import time
 
 from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.progress import as_callback
+from hyde_bsdf.resources import wait_limit
 
-__all__ = ["gather", "ExecutorError", "check_executor", "POLL_S", "HEARTBEAT_S", "NO_WORKER_GRACE_S"]
+__all__ = ["gather", "ExecutorError", "check_executor", "scheduler_identity", "POLL_S", "HEARTBEAT_S",
+           "NO_WORKER_GRACE_S"]
 
 #: longest single wait on the executor before the liveness checks run again (seconds)
 POLL_S = 2.0
@@ -80,14 +83,24 @@ def _problem(executor):
     if status not in ("running", "newly-created"):
         return True, f"its client is {status} (the scheduler is unreachable or was closed)"
     try:
-        try:
-            info = client.scheduler_info(n_workers=0)  # totals only: cheap on a big cluster
-        except TypeError:                             # distributed < 2025: no n_workers argument
-            info = client.scheduler_info()
+        info = scheduler_identity(client, n_workers=0)  # totals only: cheap on a big cluster
     except Exception as exc:  # noqa: BLE001 -- any failure to reach the scheduler is reported
         return True, f"its scheduler does not answer ({type(exc).__name__}: {exc})"
     workers = info.get("n_workers", len(info.get("workers", {})))
     return (False, "it has no worker (the only worker died or was never started)") if workers == 0 else None
+
+
+def scheduler_identity(client, **kwargs) -> dict:
+    """The dask scheduler's answer to ``identity`` (its workers, their threads), waited for at most
+    ``HYDE_BSDF_CONNECT_TIMEOUT`` seconds (a TimeoutError naming it beyond)."""
+    seconds, name = wait_limit("connect")
+    try:
+        try:
+            return client.sync(client.scheduler.identity, **kwargs, callback_timeout=seconds)
+        except TypeError:                         # distributed < 2025: no n_workers argument
+            return client.sync(client.scheduler.identity, callback_timeout=seconds)
+    except TimeoutError:
+        raise TimeoutError(f"no answer within {seconds:g} s ({name})") from None
 
 
 def _executor_failure(exc) -> bool:
@@ -100,8 +113,8 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, w
            on_result=None):
     """[fn(item) for item in items], run on ``executor`` (not shut down here), never waiting blindly.
 
-    ``timeout``: seconds without any task finishing after which the run is given up (None: no
-    limit while the executor is alive); ``on_done(done_count)`` after every finished task;
+    ``timeout``: seconds without any task finishing after which the run is given up (None:
+    ``HYDE_BSDF_TASK_TIMEOUT``, default 3600 s); ``on_done(done_count)`` after every finished task;
     ``heartbeat``: a progress callback (as :func:`hyde_bsdf.progress.as_callback` reads it) called
     every HEARTBEAT_S seconds in which nothing finished; ``what``, ``label``: words for the
     messages ('partition', 'mom'); ``on_result(index, result)`` with each task's result as it
@@ -110,6 +123,7 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, w
     """
     if timeout is not None and not (timeout > 0):
         raise UsageError(f"timeout must be > 0 seconds or None, got {shorten(timeout)}")
+    timeout, setting = (timeout, "timeout") if timeout is not None else wait_limit("task")
     beat, name, items = as_callback(heartbeat, prefix=""), _name(executor), list(items)
     futures, results, done_count = {}, [None] * len(items), 0
 
@@ -124,7 +138,7 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, w
         raise fail(f"refused the {what}s ({type(exc).__name__}: {exc})") from None
     pending, last_done, last_beat, no_worker_since = set(futures), time.monotonic(), time.monotonic(), None
     while pending:
-        step = POLL_S if timeout is None else min(POLL_S, max(0.01, timeout - (time.monotonic() - last_done)))
+        step = min(POLL_S, max(0.01, timeout - (time.monotonic() - last_done)))
         done, pending = cf.wait(pending, timeout=step, return_when=cf.FIRST_COMPLETED)
         for fut in done:
             try:
@@ -153,8 +167,8 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, w
         if no_worker_since is not None and now - no_worker_since >= NO_WORKER_GRACE_S:
             raise fail(f"is dead: {problem[1]}; no worker for {now - no_worker_since:.0f} s")
         idle = now - last_done
-        if timeout is not None and idle >= timeout:
-            raise fail(f"finished no {what} for {idle:.0f} s (timeout={timeout:g} s)")
+        if idle >= timeout:
+            raise fail(f"finished no {what} for {idle:.0f} s ({setting}={timeout:g} s)")
         if beat is not None and now - last_beat >= HEARTBEAT_S:
             last_beat = now
             beat(f"{label}: waiting on the {name}: {done_count}/{len(items)} {what}s done, "

@@ -203,7 +203,7 @@ from hyde_bsdf.model.parameters import NATURAL_INDEX
 from hyde_bsdf.progress import Throttle, as_callback
 from hyde_bsdf.mom import cost as _cost
 from hyde_bsdf.mom.beam import gaussian_beam, window_bias
-from hyde_bsdf.mom.dense import solve_dense
+from hyde_bsdf.mom.dense import check_finite_surface, solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, NEAR_WL, FastSolverUnsuitable, block_length_wl, plan_blocks, solve_fast
 from hyde_bsdf.mom.floor import FLOOR_MARGIN, floor_reason, partition_floor
 from hyde_bsdf.mom.gather import ExecutorError, check_executor, gather
@@ -466,6 +466,7 @@ def _solve_fields(task, psi, clock):
     """
     x, y, fp, fpp, dx = task["x"], task["y"], task["dfdx"], task["d2fdx2"], task["dx"]
     pols, eta = task["pols"], task["eta"]
+    check_finite_surface(x, y, fp, fpp, psi)
     if task.get("solver", "dense") != "fast":
         return solve_dense(x, y, fp, fpp, dx, psi, pols, eta, clock), "dense", []
     reasons = []

@@ -52,6 +52,8 @@ from hyde_bsdf.errors import UsageError
 __all__ = ["Calibration", "Light", "load_cameras", "load_lights", "light_dict", "light_spec", "calibrated_sensors",
            "calibrated_scene"]
 
+#: the horizontal field of view a calibration may give, deg (Mitsuba's perspective sensor needs (0, 180))
+FOV_RANGE = (1e-3, 179.0)
 #: Mitsuba camera-local axes expressed in the CV camera frame: x left, y up, z forward
 CV_TO_MITSUBA = np.diag([-1.0, -1.0, 1.0])
 
@@ -96,6 +98,12 @@ class Calibration:
         if abs(fx / fy - 1.0) > 1e-3:
             raise UsageError(f"{where}: fx = {fx:g} and fy = {fy:g} differ by more than 0.1 %; resample the images "
                              f"to square pixels (the renderer's pixels are square)")
+        fov = math.degrees(2.0 * math.atan(w / (2.0 * fx)))
+        if not FOV_RANGE[0] <= fov <= FOV_RANGE[1]:
+            raise UsageError(f"{where}: fx = {fx:g} px over a width of {w} px is a field of view of {fov:.6g} deg; a "
+                             f"pinhole camera's is in [{FOV_RANGE[0]:g}, {FOV_RANGE[1]:g}] deg (fx in pixels, "
+                             f"{w / (2 * math.tan(math.radians(FOV_RANGE[1] / 2))):.3g} to "
+                             f"{w / (2 * math.tan(math.radians(FOV_RANGE[0] / 2))):.3g} here)")
         R = _matrix(d["R"], (3, 3), f"{where}: R")
         if np.abs(R @ R.T - np.eye(3)).max() > 1e-6 or np.linalg.det(R) < 0:
             raise UsageError(f"{where}: R is not a rotation (R R^T = I, det R = +1 within 1e-6); give the "
@@ -167,11 +175,17 @@ def _matrix(v, shape, what) -> np.ndarray:
 
 
 def _read_json(path, what):
-    path = Path(path)
+    """The JSON of ``path`` (a regular file of at most 1 MiB: the input gate), one line for what is not."""
+    from hyde_bsdf.io.input_gate import check_input
+
+    if not Path(path).exists():
+        raise UsageError(f"{what} {str(path)!r}: no such file")
+    path = check_input(path, what, limit=2**20, stdin=False)
     try:
         return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise UsageError(f"{what} {str(path)!r}: no such file") from None
+    except RecursionError:                     # [[[[... 100,000 deep: Python's parser gives up
+        raise UsageError(f"{what} {str(path)!r}: nested too deeply to be a calibration (JSON arrays or objects "
+                         f"inside each other beyond Python's limit)") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise UsageError(f"{what} {str(path)!r}: not readable JSON ({str(exc).splitlines()[0]})") from None
 

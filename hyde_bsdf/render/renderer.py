@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import os
 import re
 import signal
 import threading
@@ -40,11 +39,12 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError, one_line
 from hyde_bsdf.io.input_gate import check_input
+from hyde_bsdf.io.scene_files import scene_files
 from hyde_bsdf.io.stokes_exr import STOKES_NAMES
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.resources import COSTS, check_memory, render_bytes
 
-__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "load_scene_nearest", "scene_inputs", "render_stokes",
+__all__ = ["DEFAULT_VARIANT", "prepare_variant", "load_scene", "load_scene_nearest", "render_stokes",
            "plan_passes", "sensor_to_paper_rotation", "rotate_stokes"]
 
 DEFAULT_VARIANT = "llvm_ad_spectral_polarized"
@@ -120,7 +120,7 @@ class _SceneXML:
     def __init__(self, path: Path, params: dict):
         self.path = path
         self.raw = {}   # "sample_count"/"width"/"height" -> raw attribute text of the first sensor
-        self.values = dict(params)
+        self.values, self.params = dict(params), dict(params)
         try:
             text = path.read_text(encoding="utf-8", errors="replace")
         except OSError as exc:
@@ -148,31 +148,10 @@ class _SceneXML:
         m = _PARAM.fullmatch(self.raw.get(key, "") or "")
         return f" (the scene's ${m.group(1)}; set it with `params` {m.group(1)}=N)" if m else ""
 
-    def files(self) -> list[Path]:
-        """The files the scene names (``<string name="filename" value=...>``, and the ``filename``
-        attribute of ``<include>`` and ``<spectrum>``; ``$name`` resolved, relative to the scene's
-        folder): inputs of the run, which no output may overwrite."""
-        if self.tree is None:
-            return []
-        out = []
-        for el in self.tree.getroot().iter():
-            name = el.get("value") if el.tag == "string" and el.get("name") == "filename" else el.get("filename")
-            if name:
-                p = Path(self.resolve(name)).expanduser()
-                out.append(p if p.is_absolute() else self.path.parent / p)
-        return out
-
-    def check_files(self) -> None:
-        """Each existing file the scene names through the input gate: a FIFO or a device as a
-        texture or mesh is refused here, before Mitsuba would wait on it forever."""
-        for p in self.files():
-            if os.path.lexists(p):
-                check_input(p, f"scene {str(self.path)!r}: file", stdin=False)
-
     def check(self) -> None:
+        scene_files(self.path, self.params)        # the input gate on every file of the graph
         if self.tree is None:
             return
-        self.check_files()
         where = f"scene {str(self.path)!r}"
         if not self.sensors and not self.has_include:
             raise UsageError(f"{where} has no <sensor>: add a camera, e.g. <sensor type=\"perspective\"> "
@@ -231,14 +210,6 @@ class _SceneXML:
                 root.insert(i, inner if inner is not None else ET.Element("integrator", type="path"))
                 return ET.tostring(root, encoding="unicode")
         return None
-
-
-def scene_inputs(path, params: dict | None = None) -> list[Path]:
-    """The scene file and every file it names (``$name`` filled from ``params``): the inputs of a
-    run that reads the scene, which the output gate keeps any output from overwriting."""
-    path = Path(path)
-    info = _SceneXML(path, {str(k): str(v) for k, v in (params or {}).items()})
-    return [path] + info.files()
 
 
 def load_scene(path, params: dict | None = None, polarized: bool | None = None):

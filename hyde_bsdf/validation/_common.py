@@ -84,6 +84,20 @@ def write_checks_json(path, doc, checks):
         json.dump(data, f)
 
 
+def db(x):
+    """10 log10(x), a zero held at -300 dB (a curve's zero, not an error)."""
+    return 10.0 * np.log10(np.maximum(x, 1e-30))
+
+
+def mom_parser(doc, outdir="out/validation/"):
+    """The MoM scripts' shared options: ``-o OUTDIR``, ``--pts-per-wl``, ``--seed``."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("-o", "--outdir", default=outdir)
+    ap.add_argument("--pts-per-wl", type=float, default=10.0)
+    ap.add_argument("--seed", type=int, default=0)
+    return ap
+
+
 def write_csv(path, header, rows):
     """Write the numbers behind a figure: one header row, then ``rows`` (atomically: a temporary
     file beside ``path``, renamed over it once complete)."""
@@ -96,10 +110,13 @@ def write_csv(path, header, rows):
         w.writerows(rows)
 
 
-def save_figure(fig, path, dpi=130):
+def save_figure(fig, path, dpi=130, tight=False):
     """Save a matplotlib figure as PNG (atomically), close it, and name it in the report's
-    protocol (:data:`FIGURES`)."""
+    protocol (:data:`FIGURES`); ``tight``: lay it out tightly first."""
     import matplotlib.pyplot as plt
+
+    if tight:
+        fig.tight_layout()
 
     from hyde_bsdf.io.atomic import atomic_path
     try:
@@ -108,6 +125,18 @@ def save_figure(fig, path, dpi=130):
     finally:
         plt.close(fig)
     FIGURES.append(str(path))
+
+
+def sweep_chart(sweeps, path, title, **kw):
+    """Run each stability sweep ``(title, values, fn)`` (``fn(value)`` -> (class, error, message)), draw
+    them with :func:`stability_chart` and return the CSV rows [title, value, class, error, message]."""
+    rows, panels = [], []
+    for name, values, fn in sweeps:
+        res = [fn(v) for v in values]
+        panels.append((name, values, res))
+        rows += [[name, v, c, e, msg] for v, (c, e, msg) in zip(values, res)]
+    stability_chart(panels, path, title, **kw)
+    return rows
 
 
 def stability_chart(panels, path, title, err_label="rel. err", err_ylim=(1e-17, 1.0), text_errors=False):

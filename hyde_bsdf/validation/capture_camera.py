@@ -8,7 +8,7 @@ The camera (:data:`NOISE`): EMVA 1288 linear model, gain 1 DN per electron, read
 pixel one super-pixel), demosaicked by super-pixel -- S0, S1, S2 with their propagated sigma;
 ``stokes``: six frames (analyzers 0/45/90/135 deg, then 45 and 135 deg behind a quarter-wave
 retarder) -- S0..S3.  The sigma maps are the loss's weights and the standard errors' noise
-(:mod:`hyde_bsdf.inverse.camera_data`, :mod:`hyde_bsdf.inverse.analyzer`).
+(:mod:`hyde_bsdf.inverse.camera_data`, :mod:`hyde_bsdf.model.polarimetry`).
 
 Cases (``hyde`` on a 2 x 2 plane, :func:`hyde_bsdf.inverse.acquisition.example_material`, scale known):
 
@@ -45,7 +45,7 @@ from hyde_bsdf.validation.svbrdf_index import CSV_HEADER, _stats, run_case, star
 
 from hyde_bsdf import inverse as inv  # noqa: E402
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations  # noqa: E402
-from hyde_bsdf.inverse.analyzer import CameraNoise, simulate_capture  # noqa: E402
+from hyde_bsdf.model.polarimetry import CameraNoise, simulate_capture  # noqa: E402
 from hyde_bsdf.progress import stderr_lines  # noqa: E402
 
 _log = stderr_lines("[capture_camera]")

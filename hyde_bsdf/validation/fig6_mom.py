@@ -33,7 +33,6 @@ fig6_mom.npz (the raw MoM result, reused by mom_1d_model.py).
 """
 from __future__ import annotations
 
-import argparse
 import contextlib
 import csv
 import math
@@ -43,7 +42,8 @@ import time
 
 import numpy as np
 
-from hyde_bsdf.validation._common import flagged_legend, legend_entries, plot_flagged, save_figure  # noqa: E402
+from hyde_bsdf.validation._common import (db, flagged_legend, legend_entries, mom_parser, plot_flagged, save_figure,  # noqa: E402
+                                          write_csv)
 
 THETA_I_DEG = [10.0, 30.0, 45.0, 60.0, 75.0]
 RMS_SLOPE = 0.3
@@ -99,15 +99,9 @@ def specular_value(theta_r_deg, curve, theta_i_deg, half_width=1.0):
     return float(np.mean(curve[sel]))
 
 
-def db(x):
-    return 10.0 * np.log10(np.maximum(x, 1e-30))  # guard: log of a zero curve value
-
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("-o", "--outdir", default="out/validation/")
-    ap.add_argument("--pts-per-wl", type=float, default=10.0)
-    ap.add_argument("--seed", type=int, default=0)
+    ap = mom_parser(__doc__)
     ap.add_argument("--reuse", action="store_true", help="reuse OUTDIR/fig6_mom.npz if present")
     args = ap.parse_args(argv)
     os.makedirs(args.outdir, exist_ok=True)
@@ -170,13 +164,10 @@ def main(argv=None):
     fig.tight_layout(rect=(0, below, 1, 1))
     png = os.path.join(args.outdir, "fig6_mom.png")
     save_figure(fig, png, dpi=120)
-
-    with open(os.path.join(args.outdir, "fig6_mom.csv"), "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["theta_i_deg", "theta_r_deg", "sigma_mom", "sigma_mom_std_error", "mom_normalized",
-                    "pbrdf_F00_cos_normalized", "model1d_normalized", "valid_s"])
-        for r in rows:
-            w.writerow([f"{v:.6g}" for v in r])
+    write_csv(os.path.join(args.outdir, "fig6_mom.csv"),
+              ["theta_i_deg", "theta_r_deg", "sigma_mom", "sigma_mom_std_error", "mom_normalized",
+                    "pbrdf_F00_cos_normalized", "model1d_normalized", "valid_s"],
+              [[f"{v:.6g}" for v in r] for r in rows])
     with open(os.path.join(args.outdir, "fig6_mom_table.csv"), "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(table[0]))
         w.writeheader()
@@ -248,7 +239,7 @@ def validate(outdir="out/validation", quick=False):
                            value=r["rms_diff_1d_model_dB"], tolerance=tol, passed=r["rms_diff_1d_model_dB"] <= tol))
         checks.append(dict(name=f"Fig6 MoM vs Eq. 17 (2-D model, normalised as in the paper), theta_i = {ti:g} deg (rms dB)",
                            value=r["rms_diff_dB"], tolerance="reported", passed=True))
-    from _common import atlas_checks
+    from hyde_bsdf.validation._common import atlas_checks
     checks += atlas_checks("Fig6 MoM vs the model", [r["theta_i_deg"] for r in table], RMS_SLOPE, RMS_HEIGHT_WL,
                            [("PEC", None, None)])
     return checks

@@ -20,13 +20,17 @@ Targets (issue 30):
   wavelength -- or within 3 standard errors that are no larger than 1.5x the Cramer-Rao bound of
   this design (computed here from the generator's own derivatives and noise model);
 - normalized only: the same, or a warning that names what is not identified; never a silent
-  error beyond 3 standard errors;
+  error beyond 3 standard errors -- on the first seed of each case (the table); over all seeds
+  honest Gaussian errors are exceeded by 3 of them in 0.27 % of the values, so there the count of
+  values beyond 3 standard errors without a warning must not exceed what that rate gives (binomial
+  tail p >= 0.001; a bias or too-small errors give many more);
 - pull std 0.8-1.25 over >= 20 noise seeds wherever standard errors are claimed (errors not
   "lower bounds", the parameter not flagged);
-- 0 silent misfits: a fit whose model is shown wrong by this script's own chi^2 test (p < 0.001,
-  the fitted model evaluated by ``pbrdf`` against the data) without the fit saying so, on every
-  case and seed, in particular on the data the family cannot describe (GGX, a retardance, a
-  volume term);
+- 0 silent misfits on the data the family cannot describe (GGX, a retardance, a volume term), on
+  every seed: a fit whose model is shown wrong by this script's own chi^2 test (p < 0.001, the
+  fitted model evaluated by ``pbrdf`` against the data) without the fit saying so.  On the
+  family's own data that test rejects the true model in 0.1 % of the fits by construction: the
+  count there must not exceed that rate's (binomial tail p >= 0.001);
 - the JSON of ``hyde-bsdf fit --json`` for every case (fit_lab_data_<case>_<data>.json).
 
 Writes fit_lab_data.png, fit_lab_data.csv (one row per case, data and parameter),
@@ -45,6 +49,8 @@ from pathlib import Path
 
 import numpy as np
 from scipy.special import erf
+from scipy.stats import binom
+from scipy.stats import norm as gaussian
 from scipy.stats import chi2 as chi2_dist
 
 from hyde_bsdf.fit.lab import fit_lab
@@ -317,6 +323,12 @@ def judge(label, options, family, with_m00, seed, bounds):
     return result, rows, pulls, silent
 
 
+def _judged(rows) -> int:
+    """The values a silent error could be: a family case's parameters with a finite standard error,
+    neither flagged nor in a fit that warns."""
+    return sum(1 for r in rows if r["ok"] != "" and math.isfinite(r["stderr"]) and not r["flagged"] and r["adequate"])
+
+
 def run_case(label, options, family, with_m00, seeds, outdir):
     """The case's first seed in full (rows, JSON) and every seed's pulls and silent misfits."""
     bounds = cramer_rao(options, with_m00) if family else {}
@@ -324,18 +336,21 @@ def run_case(label, options, family, with_m00, seeds, outdir):
     slug = "".join(c if c.isalnum() else "_" for c in label.split(":")[0].lower()).strip("_")[:40]
     (outdir / f"fit_lab_data_{slug}_{'m00' if with_m00 else 'normalized'}.json").write_text(
         json.dumps(result.to_dict(), indent=1, allow_nan=False))
-    silents = [silent or any(r["silent_error"] for r in rows)]
+    silents, errors, judged = [silent], [sum(r["silent_error"] for r in rows)], [_judged(rows)]
     for s in range(1, seeds):
         _, more_rows, more_pulls, sil = judge(label, options, family, with_m00, s, bounds)
         pulls += more_pulls
-        silents.append(sil or any(r["silent_error"] for r in more_rows))
+        silents.append(sil)
+        errors.append(sum(r["silent_error"] for r in more_rows))
+        judged.append(_judged(more_rows))
     p = np.array([x for _, x in pulls])
     summary = dict(case=label, family=family, data="M00 + normalized" if with_m00 else "normalized only",
                    model=result.model.label, adequate=result.verdict.adequate,
                    warned=bool(result.warnings), seeds=seeds, pulls=p.size,
                    pull_std=float(p.std(ddof=1)) if p.size > 2 else math.nan,
                    pull_mean=float(p.mean()) if p.size else math.nan,
-                   silent=int(sum(silents)), fits=len(silents),
+                   silent=int(sum(silents)), fits=len(silents), silent_errors=int(sum(errors)),
+                   judged_values=int(sum(judged)), first_seed_silent_errors=int(errors[0]),
                    ok=all(r["ok"] for r in rows) if family else "")
     return summary, rows, pulls
 
@@ -394,7 +409,13 @@ def _checks(worst, summaries, rows, out, quick):
     claimed = [s for s in summaries if s["family"] and s["pulls"] > 2]
     off = [f"{s['case'].split(':')[0]} ({s['data']}) {s['pull_std']:.3g}" for s in claimed
            if not PULL_RANGE[0] <= s["pull_std"] <= PULL_RANGE[1]]
-    silent = sum(s["silent"] for s in summaries)
+    outside = [s for s in summaries if not s["family"]]
+    inside = [s for s in summaries if s["family"]]
+    silent_out = sum(s["silent"] for s in outside)
+    first = sum(s["first_seed_silent_errors"] for s in inside)
+    chance = [(sum(s["silent"] for s in inside), sum(s["fits"] for s in inside), 1e-3),
+              (sum(s["silent_errors"] for s in inside), sum(s["judged_values"] for s in inside), 2 * gaussian.sf(3.0))]
+    tails = [binom.sf(k - 1, n, q) if k else 1.0 for k, n, q in chance]
     jsons = sorted(out.glob("fit_lab_data_*.json"))
     schema = all(set(json.loads(p.read_text())) == {"model", "parameters", "covariance", "verdict", "models"}
                  for p in jsons)
@@ -407,8 +428,15 @@ def _checks(worst, summaries, rows, out, quick):
         dict(name="normalized only: the same targets, or a warning naming what is not identified",
              value=f"{len(norm) - len(bad(norm))}/{len(norm)}" + (f" (not: {'; '.join(bad(norm))})" if bad(norm) else ""),
              tolerance="all", passed=not bad(norm)),
-        dict(name="silent misfits and silent errors beyond 3 standard errors (every case and seed)",
-             value=f"{silent} of {sum(s['fits'] for s in summaries)} fits", tolerance="0", passed=silent == 0),
+        dict(name="silent misfits on data the family cannot describe (GGX, retardance, volume; every seed)",
+             value=f"{silent_out} of {sum(s['fits'] for s in outside)} fits", tolerance="0", passed=silent_out == 0),
+        dict(name="silent errors beyond 3 standard errors on the first seed of each family case",
+             value=f"{first}", tolerance="0", passed=first == 0),
+        dict(name="family data, every seed: silent chi^2 misfits and silent values beyond 3 standard errors "
+                  "against the rates of honest Gaussian errors (0.1 % of fits, 0.27 % of values)",
+             value=f"{chance[0][0]} of {chance[0][1]} fits (expected {chance[0][1] * 1e-3:.2g}, tail p {tails[0]:.2g}); "
+                   f"{chance[1][0]} of {chance[1][1]} values (expected {chance[1][1] * chance[1][2]:.2g}, tail p "
+                   f"{tails[1]:.2g})", tolerance="tail p >= 0.001", passed=min(tails) >= 1e-3),
         dict(name="the JSON result of every case has the issue's schema",
              value=f"{len(jsons)} files", tolerance=f"{len(summaries)}", passed=schema and len(jsons) == len(summaries)),
     ]
@@ -417,6 +445,11 @@ def _checks(worst, summaries, rows, out, quick):
                            value=", ".join(f"{s['case'].split(':')[0]} ({s['data']}) {s['pull_std']:.3g}"
                                            for s in claimed), tolerance=f"{PULL_RANGE}", passed=not off))
     return checks
+
+
+def _short(case) -> str:
+    """A case's axis label: "issue", "B+S Lambertian 10 %", "GGX + Smith, ...", ..."""
+    return case.split(":")[0].replace("Beckmann + Smith, ", "B+S ").replace("Lambertian", "Lamb.")[:26]
 
 
 def _plot(path, summaries, rows):
@@ -447,7 +480,7 @@ def _plot(path, summaries, rows):
         ax.plot(i, s["pull_std"], "o", color="C0" if s["data"] != "normalized only" else "C1")
     ax.axhspan(*PULL_RANGE, color="C2", alpha=0.15)
     ax.set_xticks(range(len(claimed)))
-    ax.set_xticklabels([s["case"].split(":")[0][:22] + (" (norm.)" if s["data"] == "normalized only" else "")
+    ax.set_xticklabels([_short(s["case"]) + (" (norm.)" if s["data"] == "normalized only" else "")
                         for s in claimed], rotation=30, fontsize=7, ha="right")
     ax.set_ylabel("pull std over the noise seeds")
     ax.set_title("standard errors against the scatter (green: 0.8-1.25)", fontsize=9)
@@ -458,12 +491,11 @@ def _plot(path, summaries, rows):
         ax.semilogy(i, r["chi2_red_check"], "o", color=colour, ms=7)
     ax.axhline(1.0, color="grey", lw=0.6)
     ax.set_xticks(range(len(summaries)))
-    ax.set_xticklabels([s["case"].split(":")[0][:22] + (" (norm.)" if s["data"] == "normalized only" else "")
+    ax.set_xticklabels([_short(s["case"]) + (" (norm.)" if s["data"] == "normalized only" else "")
                         for s in summaries], rotation=30, fontsize=7, ha="right")
     ax.set_ylabel("reduced chi^2 of the chosen model (this script's test)")
     ax.set_title("green: adequate; orange: the fit warns; red: a silent misfit", fontsize=9)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110, tight=True)
 
 
 if __name__ == "__main__":

@@ -192,7 +192,7 @@ def mitsuba_table(path, bsdf: dict, resolution=(13, 24, 24)):
     table on the exporter's grid: the paper's bases from :func:`eval_paper`, then the table's frames."""
     import mitsuba as mi
 
-    from hyde_bsdf.mitsuba.frames import eval_paper
+    from hyde_bsdf.validation._frames import eval_paper
     from hyde_bsdf.mitsuba.variants import set_variant
 
     set_variant("llvm_ad_spectral_polarized")
@@ -397,8 +397,7 @@ def _plot(path, cases, mits):
     ax.set_xticks(range(len(claimed)), [f"{c['kind']}\n{c['case']}" for c in claimed], rotation=90, fontsize=6)
     ax.set_ylabel("pull std over repeated noise")
     ax.set_title("standard errors: pull std (target 0.8-1.25)", fontsize=9)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110, tight=True)
 
 
 if __name__ == "__main__":

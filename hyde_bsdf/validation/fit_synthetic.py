@@ -38,7 +38,7 @@ from hyde_bsdf.app.plots import plot_fit
 from hyde_bsdf.io.measurements import write_measurements
 from hyde_bsdf.io.atomic import atomic_open
 
-from hyde_bsdf.validation._common import cli, save_figure  # noqa: E402
+from hyde_bsdf.validation._common import FIGURES, cli, save_figure  # noqa: E402
 
 MATERIALS = {
     "infragold": {"n": 0.285, "k": 7.3523, "rms_slope": 0.44, "label": "LabSphere Infragold (Fig. 8)"},
@@ -82,6 +82,7 @@ def validate(outdir="out/validation", quick=False, trials=200, large_rows=None):
         plot_fit(res, meas, out / f"fit_synthetic_{m}.png", truth=truth,
                  title=f"synthetic {mat['label']}: truth eta = {truth['n']} - j{truth['k']}, "
                        f"rms_slope = {truth['rms_slope']} (bars: +-1 sigma of {N_SAMPLES} samples)")
+        FIGURES.append(str(out / f"fit_synthetic_{m}.png"))     # saved by app.plots: named for the report here
         for q in PARAMS:
             pull = (res.params[q] - truth[q]) / res.stderr[q]
             rows.append({"material": m, "parameter": q, "truth": truth[q], "fit": res.params[q],

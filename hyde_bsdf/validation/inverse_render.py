@@ -123,6 +123,16 @@ def endpoint_losses(scene, runs, spp, spp_ref, seed=7):
     return rows
 
 
+def _write_dicts(path, comment, rows):
+    """A CSV of dict rows (floats to 6 digits) under one ``# comment`` line, written atomically."""
+    with atomic_open(path, "w", newline="") as fh:
+        fh.write(f"# {comment}\n")
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+
+
 def validate(outdir="out/validation", quick=False, iterations=400, iterations_directional=1000, spp=16,
              spp_ref=512, res=64):
     """Run parts A and B; write the PNG/CSV files; return the report's checks.
@@ -148,20 +158,12 @@ def validate(outdir="out/validation", quick=False, iterations=400, iterations_di
     etas, ks, maps = landscape(sceneB, spp, grid_n)
     valley = valley_profile(sceneB, spp, points=7 if quick else 13)
     ends = endpoint_losses(sceneB, B, spp, spp_ref)
-    with atomic_open(out / "inverse_endpoints.csv", "w", newline="") as fh:
-        fh.write("# directional light (beta = 60 deg): both losses at the truth and at the end points of the "
-                 "two runs, rendered with the reference's seed (no sampling noise between them)\n")
-        w = csv.DictWriter(fh, fieldnames=list(ends[0]))
-        w.writeheader()
-        for r in ends:
-            w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
-    with atomic_open(out / "inverse_valley.csv", "w", newline="") as fh:
-        fh.write("# directional light (beta = 60 deg): losses along the curve of equal facet reflectance "
-                 "A(60 deg) through the truth; rms_slope at truth; same seed for reference and renders\n")
-        w = csv.DictWriter(fh, fieldnames=list(valley[0]))
-        w.writeheader()
-        for r in valley:
-            w.writerow({k: f"{v:.6g}" for k, v in r.items()})
+    _write_dicts(out / "inverse_endpoints.csv", "directional light (beta = 60 deg): both losses at the truth and at "
+                 "the end points of the two runs, rendered with the reference's seed (no sampling noise between them)",
+                 ends)
+    _write_dicts(out / "inverse_valley.csv", "directional light (beta = 60 deg): losses along the curve of equal "
+                 "facet reflectance A(60 deg) through the truth; rms_slope at truth; same seed for reference and "
+                 "renders", valley)
 
     rows = []
     for tag, runs in (("points", A), ("directional", B)):

@@ -20,14 +20,14 @@ mom_1d_model.csv (curves), mom_1d_model_table.csv.
 """
 from __future__ import annotations
 
-import argparse
 import csv
 import os
 
 import numpy as np
 
 from hyde_bsdf.validation import fig6_mom  # noqa: E402  (the shared Fig. 6 case and its MoM run)
-from hyde_bsdf.validation._common import flagged_legend, legend_entries, plot_flagged, save_figure  # noqa: E402
+from hyde_bsdf.validation._common import (db, flagged_legend, legend_entries, mom_parser, plot_flagged, save_figure,  # noqa: E402
+                                          write_csv)
 
 LOBE_LEVEL = 0.1
 
@@ -38,15 +38,9 @@ def model1d_level():
     return inspect.signature(model1d.lobe_energy_shares).parameters["level"].default
 
 
-def db(x):
-    return 10.0 * np.log10(np.maximum(x, 1e-30))  # guard: log of zero
-
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("-o", "--outdir", default="out/validation/")
-    ap.add_argument("--pts-per-wl", type=float, default=10.0)
-    ap.add_argument("--seed", type=int, default=0)
+    ap = mom_parser(__doc__)
     ap.add_argument("--rerun", action="store_true", help="run the MoM even if OUTDIR/fig6_mom.npz exists")
     args = ap.parse_args(argv)
     args.reuse = not args.rerun
@@ -109,12 +103,10 @@ def main(argv=None):
     fig.tight_layout(rect=(0, below, 1, 1))
     png = os.path.join(args.outdir, "mom_1d_model.png")
     save_figure(fig, png, dpi=120)
-    with open(os.path.join(args.outdir, "mom_1d_model.csv"), "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["theta_i_deg", "theta_r_deg", "sigma_mom", "sigma_mom_std_error", "sigma_model1d",
-                    "sigma_model1d_specular", "valid_s"])
-        for r in rows:
-            w.writerow([f"{v:.6g}" for v in r])
+    write_csv(os.path.join(args.outdir, "mom_1d_model.csv"),
+              ["theta_i_deg", "theta_r_deg", "sigma_mom", "sigma_mom_std_error", "sigma_model1d",
+                    "sigma_model1d_specular", "valid_s"],
+              [[f"{v:.6g}" for v in r] for r in rows])
     with open(os.path.join(args.outdir, "mom_1d_model_table.csv"), "w", newline="") as fh:
         w = csv.DictWriter(fh, fieldnames=list(table[0]))
         w.writeheader()
@@ -152,7 +144,7 @@ def validate(outdir="out/validation", quick=False):
         checks.append(dict(name=f"energy the specular lobe misses (1 - rho_s, 1-D model) vs MoM outside the lobe, "
                                 f"theta_i = {ti:g} deg", value=f"{r['model_missed_by_lobe']:.4f} vs {r['mom_outside_lobe']:.4f}",
                            tolerance="reported", passed=True))
-    from _common import atlas_checks
+    from hyde_bsdf.validation._common import atlas_checks
     checks += atlas_checks("MoM vs 1-D model (Fig. 6 surface)", [r["theta_i_deg"] for r in table], fig6_mom.RMS_SLOPE,
                            fig6_mom.RMS_HEIGHT_WL, [("PEC", None, None)])
     return checks

@@ -37,7 +37,7 @@ import warnings
 
 import numpy as np
 
-from hyde_bsdf.validation._common import save_figure  # noqa: E402
+from hyde_bsdf.validation._common import db, save_figure
 
 THETA_I_DEG = [10.0, 30.0, 45.0, 60.0, 75.0]
 THETA_R_DEG = np.round(np.arange(-89.5, 89.51, 0.5), 6)
@@ -45,9 +45,6 @@ ELL = 5.0
 SIGMA_H = 0.3 * ELL / math.sqrt(2.0)
 LOBE = 0.1
 
-
-def db(x):
-    return 10.0 * np.log10(np.maximum(x, 1e-30))  # guard: log of zero
 
 
 def lobe_rms_db(a, b, ref):

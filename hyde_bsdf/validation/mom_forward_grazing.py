@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.validation._common import cli, flagged_legend, legend_entries, plot_flagged, save_figure, write_csv  # noqa: E402
+from hyde_bsdf.validation._common import cli, db, flagged_legend, legend_entries, plot_flagged, save_figure, write_csv  # noqa: E402
 
 K0 = 2.0 * math.pi
 ELL = 5.0
@@ -95,9 +95,6 @@ def run(length, partitions, sigma_h, w, theta_i, incidence, seed=3):
                            executor=mom.SerialExecutor(), taper_width_wl=w, polarization=("s", "p"), solver="fast",
                            incidence=incidence, progress=False)
 
-
-def db(v):
-    return 10.0 * np.log10(np.maximum(v, 1e-30))
 
 
 def band_means(res_sigma):

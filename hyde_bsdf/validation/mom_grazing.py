@@ -292,8 +292,7 @@ def energy_figure(rows, path):
     ax.set(xlabel="theta_i (deg)", ylabel="reflected + absorbed - 1",
            title="Long flat plates, Thorsos' parameter 0.005, fast MoM")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    save_figure(fig, path)
+    save_figure(fig, path, tight=True)
 
 
 def validate(outdir="out/validation", quick=False):

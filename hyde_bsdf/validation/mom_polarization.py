@@ -119,8 +119,7 @@ def chart(rows, path):
     axes[0].legend(fontsize=6)
     axes[1].legend(fontsize=7)
     fig.suptitle("MoM flat-plate limit, both polarisations, 10 pts/lambda (default)", fontsize=9)
-    fig.tight_layout()
-    save_figure(fig, path)
+    save_figure(fig, path, tight=True)
 
 
 def validate(outdir="out/validation", quick=False):

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.validation._common import cli, save_figure, write_csv  # noqa: E402
+from hyde_bsdf.validation._common import FIGURES, cli, save_figure, write_csv  # noqa: E402
 
 TARGET_L1 = 0.01
 TARGET_POL_P95 = 0.02
@@ -75,7 +75,7 @@ def cpp_check(path, report, samples, seed):
     from hyde_bsdf.fit.pbsdf_export import _query_geometries, error_statistics
     from hyde_bsdf.fit.pbsdf_samples import paper_angles, table_to_paper
     from hyde_bsdf.io.pbsdf_file import read_pbsdf
-    from hyde_bsdf.mitsuba.frames import eval_paper
+    from hyde_bsdf.validation._frames import eval_paper
     from hyde_bsdf.mitsuba.variants import set_variant
 
     set_variant("scalar_spectral_polarized", fallback=False)
@@ -296,12 +296,13 @@ def validate(outdir="out/validation", quick=False):
 
         # ---- 3. round trip (against the index the export stored per band)
         data = pbsdf_samples(path, max_points=150 if quick else 3000)
-        fit = fit_pbsdf(data, progress=False)
+        fit = fit_pbsdf(data, shadowing=report.params["shadowing"], diffuse=report.params["diffuse"], progress=False)
         n_b, k_b = np.array(report.params["n"]), np.array(report.params["k"])
         worst = max(abs(fit.rms_slope / 0.3 - 1), *(abs(fit.n / n_b - 1)), *(abs(fit.k / k_b - 1)))
         checks.append(dict(name="round trip export -> read -> fit: largest relative error of rms_slope, n, k (5 bands)",
                            value=f"{worst:.2e}", tolerance="<= 1e-4", passed=bool(worst <= 1e-4 and fit.success)))
         plot_pbsdf_fit(fit, data, out / "pbsdf_export_fit.png", title=f"round trip: {path.name} ({'x'.join(map(str, res))})")
+        FIGURES.append(str(out / "pbsdf_export_fit.png"))      # saved by app.plots: named for the report here
 
         # ---- 4. render time, one run
         if quick:

@@ -30,9 +30,9 @@ import numpy as np
 
 
 import hyde_bsdf
-from hyde_bsdf.mitsuba import frames as pf
+from hyde_bsdf.validation import _frames as pf
 
-from hyde_bsdf.validation._common import CLASSES, cli, save_figure, stability_chart, write_csv  # noqa: E402
+from hyde_bsdf.validation._common import CLASSES, cli, save_figure, sweep_chart, write_csv  # noqa: E402
 
 GOLD_MI = dict(eta=0.285, k=7.3523)          # n + ik at the plugin; the same numbers as the paper's n - jk
 RMS = 0.44
@@ -220,14 +220,9 @@ def stability(out, quick):
         ("k (log; 0 first), eta = 1.5", ks,
          lambda v: _classify_plugin(mi, dict(rms_slope=0.3), (40.0, 50.0, 170.0), 1.5, float(v))),
     ]
-    rows, panels = [], []
-    for title, values, fn in sweeps:
-        res = [fn(v) for v in values]
-        panels.append((title, values, res))
-        rows += [[title, v, c, e, msg] for v, (c, e, msg) in zip(values, res)]
-    stability_chart(panels, out / "plugin_stability.png",
-                    "Plugin stability map, llvm_ad_spectral_polarized (dots: error vs evaluator)",
-                    err_label="rel. err", err_ylim=(1e-9, 1.0))
+    rows = sweep_chart(sweeps, out / "plugin_stability.png",
+                       "Plugin stability map, llvm_ad_spectral_polarized (dots: error vs evaluator)",
+                       err_label="rel. err", err_ylim=(1e-9, 1.0))
     write_csv(out / "plugin_stability.csv", ["sweep", "value", "class", "rel_error_vs_evaluator", "message"], rows)
     counts = {c: sum(r[2] == c for r in rows) for c in CLASSES}
     return [dict(name="Plugin stability map: points that fail (NaN/Inf/crash)", value=counts["fails"],

@@ -59,7 +59,7 @@ def _index_at(mi, index):
 
 def vs_evaluator(n_dirs=10_000, seed=1):
     from hyde_bsdf import pbrdf
-    from hyde_bsdf.mitsuba import frames as pf
+    from hyde_bsdf.validation import _frames as pf
 
     mi = _setup("llvm_ad_spectral_polarized")
     rng = np.random.default_rng(seed)
@@ -144,7 +144,7 @@ def vs_roughconductor(n=10_000):
 
 
 def chi2_pvalues():
-    from hyde_bsdf.mitsuba.chi2 import chi2_test
+    from hyde_bsdf.validation._chi2 import chi2_test
 
     configs = [(0.02, 30), (0.02, 60), (0.05, 0), (0.05, 45), (0.1, 0), (0.1, 85), (0.3, 45),
                (0.3, 80), (0.6, 10), (0.6, 70), (1.0, 30), (1.5, 0), (1.5, 85)]

@@ -29,7 +29,7 @@ def vector_reference(ti, tr, ph, s, n, k, pec):
     """Eq. 6/13 from vectors (independent of the angle formulas); None where it is undefined."""
     wi = np.array([math.sin(ti), 0.0, math.cos(ti)])
     wr = np.array([math.sin(tr) * math.cos(ph), math.sin(tr) * math.sin(ph), math.cos(tr)])
-    if wi[2] <= 0 or wr[2] <= 0:
+    if wi[2] <= 1e-15 or wr[2] <= 1e-15:     # at or below the horizon (90 deg: cos(pi/2) = 6e-17 is rounding)
         return np.zeros((4, 4))
     z = np.array([0.0, 0.0, 1.0])
     h = wi + wr

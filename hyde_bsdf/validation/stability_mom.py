@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.validation._common import CLASSES, cli, stability_chart, write_csv  # noqa: E402
+from hyde_bsdf.validation._common import CLASSES, cli, sweep_chart, write_csv  # noqa: E402
 
 ELL = 5.0
 SIGMA_H = 0.3 * ELL / math.sqrt(2.0)
@@ -69,13 +69,8 @@ def validate(outdir="out/validation", quick=False):
                lambda v: classify(300.0, 2, 30.0, 10, solver="fast", slope=v)),
               ("fast solver: theta_i (deg), 2 x 150 lambda", fast_angles,
                lambda v: classify(300.0, 2, v, 10, solver="fast"))]
-    rows, panels = [], []
-    for title, values, fn in sweeps:
-        res = [fn(v) for v in values]
-        panels.append((title, values, res))
-        rows += [[title, v, c, e, m] for v, (c, e, m) in zip(values, res)]
-    stability_chart(panels, out / "stability_mom.png",
-                    "MoM stability map (text: |power balance - 1|; 6 partitions, rms slope 0.3)", text_errors=True)
+    rows = sweep_chart(sweeps, out / "stability_mom.png",
+                       "MoM stability map (text: |power balance - 1|; 6 partitions, rms slope 0.3)", text_errors=True)
     write_csv(out / "stability_mom.csv", ["sweep", "value", "class", "abs_power_balance_error", "message"], rows)
     counts = {c: sum(r[2] == c for r in rows) for c in CLASSES}
     low = [r for r in rows if r[0].startswith("points") and r[1] < 5]

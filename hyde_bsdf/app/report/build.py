@@ -53,12 +53,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from hyde_bsdf.app.args import Parser, positive_int, quiet_option
+from hyde_bsdf.app.args import Parser, positive_int, quiet_option, reads, writes
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.atomic import TEMP_NAME_RE, atomic_folder, atomic_open
-from hyde_bsdf.io.output_gate import check_output_dir
+from hyde_bsdf.io.output_gate import check_not_input, check_output_dir
 from hyde_bsdf.progress import as_callback
-from hyde_bsdf.resources import OutputLock, format_bytes, total_memory
+from hyde_bsdf.resources import OutputLock, format_bytes, total_memory, wait_limit
 
 __all__ = ["SECTIONS", "GENERATOR", "build_report", "check_report_dir", "cli_main"]
 
@@ -67,7 +67,7 @@ SECTIONS = [
     ("NumPy evaluator and DHR (paper Figs. 4, 8, 9; Eqs. 6-17)",
      ["fig4_priest_germer", "fig8_9_mueller", "dhr_convergence", "stability_evaluator"]),
     ("Mitsuba plugin and rendering",
-     ["plugin_checks", "render_checks", "speed_accuracy_render", "model_economy"]),
+     ["plugin_checks", "render_checks", "furnace", "speed_accuracy_render", "model_economy"]),
     ("Method of moments (paper Fig. 6)", ["fig6_mom", "mom_convergence", "mom_1d_model", "stability_mom", "mom_polarization", "mom_mueller_1d", "mom_speed_accuracy", "mom_grazing", "mom_forward_grazing", "mom_reciprocity", "accuracy_atlas"]),
     ("Fitting and inverse rendering (paper Section 4)",
      ["fit_synthetic", "fit_model_selection", "fit_lab_data", "inverse_render", "gradient_check", "svbrdf_inverse", "svbrdf_index",
@@ -196,7 +196,9 @@ class _Child:
 
     def __init__(self, path: Path, outdir: Path, quick: bool, jobs: int = 1):
         self.path, self.outdir, self.t0 = path, Path(outdir), time.perf_counter()
-        self.work = tempfile.TemporaryDirectory(prefix="hyde-validate-")
+        self.limit, self.limit_name = wait_limit("script")      # a script that hangs is killed there
+        # inside the report's temporary folder: a killed run (SIGKILL from hyde-bsdf's waiting process) leaves nothing
+        self.work = tempfile.TemporaryDirectory(prefix=".work-", dir=self.outdir)
         self.stderr = tempfile.TemporaryFile(dir=self.work.name)
         self.checks_json = Path(self.work.name) / f"{path.stem}.checks.json"
         try:
@@ -210,6 +212,13 @@ class _Child:
     def close(self):
         self.stderr.close()
         self.work.cleanup()
+
+    def check_limit(self):
+        """Kill the child once it has run longer than the script limit: one failed check, never a hang."""
+        if self.proc.poll() is None and time.perf_counter() - self.t0 > self.limit:
+            self.proc.kill()
+            self.proc.wait()
+            self.stderr.write(f"\ntimed out after {self.limit:g} s ({self.limit_name}): killed\n".encode())
 
     def stop(self):
         """Terminate the child (SIGTERM, then SIGKILL after :data:`TERMINATE_WAIT` s) and reap it."""
@@ -296,6 +305,8 @@ def _run_all(paths: list, outdir: Path, quick: bool, jobs: int = 1, progress=Non
                 running.append(_Child(path, outdir, quick, jobs))
             if not running:
                 continue
+            for child in running:
+                child.check_limit()
             ended = [c for c in running if c.proc.poll() is not None]
             if not ended:
                 time.sleep(0.05)
@@ -348,6 +359,7 @@ def build_report(outdir, quick=False, progress=True, force=False, scripts=None, 
         raise UsageError(f"jobs must be a whole number >= 1, got {jobs!r}")
     final = check_report_dir(outdir, force)
     vdir = validation_dir(scripts)
+    check_not_input([final], [vdir], "--outdir")          # the report is not the scripts' folder
     with OutputLock([final], "--outdir"), atomic_folder(final) as out:     # one report run per folder
         return _build(out, vdir, quick, as_callback(progress, "[validate]"), jobs, _previous_cpu(final, quick))
 
@@ -439,10 +451,11 @@ def _write_html(out, info, sections, rows, all_passed, quick):
 
 def build_parser() -> Parser:
     ap = Parser(prog="hyde-bsdf validate", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)")
+    writes(ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)"))
     ap.add_argument("--quick", action="store_true", help="small sweeps; under 3 minutes on 2 cores")
-    ap.add_argument("--scripts", metavar="DIR", default=None,
-                    help="folder of the validation scripts (default: the package's own, hyde_bsdf/validation/)")
+    reads(ap.add_argument("--scripts", metavar="DIR", default=None,
+                          help="folder of the validation scripts (default: the package's own, hyde_bsdf/validation/)"),
+          "folder")
     ap.add_argument("--jobs", "-j", type=positive_int, default=None, metavar="N",
                     help=f"scripts run at once (default: one per core, at most {MAX_JOBS}; 1 runs them one after "
                          "another)")

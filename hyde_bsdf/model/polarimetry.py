@@ -55,6 +55,7 @@ analysis matrix.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -251,6 +252,11 @@ def _estimate(I, var, A, mask, max_condition, angles, method, squeeze):
     if A.shape[-2] != I.shape[0] or A.shape[-1] != 4 or A.ndim not in (2, 4):
         raise UsageError(f"the analysis matrix must be (N, 4) or (H, W, N, 4) with N = {I.shape[0]} frames; "
                          f"got {A.shape}")
+    if not np.any(mask):           # no silent all-zero estimate
+        raise UsageError("no pixel is usable (each is saturated or below the black level in some frame, or "
+                         "shares a superpixel cell with one): nothing to estimate")
+    if not np.isfinite(A).all():
+        raise UsageError("the analysis matrix has NaN or infinite entries; a calibrated matrix is finite")
     cols = _measured_columns(A)
     S, sig, cond = _solve(I, var, A, cols, max_condition, angles)
     S = np.where(mask[None, :, :, None], S, 0.0)
@@ -353,7 +359,19 @@ def _check_raw_one(I, noise, name, saturated):
     if where and saturated == "error":
         raise UsageError(f"{name}: {where[0]} pixel(s) at or above the saturation level {noise.saturation:g} DN "
                          f"(first at {where[1]}); lower the exposure or pass saturated='mask' to leave them out")
-    return ~full.any(axis=-1)
+    # calibrated: darker than the black level beyond the read noise (5 sigma: no false alarm in 10^6 pixels,
+    # and half a DN of rounding) is no light -- a wrong black level, or a defect: left out; every pixel so, refused
+    dark = I - noise.black_level < -(5.0 * noise.gain * noise.read_noise + 0.5)
+    where = _first_bad(dark)
+    if where:
+        n = dark.shape[0] * dark.shape[1]
+        if where[0] == n:
+            raise UsageError(f"{name}: every pixel is below the black level {noise.black_level:g} DN beyond the read "
+                             f"noise (the brightest is {float(I.max()):g} DN): the black level is wrong for this frame")
+        warnings.warn(f"{name}: {100 * where[0] / n:.3g} % of the pixels ({where[0]} of {n}) are below the black "
+                      f"level {noise.black_level:g} DN beyond the read noise (first at {where[1]}): left out (mask 0)",
+                      UserWarning, stacklevel=4)
+    return ~(full | dark).any(axis=-1)
 
 
 def simulate_frames(stokes, A, noise: CameraNoise, rng) -> np.ndarray:
