@@ -210,6 +210,19 @@ def test_export_takes_a_fits_index_per_wavelength_and_refuses_outside_it(tmp_pat
     assert "diffuse_reflectance = 0.1" in capsys.readouterr().out
 
 
+def test_the_one_wavelength_fit_refuses_what_it_would_drop():
+    """fit_measurements (fit_mueller on Measurements) fits one index to normalized elements: given
+    M00 or two wavelengths it would drop M00 and mix the wavelengths silently, so it refuses and
+    names fit_lab.  < 1 s."""
+    from hyde_bsdf.errors import UsageError
+    from hyde_bsdf.fit.mueller_fit import fit_measurements
+
+    with pytest.raises(UsageError, match="2 wavelengths and M00 in 1/sr.*fit_lab"):
+        fit_measurements(lab_measurements())
+    with pytest.raises(UsageError, match="have 2 wavelengths; .*fit_lab"):
+        fit_measurements(lab_measurements(with_m00=False))
+
+
 def test_normalized_rows_are_whitened_with_their_shared_m00_noise():
     """Without M00 a row's ratios M_jk/M00 share M00's noise: covariance C = diag(own^2) + s s^T per
     row (s = delta r, own^2 = sigma^2 - s^2).  ``LabData.whiten`` (Sherman-Morrison, one dot product

@@ -94,7 +94,7 @@ def test_interrupted_report_keeps_previous_report(tmp_path, monkeypatch):
     ok, rows, _ = build_report(out, quick=True, progress=False)
     assert ok and len(rows) == 1
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    assert set(before) == {"index.html", "checks.csv", "fake.png", "fake.csv"}
+    assert set(before) == {"index.html", "checks.csv", "times.csv", "fake.png", "fake.csv"}
     assert "1 of 1 checks pass" in before["index.html"].decode()
     monkeypatch.setenv("HYDE_TEST_INTERRUPT", "1")
     try:
@@ -303,6 +303,28 @@ def test_a_script_that_reads_anothers_output_waits_for_it(tmp_path, monkeypatch)
     monkeypatch.setattr(build, "machine_info", lambda: {"CPU": "test"})
     ok, rows, _ = build_report(tmp_path / "report", quick=True, progress=False, scripts=vdir, jobs=2)
     assert ok and rows[1]["value"] == "done", rows
+
+
+def test_a_rerun_starts_the_longest_scripts_first(tmp_path, monkeypatch):
+    """The report writes each script's wall and CPU seconds to times.csv; a rerun into the same
+    folder starts the scripts that took the most CPU time first (a script it has no time for before
+    them), so that no long script runs alone at the end.  The report's order stays the sections'."""
+    from hyde_bsdf.app.report import build
+
+    vdir = tmp_path / "scripts"
+    _write_fakes(vdir, {stem: "return [dict(name='ok', value=1, tolerance='-', passed=True)]" for stem in "abc"})
+    monkeypatch.setattr(build, "SECTIONS", [("Fake", ["a", "b", "c"])])
+    monkeypatch.setattr(build, "machine_info", lambda: {"CPU": "test"})
+    out = tmp_path / "report"
+    build_report(out, quick=True, progress=False, scripts=vdir, jobs=1)
+    with open(out / "times.csv", newline="") as fh:
+        times = list(csv.DictReader(fh))
+    assert [r["script"] for r in times] == ["a", "b", "c"] and all(float(r["cpu_seconds"]) > 0 for r in times)
+    (out / "times.csv").write_text("script,mode,seconds,cpu_seconds,jobs\na,quick,1,1.0,1\nb,quick,9,9.0,1\n")
+    started = []
+    ok, rows, _ = build_report(out, quick=True, progress=lambda m: started.append(m.split()[1]) if "..." in m else None,
+                               scripts=vdir, jobs=1)
+    assert started == ["c", "b", "a"] and [r["script"] for r in rows] == ["a", "b", "c"]
 
 
 def test_ctrl_c_terminates_every_running_script(tmp_path):

@@ -885,7 +885,15 @@ def _adequacy(r, J, cov, ti, tr, ph, n_elements, chi2, dof, sigma_given):
 
 
 def fit_measurements(meas: Measurements, **kwargs) -> FitResult:
-    """:func:`fit_mueller` on a :class:`~hyde_bsdf.io.measurements.Measurements` (e.g. from a CSV)."""
+    """:func:`fit_mueller` on a :class:`~hyde_bsdf.io.measurements.Measurements` (e.g. from a CSV):
+    the normalized elements of one wavelength.  Measurements with M00 in 1/sr or at several
+    wavelengths are refused (fit_mueller would drop M00 and fit one index to every wavelength):
+    :func:`hyde_bsdf.fit.lab.fit_lab` fits them."""
+    extra = ([f"{len(meas.wavelengths)} wavelengths"] if len(meas.wavelengths) > 1 else []) + \
+        (["M00 in 1/sr"] if meas.m00 is not None else [])
+    if extra:
+        raise UsageError(f"{meas.source}: the measurements have {' and '.join(extra)}; fit_measurements fits one "
+                         "wavelength's normalized elements and would drop them -- use hyde_bsdf.fit.lab.fit_lab")
     return fit_mueller(meas.theta_i, meas.theta_r, meas.phi, meas.values,
                        sigma=meas.uncertainty(), **kwargs)
 

@@ -235,7 +235,7 @@ def camera_files(cameras, lights, references, *, masks=None, channel: str = "Y")
         for k, m in enumerate(masks):
             j, i = divmod(k, len(cams))
             d = data[j][i]
-            m = as_mask(m, f"the mask of --reference {refs[k]!r}")
+            m = as_mask(m, f"the mask of `references` {refs[k]!r}")
             d["mask"] = m if d["mask"] is None else d["mask"] & m
     return cams, lts, data
 

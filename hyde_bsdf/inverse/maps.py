@@ -97,7 +97,7 @@ def _check_seen(seen):
     """``seen``, refused (before the work) when no texel is seen: all-NaN maps are no answer."""
     if seen is not None and not np.any(seen):
         raise UsageError(f"no picture sees the sample: texels seen 0 of {np.size(seen)} (check where the cameras "
-                         "look, the --camera/--light files, and the references' masks)")
+                         "look, the `cameras` and `lights` files, and the `references`' masks)")
     return seen
 
 

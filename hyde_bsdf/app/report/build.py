@@ -7,9 +7,11 @@ module runs them, each as a **child process** -- ``python SCRIPT.py -o OUT [--qu
 (the child writes its docstring, its checks, the figures it saved and its CPU time as JSON to
 ``FILE``) -- ``--jobs N`` of them at once (default one per core, at most :data:`MAX_JOBS`), times
 each one, collects the checks and the figures, and writes ``DIR/index.html`` (and
-``DIR/checks.csv``): the machine, the time each script took, a table of every check with its
+``DIR/checks.csv``, and each script's wall and CPU seconds in ``DIR/times.csv``): the machine, the
+time each script took, a table of every check with its
 number, tolerance and verdict, and the figures, in the sections' order whatever order the scripts
-ended in.  A script that reads another's output (:data:`AFTER`) starts after it.  A script that
+ended in.  A script that reads another's output (:data:`AFTER`) starts after it.  A rerun into
+the same folder starts the scripts that took the most CPU time last time first.  A script that
 crashes, is killed or is missing is reported as a failed check (with the last lines of its
 stderr); the report still completes.  A script's own output is not shown (run it alone to see it:
 ``python hyde_bsdf/validation/STEM.py --quick``).  Ctrl-C (or SIGTERM) ends the running scripts
@@ -41,6 +43,7 @@ import csv
 import datetime as _dt
 import html
 import json
+import math
 import os
 import platform
 import signal
@@ -358,14 +361,28 @@ def build_report(outdir, quick=False, progress=True, force=False, scripts=None, 
     vdir = validation_dir(scripts)
     check_not_input([final], [vdir], "--outdir")          # the report is not the scripts' folder
     with OutputLock([final], "--outdir"), atomic_folder(final) as out:     # one report run per folder
-        return _build(out, vdir, quick, as_callback(progress, "[validate]"), jobs)
+        return _build(out, vdir, quick, as_callback(progress, "[validate]"), jobs, _previous_cpu(final, quick))
 
 
-def _build(out: Path, vdir: Path, quick: bool, progress, jobs: int):
+def _previous_cpu(folder: Path, quick: bool) -> dict:
+    """{script: CPU seconds} of the earlier report of the same mode in ``folder`` (its
+    ``times.csv``); empty when there is none or it cannot be read."""
+    try:
+        with open(folder / "times.csv", newline="", encoding="utf-8") as fh:
+            return {r["script"]: float(r["cpu_seconds"]) for r in csv.DictReader(fh)
+                    if r["mode"] == ("quick" if quick else "full") and r["cpu_seconds"]}
+    except (OSError, KeyError, ValueError, TypeError):
+        return {}
+
+
+def _build(out: Path, vdir: Path, quick: bool, progress, jobs: int, previous: dict):
     info = machine_info()
     t_start = time.perf_counter()
     stems = [s for _, names in SECTIONS for s in names]
-    results = _run_all([vdir / f"{stem}.py" for stem in stems], out, quick, jobs, progress)
+    # the longest scripts of the earlier report first (new ones before them): the cores stay busy
+    # to the end instead of one long script running alone
+    order = sorted(stems, key=lambda stem: -previous.get(stem, math.inf))
+    results = _run_all([vdir / f"{stem}.py" for stem in order], out, quick, jobs, progress)
     total = time.perf_counter() - t_start
     rows, sections = [], []
     for title, names in SECTIONS:
@@ -385,6 +402,11 @@ def _build(out: Path, vdir: Path, quick: bool, progress, jobs: int):
         w = csv.DictWriter(f, fieldnames=["script", "name", "value", "tolerance", "passed"])
         w.writeheader()
         w.writerows(rows)
+    with atomic_open(out / "times.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["script", "mode", "seconds", "cpu_seconds", "jobs"])
+        w.writerows([stem, "quick" if quick else "full", f"{results[stem]['seconds']:.2f}",
+                     "" if results[stem]["cpu"] is None else f"{results[stem]['cpu']:.2f}", jobs] for stem in stems)
     return all_passed, rows, total
 
 
@@ -430,7 +452,7 @@ def _write_html(out, info, sections, rows, all_passed, quick):
 def build_parser() -> Parser:
     ap = Parser(prog="hyde-bsdf validate", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     writes(ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)"))
-    ap.add_argument("--quick", action="store_true", help="small sweeps; under 3 minutes on 2 cores")
+    ap.add_argument("--quick", action="store_true", help="small sweeps (about 300 CPU s: 12 minutes measured on 2 cores at load 12; docs/validation.md)")
     reads(ap.add_argument("--scripts", metavar="DIR", default=None,
                           help="folder of the validation scripts (default: the package's own, hyde_bsdf/validation/)"),
           "folder")
@@ -439,7 +461,7 @@ def build_parser() -> Parser:
                          "another)")
     ap.add_argument("--force", action="store_true",
                     help="write into a folder that is not an earlier report; its files are kept, except "
-                         "those of the report's names (index.html, checks.csv, the figures), which are replaced")
+                         "those of the report's names (index.html, checks.csv, times.csv, the figures), which are replaced")
     quiet_option(ap)
     return ap
 
