@@ -41,7 +41,6 @@ from hyde_bsdf.app.flags import for_command_line
 from hyde_bsdf.app.plots import plot_history
 from hyde_bsdf.errors import UsageError, one_line, shorten
 from hyde_bsdf.inverse.acquisition import design_acquisition, example_material, synthetic_observations
-from hyde_bsdf.inverse.camera_data import impossible_pixels
 from hyde_bsdf.inverse.loss import StokesLoss, as_mask, check_reference_scale, interior_mask
 from hyde_bsdf.inverse.maps import invert_maps
 from hyde_bsdf.inverse.observations import (LIGHTS, MAP_PARAMETERS, MAP_VARIANT, Observation, example_maps,
@@ -306,8 +305,9 @@ def _read_reference(path, width, height, what="--reference"):
     four components (the scalar inversion compares S0..S3) and for NaN."""
     from hyde_bsdf.inverse.camera_data import camera_reference
 
+    _check_reference_size(path, width, height, what)
     with user_input(f"{what} {shorten(str(path))}", library=True):
-        data = camera_reference(str(path), channel="Y")
+        data = camera_reference(str(path), channel="Y")       # (warns about pixels no light gives: mask 0)
     if len(data["measured"]) < 4:
         raise UsageError(f"{what} {shorten(str(path))} holds {'+'.join(data['measured'])}; the scalar inversion "
                          "compares all four Stokes components (S0..S3): use --maps for a camera's measured ones")
@@ -318,7 +318,17 @@ def _read_reference(path, width, height, what="--reference"):
                          f"render the reference with the same scene and film")
     with user_input():
         check_reference_scale(ref, f"{what} {str(path)!r}")
-    return ref
+    return ref, data["mask"]
+
+
+def _check_reference_size(path, width, height, what="--reference") -> None:
+    """The reference's size against the film, from its header: before its data are read (and warned about)."""
+    from hyde_bsdf.io.arrays import exr_shape
+
+    h, w = exr_shape(check_input(path, what, stdin=False), what)[:2]
+    if (w, h) != (width, height):
+        raise UsageError(f"{what} {shorten(str(path))} is {w}x{h} pixels but the scene's film is "
+                         f"{width}x{height}: render the reference with the same scene and film")
 
 
 def _camera_observation(scene, args, path, width, height, mask):
@@ -326,6 +336,7 @@ def _camera_observation(scene, args, path, width, height, mask):
     :func:`hyde_bsdf.inverse.camera_data.camera_observation`), checked against the film size."""
     from hyde_bsdf.inverse.camera_data import camera_observation
 
+    _check_reference_size(path, width, height)
     o = camera_observation(scene, path, sensor=args.sensor, mask=None, channel=args.channel)
     h, w = o.reference.shape[1:]
     if (w, h) != (width, height):
@@ -422,10 +433,9 @@ def _scalar_run(args, truth, start, fit, paths):
     _check_step_memory(W, H, args, "--spp" + (" or --res" if not args.scene else " or the film's width/height"))
     mask = None
     if args.reference:
-        ref = _read_reference(args.reference[0], W, H)
+        ref, good = _read_reference(args.reference[0], W, H)
         truth_known = args.truth is not None
-        bad = impossible_pixels(ref, None, f"--reference {shorten(args.reference[0])}")
-        mask = interior_mask(ref[0]) & ~bad if bad.any() else None
+        mask = None if good is None else interior_mask(ref[0]) & good      # pixels no light gives: left out
     else:
         _log(f"rendering the reference at {truth} ({args.spp_ref} spp)")
         ref = render_reference(scene, truth, args.spp_ref, seed=args.seed, prefix=args.target)

@@ -27,10 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.errors import UsageError
+from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.inverse._common import Y_WEIGHTS
 from hyde_bsdf.model.polarimetry import StokesEstimate, stokes_sigma
-from hyde_bsdf.inverse.loss import as_mask, interior_mask
+from hyde_bsdf.inverse.loss import as_mask, check_reference_scale, interior_mask
 from hyde_bsdf.inverse.observations import Observation
 
 __all__ = ["camera_reference", "camera_observation", "calibrated_observations", "observations_from_files", "camera_files",
@@ -146,6 +146,8 @@ def camera_reference(data, *, channel: str = "Y", measured=None, noise=None, ana
     if mask is not None and np.shape(mask) != (H, W):
         raise UsageError(f"{what}: the mask is {np.shape(mask)[::-1]}, the image {W}x{H}")
     mask = None if mask is None else as_mask(mask, f"{what}: its mask")
+    # NaN and an absurd scale are refusals: before any data warning
+    check_reference_scale(ref, shorten(what) if isinstance(data, (str, Path)) else what)
     inside = np.ones((H, W), bool) if mask is None else mask      # (sigma is 0 where the data mask a pixel)
     bad = impossible_pixels(ref, sig, what, sigma_bad & inside) & inside
     if bad.any():
