@@ -264,6 +264,10 @@ CLI_ROWS = [
     ("invert --mask of zeros (new)", ["invert", "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--reference",
      "{tmp}/invscene16/ref.exr", "--mask", "{in33}/zeros16.npy", "-o", "{tmp}/zeromask"], 2,
      "zeros16.npy' leaves out every pixel: nothing to fit", "in"),
+    ("invert --fit '' (was: the defaults fitted)", ["invert", "--fit", "", "-o", "{tmp}/fitempty"], 2,
+     "--fit must list parameters from rms_slope, eta, k, got ''", "in"),
+    ("invert --maps --fit '' (was: the preset's fitted)", ["invert", "--maps", "--fit", "", "-o", "{tmp}/fitempty"], 2,
+     "--fit must list parameters from alpha, rms_slope, eta, k, specular_reflectance, got ''", "in"),
     # --- issue 33: sizes known before memory is taken; no library exception reaches the user ---
     ("stokes --analysis whose .npy header lies (new)", ["stokes", "--mosaic", "{in33}/mosaic.npy", "--analysis",
      "{in33}/lie.npy", "-o", "{tmp}/lie.exr"], 2,
