@@ -12,7 +12,10 @@ rng = np.random.default_rng(14)
 
 def angular_reference(theta_i, s, shadowing):
     """Eq. 14 integrated over (theta_r, phi) with the evaluator itself (fine trapezoid grid)."""
+    # the horizon as a limit: f cos(theta_r) is finite there, but f itself (infinite for "none") is 0
+    # at exactly 90 deg, where the evaluator returns no 1/0
     tr = np.linspace(0, math.pi / 2, 1201)
+    tr[-1] -= 1e-9
     ph = np.linspace(0, math.pi, 1201)
     TR, PH = np.meshgrid(tr, ph, indexing="ij")
     F = hyde_bsdf.pbrdf(theta_i, TR, PH, rms_slope=s, pec=True, shadowing=shadowing,
