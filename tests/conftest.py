@@ -133,3 +133,17 @@ def mitsuba_with_hyde(variant: str):
     set_variant(variant, fallback=False)
     hyde_bsdf.register(variant)
     return mi
+
+
+def docstring_ids(tree) -> set:
+    """``id()`` of every docstring constant of a parsed module (its own, its classes' and functions'):
+    the code-rule tests skip prose."""
+    import ast
+
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
+            first = node.body[0]
+            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
+                out.add(id(first.value))
+    return out
