@@ -133,3 +133,42 @@ def mitsuba_with_hyde(variant: str):
     set_variant(variant, fallback=False)
     hyde_bsdf.register(variant)
     return mi
+
+
+def docstring_ids(tree) -> set:
+    """``id()`` of every docstring constant of a parsed module (its own, its classes' and functions'):
+    the code-rule tests skip prose."""
+    import ast
+
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
+            first = node.body[0]
+            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
+                out.add(id(first.value))
+    return out
+
+
+def textured_plane_scene(folder, target="0, 0, 0", size=16) -> str:
+    """A polarized scene file in ``folder``: a ``hyde`` plane whose ``alpha`` is a 2 x 2 texture (``a.exr``,
+    0.3, written here), seen from (0, -3, 3) looking at ``target`` by a ``size`` x ``size`` luminance
+    film, under a point light.  The inverse-rendering CLI tests' sample; returns the scene's path."""
+    from pathlib import Path
+
+    import mitsuba as mi
+    import numpy as np
+
+    folder = Path(folder)
+    mi.Bitmap(np.full((2, 2, 1), 0.3, np.float32)).write(str(folder / "a.exr"))
+    (folder / "s.xml").write_text(f"""<scene version="3.0.0">
+  <integrator type="stokes"><integrator type="path"><integer name="max_depth" value="2"/></integrator></integrator>
+  <sensor type="perspective"><float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0, -3, 3" target="{target}" up="0, 0, 1"/></transform>
+    <film type="hdrfilm"><integer name="width" value="{size}"/><integer name="height" value="{size}"/>
+      <string name="pixel_format" value="luminance"/><rfilter type="box"/></film></sensor>
+  <shape type="rectangle" id="plane"><bsdf type="hyde"><texture type="bitmap" name="alpha">
+    <string name="filename" value="{folder / 'a.exr'}"/><boolean name="raw" value="true"/>
+    <string name="filter_type" value="nearest"/></texture><float name="eta" value="1.5"/></bsdf></shape>
+  <emitter type="point"><point name="position" x="0" y="3" z="3"/><float name="intensity" value="20"/></emitter>
+</scene>""")
+    return str(folder / "s.xml")

@@ -16,6 +16,8 @@ import ast
 import re
 from pathlib import Path
 
+from conftest import docstring_ids
+
 PACKAGE = Path(__file__).resolve().parent.parent / "hyde_bsdf"
 MAX_PARAMETERS = 12
 MAX_INVERSE_NAMES = 20
@@ -49,19 +51,9 @@ def test_inverse_exports_what_a_user_needs():
     assert set(names) <= imported and imported <= set(names), "import only what __all__ names"
 
 
-def _docstrings(tree) -> set:
-    out = set()
-    for node in ast.walk(tree):
-        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
-            first = node.body[0]
-            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
-                out.add(id(first.value))
-    return out
-
-
 def _flags_in_strings(path: Path) -> list[str]:
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    skip = _docstrings(tree)
+    skip = docstring_ids(tree)
     return [f"{path.name}:{n.lineno}: {m}" for n in ast.walk(tree)
             if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in skip
             for m in FLAG.findall(n.value)]

@@ -21,6 +21,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import textured_plane_scene
 
 from hyde_bsdf.errors import UsageError
 
@@ -255,25 +256,12 @@ def test_an_unexpected_library_exception_is_one_line_and_exit_2(monkeypatch, cap
 def test_maps_of_a_sample_no_camera_sees_are_refused_before_the_work(tmp_path, capsys, monkeypatch):
     """The sensor looks away from the textured plane: 'texels seen 0 of 4', exit 2, nothing written
     (was all-NaN maps and exit 0)."""
-    import mitsuba as mi
-
     from hyde_bsdf import inverse as inv
     from hyde_bsdf.app.cli import main
     from hyde_bsdf.io.stokes_exr import write_stokes_exr
 
     inv.prepare(inv.observations.MAP_VARIANT)
-    mi.Bitmap(np.full((2, 2, 1), 0.3, np.float32)).write(str(tmp_path / "a.exr"))
-    (tmp_path / "s.xml").write_text(f"""<scene version="3.0.0">
-  <integrator type="stokes"><integrator type="path"><integer name="max_depth" value="2"/></integrator></integrator>
-  <sensor type="perspective"><float name="fov" value="40"/>
-    <transform name="to_world"><lookat origin="0, -3, 3" target="0, -6, 6" up="0, 0, 1"/></transform>
-    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/>
-      <string name="pixel_format" value="luminance"/><rfilter type="box"/></film></sensor>
-  <shape type="rectangle" id="plane"><bsdf type="hyde"><texture type="bitmap" name="alpha">
-    <string name="filename" value="{tmp_path / 'a.exr'}"/><boolean name="raw" value="true"/>
-    <string name="filter_type" value="nearest"/></texture><float name="eta" value="1.5"/></bsdf></shape>
-  <emitter type="point"><point name="position" x="0" y="3" z="3"/><float name="intensity" value="20"/></emitter>
-</scene>""")
+    textured_plane_scene(tmp_path, target="0, -6, 6", size=8)      # looking up, away from the plane
     S = np.zeros((8, 8, 3), np.float32)
     write_stokes_exr(tmp_path / "ref.exr", {"S0": S + 1.0, "S1": S + 0.1, "S2": S, "S3": S})
     monkeypatch.setattr("hyde_bsdf.inverse.maps._polish", None)     # any step of the work would fail

@@ -14,7 +14,7 @@ import re
 from pathlib import Path
 
 import pytest
-from conftest import library_modules
+from conftest import docstring_ids, library_modules
 
 import hyde_bsdf
 from hyde_bsdf.model import parameters as P
@@ -67,20 +67,10 @@ def _pair(node):
     return None
 
 
-def _docstrings(tree):
-    out = set()
-    for node in ast.walk(tree):
-        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
-            first = node.body[0]
-            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
-                out.add(id(first.value))
-    return out
-
-
 def range_literals(source: str):
     """(line, what) of each range literal for a model parameter in ``source``."""
     tree = ast.parse(source)
-    docs = _docstrings(tree)
+    docs = docstring_ids(tree)
     found = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Compare):

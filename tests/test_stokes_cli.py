@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import textured_plane_scene
 
 from hyde_bsdf.app.cli import main
 from hyde_bsdf.model.polarimetry import CameraNoise, simulate_mosaic
@@ -81,25 +82,11 @@ def test_invert_camera_options_are_checked_first(tmp_path, capsys):
 def test_invert_reads_a_linear_camera_exr(tmp_path, capsys):
     """--scene + --reference a mono S0, S1, S2 EXR with sigma (what `stokes` writes): accepted, the
     maps and alpha_seen.npy written."""
-    import mitsuba as mi
-
     from hyde_bsdf import inverse as inv
     from hyde_bsdf.model.polarimetry import simulate_capture, write_stokes_estimate
 
     inv.prepare(inv.observations.MAP_VARIANT)
-    mi.Bitmap(np.full((2, 2, 1), 0.3, np.float32)).write(str(tmp_path / "a.exr"))
-    xml = f"""<scene version="3.0.0">
-  <integrator type="stokes"><integrator type="path"><integer name="max_depth" value="2"/></integrator></integrator>
-  <sensor type="perspective"><float name="fov" value="40"/>
-    <transform name="to_world"><lookat origin="0, -3, 3" target="0, 0, 0" up="0, 0, 1"/></transform>
-    <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/>
-      <string name="pixel_format" value="luminance"/><rfilter type="box"/></film></sensor>
-  <shape type="rectangle" id="plane"><bsdf type="hyde"><texture type="bitmap" name="alpha">
-    <string name="filename" value="{tmp_path / 'a.exr'}"/><boolean name="raw" value="true"/>
-    <string name="filter_type" value="nearest"/></texture><float name="eta" value="1.5"/></bsdf></shape>
-  <emitter type="point"><point name="position" x="0" y="3" z="3"/><float name="intensity" value="20"/></emitter>
-</scene>"""
-    (tmp_path / "s.xml").write_text(xml)
+    textured_plane_scene(tmp_path)
     ref = inv.observations.render_stokes_np(inv.scalar.load_scene(str(tmp_path / "s.xml")), 0, 32, seed=1)
     est = simulate_capture(ref, CameraNoise(read_noise=3.0, black_level=64.0), np.random.default_rng(0), signal=3000.0)
     write_stokes_estimate(est, tmp_path / "ref.exr")
