@@ -579,6 +579,8 @@ def _make_class():
             # smith without a term that reads its DHR: roughconductor's specular lobe, Mitsuba's rational G1
             fit = shadow.name == "smith" and not term.reads_dhr
             self.m_g, self.m_visible_ratio, self.m_g1 = _SHADOWING["smith_fit" if fit else shadow.name]
+            # Smith's G is G1(wi) G1(wo) with the G1 of the density: the value and the pdf share G1(wi)
+            self.m_g_product = shadow.name == "smith"
             self.m_diffuse_factor = _DIFFUSE[term.name]
             self.m_albedo = _read_albedo(props, term)
             self.m_albedo_mean = terms.PARAMETER_DEFAULTS["diffuse_reflectance"]
@@ -836,9 +838,9 @@ def _make_class():
             return (ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0),
                     self.m_has_diffuse and ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1))
 
-        def _p_spec(self, ctx, si, rough):
+        def _p_spec(self, lobes, rough):
             """Probability of sampling the specular lobe (a Python constant or a Float)."""
-            spec_on, diff_on = self._lobes(ctx)
+            spec_on, diff_on = lobes
             if spec_on and not diff_on:
                 return 1.0
             if diff_on and not spec_on:
@@ -858,9 +860,31 @@ def _make_class():
                 return dr.clip(rho_avg / (rho_avg + self.m_albedo_mean + 1e-6), 0.05, 0.95)
             return dr.clip(rho_avg, 0.05, 0.95)
 
-        def _mueller(self, ctx, si, wo, h, n, k, spec, diff, scale, active):
-            """(Fresnel(h) spec + M00(h) diff) scale as a Spectrum (Mueller matrix if polarized), 0
-            where not ``active``.
+        def _lobe(self, distr, wi, wo, h, cos_i, value, pdf):
+            """(D G / (4 cos theta_i), its sampling density): the specular lobe of paper Eq. 13 without M and
+            times cos theta_o, and the density the sampler draws h from (visible normals: D G1(wi) / (4 cos
+            theta_i); else D cos theta_h / (4 wo.h)), each capped at MAX_LOBE, None where not asked for.
+
+            D(h), G1(wi) (a factor of both with Smith shadowing) and 4 cos theta_i are traced once for the two.
+            """
+            d = distr.eval(h)
+            four_cos_i = 4.0 * _pos(cos_i)
+            g1_i = self.m_g1(distr, wi, h) if self.m_g_product or (pdf and self.m_sample_visible) else None
+            lobe = density = None
+            if value:
+                g = g1_i * self.m_g1(distr, wo, h) if self.m_g_product else self.m_g(distr, wi, wo, h)
+                lobe = dr.minimum(d * g / four_cos_i, MAX_LOBE)
+            if pdf:
+                if self.m_sample_visible:
+                    density = d * g1_i / four_cos_i
+                else:
+                    density = distr.pdf(po.snap_to_normal(wi), h) / (4.0 * _pos(dr.dot(wo, h)))
+                density = dr.minimum(density, MAX_LOBE)
+            return lobe, density
+
+        def _mueller(self, ctx, si, wo, cos_beta, n, k, spec, diff, scale, active):
+            """(Fresnel(beta) spec + M00(beta) diff) scale as a Spectrum (Mueller matrix if polarized), 0
+            where not ``active``; ``cos_beta`` = wi.h, the facet's incidence cosine.
 
             ``spec`` (a Float) multiplies the facet Fresnel Mueller matrix (paper Eq. 11) rotated
             into Mitsuba's Stokes bases; ``diff`` (a Float or 0.0) multiplies only its unpolarized
@@ -869,17 +893,18 @@ def _make_class():
             and the basis rotations), not on the 16 spectral entries: the Fresnel terms are
             evaluated at cos beta = 1 there (finite), times factors that are 0.
             """
+            no_diff = isinstance(diff, float) and diff == 0.0
             spec = dr.select(active, spec, 0.0) * scale
-            if not (isinstance(diff, float) and diff == 0.0):
+            if not no_diff:
                 diff = dr.select(active, diff, 0.0) * scale
             # a Float: broadcast to the index's spectrum where needed
-            cos_beta = dr.select(active, dr.dot(si.wi, h), 1.0)
+            cos_beta = dr.select(active, cos_beta, 1.0)
             if not self.m_polarized:
                 if isinstance(n, mi.Float):
                     fresnel = po.fresnel_average(cos_beta, n, k)
                 else:   # per channel on Floats: ~2x fewer host microseconds than on the spectrum type
                     fresnel = type(n)(*[po.fresnel_average(cos_beta, n[i], k[i]) for i in range(len(n))])
-                value = fresnel * (spec + diff)
+                value = fresnel * (spec if no_diff else spec + diff)
                 return value if isinstance(value, mi.Spectrum) else mi.Spectrum(value)
             a, b, c, s = po.fresnel_mueller_entries(*po.facet_fresnel(cos_beta, n, k))
             # Light arrives along -wo_hat and leaves along +wi_hat (roughconductor's frames)
@@ -904,27 +929,27 @@ def _make_class():
             return ps.rotated_facet_mueller(a, b, c, s, [dr.select(active, x, 0.0) for x in rot_in],
                                             [dr.select(active, x, 0.0) for x in rot_out], spec, diff)
 
-        def _value(self, ctx, si, wo, geo, rough, distr, inv_pdf=None):
-            """f cos(theta_o) as a Spectrum (Mueller matrix in polarized variants); with ``inv_pdf``
-            (a Float, 0 where the sample failed) the sampling weight f cos(theta_o) / pdf."""
-            spec_on, diff_on = self._lobes(ctx)
+        def _value(self, ctx, si, wo, geo, rough, lobes, lobe, inv_pdf=None):
+            """f cos(theta_o) as a Spectrum (Mueller matrix in polarized variants), ``lobe`` the specular
+            D G / (4 cos theta_i) of :meth:`_lobe`; with ``inv_pdf`` (a Float, 0 where the sample failed) the
+            sampling weight f cos(theta_o) / pdf."""
+            spec_on, diff_on = lobes
             if not (spec_on or diff_on):
                 return dr.zeros(mi.Spectrum)
             active, cos_i, cos_o, h = geo
             n, k = self._index(si, active)
             scale = self._scale(si, active)
-            spec = 0.0
-            if spec_on:
-                # D G / (4 cos_i) = (Eq. 13 without M) * cos_o
-                spec = dr.minimum(distr.eval(h) * self.m_g(distr, si.wi, wo, h) / (4.0 * _pos(cos_i)), MAX_LOBE)
+            spec = lobe if spec_on else 0.0
             paper = diff_on and self.m_diffuse_factor is not None
             diff = self._diffuse(ctx, si, wo, rough) * cos_o if paper else 0.0
-            weight = cos_o * dr.inv_pi
+            lambertian = diff_on and self.m_albedo is not None
+            weight = cos_o * dr.inv_pi if lambertian else None
             if inv_pdf is not None:     # scaled here: a division of the whole Mueller matrix is slow to trace
                 spec, diff = spec * inv_pdf, (diff * inv_pdf if paper else 0.0)
-                weight, active = weight * inv_pdf, active & (inv_pdf > 0)
-            value = self._mueller(ctx, si, wo, h, n, k, spec, diff, scale, active)
-            if diff_on and self.m_albedo is not None:
+                weight = weight * inv_pdf if lambertian else None
+                active = active & (inv_pdf > 0)
+            value = self._mueller(ctx, si, wo, dr.dot(si.wi, h), n, k, spec, diff, scale, active)
+            if lambertian:
                 value = value + self._lambertian(si, dr.select(active, weight, 0.0), active)
             return value
 
@@ -937,41 +962,48 @@ def _make_class():
             value = albedo * weight
             return mi.depolarizer(value) if self.m_polarized else value
 
-        def _pdf(self, si, wo, geo, distr, p_spec):
-            """The mixture density of :meth:`sample` (``p_spec`` from :meth:`_p_spec`)."""
+        def _pdf(self, si, wo, geo, p_spec, density):
+            """The mixture density of :meth:`sample` (``p_spec`` from :meth:`_p_spec`, ``density`` the
+            specular lobe's from :meth:`_lobe`)."""
             if p_spec is None:
                 return mi.Float(0.0)
             active, cos_i, cos_o, h = geo
             pdf_spec = 0.0
             if not (isinstance(p_spec, float) and p_spec == 0.0):
                 spec_ok = active & (dr.dot(si.wi, h) > 0) & (dr.dot(wo, h) > 0)
-                if self.m_sample_visible:
-                    pdf_spec = distr.eval(h) * self.m_g1(distr, si.wi, h) / (4.0 * _pos(cos_i))
-                else:
-                    pdf_spec = distr.pdf(po.snap_to_normal(si.wi), h) / (4.0 * _pos(dr.dot(wo, h)))
-                pdf_spec = dr.select(spec_ok, dr.minimum(pdf_spec, MAX_LOBE), 0.0)
+                pdf_spec = dr.select(spec_ok, density, 0.0)
             if isinstance(p_spec, float) and p_spec == 1.0:
                 return dr.select(active, pdf_spec, 0.0)
             pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo)
             return dr.select(active, p_spec * pdf_spec + (1.0 - p_spec) * pdf_diff, 0.0)
 
+        def _specular_wanted(self, lobes, p_spec, value, pdf):
+            """(the lobe's value wanted, its density wanted): not when the lobe is off or never sampled."""
+            return (value and lobes[0], pdf and p_spec is not None and not (isinstance(p_spec, float) and p_spec == 0.0))
+
         # ------------------------------------------------------------------
-        # eval, pdf, eval_pdf and sample share one roughness lookup, one geometry and one
-        # distribution per call (each is traced on the host at every render)
-        def eval(self, ctx, si, wo, active=True):
+        # eval, pdf, eval_pdf and sample share one roughness lookup, one geometry, one distribution and
+        # the specular lobe's factors per call: each is traced on the host for every live instance at
+        # every render (the cost per instance: benchmarks/bench_render.py --instances)
+        def _eval_pdf(self, ctx, si, wo, active, value, pdf):
+            lobes = self._lobes(ctx)
             rough = self._rough(si, active)
-            return self._value(ctx, si, wo, self._geometry(si, wo, active), rough, self._distr(rough))
+            geo = self._geometry(si, wo, active)
+            p_spec = self._p_spec(lobes, rough) if pdf else None
+            want_value, want_pdf = self._specular_wanted(lobes, p_spec, value, pdf)
+            lobe, density = (self._lobe(self._distr(rough), si.wi, wo, geo[3], geo[1], want_value, want_pdf)
+                             if want_value or want_pdf else (None, None))
+            return (self._value(ctx, si, wo, geo, rough, lobes, lobe) if value else None,
+                    self._pdf(si, wo, geo, p_spec, density) if pdf else None)
+
+        def eval(self, ctx, si, wo, active=True):
+            return self._eval_pdf(ctx, si, wo, active, True, False)[0]
 
         def pdf(self, ctx, si, wo, active=True):
-            rough = self._rough(si, active)
-            return self._pdf(si, wo, self._geometry(si, wo, active), self._distr(rough),
-                             self._p_spec(ctx, si, rough))
+            return self._eval_pdf(ctx, si, wo, active, False, True)[1]
 
         def eval_pdf(self, ctx, si, wo, active=True):
-            rough = self._rough(si, active)
-            geo, distr = self._geometry(si, wo, active), self._distr(rough)
-            return (self._value(ctx, si, wo, geo, rough, distr),
-                    self._pdf(si, wo, geo, distr, self._p_spec(ctx, si, rough)))
+            return self._eval_pdf(ctx, si, wo, active, True, True)
 
         def _sample_specular(self, ctx, si, sample2, active, distr):
             """The specular lobe alone (p_spec = 1): exactly roughconductor's sampling routine."""
@@ -999,12 +1031,14 @@ def _make_class():
                            / _pos(cos_i * mi.Frame3f.cos_theta(m)))
             n, k = self._index(si, active)
             bs.pdf = dr.select(active, bs.pdf, 0.0)
-            return bs, self._mueller(ctx, si, bs.wo, m, n, k, g_ratio, 0.0, self._scale(si, active), active)
+            return bs, self._mueller(ctx, si, bs.wo, dr.dot(si.wi, m), n, k, g_ratio, 0.0, self._scale(si, active),
+                                     active)
 
         def sample(self, ctx, si, sample1, sample2, active=True):
             active = active & (mi.Frame3f.cos_theta(si.wi) > 0)
+            lobes = self._lobes(ctx)
             rough = self._rough(si, active)
-            p_spec = self._p_spec(ctx, si, rough)
+            p_spec = self._p_spec(lobes, rough)
             if p_spec is None:
                 return dr.zeros(mi.BSDFSample3f), dr.zeros(mi.Spectrum)
             distr = self._distr(rough)
@@ -1027,10 +1061,14 @@ def _make_class():
                                         mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
             active = active & (mi.Frame3f.cos_theta(bs.wo) > 0)
             geo = self._geometry(si, bs.wo, active)
-            pdf = self._pdf(si, bs.wo, geo, distr, p_spec)
+            want_value, want_pdf = self._specular_wanted(lobes, p_spec, True, True)
+            lobe, density = (self._lobe(distr, si.wi, bs.wo, geo[3], geo[1], want_value, want_pdf)
+                             if want_value or want_pdf else (None, None))
+            pdf = self._pdf(si, bs.wo, geo, p_spec, density)
             ok = active & (pdf > 0)
             bs.pdf = dr.select(ok, pdf, 0.0)
-            return bs, self._value(ctx, si, bs.wo, geo, rough, distr, dr.select(ok, dr.rcp(dr.select(ok, pdf, 1.0)), 0.0))
+            inv_pdf = dr.select(ok, dr.rcp(dr.select(ok, pdf, 1.0)), 0.0)
+            return bs, self._value(ctx, si, bs.wo, geo, rough, lobes, lobe, inv_pdf)
     HydeBSDF.__name__ = "HydeBSDF"
     return HydeBSDF
 
