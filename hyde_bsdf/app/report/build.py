@@ -170,16 +170,20 @@ def script_command(path: Path, outdir: Path, quick: bool, checks_json: Path) -> 
     return cmd + (["--quick"] if quick else [])
 
 
-#: the thread pools of NumPy's BLAS and OpenMP: with several scripts at once each child gets its
-#: share of the cores (a user's own setting is kept)
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+#: the thread pools of NumPy's BLAS, OpenMP and Dr.Jit: with several scripts at once each child gets its
+#: share of the cores (a user's own setting is kept).  Dr.Jit reads no variable of its own: the scripts'
+#: protocol (``hyde_bsdf/validation/_common.py``) sets its pool from :data:`DRJIT_THREADS`.  Measured
+#: (capture_camera --quick at load 8): 24 CPU s with Dr.Jit's default pool of one thread per core, 15 with one
+#: thread -- the validation's kernels are small, and idle workers spin on cores other scripts need
+DRJIT_THREADS = "HYDE_DRJIT_THREADS"
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", DRJIT_THREADS)
 
 
 def _child_env(jobs: int = 1) -> dict:
     """The report's environment; when this package runs from a source tree, that tree goes first
     on the child's PYTHONPATH, so the scripts import the same ``hyde_bsdf`` as the report.  With
-    ``jobs`` scripts at once, BLAS and OpenMP get ``cores // jobs`` threads each (a spinning
-    BLAS thread pool on a core another script needs slows both)."""
+    ``jobs`` scripts at once, BLAS, OpenMP and Dr.Jit get ``cores // jobs`` threads each (a spinning
+    thread pool on a core another script needs slows both)."""
     env = dict(os.environ)
     root = Path(__file__).resolve().parents[3]
     if (root / "pyproject.toml").is_file():
