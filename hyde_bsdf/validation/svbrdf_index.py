@@ -210,7 +210,10 @@ def validate(outdir="out/validation", quick=False):
                 _log(f"[svbrdf_index] {key[0]}, {key[1]}: {results[key][3]:.0f} s; " + "; ".join(
                     f"{r[2]} {100 * float(r[3]):.2f} % / {100 * float(r[4]):.2f} %, pulls {r[5]}"
                     for r in rows if (r[0], r[1]) == key))
-                _plot(out / "svbrdf_index.png", results, cfg)
+                if not quick:       # the picture so far (the quick run draws it once, below)
+                    _plot(out / "svbrdf_index.png", results, cfg)
+        if quick:
+            _plot(out / "svbrdf_index.png", results, cfg)
         _, honesty = honesty_cases(out, quick)
     finally:
         if previous is not None and previous != mi.variant():
