@@ -335,7 +335,7 @@ CLI_ROWS = [
     ("invert --scheduler: a server that answers noise, not dask's protocol (refused at once) (new)", ["invert",
      "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json",
      "--reference", "{tmp}/invscene16/ref.exr", "--tiles", "2", "--scheduler", "{server}", "-o", "{tmp}/sched"], 2,
-     "no dask scheduler answers there (its answer is not dask's protocol: Unable to allocate 6.71 EiB", "server-noise"),
+     "no dask scheduler answers there (its answer is not dask's protocol: ", "server-noise"),
     # --- issue 33: a signal is one line whatever it is and wherever it lands
     ("render: SIGHUP (the terminal closed) removes the temporaries (new)", ["render", "{tiny}", "-o",
      "{tmp}/sighup.exr", "--spp", "200000", "--chunks", "20000"], 129, "hyde-bsdf render: terminated (SIGHUP)",
