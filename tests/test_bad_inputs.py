@@ -20,7 +20,8 @@ before the output paths and the scene have been checked.
   the test (so a refusal proves the free space was checked before the first pass); ``"noscene"`` is
   ``"in"`` with loading a scene failing the test (refused before any scene loads);
   ``"server-MODE"`` is ``"in"`` with ``{server}`` a local port that is no dask scheduler
-  (:class:`_HostileServer`) and ``HYDE_BSDF_CONNECT_TIMEOUT=0.5``.
+  (:class:`_HostileServer`) and ``HYDE_BSDF_CONNECT_TIMEOUT=0.5``; ``"tasklimit"`` is ``"in"`` with
+  ``HYDE_BSDF_TASK_TIMEOUT=0.01``.
 
 Append a row for each new mistake; ``API_ROWS`` does the same for Python calls
 ``(id, call(paths), exception type, needle)``.
@@ -327,6 +328,10 @@ CLI_ROWS = [
      "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json", "--reference",
      "{tmp}/invscene16/ref.exr", "--tiles", "2", "--scheduler", "{server}", "-o", "{tmp}/sched"], 2,
      "no dask scheduler answers there (no answer within 0.5 s (HYDE_BSDF_CONNECT_TIMEOUT))", "server-stall"),
+    ("invert --tiles --workers 2 whose tiles outlast HYDE_BSDF_TASK_TIMEOUT=0.01 s: one line, not 'unexpected' (new)",
+     ["invert", "--maps", "--scene", "{cap}/sample.xml", "--camera", "{cap}/camera.json", "--light",
+      "{cap}/lights.json", "--reference", "{cap}/ref.exr", "--tiles", "2", "--workers", "2", "-o", "{tmp}/tasklimit"],
+     2, " s (HYDE_BSDF_TASK_TIMEOUT=0.01 s); 0 of 4 tiles had finished", "tasklimit"),
     ("invert --scheduler: a server that answers noise, not dask's protocol (refused at once) (new)", ["invert",
      "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json",
      "--reference", "{tmp}/invscene16/ref.exr", "--tiles", "2", "--scheduler", "{server}", "-o", "{tmp}/sched"], 2,
@@ -631,7 +636,11 @@ def _gate_files(tmp):
     (tmp / "data_as.png").write_bytes((tmp / "meas.csv").read_bytes())   # a CSV under a plot's name
     (tmp / "inref").mkdir()
     _stokes_exr(tmp / "inref" / "invert.png", 16, 1.0)
-    return {"in33": _issue33_files(tmp),
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_signals import _inputs              # a calibrated capture: sample, camera, light, reference
+    (tmp / "cap").mkdir()
+    _inputs(tmp / "cap")
+    return {"in33": _issue33_files(tmp), "cap": tmp / "cap",
             "fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
             "huge": _huge_table(tmp.parent / f"{tmp.name}_sparse"),
             "devtex": scene("devtex", bitmap.format("/dev/zero")),
@@ -845,6 +854,8 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
             def no_pass(*args, **kwargs):
                 raise AssertionError("a render pass ran before the free space was checked")
             monkeypatch.setattr("hyde_bsdf.render.renderer._render_pass", no_pass)
+        if how == "tasklimit":                    # the pool's workers are killed at the limit (end_pool)
+            monkeypatch.setenv("HYDE_BSDF_TASK_TIMEOUT", "0.01")
         if how == "noscene":                      # refused before any scene loads: a load fails the row
             def no_scene(*args, **kwargs):
                 raise AssertionError("a scene was loaded before the refusal")
@@ -872,6 +883,7 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     assert lines[-1].startswith((f"hyde-bsdf {argv[0]}", f"[{argv[0]}]") if code == 0 else f"hyde-bsdf {argv[0]}"), \
         lines[-1]
     assert needle in lines[-1], lines[-1]
+    assert "(unexpected" not in lines[-1], lines[-1]      # every row's refusal is foreseen, never "please report it"
     assert (paths["tmp"] / "kept" / "invert_history.csv").read_text() == "a previous run's output\n"   # no file lost
     after = _snapshot(paths["tmp"])
     assert {f: b for f, b in after.items() if f in before} == before, "an existing file changed or was lost"
