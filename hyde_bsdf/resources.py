@@ -69,13 +69,18 @@ class Costs:
     far_field_seconds: float = 5.65e-10
     #: ``export``: Mitsuba's loader holds this many copies of a ``.pbsdf`` table
     pbsdf_loader_copies: int = 2
-    #: ``pbrdf``: peak bytes per direction beyond the caller's angle arrays (the (4, 4) float64 result, the
-    #: raveled angles, the diffuse term's temporaries, the finiteness check; measured 161-185 B at 10^6)
-    pbrdf_bytes_per_direction: int = 224
+    #: ``pbrdf``: peak bytes per direction beyond the caller's angle arrays: the (4, 4) float64 result (128 B)
+    #: and the argument checks' temporaries; the model runs in blocks of 8192 directions (measured 154 B at 10^6
+    #: directions, 135 B (resident) at 9x10^6 broadcast ones)
+    pbrdf_bytes_per_direction: int = 160
     #: ``stokes``: peak bytes per raw value (pixel x frame) of frames or a superpixel mosaic, and of a
     #: bilinear (full-resolution) mosaic (measured 72-94 B and 270 B at 1-12 million values)
     stokes_bytes_per_value: int = 128
     stokes_bilinear_bytes_per_value: int = 384
+    #: a CSV (``fit``'s measurements): peak bytes per value it can hold (one per comma or line end) while
+    #: it is read and parsed (measured 18 B on NumPy's path, 48 B on the cell-by-cell one, at 1.6 million
+    #: one-digit values, the densest a file can be)
+    csv_bytes_per_value: int = 64
     #: disk, upper bounds: one plot file (the largest raster figure, a 16-element fit at 120 dpi, is
     #: 10.6 MB of RGBA; the largest vector one, the .pbsdf fit, ~30 MB), one history-CSV row
     plot_file_bytes: int = 64 * MiB

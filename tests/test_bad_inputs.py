@@ -11,13 +11,17 @@ before the output paths and the scene have been checked.
 * ``needle``: a piece of the last stderr line (it names the parameter or file);
 * ``how``: ``"in"`` runs ``hyde_bsdf.app.cli.main`` in this process; ``"sub"`` runs
   ``python -m hyde_bsdf.app.cli`` (where a crash or signal is the point); ``"lowmem"`` is ``"in"``
-  with ``MemAvailable`` read as 2 GiB; ``"noscripts"`` is ``"in"`` with the validation scripts'
+  with ``MemAvailable`` read as 2 GiB (``"mem8m"``: 8 MiB); ``"noscripts"`` is ``"in"`` with the validation scripts'
   folder missing; ``"sigint"`` sends Ctrl-C once the render's progress line appears;
   ``"sighup"`` sends SIGHUP there, ``"sigint-group"`` Ctrl-C to the run's whole process group (as a
   terminal does); ``"pipe"`` closes the reader of stdout at once (``hyde-bsdf fit ... | head -0``);
   ``"cuda"`` is ``"in"``, run only on a machine without a CUDA GPU (hardware-dependent);
   ``"diskfull"`` is ``"in"`` with every file system reporting 50 KB free and a render pass failing
-  the test (so a refusal proves the free space was checked before the first pass).
+  the test (so a refusal proves the free space was checked before the first pass); ``"noscene"`` is
+  ``"in"`` with loading a scene failing the test (refused before any scene loads);
+  ``"server-MODE"`` is ``"in"`` with ``{server}`` a local port that is no dask scheduler
+  (:class:`_HostileServer`) and ``HYDE_BSDF_CONNECT_TIMEOUT=0.5``; ``"tasklimit"`` is ``"in"`` with
+  ``HYDE_BSDF_TASK_TIMEOUT=0.01``.
 
 Append a row for each new mistake; ``API_ROWS`` does the same for Python calls
 ``(id, call(paths), exception type, needle)``.
@@ -264,6 +268,14 @@ CLI_ROWS = [
     ("invert --mask of zeros (new)", ["invert", "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--reference",
      "{tmp}/invscene16/ref.exr", "--mask", "{in33}/zeros16.npy", "-o", "{tmp}/zeromask"], 2,
      "zeros16.npy' leaves out every pixel: nothing to fit", "in"),
+    ("stokes --mosaic of zeros: no light reached the sensor (was an all-zero EXR, exit 0) (new)", ["stokes",
+     "--mosaic", "{in33}/zeros16.npy", "-o", "{tmp}/nolight.exr"], 2, "zeros16.npy: no pixel is above the black level "
+     "0 DN beyond the read noise (the brightest is 0 DN): no light reached the sensor", "in"),
+    ("stokes --frames all at the black level (new)", ["stokes", "--frames", "{in33}/blk0.png", "{in33}/blk1.png",
+     "{in33}/blk2.png", "--angles", "0,60,120", "--black-level", "2", "-o", "{tmp}/nolight.exr"], 2,
+     "the frames: no pixel is above the black level 2 DN beyond the read noise (the brightest is 2 DN)", "in"),
+    ("invert: a black reference, S0 = 0 everywhere (new)", ["invert", "--reference", "{in33}/black.exr", "--res",
+     "16", "-o", "{tmp}/black"], 2, "black.exr' has peak |S0| = 0, outside the accepted range [1e-10, 1e+10]", "in"),
     ("invert --fit '' (was: the defaults fitted)", ["invert", "--fit", "", "-o", "{tmp}/fitempty"], 2,
      "--fit must list parameters from rms_slope, eta, k, got ''", "in"),
     ("invert --maps --fit '' (was: the preset's fitted)", ["invert", "--maps", "--fit", "", "-o", "{tmp}/fitempty"], 2,
@@ -284,7 +296,46 @@ CLI_ROWS = [
      "--scene", "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json",
      "--reference", "{tmp}/invscene16/ref.exr", "--tiles", "1000x1000", "-o", "{tmp}/tiles"], 2,
      "--tiles must be 1..6 x 1..6 for a 6 x 6-texel map, got 1000 x 1000 (the scene's largest texture, "
-     "'alpha.exr', read before any scene loads)", "in"),
+     "'alpha.exr', read before any scene loads)", "noscene"),
+    ("invert --tiles 1000x1000, the map a .hdr texture whose header is not read: the references' pixels bound it "
+     "(new)", ["invert", "--maps", "--scene", "{in33}/hdrtex.xml", "--camera", "{in33}/cam.json", "--light",
+               "{in33}/cam.json", "--reference", "{tmp}/invscene16/ref.exr", "--tiles", "1000x1000", "-o", "{tmp}/tiles"],
+     2, "--tiles 1000x1000 makes 1000000 tiles, more than the 256 pixels of the 1 --reference picture(s): each tile "
+     "needs a whole pixel of its own", "noscene"),
+    ("invert --tiles 20x20, alpha a constant (no texture file to read) (new)", ["invert", "--maps", "--scene",
+     "{in33}/constalpha.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json", "--reference",
+     "{tmp}/invscene16/ref.exr", "--tiles", "20x20", "-o", "{tmp}/tiles"], 2,
+     "--tiles 20x20 makes 400 tiles, more than the 256 pixels of the 1 --reference picture(s)", "noscene"),
+    # CSV and .npz inputs sized before they are decoded (a CSV's values bounded by its size)
+    ("fit: a CSV of 50000 rows with 8 MiB available: its values counted before it is decoded (new)", ["fit",
+     "{in33}/dense.csv", "-q"], 2, "dense.csv' (391 KiB: at most 200005 values, 64 B each to parse): about 12.2 MiB "
+     "of memory needed, but only 8 MiB is available; split it into smaller files", "mem8m"),
+    ("accuracy --atlas: a .npz whose member's header claims 1.16 TiB (new)", ["accuracy", "--theta-i", "30",
+     "--rms-slope", "0.3", "--atlas", "{in33}/lie.npz"], 2, "lie.npz', array 'a.npy': its header says "
+     "100000x100000x4x4 float64 values (1.16 TiB), but the file holds 8 B (truncated or damaged)", "in"),
+    ("accuracy --atlas: a .npz of pickled Python objects (new)", ["accuracy", "--theta-i", "30", "--rms-slope", "0.3",
+     "--atlas", "{in33}/objects.npz"], 2, "objects.npz', array 'a.npy' holds Python objects, not numbers", "in"),
+    ("accuracy --atlas: a text file named .npz (new)", ["accuracy", "--theta-i", "30", "--rms-slope", "0.3",
+     "--atlas", "{in33}/text.npz"], 2, "text.npz': not a readable .npz file (File is not a zip file)", "in"),
+    # --- issue 33: every wait bounded, the limit named (HYDE_BSDF_CONNECT_TIMEOUT is 0.5 s in these rows;
+    # the server that accepts and never answers, the issue's case, is in tests/test_waits.py)
+    ("invert --scheduler: a port whose accept queue is full (the TCP handshake never completes) (new)",
+     ["invert", "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light",
+      "{in33}/cam.json", "--reference", "{tmp}/invscene16/ref.exr", "--tiles", "2", "--scheduler", "{server}", "-o",
+      "{tmp}/sched"], 2, "no dask scheduler answers there (no answer within 0.5 s (HYDE_BSDF_CONNECT_TIMEOUT): "
+     "Timed out trying to connect to", "server-full"),
+    ("invert --scheduler: a server that starts a dask message and stalls (new)", ["invert", "--maps", "--scene",
+     "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json", "--reference",
+     "{tmp}/invscene16/ref.exr", "--tiles", "2", "--scheduler", "{server}", "-o", "{tmp}/sched"], 2,
+     "no dask scheduler answers there (no answer within 0.5 s (HYDE_BSDF_CONNECT_TIMEOUT))", "server-stall"),
+    ("invert --tiles --workers 2 whose tiles outlast HYDE_BSDF_TASK_TIMEOUT=0.01 s: one line, not 'unexpected' (new)",
+     ["invert", "--maps", "--scene", "{cap}/sample.xml", "--camera", "{cap}/camera.json", "--light",
+      "{cap}/lights.json", "--reference", "{cap}/ref.exr", "--tiles", "2", "--workers", "2", "-o", "{tmp}/tasklimit"],
+     2, " s (HYDE_BSDF_TASK_TIMEOUT=0.01 s); 0 of 4 tiles had finished", "tasklimit"),
+    ("invert --scheduler: a server that answers noise, not dask's protocol (refused at once) (new)", ["invert",
+     "--maps", "--scene", "{tmp}/invscene16/scene.xml", "--camera", "{in33}/cam.json", "--light", "{in33}/cam.json",
+     "--reference", "{tmp}/invscene16/ref.exr", "--tiles", "2", "--scheduler", "{server}", "-o", "{tmp}/sched"], 2,
+     "no dask scheduler answers there (its answer is not dask's protocol: Unable to allocate 6.71 EiB", "server-noise"),
     # --- issue 33: a signal is one line whatever it is and wherever it lands
     ("render: SIGHUP (the terminal closed) removes the temporaries (new)", ["render", "{tiny}", "-o",
      "{tmp}/sighup.exr", "--spp", "200000", "--chunks", "20000"], 129, "hyde-bsdf render: terminated (SIGHUP)",
@@ -347,6 +398,36 @@ def _export_while_locked(p):
         export_pbsdf(p["tmp"] / "locked.pbsdf", rms_slope=0.3, n=1.5, resolution=(4, 4, 4), progress=False)
 
 
+def _a_task_that_never_ends(p):
+    """The package's own process pool (mom.solver.process_pool) whose one task sleeps for an hour: the
+    limit (timeout=0.3 s) ends the wait, and end_pool kills the worker rather than wait for the task (the
+    shutdown, and the interpreter's exit after it, waited for the task: a wait without an end)."""
+    import time
+
+    from hyde_bsdf.mom.gather import end_pool, gather
+    from hyde_bsdf.mom.solver import process_pool
+
+    ex = process_pool(1)
+    try:
+        gather(ex, time.sleep, [3600], timeout=0.3)
+    finally:
+        workers = list(ex._processes.values())
+        end_pool(ex, finished=False)
+        assert [w.exitcode for w in workers] == [-signal.SIGKILL], [w.exitcode for w in workers]
+
+
+def _scatter_past_its_limit(p):
+    """mom.scatter on its own pool with timeout=0.001 s: no partition finishes in time; the pool's workers
+    are ended, none is left running."""
+    import multiprocessing
+
+    from hyde_bsdf import mom
+    try:
+        mom.scatter(20.0, 2, 0.0, 1.0, 0.0, 0.0, pts_per_wl=6, timeout=0.001, progress=False)
+    finally:
+        assert not multiprocessing.active_children()
+
+
 def _api_rows():
     from hyde_bsdf.mom import ExecutorError
     from hyde_bsdf.render.renderer import load_scene, plan_passes, prepare_variant, render_stokes
@@ -382,6 +463,12 @@ def _api_rows():
          r"memory needed, but only 819 MiB is available \(80% of the 1 GiB available\); use a shorter length_wl"),
         ("export_pbsdf while another run writes the same file (new)", _export_while_locked, UsageError,
          r"locked.pbsdf' is being written by another run \(pid \d+\)"),
+        ("a process pool whose task never ends: the limit, then its worker killed (was: the shutdown waited)",
+         _a_task_that_never_ends, ExecutorError, r"^hyde-bsdf: the process pool of 1 workers finished no task for \d+ s "
+                                                 r"\(timeout=0\.3 s\); 0 of 1 tasks had finished$"),
+        ("mom.scatter past its timeout: one line, no worker left (new)", _scatter_past_its_limit, ExecutorError,
+         r"^mom\.scatter: the process pool of \d+ workers finished no partition for \d+ s \(timeout=0\.001 s\); 0 of 2 "
+         r"partitions had finished$"),
         ("mom.scatter on a dask cluster whose only worker died (was a hang)", _scatter_on_a_dead_cluster,
          ExecutorError, r"^mom\.scatter: the dask cluster at inproc://\S+ is dead: it has no worker .*; 0 of 2 "
                         r"partitions had finished$"),
@@ -549,7 +636,11 @@ def _gate_files(tmp):
     (tmp / "data_as.png").write_bytes((tmp / "meas.csv").read_bytes())   # a CSV under a plot's name
     (tmp / "inref").mkdir()
     _stokes_exr(tmp / "inref" / "invert.png", 16, 1.0)
-    return {"in33": _issue33_files(tmp),
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_signals import _inputs              # a calibrated capture: sample, camera, light, reference
+    (tmp / "cap").mkdir()
+    _inputs(tmp / "cap")
+    return {"in33": _issue33_files(tmp), "cap": tmp / "cap",
             "fifotex": scene("fifotex", bitmap.format("tex_fifo.png")),
             "huge": _huge_table(tmp.parent / f"{tmp.name}_sparse"),
             "devtex": scene("devtex", bitmap.format("/dev/zero")),
@@ -559,8 +650,10 @@ def _gate_files(tmp):
 
 def _issue33_files(tmp):
     """Frames, CSVs, arrays and images for the issue 33 rows, in tmp/in33."""
+    import io
     import json
     import struct
+    import zipfile
     import zlib
 
     import numpy as np
@@ -577,6 +670,10 @@ def _issue33_files(tmp):
         th = np.radians(deg)
         write_measurements(d / name, synthetic_measurements(th, th, np.full(th.size, np.pi), n=1.5, k=3.0,
                                                             rms_slope=0.3))
+    for i in range(3):                             # frames at the black level 2 DN: no light
+        Image.fromarray(np.full((8, 8), 2, np.uint8)).save(d / f"blk{i}.png")
+    _stokes_exr(d / "black.exr", 16, 0.0)
+    (d / "dense.csv").write_text("theta_i_deg,theta_r_deg,phi_deg,M01\n" + "1,1,1,0\n" * 50_000)
     (d / "fit.pbsdf").write_text(json.dumps({"note": "a fit result under a table's name"}))
     (d / "cam.json").write_text(json.dumps({"width": 16, "height": 16}))     # read after the --tiles check
     np.save(d / "dark.npy", np.full((8, 8), 3, np.uint16))
@@ -593,12 +690,62 @@ def _issue33_files(tmp):
         path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
                          + chunk(b"IDAT", data))
 
+    scene16 = (tmp / "invscene16" / "scene.xml").read_text()
+    (d / "hdrtex.xml").write_text(scene16.replace("alpha.exr", "alpha.hdr"))     # a texture whose header is
+    (d / "alpha.hdr").write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 6 +X 6\n" + bytes(6 * 6 * 4))  # not read
+    (d / "constalpha.xml").write_text(scene16.replace('<texture type="bitmap" name="alpha"><string name="filename" '
+                                                      'value="alpha.exr"/></texture>', '<float name="alpha" value="0.3"/>'))
+    with zipfile.ZipFile(d / "lie.npz", "w") as zf:           # a member whose header claims 1.16 TiB in 8 bytes
+        head = io.BytesIO()
+        np.lib.format.write_array_header_1_0(head, {"descr": "<f8", "fortran_order": False,
+                                                    "shape": (100000, 100000, 4, 4)})
+        zf.writestr("a.npy", head.getvalue() + b"\0" * 8)
+    np.savez(d / "objects.npz", a=np.array([{"x": 1}], dtype=object))
+    (d / "text.npz").write_text("not a zip\n")
     png(d / "trunc.png", 64, 64, zlib.compress(b"\0" * 10)[:5])
     png(d / "big.png", 9600, 9600, zlib.compress(b"\0" * 64))
     png(d / "hugetex.png", 100000, 100000, zlib.compress(b"\0" * 64))
     (d / "hugetex.xml").write_text(SCENE.replace('<bsdf type="diffuse"/>', '<bsdf type="diffuse"><texture type="bitmap" '
                                    'name="reflectance"><string name="filename" value="hugetex.png"/></texture></bsdf>'))
     return d
+
+
+class _HostileServer:
+    """A TCP port on 127.0.0.1 that is no dask scheduler (the ``server-MODE`` rows): ``full``, its accept
+    queue full and never served, so a new connection's handshake never completes; ``stall``, the first 8 bytes of a dask message (one frame follows) and
+    then nothing; ``noise``, 64 bytes that are not dask's protocol."""
+
+    def __init__(self, mode):
+        import socket
+        import struct
+
+        self.sock, self.conns = socket.socket(), []
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.listen(0)
+        self.address = f"tcp://127.0.0.1:{self.sock.getsockname()[1]}"
+        if mode == "full":                         # Linux queues backlog + 1 connections, then drops SYNs
+            for _ in range(3):
+                c = socket.socket()
+                c.setblocking(False)
+                with contextlib.suppress(BlockingIOError):
+                    c.connect(self.sock.getsockname())
+                self.conns.append(c)
+            return
+        answer = {"stall": struct.pack("<Q", 1), "noise": bytes(range(100, 164))}[mode]
+        threading.Thread(target=self._serve, args=(answer,), daemon=True).start()
+
+    def _serve(self, answer):
+        while True:
+            try:
+                conn = self.sock.accept()[0]
+                self.conns.append(conn)
+                conn.sendall(answer)
+            except OSError:
+                return
+
+    def close(self):
+        for c in self.conns + [self.sock]:
+            c.close()
 
 
 def _snapshot(folder):
@@ -660,6 +807,12 @@ def _subprocess(argv, how, timeout=None):
 @pytest.mark.parametrize("row", CLI_ROWS, ids=[r[0] for r in CLI_ROWS])
 def test_cli_bad_input(row, paths, capsys, monkeypatch):
     name, argv, code, needle, how = row
+    server = None
+    if how.startswith("server-"):                 # a port that is no dask scheduler, the wait's limit 0.5 s
+        pytest.importorskip("distributed")
+        server = _HostileServer(how.split("-", 1)[1])
+        paths = {**paths, "server": server.address}
+        monkeypatch.setenv("HYDE_BSDF_CONNECT_TIMEOUT", "0.5")
     argv = _fill(argv, paths)
     if how == "cuda":
         import drjit as dr
@@ -691,8 +844,9 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     if how in ("sub", "sigint", "sigterm", "sighup", "sigint-group", "pipe"):
         got, out, err = _subprocess(argv, how)
     else:
-        if how == "lowmem":
-            monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 2 * 2**30)
+        if how in ("lowmem", "mem8m"):
+            avail = 2 * 2**30 if how == "lowmem" else 8 * 2**20
+            monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: avail)
         if how == "diskfull":
             usage = shutil.disk_usage(paths["tmp"])
             monkeypatch.setattr(shutil, "disk_usage", lambda path: usage._replace(free=50_000))
@@ -700,6 +854,13 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
             def no_pass(*args, **kwargs):
                 raise AssertionError("a render pass ran before the free space was checked")
             monkeypatch.setattr("hyde_bsdf.render.renderer._render_pass", no_pass)
+        if how == "tasklimit":                    # the pool's workers are killed at the limit (end_pool)
+            monkeypatch.setenv("HYDE_BSDF_TASK_TIMEOUT", "0.01")
+        if how == "noscene":                      # refused before any scene loads: a load fails the row
+            def no_scene(*args, **kwargs):
+                raise AssertionError("a scene was loaded before the refusal")
+            monkeypatch.setattr("hyde_bsdf.render.camera.calibrated_scene", no_scene)
+            monkeypatch.setattr("hyde_bsdf.render.renderer.load_scene_nearest", no_scene)
         if how == "noscripts":
             monkeypatch.setattr("hyde_bsdf.app.report.build.VALIDATION_DIR", paths["tmp"] / "no_validation")
         monkeypatch.chdir(paths["tmp"])
@@ -709,6 +870,8 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
         except SystemExit as exc:                 # argparse errors of commands that do not catch them
             got = exc.code
         out, err = capsys.readouterr()
+    if server is not None:
+        server.close()
     assert got == code, (got, err[-2000:])
     assert "Traceback" not in err and "Traceback" not in out, err[-3000:]
     lines = [ln for ln in err.replace("\r", "\n").splitlines() if ln.strip()]
@@ -720,6 +883,7 @@ def test_cli_bad_input(row, paths, capsys, monkeypatch):
     assert lines[-1].startswith((f"hyde-bsdf {argv[0]}", f"[{argv[0]}]") if code == 0 else f"hyde-bsdf {argv[0]}"), \
         lines[-1]
     assert needle in lines[-1], lines[-1]
+    assert "(unexpected" not in lines[-1], lines[-1]      # every row's refusal is foreseen, never "please report it"
     assert (paths["tmp"] / "kept" / "invert_history.csv").read_text() == "a previous run's output\n"   # no file lost
     after = _snapshot(paths["tmp"])
     assert {f: b for f, b in after.items() if f in before} == before, "an existing file changed or was lost"

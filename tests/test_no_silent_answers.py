@@ -194,17 +194,68 @@ def test_array_files_are_sized_from_their_headers(tmp_path, monkeypatch):
         read_array(png, "frame")
 
 
+def test_npz_and_csv_files_are_sized_before_they_are_decoded(tmp_path, monkeypatch):
+    """A .npz: its members' headers, read through zipfile, against the available memory (a 32 MiB array of
+    zeros deflates to 32 KiB; 16 MiB available: refused, nothing inflated past the header) and read back
+    whole when it fits.  A CSV: at most one value per comma or line end (counted in the bytes, before they
+    are decoded) at COSTS.csv_bytes_per_value = 64 B: 50000 rows of 4 one-digit values, 391 KiB, can hold
+    200005 values, 12.2 MiB to parse.  Cost: about 0.5 s."""
+    from hyde_bsdf.io.arrays import read_npz
+    from hyde_bsdf.io.input_gate import check_csv_values
+    from hyde_bsdf.io.measurements import MeasurementFileError, read_measurements
+
+    np.savez_compressed(tmp_path / "zeros.npz", z=np.zeros(2**22), one=np.arange(3))
+    assert (tmp_path / "zeros.npz").stat().st_size < 2**16
+    got = read_npz(tmp_path / "zeros.npz")
+    assert sorted(got) == ["one", "z"] and got["z"].shape == (2**22,) and got["one"].tolist() == [0, 1, 2]
+    assert check_csv_values(b"a,b\r\n1,2\n3,4", "x") == 7        # an upper bound: 6 cells (CR LF counts twice)
+    monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 16 * 2**20)
+    with pytest.raises(UsageError, match=r"^atlas .*zeros.npz., 2 arrays \(33554456\): about 32 MiB of memory needed, "
+                                         r"but only 16 MiB is available; give a smaller file$"):
+        read_npz(tmp_path / "zeros.npz", "atlas")
+    csv = tmp_path / "dense.csv"
+    csv.write_text("theta_i_deg,theta_r_deg,phi_deg,M01\n" + "1,1,1,0\n" * 50_000)
+    assert len(read_measurements(csv)) == 50_000                  # 12.2 MiB of 16: read
+    monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 8 * 2**20)
+    with pytest.raises(MeasurementFileError, match=r"^measurement file .*dense.csv. \(391 KiB: at most 200005 values, "
+                                                   r"64 B each to parse\): about 12\.2 MiB of memory needed, but only "
+                                                   r"8 MiB is available; split it into smaller files$"):
+        read_measurements(csv)
+
+
 def test_pbrdf_refuses_a_direction_count_beyond_the_memory(monkeypatch):
-    """10^4 x 10^4 broadcast directions need 10^8 x 224 B = 20.9 GiB (COSTS.pbrdf_bytes_per_direction,
-    measured 161-185 B): with 1 GiB available, one line before any allocation (was a MemoryError after 71 s)."""
+    """10^4 x 10^4 broadcast directions need 10^8 x 160 B = 14.9 GiB (COSTS.pbrdf_bytes_per_direction: the
+    128 B result and the checks' temporaries; the model itself runs in blocks): with 1 GiB available, one
+    line naming the parameters before any allocation (was a MemoryError after 71 s)."""
     from hyde_bsdf import pbrdf
 
     monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 2**30)
     th = np.linspace(0.0, 1.5, 10**4)
-    with pytest.raises(UsageError, match=r"pbrdf of 100000000 directions \(224 B each\): about 20\.9 GiB of memory "
-                                         r"needed, but only 1 GiB is available; evaluate fewer directions"):
+    with pytest.raises(UsageError, match=r"^pbrdf of 100000000 directions \(160 B each, 128 B of it the 4x4 result\): "
+                                         r"about 14\.9 GiB of memory needed, but only 1 GiB is available; pass fewer "
+                                         r"directions in theta_i, theta_r, phi at once$"):
         pbrdf(th[:, None], th[None, :], np.pi, rms_slope=0.3, n=1.5)
     assert pbrdf(th[:100], th[:100], np.pi, rms_slope=0.3, n=1.5).shape == (100, 4, 4)   # small: unchecked
+
+
+def test_pbrdf_memory_beyond_its_result_is_bounded():
+    """The model runs in blocks of 8192 directions and never expands broadcast angles: at 10^6 broadcast
+    directions (1000 x 1000) the peak beyond the 122 MiB result is 2.1 MiB (tracemalloc; was 33.4 MiB,
+    growing with the count), asserted < 8 MiB.  Cost: about 1 s."""
+    import tracemalloc
+
+    from hyde_bsdf import pbrdf
+
+    th = np.linspace(0.0, 1.5, 1000)
+    pbrdf(th[:3], th[:3], np.pi, rms_slope=0.3, n=1.5)          # the DHR table read once, outside the count
+    tracemalloc.start()
+    try:
+        F = pbrdf(th[:, None], th[None, :], np.pi, rms_slope=0.3, n=1.5)
+        beyond = tracemalloc.get_traced_memory()[1] - F.nbytes
+    finally:
+        tracemalloc.stop()
+    assert F.shape == (1000, 1000, 4, 4) and F.nbytes == 128 * 10**6
+    assert beyond < 8 * 2**20, beyond / 2**20
 
 
 # --- calibration files: one line, never a library's exception --------------------------------------

@@ -221,18 +221,21 @@ def _check_tiles_args(args):
         raise UsageError(f"--tiles must be N or RxC with integers >= 1 (e.g. 4 or 4x8), got {shorten(args.tiles)}")
     args.tile_grid = (int(parts[0]), int(parts[-1]))
     if args.scene:
-        _check_tile_grid(args.tile_grid, args.scene[0])
+        _check_tile_grid(args.tile_grid, args.scene[0], args.reference or [])
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be an integer >= 1, got {args.workers}")
     if args.workers is not None and args.scheduler is not None:
         raise UsageError("give --workers (a process pool here) or --scheduler (a dask cluster), not both")
 
 
-def _check_tile_grid(grid, scene) -> None:
-    """--tiles RxC refused before any scene loads when no texture of the scene's file graph has R rows
-    and C columns of texels (the map is one of them; each tile needs a texel).  Sizes from the files'
-    headers; a scene whose textures are not files (or not images) is checked once it is loaded."""
-    from hyde_bsdf.io.arrays import image_shape
+def _check_tile_grid(grid, scene, references) -> None:
+    """--tiles RxC refused before any scene loads when it is finer than the data, from what the files'
+    headers say: when no texture of the scene's file graph has R rows and C columns of texels (the map
+    is one of them; each tile needs a texel), and -- whatever the textures are, unreadable or not
+    files -- when the R x C tiles outnumber the pixels of the --reference pictures (each tile needs
+    a whole pixel of its own)."""
+    from hyde_bsdf.errors import InputFileError
+    from hyde_bsdf.io.arrays import exr_shape, image_shape
     from hyde_bsdf.io.scene_files import scene_files
 
     sizes = {p: image_shape(p) for p in scene_files(scene)[1:] if p.is_file()}
@@ -242,6 +245,14 @@ def _check_tile_grid(grid, scene) -> None:
         h, w = sizes[biggest][:2]
         raise UsageError(f"--tiles must be 1..{h} x 1..{w} for a {h} x {w}-texel map, got {grid[0]} x {grid[1]} "
                          f"(the scene's largest texture, {shorten(biggest.name)}, read before any scene loads)")
+    try:
+        pixels = sum(math.prod(exr_shape(r, "--reference")[:2]) for r in references)
+    except InputFileError:
+        return                          # refused, with its reason, when the references are read
+    if references and grid[0] * grid[1] > pixels:
+        raise UsageError(f"--tiles {grid[0]}x{grid[1]} makes {grid[0] * grid[1]} tiles, more than the {pixels} pixels "
+                         f"of the {len(references)} --reference picture(s): each tile needs a whole pixel of its own; "
+                         "use fewer tiles")
 
 
 #: invert_maps' default samples per pixel of the uncertainty step (its forward-mode renders; memory check)
@@ -685,7 +696,11 @@ def _dask_client(address):
     thread.join(seconds + 1.0)
     if "client" in box:
         return box["client"]
-    why = one_line(box["error"]) if "error" in box else f"no answer within {seconds:g} s ({name})"
+    why, error = f"no answer within {seconds:g} s ({name})", box.get("error")
+    if error is not None:          # dask's own time-out (a port that never completes a handshake), a reset, noise
+        why = (f"{why}: {one_line(error)}" if "timed out" in str(error).lower() else
+               f"its answer is not dask's protocol: {one_line(error)}" if isinstance(error, (MemoryError, ValueError))
+               else one_line(error))           # (dask reads a length from the noise and allocates it)
     raise UsageError(f"--scheduler {shorten(address)}: no dask scheduler answers there ({why})")
 
 

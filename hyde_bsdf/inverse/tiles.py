@@ -296,7 +296,7 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
     :class:`MapInversionResult` of the whole map; ``result.tiles`` lists each tile's bounds, pixels,
     seconds per iteration and the peak RSS of the process that ran it; ``history`` holds the tiles'
     mean loss and their summed seconds (the work of one pass over all tiles)."""
-    from hyde_bsdf.mom.gather import check_executor, gather       # the executors (mom imports on demand)
+    from hyde_bsdf.mom.gather import check_executor, end_pool, gather       # the executors (mom imports on demand)
     from hyde_bsdf.mom.solver import SerialExecutor, process_pool
 
     check_executor(executor)
@@ -339,9 +339,7 @@ def invert_maps_tiled(capture: Capture, start: dict, *, fit=("alpha",), tiles=(2
                          label="invert_maps_tiled")
     finally:
         if own:          # after a failure, no wait for a running tile: its worker is ended
-            ex.shutdown(wait=results is not None, cancel_futures=True)
-            for proc in list((getattr(ex, "_processes", None) or {}).values()) if results is None else ():
-                proc.kill()
+            end_pool(ex, finished=results is not None)
     res = stitch_tiles(results, shape, start, tuple(fit), components=options.get("components", "stokes"),
                        threshold=options.get("threshold", STDERR_THRESHOLD),
                        convergence=options.get("convergence", CONVERGENCE_THRESHOLD),

@@ -1,9 +1,10 @@
-"""Arrays from ``.npy`` files and images, sized from their headers before anything is decoded.
+"""Arrays from ``.npy`` and ``.npz`` files and images, sized from their headers before anything is decoded.
 
 :func:`array_header` reads what a file says its array is, (shape, dtype): the ``.npy`` header (NumPy's
 format: a magic string, then a Python-literal dict) or an image's (PIL opens lazily: size and mode,
 no pixel).  :func:`read_array` checks that size against the file (a ``.npy`` holds its data: a
-229-byte file cannot hold 200000 x 200000 values) and against the available memory, then decodes.
+229-byte file cannot hold 200000 x 200000 values) and against the available memory, then decodes;
+:func:`read_npz` does the same for each member of a ``.npz`` (its header through :mod:`zipfile`).
 PIL's own "decompression bomb" limit is replaced by that memory check.  A refusal is one
 :class:`~hyde_bsdf.errors.UsageError` naming the file.
 """
@@ -19,7 +20,7 @@ from hyde_bsdf.errors import InputFileError, UsageError, one_line, shorten
 from hyde_bsdf.io.input_gate import check_dimensions, check_input
 from hyde_bsdf.resources import format_bytes
 
-__all__ = ["array_header", "read_array", "exr_shape", "image_shape", "check_image_memory", "IMAGE_DTYPES"]
+__all__ = ["array_header", "read_array", "read_npz", "exr_shape", "image_shape", "check_image_memory", "IMAGE_DTYPES"]
 
 #: PIL image mode -> (dtype, values per pixel)
 IMAGE_DTYPES = {"1": (np.bool_, 1), "L": (np.uint8, 1), "P": (np.uint8, 1), "I;16": (np.uint16, 1),
@@ -45,23 +46,65 @@ def _image(path, what):
 
 def _npy_header(path, what):
     """(shape, dtype, offset of the data) of a ``.npy`` file."""
-    fmt = np.lib.format
     try:
         with open(path, "rb") as fh:
-            version = fmt.read_magic(fh)
-            read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
-            shape, _, dtype = read(fh)
+            shape, dtype = _read_npy_header(fh, what, shorten(str(path)))
             offset = fh.tell()
-    except (OSError, ValueError, SyntaxError, TypeError) as exc:
+    except OSError as exc:
         raise UsageError(f"{what} {shorten(str(path))}: not a readable .npy file ({one_line(exc)[:120]})") from None
-    if dtype.hasobject:
-        raise UsageError(f"{what} {shorten(str(path))} holds Python objects, not numbers; save a numeric array")
-    shape = tuple(int(d) for d in shape)
-    need, held = math.prod(shape) * dtype.itemsize, os.path.getsize(path) - offset
-    if need > held:
-        raise UsageError(f"{what} {shorten(str(path))}: its header says {'x'.join(map(str, shape))} {dtype} values "
-                         f"({format_bytes(need)}), but the file holds {format_bytes(held)} (truncated or damaged)")
+    _check_held(shape, dtype, os.path.getsize(path) - offset, f"{what} {shorten(str(path))}")
     return shape, dtype, offset
+
+
+def _read_npy_header(fh, what, name):
+    """(shape, dtype) from the ``.npy`` header at ``fh``'s position (NumPy's format: a magic string,
+    then a Python-literal dict), nothing more read."""
+    fmt = np.lib.format
+    try:
+        version = fmt.read_magic(fh)
+        read = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+        shape, _, dtype = read(fh)
+    except (ValueError, SyntaxError, TypeError) as exc:
+        raise UsageError(f"{what} {name}: not a readable .npy array ({one_line(exc)[:120]})") from None
+    if dtype.hasobject:
+        raise UsageError(f"{what} {name} holds Python objects, not numbers; save a numeric array")
+    return tuple(int(d) for d in shape), dtype
+
+
+def _check_held(shape, dtype, held, name):
+    """UsageError when a header's ``shape`` x ``dtype`` needs more than the ``held`` bytes of data."""
+    need = math.prod(shape) * dtype.itemsize
+    if need > held:
+        raise UsageError(f"{name}: its header says {'x'.join(map(str, shape))} {dtype} values "
+                         f"({format_bytes(need)}), but the file holds {format_bytes(held)} (truncated or damaged)")
+
+
+def read_npz(path, what: str = "array file") -> dict:
+    """{name: array} of a ``.npz`` file (NumPy's zip of ``.npy`` members, compressed or not): each
+    member's header read through :mod:`zipfile` (only its first bytes are inflated) and checked against
+    the member's size in the zip's directory, their total against the available memory, before any
+    data is decoded."""
+    import zipfile
+
+    path = check_input(path, what, stdin=False)
+    name = f"{what} {shorten(str(path))}"
+    try:
+        with zipfile.ZipFile(path) as zf:
+            members = [m for m in zf.infolist() if m.filename.endswith(".npy")]
+            total = 0
+            for m in members:
+                with zf.open(m) as fh:
+                    shape, dtype = _read_npy_header(fh, what, f"{shorten(str(path))}, array {shorten(m.filename)}")
+                    _check_held(shape, dtype, m.file_size - fh.tell(), f"{name}, array {shorten(m.filename)}")
+                total += math.prod(shape) * dtype.itemsize
+    except (OSError, zipfile.BadZipFile, EOFError) as exc:
+        raise UsageError(f"{name}: not a readable .npz file ({one_line(exc)[:120]})") from None
+    check_dimensions((total,), 1, f"{name}, {len(members)} arrays", option="give a smaller file")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {k: data[k] for k in data.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise UsageError(f"{name}: not a readable .npz file ({one_line(exc)[:120]})") from None
 
 
 def array_header(path, what: str = "array file") -> tuple[tuple, np.dtype]:

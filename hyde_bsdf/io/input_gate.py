@@ -14,7 +14,8 @@ Rules (``docs/troubleshooting.md``, "The file gates"):
   is one line naming the row, not a parser traceback;
 * a table's declared dimensions are multiplied in Python integers (no overflow) and checked
   against the file's size and the available memory before anything is allocated
-  (:func:`check_dimensions`).
+  (:func:`check_dimensions`); a CSV's values are counted from its separators and checked the
+  same way before it is decoded (:func:`check_csv_values`).
 
 Every refusal is a :class:`~hyde_bsdf.errors.UsageError` naming the file (cut to a readable
 length) and the limit.
@@ -30,10 +31,10 @@ import sys
 from pathlib import Path
 
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.resources import check_memory, format_bytes
+from hyde_bsdf.resources import COSTS, check_memory, format_bytes
 
 __all__ = ["STDIN", "DEFAULT_LIMIT", "CSV_FIELD_LIMIT", "is_stdin", "file_kind", "check_input",
-           "read_input", "read_text", "csv_rows", "check_dimensions"]
+           "read_input", "read_text", "csv_rows", "check_dimensions", "check_csv_values"]
 
 #: the spelling of standard input
 STDIN = "-"
@@ -105,7 +106,9 @@ def read_input(path, what: str = "input file", limit: int = DEFAULT_LIMIT) -> by
         if not stat.S_ISREG(st.st_mode):
             raise UsageError(f"{what} {shorten(checked)} is {file_kind(st.st_mode)}, not a regular file")
         os.set_blocking(fd, True)
-        data = fh.read(limit + 1)
+        data = fh.read(min(st.st_size, limit) + 1)    # read(n) allocates n bytes first: never the whole limit
+        if len(data) > st.st_size:                     # it grew while being read
+            data += fh.read(limit + 1 - len(data))
     if len(data) > limit:
         raise UsageError(f"{what} {shorten(checked)} grew past the {format_bytes(limit)} accepted while being read")
     return data
@@ -158,3 +161,14 @@ def check_dimensions(dims, itemsize: int, what: str, *, available_in_file: int |
         raise UsageError(f"{what}: dimensions {'x'.join(map(str, dims))} need {format_bytes(nbytes)}, but the "
                          f"file holds only {format_bytes(available_in_file)} for them (truncated or damaged)")
     return check_memory(nbytes, f"{what} ({'x'.join(map(str, dims))})", option)
+
+
+def check_csv_values(raw: bytes, what: str) -> int:
+    """The values the CSV bytes ``raw`` can hold -- one per comma or line end, plus one: a bound counted
+    at memory speed, before a byte is decoded -- times the memory parsing one takes
+    (:data:`~hyde_bsdf.resources.COSTS` ``csv_bytes_per_value``), checked against the available memory.
+    Returns the bound."""
+    values, per = raw.count(b",") + raw.count(b"\n") + raw.count(b"\r") + 1, COSTS.csv_bytes_per_value
+    check_memory(values * per, f"{what} ({format_bytes(len(raw))}: at most {values} values, {per} B each to parse)",
+                 "split it into smaller files")
+    return values

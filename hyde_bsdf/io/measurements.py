@@ -73,9 +73,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hyde_bsdf.errors import InputFileError, UsageError
+from hyde_bsdf.errors import InputFileError, UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_open
-from hyde_bsdf.io.input_gate import STDIN, check_input, csv_rows, read_input
+from hyde_bsdf.io.input_gate import STDIN, check_csv_values, check_input, csv_rows, read_input
 from hyde_bsdf.io.output_gate import check_output_path
 from hyde_bsdf.progress import as_callback
 
@@ -495,7 +495,9 @@ def _read_gated(path, name, report):
         size = 0 if checked == STDIN else checked.stat().st_size
         if report and size > 10e6:
             report(f"reading {name} ({size / 1e6:.0f} MB)")
-        return read_input(path, "measurement file"), size
+        raw = read_input(path, "measurement file")
+        check_csv_values(raw, f"measurement file {shorten(name)}")      # before it is decoded
+        return raw, size
     except UsageError as exc:
         raise MeasurementFileError(str(exc)) from None
 

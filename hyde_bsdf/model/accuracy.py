@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
+from hyde_bsdf.io.arrays import read_npz
 from hyde_bsdf.io.input_gate import check_input
 
 __all__ = ["accuracy", "verdict", "load_atlas", "Atlas", "ATLAS_PATH", "TOLERANCE_DB", "TOLERANCE", "ELEMENTS_16"]
@@ -66,11 +67,9 @@ class Atlas:
     def __init__(self, path):
         path = Path(check_input(path, "accuracy atlas", stdin=False))     # a regular file: no FIFO, no device
         try:
-            with np.load(path, allow_pickle=False) as data:
-                self.arrays = {k: data[k] for k in data.files}
-        except (OSError, ValueError) as exc:
-            raise UsageError(f"cannot read the accuracy atlas {shorten(str(path))} ({exc}); rebuild it with "
-                             "python hyde_bsdf/validation/accuracy_atlas.py table") from None
+            self.arrays = read_npz(path, "accuracy atlas")       # sized from its members' headers first
+        except UsageError as exc:
+            raise UsageError(f"{exc}; rebuild it with python hyde_bsdf/validation/accuracy_atlas.py table") from None
         a = self.arrays
         self.path = path
         self.provenance = json.loads(str(a["provenance"]))

@@ -83,44 +83,45 @@ def specular_pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False
     index = Index.from_keywords(n, k, pec, index)
     term = shadowing_term(shadowing)
     theta_i, theta_r, phi = _check_all_angles(theta_i, theta_r, phi)
-    return _specular(theta_i, theta_r, phi, s, index, term)[0]
+    return _evaluate(theta_i, theta_r, phi, s, index, term)
 
 
-#: elements per block: every temporary of a block stays in the CPU cache.
+#: elements per block: every temporary of a block stays in the CPU cache, and the memory beyond the
+#: result is a few blocks' worth whatever the number of directions.
 _BLOCK = 8192
 
 
 def _check_memory(size: int) -> None:
     """UsageError before the allocation when ``size`` directions need more than the available memory
-    (:data:`~hyde_bsdf.resources.COSTS`); below 64 MiB nothing is read (the fits call this often)."""
+    (:data:`~hyde_bsdf.resources.COSTS`: the result, 128 B per direction, and the blocks'
+    temporaries); below 64 MiB nothing is read (the fits call this often)."""
     from hyde_bsdf.resources import COSTS, check_memory
 
     need = size * COSTS.pbrdf_bytes_per_direction
     if need > 64 * 2**20:
-        check_memory(need, f"pbrdf of {size} directions ({COSTS.pbrdf_bytes_per_direction} B each)",
-                     "evaluate fewer directions at once (in blocks)")
+        check_memory(need, f"pbrdf of {size} directions ({COSTS.pbrdf_bytes_per_direction} B each, 128 B of it the "
+                     "4x4 result)", "pass fewer directions in theta_i, theta_r, phi at once")
 
 
-def _specular(theta_i, theta_r, phi, s, index, shadowing):
-    """F^s and M_00(beta) for broadcast angles, an :class:`Index` and a shadowing record; returns
-    (F, M00, above).
+def _evaluate(theta_i, theta_r, phi, s, index, shadowing, diffuse=None):
+    """F^s (plus, with ``diffuse`` = (term, hemisphere, its parameters), F^d_00) for broadcast angles,
+    an :class:`Index` and a shadowing record, :data:`_BLOCK` directions at a time: beyond the result the
+    memory is bounded (broadcast angles are never expanded whole).  FloatingPointError, naming the
+    first index, for a non-finite value.
 
     F has shape (..., 4, 4) but is a view of a (4, 4, ...) buffer, so that each
     element F[..., i, j] is contiguous (writing 16 strided planes costs more than
     the whole model); np.ascontiguousarray(F) gives the other layout.
     """
     ti, tr, ph = np.broadcast_arrays(theta_i, theta_r, phi)
-    shape = ti.shape
-    _check_memory(ti.size)
-    ti, tr, ph = ti.ravel(), tr.ravel(), ph.ravel()
-    size = ti.size
+    shape, size = ti.shape, ti.size
+    _check_memory(size)
     buf = np.empty((4, 4, size))
-    M00 = np.empty(size)
-    above = np.empty(size, bool)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore", under="ignore"):
         for lo in range(0, size, _BLOCK):
             sl = slice(lo, lo + _BLOCK)
-            si, ci, sr, cr, sh, ch = trig = angle_trig(ti[sl], tr[sl], ph[sl])
+            a, b = ti.flat[sl], tr.flat[sl]               # a copy of the block only
+            si, ci, sr, cr, sh, ch = trig = angle_trig(a, b, ph.flat[sl])
             up = (ci > HORIZON_COS) & (cr > HORIZON_COS)       # at or below the horizon: F = 0
             cos_a, cos_b, tan2_a = cos_alpha_beta(*trig)
             G = shadowing.g(cos_a, cos_b, ci, cr, s)
@@ -128,11 +129,17 @@ def _specular(theta_i, theta_r, phi, s, index, shadowing):
             scale = beckmann_P(cos_a, tan2_a, s) * G / (4.0 * ci * cr * cos_a)
             scale = np.where(up, scale, 0.0)
             A, B, C, S = fresnel_mueller_terms(np.where(up, cos_b, 1.0), index)
-            rotated_fresnel_mueller(A, B, C, S, *rotation_terms(*trig), scale, buf[:, :, sl])
-            M00[sl] = A
-            above[sl] = up
-    F = np.moveaxis(buf.reshape((4, 4) + shape), (0, 1), (-2, -1))
-    return F, M00.reshape(shape), above.reshape(shape)
+            block = buf[:, :, sl]
+            rotated_fresnel_mueller(A, B, C, S, *rotation_terms(*trig), scale, block)
+            if diffuse is not None:                       # Eq. 17: F^d_00 above the horizon
+                term, hemisphere, own = diffuse
+                block[0, 0] += np.where(up, term.f00(hemisphere, a, b, A, **own), 0.0)
+            finite = np.isfinite(block).all(axis=(0, 1))
+            if not finite.all():                          # never hand back NaN silently
+                where = list(np.unravel_index(lo + int(np.argmin(finite)), shape))
+                raise FloatingPointError(f"pbrdf produced a non-finite value at index {[int(w) for w in where]} "
+                                         f"(rms_slope={s}, {index.text()}); please report it")
+    return np.moveaxis(buf.reshape((4, 4) + shape), (0, 1), (-2, -1))
 
 
 def diffuse_pbrdf(theta_i, theta_r, M00, rms_slope, mode="paper", shadowing="vgroove", diffuse_reflectance=None):
@@ -198,14 +205,5 @@ def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,
     shadow, term = check_pair(shadowing, diffuse)     # the rules of model/terms.py
     own = term_arguments(term, diffuse_reflectance=diffuse_reflectance)
     theta_i, theta_r, phi = _check_all_angles(theta_i, theta_r, phi)
-    out, A, above = _specular(theta_i, theta_r, phi, s, index, shadow)
-    if term.present:
-        ti, tr = np.broadcast_arrays(theta_i, theta_r)
-        diffuse = term.f00(DHRHemisphere(shadow.name, s), ti, tr, A, **own)
-        out[..., 0, 0] += np.where(above, diffuse, 0.0)
-    if not np.isfinite(out).all():   # never hand back NaN silently
-        bad = np.argwhere((~np.isfinite(out.reshape(out.shape[:-2] + (16,)))).any(-1))[:1]
-        where = bad[0].tolist() if bad.size else []
-        raise FloatingPointError(f"pbrdf produced a non-finite value at index {where} "
-                                 f"(rms_slope={s}, {index.text()}); please report it")
-    return out
+    diffuse = (term, DHRHemisphere(shadow.name, s), own) if term.present else None
+    return _evaluate(theta_i, theta_r, phi, s, index, shadow, diffuse)

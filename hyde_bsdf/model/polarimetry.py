@@ -192,7 +192,18 @@ def _check_raw(frames, noise: CameraNoise, names, angles, saturated: str):
     mask = np.ones(I.shape[1:3], bool)
     for k in range(len(arrs)):
         mask &= _check_raw_one(I[k], noise, _frame_label(k, names, angles), saturated)
+    _check_light(I, noise, "the frames")
     return I, mask
+
+
+def _check_light(I, noise, name):
+    """UsageError when no raw value (of any frame: one analyzer may see none of a polarized light) is
+    above the black level beyond the read noise (5 sigma and half a DN of rounding): no light reached the
+    sensor, and every Stokes value would be 0 -- an empty answer, not a measurement."""
+    if not (I - noise.black_level > 5.0 * noise.gain * noise.read_noise + 0.5).any():
+        raise UsageError(f"{name}: no pixel is above the black level {noise.black_level:g} DN beyond the read noise "
+                         f"(the brightest is {float(I.max()):g} DN): no light reached the sensor (a lens cap, a zero "
+                         "exposure?)")
 
 
 def _first_bad(bad):
@@ -339,6 +350,7 @@ def stokes_from_mosaic(raw, layout=SONY_LAYOUT, *, method: str = "superpixel", a
     I = arr.astype(np.float64)
     I = I[..., None] if I.ndim == 2 else I
     mask = _check_raw_one(I, noise, name, saturated)
+    _check_light(I, noise, name)
     I = I - noise.black_level
     Ic, Vc, m = _demosaic(I, noise.variance(I), mask, method)
     A = analysis_matrix(angles) if analysis is None else analysis

@@ -48,7 +48,7 @@ import numpy as np
 
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.io.atomic import atomic_path
-from hyde_bsdf.mom.gather import gather
+from hyde_bsdf.mom.gather import end_pool, gather
 from hyde_bsdf.progress import as_callback
 
 __all__ = ["Material", "Grid", "GRID", "MATERIALS", "plan", "tasks", "run_task", "run_tasks", "load_checkpoints",
@@ -261,12 +261,14 @@ def run_tasks(todo, folder, executor=None, workers=2, progress=True, grid=GRID, 
             report(f"{result['key']}: {result['status']}, {result['partitions']} partition(s), "
                    f"{result['cpu_s']:.0f} CPU s ({time.perf_counter() - t0:.0f} s elapsed)")
 
+    finished = False
     try:
         gather(ex, run_task, todo, on_result=done, heartbeat=as_callback(progress, prefix=""), what="task",
                label="atlas")
+        finished = True
     finally:
-        if own:
-            ex.shutdown(wait=True, cancel_futures=True)
+        if own:          # after a failure, no wait for a running task: its worker is ended
+            end_pool(ex, finished)
     return len(todo)
 
 

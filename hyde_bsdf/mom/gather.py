@@ -11,6 +11,7 @@ asks a dask scheduler nothing without a limit (:func:`scheduler_identity`), and 
 finished task.  A dead executor, a task killed with its worker, or the timeout ends in one
 :class:`ExecutorError` line naming the executor and how many tasks had finished; the pending
 tasks are cancelled.  An exception raised *by a task* reaches the caller unchanged.
+:func:`end_pool` ends a pool the caller made without waiting on a task that never finishes.
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.progress import as_callback
 from hyde_bsdf.resources import wait_limit
 
-__all__ = ["gather", "ExecutorError", "check_executor", "scheduler_identity", "POLL_S", "HEARTBEAT_S",
+__all__ = ["gather", "end_pool", "ExecutorError", "check_executor", "scheduler_identity", "POLL_S", "HEARTBEAT_S",
            "NO_WORKER_GRACE_S"]
 
 #: longest single wait on the executor before the liveness checks run again (seconds)
@@ -174,3 +175,14 @@ def gather(executor, fn, items, *, timeout=None, on_done=None, heartbeat=None, w
             beat(f"{label}: waiting on the {name}: {done_count}/{len(items)} {what}s done, "
                  f"none finished for {idle:.0f} s")
     return results
+
+
+def end_pool(executor, finished: bool) -> None:
+    """Shut down a pool the package made for a call: once every task ``finished``, waiting for its
+    workers to exit; otherwise (a time-out, a lost task, an exception) its workers are killed first,
+    so a task that never ends holds neither this call nor the interpreter's exit (which joins the
+    pool).  The workers are taken before the shutdown, which forgets them."""
+    workers = [] if finished else list((getattr(executor, "_processes", None) or {}).values())
+    for proc in workers:
+        proc.kill()
+    executor.shutdown(wait=True if finished else bool(workers), cancel_futures=True)

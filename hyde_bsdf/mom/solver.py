@@ -206,7 +206,7 @@ from hyde_bsdf.mom.beam import gaussian_beam, window_bias
 from hyde_bsdf.mom.dense import check_finite_surface, solve_dense
 from hyde_bsdf.mom.fast import FAST_TOL, NEAR_WL, FastSolverUnsuitable, block_length_wl, plan_blocks, solve_fast
 from hyde_bsdf.mom.floor import FLOOR_MARGIN, floor_reason, partition_floor
-from hyde_bsdf.mom.gather import ExecutorError, check_executor, gather
+from hyde_bsdf.mom.gather import ExecutorError, check_executor, end_pool, gather
 from hyde_bsdf.mom.kernels import absorbed_flux, far_field_uv
 from hyde_bsdf.mom.runtime import limit_blas_threads, restore_blas_threads, worker_init
 
@@ -1233,15 +1233,17 @@ def _solve_partitions(tasks, executor, workers, cfg, progress):
     own = executor is None
     ex = process_pool(workers) if own else executor
     update = _progress_reporter(cfg["partitions"], progress)
+    results = None
     try:
         # never a blind wait: liveness checks, the caller's timeout and a heartbeat (gather.py) through the
         # progress callback (None: stderr lines, as True; False: none)
-        return gather(ex, solve_partition, tasks, timeout=cfg["timeout"], on_done=update,
-                      heartbeat=as_callback(True if progress is None else progress, prefix=""),
-                      what="partition", label="mom.scatter")
+        results = gather(ex, solve_partition, tasks, timeout=cfg["timeout"], on_done=update,
+                         heartbeat=as_callback(True if progress is None else progress, prefix=""),
+                         what="partition", label="mom.scatter")
+        return results
     finally:
-        if own:
-            ex.shutdown(wait=True, cancel_futures=True)
+        if own:          # after a failure, no wait for a running partition: its worker is ended
+            end_pool(ex, finished=results is not None)
 
 
 def _solver_reasons(results):
