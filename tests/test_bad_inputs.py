@@ -319,6 +319,11 @@ CLI_ROWS = [
      "100000x100000x4x4 float64 values (1.16 TiB), but the file holds 8 B (truncated or damaged)", "in"),
     ("accuracy --atlas: a .npz of pickled Python objects (new)", ["accuracy", "--theta-i", "30", "--rms-slope", "0.3",
      "--atlas", "{in33}/objects.npz"], 2, "objects.npz', array 'a.npy' holds Python objects, not numbers", "in"),
+    ("accuracy --atlas: another .npz, not an atlas (was KeyError, 'unexpected') (new)", ["accuracy", "--theta-i",
+     "30", "--rms-slope", "0.3", "--atlas", "{in33}/other.npz"], 2,
+     "other.npz' has no array 'provenance': not an accuracy atlas", "in"),
+    ("accuracy --atlas: a zip without arrays (new)", ["accuracy", "--theta-i", "30", "--rms-slope", "0.3",
+     "--atlas", "{in33}/plain.zip"], 2, "plain.zip' holds no .npy array: not a .npz file", "in"),
     ("accuracy --atlas: a text file named .npz (new)", ["accuracy", "--theta-i", "30", "--rms-slope", "0.3",
      "--atlas", "{in33}/text.npz"], 2, "text.npz': not a readable .npz file (File is not a zip file)", "in"),
     # --- issue 33: every wait bounded, the limit named (HYDE_BSDF_CONNECT_TIMEOUT is 0.5 s in these rows;
@@ -708,6 +713,9 @@ def _issue33_files(tmp):
         zf.writestr("a.npy", head.getvalue() + b"\0" * 8)
     np.savez(d / "objects.npz", a=np.array([{"x": 1}], dtype=object))
     (d / "text.npz").write_text("not a zip\n")
+    np.savez(d / "other.npz", x=np.arange(3))
+    with zipfile.ZipFile(d / "plain.zip", "w") as zf:
+        zf.writestr("readme.txt", "no arrays here")
     png(d / "trunc.png", 64, 64, zlib.compress(b"\0" * 10)[:5])
     png(d / "big.png", 9600, 9600, zlib.compress(b"\0" * 64))
     png(d / "hugetex.png", 100000, 100000, zlib.compress(b"\0" * 64))

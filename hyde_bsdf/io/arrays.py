@@ -99,10 +99,12 @@ def read_npz(path, what: str = "array file") -> dict:
                 total += math.prod(shape) * dtype.itemsize
     except (OSError, zipfile.BadZipFile, EOFError) as exc:
         raise UsageError(f"{name}: not a readable .npz file ({one_line(exc)[:120]})") from None
+    if not members:
+        raise UsageError(f"{name} holds no .npy array: not a .npz file")
     check_dimensions((total,), 1, f"{name}, {len(members)} arrays", option="give a smaller file")
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return {k: data[k] for k in data.files}
+        with np.load(path, allow_pickle=False) as data:      # its .npy members only (others are not sized)
+            return {m.filename[:-4]: data[m.filename[:-4]] for m in members}
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise UsageError(f"{name}: not a readable .npz file ({one_line(exc)[:120]})") from None
 
