@@ -32,10 +32,12 @@ the median over rounds of the round's hyde / roughconductor.  With ``--loops``: 
 iteration on the 96 x 72 scene (every material's roughness a grad-enabled parameter written through
 ``params.update()``, ``mi.render(scene, params)``, loss = mean, ``dr.backward``), unfrozen and inside
 ``dr.freeze`` (the update outside the frozen function, as the plugin's checks want).  Targets:
-<= 1.15 (smith/none) and <= 1.3 (default) at 50 materials, 96 x 72; the unfrozen loop <= 1.1.
+<= 1.15 (smith/none) and <= 1.3 (default) at 50 materials, 96 x 72; the unfrozen loop <= 1.1.  With
+``--floor``: roughconductor's model written as a Python BSDF with Mitsuba's C++ building blocks
+(:func:`python_floor_class`), side by side too: what any Python plugin of that model costs at least.
 
     python benchmarks/bench_render.py --instances [--rounds 3] [--materials 1,10,50]
-                                      [--sizes 96x72,320x240] [--loops]
+                                      [--sizes 96x72,320x240] [--loops] [--floor]
 
 **Cold load** (``--cold``, issue 31): a fresh Python process with an empty home folder (no Dr.Jit
 kernel cache, nothing of hyde-bsdf's) imports Mitsuba, sets the variant, registers ``hyde`` (hyde
@@ -243,6 +245,73 @@ def micro(n_log2: int = 20, repeats: int = 7) -> list[dict]:
 #: the per-instance benchmark's BSDFs (hyde's default: no shadowing/diffuse given)
 INSTANCE_CONFIGS = {"roughconductor": None, "hyde smith/none": {"shadowing": "smith", "diffuse": "none"},
                     "hyde default": {}}
+#: ``--floor``: roughconductor's model as a Python BSDF (:func:`python_floor_class`), run side by side as well
+FLOOR = "python floor"
+
+
+def python_floor_class():
+    """roughconductor's RGB model (Beckmann, visible normals, conductor Fresnel) as a Python BSDF written with
+    Mitsuba's C++ building blocks only (``MicrofacetDistribution``, ``fresnel_conductor``): the least a Python
+    BSDF of this model traces per instance, so the floor of any Python plugin of it (no guards against NaN, no
+    polarization, Mitsuba's less accurate conductor Fresnel).  Evidence for issue 31's closing note, not a plugin."""
+    class PyRough(mi.BSDF):
+
+        def __init__(self, props):
+            mi.BSDF.__init__(self, props)
+            self.m_alpha = props.get_texture("alpha", 0.1)
+            self.m_eta, self.m_k = props.get_texture("eta", 0.0), props.get_texture("k", 1.0)
+            self.m_flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
+            self.m_components = [self.m_flags]
+
+        def _distr(self, si, active):
+            return mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, self.m_alpha.eval_1(si, active), True)
+
+        def _fresnel(self, si, cos_beta, active):
+            return mi.fresnel_conductor(cos_beta, mi.Complex2f(self.m_eta.eval_1(si, active),
+                                                               self.m_k.eval_1(si, active)))
+
+        def sample(self, ctx, si, sample1, sample2, active=True):
+            active = active & (mi.Frame3f.cos_theta(si.wi) > 0)
+            distr = self._distr(si, active)
+            bs = dr.zeros(mi.BSDFSample3f)
+            m, pdf = distr.sample(si.wi, sample2)
+            bs.wo = mi.reflect(si.wi, m)
+            bs.eta, bs.sampled_type, bs.sampled_component = 1.0, mi.UInt32(+self.m_flags), mi.UInt32(0)
+            active = active & (pdf != 0) & (mi.Frame3f.cos_theta(bs.wo) > 0)
+            bs.pdf = dr.select(active, pdf / (4.0 * dr.dot(bs.wo, m)), 0.0)
+            weight = distr.smith_g1(bs.wo, m) * self._fresnel(si, dr.dot(si.wi, m), active)
+            return bs, mi.Spectrum(dr.select(active, weight, 0.0))
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            cos_i, cos_o = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
+            active = active & (cos_i > 0) & (cos_o > 0)
+            distr = self._distr(si, active)
+            h = dr.normalize(wo + si.wi)
+            d = distr.eval(h)
+            lobe = d * distr.G(si.wi, wo, h) / (4.0 * cos_i)
+            value = lobe * self._fresnel(si, dr.dot(si.wi, h), active)
+            pdf = d * distr.smith_g1(si.wi, h) / (4.0 * cos_i)
+            return mi.Spectrum(dr.select(active, value, 0.0)), dr.select(active, pdf, 0.0)
+
+        def eval(self, ctx, si, wo, active=True):
+            return self.eval_pdf(ctx, si, wo, active)[0]
+
+        def pdf(self, ctx, si, wo, active=True):
+            return self.eval_pdf(ctx, si, wo, active)[1]
+
+        def traverse(self, callback):
+            callback.put("alpha", self.m_alpha, mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous)
+            callback.put("eta", self.m_eta, +mi.ParamFlags.Differentiable)
+            callback.put("k", self.m_k, +mi.ParamFlags.Differentiable)
+
+        def to_string(self):
+            return "PyRough[]"
+    return PyRough
+
+
+def register_python_floor():
+    mi.register_bsdf("pyrough", lambda props, cls=python_floor_class(): cls(props))
+
 INSTANCE_TARGETS = {"hyde smith/none": 1.15, "hyde default": 1.3}
 INSTANCE_VARIANT = "llvm_ad_rgb"
 
@@ -254,6 +323,8 @@ def instance_bsdf(config: str, i: int, count: int) -> dict:
     if config == "roughconductor":
         return {"type": "roughconductor", "distribution": "beckmann", "alpha": alpha_from_rms_slope(rms),
                 "eta": n, "k": k}
+    if config == FLOOR:
+        return {"type": "pyrough", "alpha": alpha_from_rms_slope(rms), "eta": n, "k": k}
     return {"type": "hyde", "rms_slope": rms, "eta": n, "k": k, **INSTANCE_CONFIGS[config]}
 
 
@@ -290,6 +361,8 @@ def instance_child(config: str, count: int, width: int, height: int, task: str, 
     "render" (one 1-spp render), "loop" (one unfrozen optimisation iteration) or "frozen" (the same
     iteration's render and backward pass inside ``dr.freeze``)."""
     prepare_variant(INSTANCE_VARIANT, fallback=False)
+    if config == FLOOR:
+        register_python_floor()
     scene = mi.load_dict(instance_scene(config, count, width, height))
     if task == "render":
         def step(seed):
@@ -333,12 +406,12 @@ def _run_instance_child(config, count, width, height, task, repeats, warmup) -> 
 
 
 def instances(rounds=3, materials=(1, 10, 50), sizes=((96, 72), (320, 240)), loops=True, repeats=7,
-              warmup=3) -> list[dict]:
+              warmup=3, floor=False) -> list[dict]:
     """The per-instance benchmark (module docstring): one row per (task, materials, size, BSDF)."""
     cases = [("render", m, w, h) for w, h in sizes for m in materials]
     if loops:
         cases += [(task, m, 96, 72) for task in ("loop", "frozen") for m in (1, max(materials))]
-    names = list(INSTANCE_CONFIGS)
+    names = list(INSTANCE_CONFIGS) + ([FLOOR] if floor else [])
     rows = []
     for task, count, width, height in cases:
         per = {n: [] for n in names}
@@ -478,6 +551,8 @@ def main(argv=None) -> int:
     p.add_argument("--materials", default="1,10,50", help="--instances: material counts (default 1,10,50)")
     p.add_argument("--sizes", default="96x72,320x240", help="--instances: image sizes (default 96x72,320x240)")
     p.add_argument("--loops", action="store_true", help="--instances: also the unfrozen and frozen AD loop")
+    p.add_argument("--floor", action="store_true",
+                   help="--instances: also roughconductor's model as a Python BSDF (the floor of a Python plugin)")
     p.add_argument("--instance-child", default=None, help=argparse.SUPPRESS)
     p.add_argument("--cold", action="store_true", help="only the cold-load benchmark (issue 31)")
     p.add_argument("--cold-rounds", type=int, default=6, help="--cold: rounds of fresh processes (default 6)")
@@ -489,7 +564,7 @@ def main(argv=None) -> int:
         return 0
     if args.instances:
         sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
-        rows = instances(args.rounds, [int(m) for m in args.materials.split(",")], sizes, args.loops)
+        rows = instances(args.rounds, [int(m) for m in args.materials.split(",")], sizes, args.loops, floor=args.floor)
         print_instances(rows)
         out = Path(args.out).with_name("bench_render_instances.csv")
         _write_csv(out, rows)

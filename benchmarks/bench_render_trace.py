@@ -7,8 +7,7 @@ assembly of one callable per instance) and, for hyde, the part spent inside each
 methods and helpers (thread-time counters wrapped around them; nested calls are counted in each
 enclosing one).  A Python BSDF that does almost nothing (``--bsdf trivial``) shows the cost of a
 Python instance as such; ``--bsdf pyrough`` is roughconductor's own model written in Python with Mitsuba's
-C++ building blocks (``MicrofacetDistribution``, ``fresnel_conductor``), no guards: the floor of a Python
-plugin of that model.
+C++ building blocks (``bench_render.python_floor_class``): the floor of a Python plugin of that model.
 
     python benchmarks/bench_render_trace.py [--bsdf "hyde default"] [--materials 50] [--renders 5]
 """
@@ -66,65 +65,6 @@ def _trivial_class():
     return Trivial
 
 
-def _pyrough_class():
-    class PyRough(mi.BSDF):
-        """roughconductor's rgb model (Beckmann, visible normals, conductor Fresnel) in Python, written with
-        Mitsuba's C++ building blocks only (MicrofacetDistribution, fresnel_conductor): the least a Python
-        BSDF of this model traces, the floor of any Python plugin of it (no guards, no polarization)."""
-
-        def __init__(self, props):
-            mi.BSDF.__init__(self, props)
-            self.m_alpha = props.get_texture("alpha", 0.1)
-            self.m_eta, self.m_k = props.get_texture("eta", 0.0), props.get_texture("k", 1.0)
-            self.m_flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
-            self.m_components = [self.m_flags]
-
-        def _distr(self, si, active):
-            return mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, self.m_alpha.eval_1(si, active), True)
-
-        def _fresnel(self, si, cos_beta, active):
-            return mi.fresnel_conductor(cos_beta, mi.Complex2f(self.m_eta.eval_1(si, active),
-                                                               self.m_k.eval_1(si, active)))
-
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            active = active & (mi.Frame3f.cos_theta(si.wi) > 0)
-            distr = self._distr(si, active)
-            bs = dr.zeros(mi.BSDFSample3f)
-            m, pdf = distr.sample(si.wi, sample2)
-            bs.wo = mi.reflect(si.wi, m)
-            bs.eta, bs.sampled_type, bs.sampled_component = 1.0, mi.UInt32(+self.m_flags), mi.UInt32(0)
-            active = active & (pdf != 0) & (mi.Frame3f.cos_theta(bs.wo) > 0)
-            bs.pdf = dr.select(active, pdf / (4.0 * dr.dot(bs.wo, m)), 0.0)
-            weight = distr.smith_g1(bs.wo, m) * self._fresnel(si, dr.dot(si.wi, m), active)
-            return bs, mi.Spectrum(dr.select(active, weight, 0.0))
-
-        def eval_pdf(self, ctx, si, wo, active=True):
-            cos_i, cos_o = mi.Frame3f.cos_theta(si.wi), mi.Frame3f.cos_theta(wo)
-            active = active & (cos_i > 0) & (cos_o > 0)
-            distr = self._distr(si, active)
-            h = dr.normalize(wo + si.wi)
-            d = distr.eval(h)
-            lobe = d * distr.G(si.wi, wo, h) / (4.0 * cos_i)
-            value = lobe * self._fresnel(si, dr.dot(si.wi, h), active)
-            pdf = d * distr.smith_g1(si.wi, h) / (4.0 * cos_i)
-            return mi.Spectrum(dr.select(active, value, 0.0)), dr.select(active, pdf, 0.0)
-
-        def eval(self, ctx, si, wo, active=True):
-            return self.eval_pdf(ctx, si, wo, active)[0]
-
-        def pdf(self, ctx, si, wo, active=True):
-            return self.eval_pdf(ctx, si, wo, active)[1]
-
-        def traverse(self, callback):
-            callback.put("alpha", self.m_alpha, mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous)
-            callback.put("eta", self.m_eta, +mi.ParamFlags.Differentiable)
-            callback.put("k", self.m_k, +mi.ParamFlags.Differentiable)
-
-        def to_string(self):
-            return "PyRough[]"
-    return PyRough
-
-
 def _timers(cls, counters):
     def wrap(name, fn):
         def timed(*args, **kwargs):
@@ -156,10 +96,8 @@ def main(argv=None) -> int:
         for i in range(args.materials):
             d[f"sphere{i}"]["bsdf"] = {"type": "trivial_python", "value": 0.3 + 0.01 * i}
     elif args.bsdf == "pyrough":
-        mi.register_bsdf("pyrough", lambda props, cls=_pyrough_class(): cls(props))
-        for i in range(args.materials):
-            d[f"sphere{i}"]["bsdf"]["type"] = "pyrough"
-            del d[f"sphere{i}"]["bsdf"]["distribution"]
+        bench_render.register_python_floor()
+        d = bench_render.instance_scene(bench_render.FLOOR, args.materials, 96, 72)
     elif args.bsdf.startswith("hyde"):
         from hyde_bsdf.mitsuba.plugin import plugin_class
         _timers(plugin_class(), counters)

@@ -9,7 +9,7 @@ memory model: the estimate over the measured peak), should be >= 1; a cost that 
 entry shows < 1: raise the entry.  After a change that moves a cost, rerun and copy the figures
 into ``hyde_bsdf/resources.py``.
 
-    .venv/bin/python benchmarks/bench_resources.py [--only render,ad,forward,dense,fast,surface,pbsdf]
+    .venv/bin/python benchmarks/bench_resources.py [--only render,ad,forward,dense,fast,surface,stokes,pbrdf,csv,pbsdf]
 
 Not measured here: ``map_bytes_per_texel_*`` (counted: float64 arrays) and ``plot_file_bytes``
 (an upper bound; the plot ``invert`` writes is printed as a check).
@@ -206,6 +206,27 @@ def pbrdf():
     return {"pbrdf_bytes_per_direction": peak / ti.size}
 
 
+def csv(tmp):
+    """Peak bytes per value (one per comma or line end) while ``read_measurements`` reads and parses a
+    CSV (tracemalloc): 1.6 million one-digit values (the densest a file can be) on NumPy's path, and on
+    the cell-by-cell one (a comment line among the rows sends it there)."""
+    import tracemalloc
+
+    from hyde_bsdf.io.measurements import read_measurements
+
+    out, head, rows = {}, "theta_i_deg,theta_r_deg,phi_deg,M01\n", "1,1,1,0\n" * 400_000
+    for key, text in (("csv_bytes_per_value (NumPy's parser)", head + rows),
+                      ("csv_bytes_per_value (cell by cell)", head + "# a comment\n" + rows)):
+        path = tmp / "values.csv"
+        path.write_text(text)
+        tracemalloc.start()
+        read_measurements(path)
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        out[key] = peak / (text.count(",") + text.count("\n") + 1)
+    return out
+
+
 LOADER = r"""
 import os, sys
 import mitsuba as mi
@@ -231,7 +252,7 @@ def pbsdf(tmp):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--only", default="render,ad,forward,dense,fast,surface,stokes,pbrdf,pbsdf")
+    ap.add_argument("--only", default="render,ad,forward,dense,fast,surface,stokes,pbrdf,csv,pbsdf")
     args = ap.parse_args(argv)
     from hyde_bsdf.resources import COSTS
 
@@ -241,7 +262,8 @@ def main(argv=None):
         steps = {"render": lambda: {**render(tmp, "llvm_ad_spectral_polarized", True),
                                     **render(tmp, "llvm_ad_rgb", False)},
                  "ad": lambda: ad(tmp), "forward": lambda: forward(tmp), "dense": dense, "fast": fast,
-                 "surface": surface, "stokes": stokes, "pbrdf": pbrdf, "pbsdf": lambda: pbsdf(tmp)}
+                 "surface": surface, "stokes": stokes, "pbrdf": pbrdf, "csv": lambda: csv(tmp),
+                 "pbsdf": lambda: pbsdf(tmp)}
         for name in args.only.split(","):
             t0 = time.perf_counter()
             measured.update(steps[name]())

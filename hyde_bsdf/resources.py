@@ -77,9 +77,9 @@ class Costs:
     #: bilinear (full-resolution) mosaic (measured 72-94 B and 270 B at 1-12 million values)
     stokes_bytes_per_value: int = 128
     stokes_bilinear_bytes_per_value: int = 384
-    #: a CSV (``fit``'s measurements): peak bytes per value the file's size allows (size / 2: a digit and a
-    #: separator each) while it is read and parsed (measured 18 B on NumPy's path, 48 B on the cell-by-cell
-    #: one, at 1.6 million one-digit values)
+    #: a CSV (``fit``'s measurements): peak bytes per value it can hold (one per comma or line end) while
+    #: it is read and parsed (measured 18 B on NumPy's path, 48 B on the cell-by-cell one, at 1.6 million
+    #: one-digit values, the densest a file can be)
     csv_bytes_per_value: int = 64
     #: disk, upper bounds: one plot file (the largest raster figure, a 16-element fit at 120 dpi, is
     #: 10.6 MB of RGBA; the largest vector one, the .pbsdf fit, ~30 MB), one history-CSV row

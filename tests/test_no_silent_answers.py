@@ -192,34 +192,42 @@ def test_array_files_are_sized_from_their_headers(tmp_path, monkeypatch):
     monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 64 * 2**20)
     with pytest.raises(UsageError, match=r"frame .*bomb.png. \(14000x14000\): about 187 MiB of memory needed"):
         read_array(png, "frame")
+    # Radiance RGBE and PFM textures (Mitsuba's other bitmap formats): sized from their text headers too
+    from hyde_bsdf.io.arrays import check_image_memory, image_shape
+
+    (tmp_path / "big.hdr").write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 100000 +X 100000\n")
+    (tmp_path / "big.pfm").write_bytes(b"PF\n100000 100000\n-1\n")
+    assert image_shape(tmp_path / "big.hdr") == (100000, 100000, 3) == image_shape(tmp_path / "big.pfm")
+    with pytest.raises(UsageError, match=r"texture .*big.hdr. \(100000x100000x3\): about 112 GiB of memory needed"):
+        check_image_memory(tmp_path / "big.hdr", "texture")
 
 
 def test_npz_and_csv_files_are_sized_before_they_are_decoded(tmp_path, monkeypatch):
     """A .npz: its members' headers, read through zipfile, against the available memory (a 32 MiB array of
     zeros deflates to 32 KiB; 16 MiB available: refused, nothing inflated past the header) and read back
-    whole when it fits.  A CSV: at most size / 2 values (a digit and a separator each) at
-    COSTS.csv_bytes_per_value = 64 B: a 10 MB file needs 305 MiB.  Cost: about 0.5 s."""
+    whole when it fits.  A CSV: at most one value per comma or line end (counted in the bytes, before they
+    are decoded) at COSTS.csv_bytes_per_value = 64 B: 50000 rows of 4 one-digit values, 391 KiB, can hold
+    200005 values, 12.2 MiB to parse.  Cost: about 0.5 s."""
     from hyde_bsdf.io.arrays import read_npz
-    from hyde_bsdf.io.input_gate import check_csv_size
+    from hyde_bsdf.io.input_gate import check_csv_values
     from hyde_bsdf.io.measurements import MeasurementFileError, read_measurements
 
     np.savez_compressed(tmp_path / "zeros.npz", z=np.zeros(2**22), one=np.arange(3))
     assert (tmp_path / "zeros.npz").stat().st_size < 2**16
     got = read_npz(tmp_path / "zeros.npz")
     assert sorted(got) == ["one", "z"] and got["z"].shape == (2**22,) and got["one"].tolist() == [0, 1, 2]
-    monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 2**30)
-    assert check_csv_size(10**7, "x") == 5 * 10**6             # 305 MiB of 1 GiB: accepted
+    assert check_csv_values(b"a,b\r\n1,2\n3,4", "x") == 7        # an upper bound: 6 cells (CR LF counts twice)
     monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 16 * 2**20)
     with pytest.raises(UsageError, match=r"^atlas .*zeros.npz., 2 arrays \(33554456\): about 32 MiB of memory needed, "
                                          r"but only 16 MiB is available; give a smaller file$"):
         read_npz(tmp_path / "zeros.npz", "atlas")
-    csv = tmp_path / "big.csv"
-    with open(csv, "wb") as fh:
-        fh.write(b"theta_i_deg,theta_r_deg,phi_deg,M01\n")
-        fh.truncate(10**7)                                   # sparse: no disk used
-    with pytest.raises(MeasurementFileError, match=r"^measurement file .*big.csv. \(9.54 MiB: at most 5000000 values, "
-                                                   r"64 B each to parse\): about 305 MiB of memory needed, but only "
-                                                   r"16 MiB is available; split it into smaller files$"):
+    csv = tmp_path / "dense.csv"
+    csv.write_text("theta_i_deg,theta_r_deg,phi_deg,M01\n" + "1,1,1,0\n" * 50_000)
+    assert len(read_measurements(csv)) == 50_000                  # 12.2 MiB of 16: read
+    monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 8 * 2**20)
+    with pytest.raises(MeasurementFileError, match=r"^measurement file .*dense.csv. \(391 KiB: at most 200005 values, "
+                                                   r"64 B each to parse\): about 12\.2 MiB of memory needed, but only "
+                                                   r"8 MiB is available; split it into smaller files$"):
         read_measurements(csv)
 
 

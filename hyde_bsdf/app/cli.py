@@ -21,6 +21,8 @@ What happens when things go wrong, for every sub-command (handled once here):
 * a failed write (disk full, quota, I/O error) -- one line naming the file, exit 2; that file is
   unchanged (:class:`hyde_bsdf.io.atomic.OutputWriteError`);
 * a closed output pipe (``hyde-bsdf fit data.csv | head``) -- quiet, exit 141 (as for SIGPIPE);
+* an executor that cannot finish the work (:class:`hyde_bsdf.mom.gather.ExecutorError`: a wait's limit
+  reached, a dead cluster, a lost worker) -- one line, exit 2;
 * anything else (a library's exception: NumPy's LinAlgError, a MemoryError, Mitsuba's RuntimeError, or a
   bug) -- one line naming its type and where in the package it was raised, exit 2
   (:func:`unexpected`; ``HYDE_BSDF_TRACEBACK=1`` shows the traceback instead).
@@ -211,6 +213,9 @@ def _convert(command: str, argv: list) -> int:
     except (RejectedResult, FloatingPointError) as exc:
         _error(command, f"error: {one_line(exc)}")
         return EXIT_FAILED
+    except _executor_error() as exc:          # a wait's limit reached, a dead cluster, a lost worker: no bug
+        _error(command, f"error: {one_line(exc)}")
+        return EXIT_USAGE
     except ModuleNotFoundError as exc:
         if exc.name is None or exc.name.split(".")[0] == "hyde_bsdf":
             raise                 # our own module missing: a packaging bug, keep the traceback
@@ -231,6 +236,14 @@ def _convert(command: str, argv: list) -> int:
             raise
         _error(command, f"error: {unexpected(exc)}")
         return EXIT_USAGE
+
+
+def _executor_error() -> type:
+    """:class:`hyde_bsdf.mom.gather.ExecutorError`, imported when an exception is being converted (the
+    dispatcher itself stays cheap to import)."""
+    from hyde_bsdf.mom.gather import ExecutorError
+
+    return ExecutorError
 
 
 #: set (to anything) to see the traceback of an unexpected exception instead of its one line

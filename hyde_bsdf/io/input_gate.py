@@ -14,8 +14,8 @@ Rules (``docs/troubleshooting.md``, "The file gates"):
   is one line naming the row, not a parser traceback;
 * a table's declared dimensions are multiplied in Python integers (no overflow) and checked
   against the file's size and the available memory before anything is allocated
-  (:func:`check_dimensions`); a CSV's values are bounded by its size (a digit and a separator
-  each) and checked the same way before it is decoded (:func:`check_csv_size`).
+  (:func:`check_dimensions`); a CSV's values are counted from its separators and checked the
+  same way before it is decoded (:func:`check_csv_values`).
 
 Every refusal is a :class:`~hyde_bsdf.errors.UsageError` naming the file (cut to a readable
 length) and the limit.
@@ -34,7 +34,7 @@ from hyde_bsdf.errors import UsageError, shorten
 from hyde_bsdf.resources import COSTS, check_memory, format_bytes
 
 __all__ = ["STDIN", "DEFAULT_LIMIT", "CSV_FIELD_LIMIT", "is_stdin", "file_kind", "check_input",
-           "read_input", "read_text", "csv_rows", "check_dimensions", "check_csv_size"]
+           "read_input", "read_text", "csv_rows", "check_dimensions", "check_csv_values"]
 
 #: the spelling of standard input
 STDIN = "-"
@@ -163,12 +163,12 @@ def check_dimensions(dims, itemsize: int, what: str, *, available_in_file: int |
     return check_memory(nbytes, f"{what} ({'x'.join(map(str, dims))})", option)
 
 
-def check_csv_size(size: int, what: str) -> int:
-    """A CSV of ``size`` bytes holds at most ``size / 2`` values (a digit and a separator each): that
-    bound times the memory parsing one takes (:data:`~hyde_bsdf.resources.COSTS`
-    ``csv_bytes_per_value``) checked against the available memory before the text is decoded.  Returns
-    the bound."""
-    values, per = (int(size) + 1) // 2, COSTS.csv_bytes_per_value
-    check_memory(values * per, f"{what} ({format_bytes(size)}: at most {values} values, {per} B each to parse)",
+def check_csv_values(raw: bytes, what: str) -> int:
+    """The values the CSV bytes ``raw`` can hold -- one per comma or line end, plus one: a bound counted
+    at memory speed, before a byte is decoded -- times the memory parsing one takes
+    (:data:`~hyde_bsdf.resources.COSTS` ``csv_bytes_per_value``), checked against the available memory.
+    Returns the bound."""
+    values, per = raw.count(b",") + raw.count(b"\n") + raw.count(b"\r") + 1, COSTS.csv_bytes_per_value
+    check_memory(values * per, f"{what} ({format_bytes(len(raw))}: at most {values} values, {per} B each to parse)",
                  "split it into smaller files")
     return values

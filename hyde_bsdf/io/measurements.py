@@ -75,7 +75,7 @@ import numpy as np
 
 from hyde_bsdf.errors import InputFileError, UsageError, shorten
 from hyde_bsdf.io.atomic import atomic_open
-from hyde_bsdf.io.input_gate import STDIN, check_csv_size, check_input, csv_rows, read_input
+from hyde_bsdf.io.input_gate import STDIN, check_csv_values, check_input, csv_rows, read_input
 from hyde_bsdf.io.output_gate import check_output_path
 from hyde_bsdf.progress import as_callback
 
@@ -493,13 +493,10 @@ def _read_gated(path, name, report):
     try:
         checked = check_input(path, "measurement file")
         size = 0 if checked == STDIN else checked.stat().st_size
-        if size:
-            check_csv_size(size, f"measurement file {shorten(name)}")      # before a byte is read
         if report and size > 10e6:
             report(f"reading {name} ({size / 1e6:.0f} MB)")
         raw = read_input(path, "measurement file")
-        if not size:
-            check_csv_size(len(raw), f"measurement file {shorten(name)}")  # standard input: once it is read
+        check_csv_values(raw, f"measurement file {shorten(name)}")      # before it is decoded
         return raw, size
     except UsageError as exc:
         raise MeasurementFileError(str(exc)) from None

@@ -556,6 +556,30 @@ def _lobe_flags(diffuse):
     return comps, flags
 
 
+class _Derived:
+    """Values derived from a texture's constant value, evaluated once (at load and at each update) so that
+    a traced call reads them instead of tracing their operations again: every live instance's methods are
+    traced at every render, and those operations are the cost per instance.
+
+    ``get()`` returns them only while they are what the call would compute: the texture still holds the
+    variable they were computed from (an assignment ``params[key] = v`` puts a new one there; the copy held
+    here keeps the old variable alive, so its index cannot be reused by the new one), that value needs no
+    gradient (these were computed without one), and no frozen function is recording (its replays must read
+    the texture, whose value may change between them).  Otherwise None: the caller traces them.
+    """
+
+    def __init__(self, value, derived):
+        self.value = value                  # a view of the texture's value (it follows assignments)
+        self.held = type(value)(value)      # the variable the values were derived from
+        self.derived = derived
+
+    def get(self):
+        if (self.value.index != self.held.index or dr.grad_enabled(self.value)
+                or dr.flag(dr.JitFlag.FreezingScope)):
+            return None
+        return self.derived
+
+
 def _make_class():
     """Build the BSDF class for the current variant (mi.BSDF differs per variant)."""
 
@@ -586,13 +610,13 @@ def _make_class():
             self.m_albedo_mean = terms.PARAMETER_DEFAULTS["diffuse_reflectance"]
             self.m_has_diffuse = term.present
             self.m_snapshots, self.m_reader = {}, pc.Reader()
+            # the DHR texture serves the diffuse factor and the lobe choice (p_spec)
+            self.m_dhr = _dhr_lookup(shadow.name) if term.present else None
             self._validate()
             self._warn_unreadable_textures()
             self.m_sample_visible = _read_bool(props, "sample_visible", True)
             _refuse_unknown(props)
             self.m_polarized = bool(mi.is_polarized)
-            # the DHR texture serves the diffuse factor and the lobe choice (p_spec)
-            self.m_dhr = _dhr_lookup(shadow.name) if term.present else None
             self.m_components, self.m_flags = _lobe_flags(term)
             self.m_gain_warned = False
             self._warn_gain()
@@ -735,6 +759,7 @@ def _make_class():
             if "rough" in groups:
                 self.m_rough_values = pc.check_roughness(self.m_rough_key, self.m_rough, self.m_rough_scale,
                                                          self.m_reader)
+                self.m_rough_constant = self._rough_constant()
             if "index" in groups:
                 pc.check_index(self.m_eta, self.m_k, self.m_reader)
                 self.m_guard_tiny = self._index_needs_guard()
@@ -762,8 +787,29 @@ def _make_class():
             Returns (alpha, rms_slope, u, 1 - rho_avg): an ``alpha`` texture's value is used as the
             Beckmann alpha unchanged (bit-identical to roughconductor's), rms_slope = alpha / sqrt(2); u
             is the DHR texture's slope coordinate and 1 - rho_avg its 1-D lookup, read once per call for
-            the lobe choice and the reciprocal term (both None without a diffuse term).
+            the lobe choice and the reciprocal term (both None without a diffuse term).  A constant roughness's
+            are computed once per value (:meth:`_rough_constant`), not traced at every call.
             """
+            if self.m_rough_constant is not None:
+                derived = self.m_rough_constant.get()
+                if derived is not None:
+                    return derived
+            return self._rough_traced(si, active)
+
+        def _rough_constant(self):
+            """The values of :meth:`_rough` of a constant roughness (a ``uniform`` texture of one number whose
+            value needs no gradient), evaluated now, at load and at each update (a :class:`_Derived`), else None."""
+            if not (dr.is_jit_v(mi.Float) and _achromatic(self.m_rough)):
+                return None
+            value = mi.traverse(self.m_rough)["value"]
+            if dr.grad_enabled(value):
+                return None
+            derived = self._rough_traced(dr.zeros(mi.SurfaceInteraction3f), True)
+            dr.eval([x for x in derived if x is not None])
+            return _Derived(value, derived)
+
+        def _rough_traced(self, si, active):
+            """:meth:`_rough` from one texture lookup."""
             r = self.m_rough.eval_1(si, active)
             # values were range-checked at load/update where readable (mesh attributes are not);
             # values below the lower bound (alpha = 0: a mirror) are floored there, and NaN too
@@ -821,17 +867,18 @@ def _make_class():
             """
             return po.safe_normalize(wi + wo, mi.Vector3f(0, 0, 1))
 
-        def _geometry(self, si, wo, active):
-            """(active, cos_i, cos_o, h) of a direction pair: shared by the value and the pdf."""
-            cos_i = mi.Frame3f.cos_theta(si.wi)
+        def _geometry(self, wi, wo, active):
+            """(active, cos_i, cos_o, h, wi.h, wo.h) of a direction pair: shared by the value and the pdf."""
+            cos_i = mi.Frame3f.cos_theta(wi)
             cos_o = mi.Frame3f.cos_theta(wo)
-            return active & (cos_i > 0) & (cos_o > 0), cos_i, cos_o, self._half_vector(si.wi, wo)
+            h = self._half_vector(wi, wo)
+            return active & (cos_i > 0) & (cos_o > 0), cos_i, cos_o, h, dr.dot(wi, h), dr.dot(wo, h)
 
-        def _diffuse(self, ctx, si, wo, rough):
+        def _diffuse(self, ctx, cos_i, cos_o, rough):
             """The diffuse term's factor (no M00, no cos theta_o); theta_in is the polar angle of the
             direction the light arrives from (wo_hat: ``wo`` in Radiance mode, ``si.wi`` in Importance)."""
-            cos_in = wo.z if ctx.mode == mi.TransportMode.Radiance else si.wi.z
-            return self.m_diffuse_factor(self.m_dhr, cos_in, si.wi.z, wo.z, rough[2], rough[3])
+            cos_in = cos_o if ctx.mode == mi.TransportMode.Radiance else cos_i
+            return self.m_diffuse_factor(self.m_dhr, cos_in, cos_i, cos_o, rough[2], rough[3])
 
         def _lobes(self, ctx):
             """(specular on, diffuse on) for this context (Python booleans)."""
@@ -936,19 +983,19 @@ def _make_class():
             spec_on, diff_on = lobes
             if not (spec_on or diff_on):
                 return dr.zeros(mi.Spectrum)
-            active, cos_i, cos_o, h = geo
+            active, cos_i, cos_o, h, wi_h, wo_h = geo
             n, k = self._index(si, active)
             scale = self._scale(si, active)
             spec = lobe if spec_on else 0.0
             paper = diff_on and self.m_diffuse_factor is not None
-            diff = self._diffuse(ctx, si, wo, rough) * cos_o if paper else 0.0
+            diff = self._diffuse(ctx, cos_i, cos_o, rough) * cos_o if paper else 0.0
             lambertian = diff_on and self.m_albedo is not None
             weight = cos_o * dr.inv_pi if lambertian else None
             if inv_pdf is not None:     # scaled here: a division of the whole Mueller matrix is slow to trace
                 spec, diff = spec * inv_pdf, (diff * inv_pdf if paper else 0.0)
                 weight = weight * inv_pdf if lambertian else None
                 active = active & (inv_pdf > 0)
-            value = self._mueller(ctx, si, wo, dr.dot(si.wi, h), n, k, spec, diff, scale, active)
+            value = self._mueller(ctx, si, wo, wi_h, n, k, spec, diff, scale, active)
             if lambertian:
                 value = value + self._lambertian(si, dr.select(active, weight, 0.0), active)
             return value
@@ -962,18 +1009,18 @@ def _make_class():
             value = albedo * weight
             return mi.depolarizer(value) if self.m_polarized else value
 
-        def _pdf(self, si, wo, geo, p_spec, density):
+        def _pdf(self, wo, geo, p_spec, density):
             """The mixture density of :meth:`sample` (``p_spec`` from :meth:`_p_spec`, ``density`` the
             specular lobe's from :meth:`_lobe`)."""
             if p_spec is None:
                 return mi.Float(0.0)
-            active, cos_i, cos_o, h = geo
+            active, cos_i, cos_o, h, wi_h, wo_h = geo
             pdf_spec = 0.0
             if not (isinstance(p_spec, float) and p_spec == 0.0):
-                spec_ok = active & (dr.dot(si.wi, h) > 0) & (dr.dot(wo, h) > 0)
+                spec_ok = active & (wi_h > 0) & (wo_h > 0)
                 pdf_spec = dr.select(spec_ok, density, 0.0)
-            if isinstance(p_spec, float) and p_spec == 1.0:
-                return dr.select(active, pdf_spec, 0.0)
+                if isinstance(p_spec, float) and p_spec == 1.0:
+                    return pdf_spec         # 0 where not active (spec_ok implies active)
             pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo)
             return dr.select(active, p_spec * pdf_spec + (1.0 - p_spec) * pdf_diff, 0.0)
 
@@ -988,13 +1035,14 @@ def _make_class():
         def _eval_pdf(self, ctx, si, wo, active, value, pdf):
             lobes = self._lobes(ctx)
             rough = self._rough(si, active)
-            geo = self._geometry(si, wo, active)
+            wi = si.wi
+            geo = self._geometry(wi, wo, active)
             p_spec = self._p_spec(lobes, rough) if pdf else None
             want_value, want_pdf = self._specular_wanted(lobes, p_spec, value, pdf)
-            lobe, density = (self._lobe(self._distr(rough), si.wi, wo, geo[3], geo[1], want_value, want_pdf)
+            lobe, density = (self._lobe(self._distr(rough), wi, wo, geo[3], geo[1], want_value, want_pdf)
                              if want_value or want_pdf else (None, None))
             return (self._value(ctx, si, wo, geo, rough, lobes, lobe) if value else None,
-                    self._pdf(si, wo, geo, p_spec, density) if pdf else None)
+                    self._pdf(wo, geo, p_spec, density) if pdf else None)
 
         def eval(self, ctx, si, wo, active=True):
             return self._eval_pdf(ctx, si, wo, active, True, False)[0]
@@ -1005,37 +1053,38 @@ def _make_class():
         def eval_pdf(self, ctx, si, wo, active=True):
             return self._eval_pdf(ctx, si, wo, active, True, True)
 
-        def _sample_specular(self, ctx, si, sample2, active, distr):
+        def _sample_specular(self, ctx, si, wi, sample2, active, distr):
             """The specular lobe alone (p_spec = 1): exactly roughconductor's sampling routine."""
             bs = dr.zeros(mi.BSDFSample3f)
-            cos_i = mi.Frame3f.cos_theta(si.wi)
-            m, pdf = distr.sample(po.snap_to_normal(si.wi), sample2)
-            bs.wo = mi.reflect(si.wi, m)
+            m, pdf = distr.sample(po.snap_to_normal(wi), sample2)
+            wo = bs.wo = mi.reflect(wi, m)
             bs.eta = 1.0
             bs.sampled_component = mi.UInt32(0)
             bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            active = active & (pdf != 0) & (mi.Frame3f.cos_theta(bs.wo) > 0)
+            active = active & (pdf != 0) & (mi.Frame3f.cos_theta(wo) > 0)
             if self.m_sample_visible and self.m_g1 is _g1_exact:
                 # the visible-normal density the sampler draws from: D G1_exact(wi) / (4 cos_i) (wi.m = wo.m);
                 # distr.sample's own pdf is written with the rational G1 (roughconductor's)
-                bs.pdf = dr.minimum(distr.eval(m) * self.m_g1(distr, si.wi, m) / (4.0 * _pos(cos_i)), MAX_LOBE)
+                bs.pdf = dr.minimum(distr.eval(m) * self.m_g1(distr, wi, m) / (4.0 * _pos(mi.Frame3f.cos_theta(wi))),
+                                    MAX_LOBE)
             else:
-                bs.pdf = pdf / (4.0 * _pos(dr.dot(bs.wo, m)))
+                bs.pdf = pdf / (4.0 * _pos(dr.dot(wo, m)))
             # weight = f cos_o / pdf, written with the sampled m like roughconductor
+            wi_m = dr.dot(wi, m)
             if self.m_sample_visible and self.m_visible_ratio is not None:
-                g_ratio = self.m_visible_ratio(distr, si.wi, bs.wo, m)
+                g_ratio = self.m_visible_ratio(distr, wi, wo, m)
             elif self.m_sample_visible:
-                g_ratio = self.m_g(distr, si.wi, bs.wo, m) / _pos(self.m_g1(distr, si.wi, m))
+                g_ratio = self.m_g(distr, wi, wo, m) / _pos(self.m_g1(distr, wi, m))
             else:
-                g_ratio = (self.m_g(distr, si.wi, bs.wo, m) * dr.dot(si.wi, m)
-                           / _pos(cos_i * mi.Frame3f.cos_theta(m)))
+                g_ratio = (self.m_g(distr, wi, wo, m) * wi_m
+                           / _pos(mi.Frame3f.cos_theta(wi) * mi.Frame3f.cos_theta(m)))
             n, k = self._index(si, active)
             bs.pdf = dr.select(active, bs.pdf, 0.0)
-            return bs, self._mueller(ctx, si, bs.wo, dr.dot(si.wi, m), n, k, g_ratio, 0.0, self._scale(si, active),
-                                     active)
+            return bs, self._mueller(ctx, si, wo, wi_m, n, k, g_ratio, 0.0, self._scale(si, active), active)
 
         def sample(self, ctx, si, sample1, sample2, active=True):
-            active = active & (mi.Frame3f.cos_theta(si.wi) > 0)
+            wi = si.wi
+            active = active & (mi.Frame3f.cos_theta(wi) > 0)
             lobes = self._lobes(ctx)
             rough = self._rough(si, active)
             p_spec = self._p_spec(lobes, rough)
@@ -1043,32 +1092,32 @@ def _make_class():
                 return dr.zeros(mi.BSDFSample3f), dr.zeros(mi.Spectrum)
             distr = self._distr(rough)
             if isinstance(p_spec, float) and p_spec == 1.0:
-                return self._sample_specular(ctx, si, sample2, active, distr)
+                return self._sample_specular(ctx, si, wi, sample2, active, distr)
 
             # mixture of the specular (glossy) and diffuse lobes
             bs = dr.zeros(mi.BSDFSample3f)
             choose_spec = sample1 < p_spec
-            m, pdf_m = distr.sample(po.snap_to_normal(si.wi), sample2)
+            m, pdf_m = distr.sample(po.snap_to_normal(wi), sample2)
             # a back-facing normal (possible without visible-normal sampling) is a failed sample
             # (sample1 >= p_spec), not ~choose_spec: in scalar variants choose_spec is a Python bool
-            active = active & ((sample1 >= p_spec) | ((pdf_m != 0) & (dr.dot(si.wi, m) > 0)))
-            wo_spec = mi.reflect(si.wi, m)
+            active = active & ((sample1 >= p_spec) | ((pdf_m != 0) & (dr.dot(wi, m) > 0)))
+            wo_spec = mi.reflect(wi, m)
             wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
-            bs.wo = dr.select(choose_spec, wo_spec, wo_diff)
+            wo = bs.wo = dr.select(choose_spec, wo_spec, wo_diff)
             bs.eta = 1.0
             bs.sampled_component = dr.select(choose_spec, mi.UInt32(0), mi.UInt32(1))
             bs.sampled_type = dr.select(choose_spec, mi.UInt32(+mi.BSDFFlags.GlossyReflection),
                                         mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
-            active = active & (mi.Frame3f.cos_theta(bs.wo) > 0)
-            geo = self._geometry(si, bs.wo, active)
+            active = active & (mi.Frame3f.cos_theta(wo) > 0)
+            geo = self._geometry(wi, wo, active)
             want_value, want_pdf = self._specular_wanted(lobes, p_spec, True, True)
-            lobe, density = (self._lobe(distr, si.wi, bs.wo, geo[3], geo[1], want_value, want_pdf)
+            lobe, density = (self._lobe(distr, wi, wo, geo[3], geo[1], want_value, want_pdf)
                              if want_value or want_pdf else (None, None))
-            pdf = self._pdf(si, bs.wo, geo, p_spec, density)
+            pdf = self._pdf(wo, geo, p_spec, density)
             ok = active & (pdf > 0)
             bs.pdf = dr.select(ok, pdf, 0.0)
             inv_pdf = dr.select(ok, dr.rcp(dr.select(ok, pdf, 1.0)), 0.0)
-            return bs, self._value(ctx, si, bs.wo, geo, rough, lobes, lobe, inv_pdf)
+            return bs, self._value(ctx, si, wo, geo, rough, lobes, lobe, inv_pdf)
     HydeBSDF.__name__ = "HydeBSDF"
     return HydeBSDF
 
