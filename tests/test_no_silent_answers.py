@@ -192,6 +192,14 @@ def test_array_files_are_sized_from_their_headers(tmp_path, monkeypatch):
     monkeypatch.setattr("hyde_bsdf.resources.available_memory", lambda: 64 * 2**20)
     with pytest.raises(UsageError, match=r"frame .*bomb.png. \(14000x14000\): about 187 MiB of memory needed"):
         read_array(png, "frame")
+    # Radiance RGBE and PFM textures (Mitsuba's other bitmap formats): sized from their text headers too
+    from hyde_bsdf.io.arrays import check_image_memory, image_shape
+
+    (tmp_path / "big.hdr").write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 100000 +X 100000\n")
+    (tmp_path / "big.pfm").write_bytes(b"PF\n100000 100000\n-1\n")
+    assert image_shape(tmp_path / "big.hdr") == (100000, 100000, 3) == image_shape(tmp_path / "big.pfm")
+    with pytest.raises(UsageError, match=r"texture .*big.hdr. \(100000x100000x3\): about 112 GiB of memory needed"):
+        check_image_memory(tmp_path / "big.hdr", "texture")
 
 
 def test_npz_and_csv_files_are_sized_before_they_are_decoded(tmp_path, monkeypatch):

@@ -231,14 +231,14 @@ def _check_tiles_args(args):
 def _check_tile_grid(grid, scene, references) -> None:
     """--tiles RxC refused before any scene loads when it is finer than the data, from what the files'
     headers say: when no texture of the scene's file graph has R rows and C columns of texels (the map
-    is one of them; each tile needs a texel), and -- whatever the textures are, unreadable or not
-    files -- when the R x C tiles outnumber the pixels of the --reference pictures (each tile needs
-    a whole pixel of its own)."""
+    is one of them; each tile needs a texel; a texture whose header cannot be read is refused here),
+    and -- whatever the textures are, files or not -- when the R x C tiles outnumber the pixels of the
+    --reference pictures (each tile needs a whole pixel of its own)."""
     from hyde_bsdf.errors import InputFileError
     from hyde_bsdf.io.arrays import exr_shape, image_shape
     from hyde_bsdf.io.scene_files import scene_files
 
-    sizes = {p: image_shape(p) for p in scene_files(scene)[1:] if p.is_file()}
+    sizes = {p: image_shape(p, "scene texture") for p in scene_files(scene)[1:] if p.is_file()}
     sizes = {p: s for p, s in sizes.items() if s is not None}
     if sizes and not any(h >= grid[0] and w >= grid[1] for h, w, *_ in sizes.values()):
         biggest = max(sizes, key=lambda p: sizes[p][0] * sizes[p][1])

@@ -87,9 +87,12 @@ def stokes_images(img, channel_names):
     return out
 
 
-def channel_names(scene):
-    """The film's channel names (after a first render)."""
-    return [f.name for f in scene.sensors()[0].film().bitmap().struct_()]
+def channel_names(scene, sensor: int = 0) -> list:
+    """The channel names of a sensor's film under the scene's integrator (R, G, B[, A] or Y, then S0.R, ...),
+    known before any render (a ``dr.freeze`` step needs them before its first call)."""
+    film = scene.sensors()[int(sensor)].film()
+    base = ["Y"] if film.base_channels_count() == 1 else ["R", "G", "B", "A"][:film.base_channels_count()]
+    return base + list(scene.integrator().aov_names())
 
 
 def interior_mask(s0) -> np.ndarray:

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.inverse.loss import as_mask, interior_mask, stokes_images
+from hyde_bsdf.inverse.loss import as_mask, channel_names as film_channels, interior_mask, stokes_images
 from hyde_bsdf.inverse.scalar import RANGES, _unique_key
 from hyde_bsdf.model.parameters import ALPHA, INVERSE_K_LOG_FLOOR, INVERSE_SCALE
 
@@ -51,17 +51,10 @@ def map_keys(params, names=("alpha",), prefix: str | None = None) -> dict:
     return out
 
 
-def film_channels(scene, sensor: int = 0) -> list:
-    """The channel names of a sensor's film under the scene's integrator (R, G, B[, A], S0.R, ...)."""
-    film = scene.sensors()[int(sensor)].film()
-    base = ["Y"] if film.base_channels_count() == 1 else ["R", "G", "B", "A"][:film.base_channels_count()]
-    return base + list(scene.integrator().aov_names())
-
-
 def render_stokes(scene, sensor: int = 0, spp: int = 16, seed: int = 0, params=None, names=None) -> list:
     """Luminance S0..S3 tensors (H, W) of one sensor's render (differentiable when ``params`` given).
 
-    ``names``: the film's channel names (:func:`film_channels`), given by a caller that renders
+    ``names``: the film's channel names (:func:`~hyde_bsdf.inverse.loss.channel_names`), given by a caller that renders
     inside ``dr.freeze`` (reading them back from the film there is a host operation it refuses)."""
     import mitsuba as mi
 

@@ -99,10 +99,12 @@ def read_npz(path, what: str = "array file") -> dict:
                 total += math.prod(shape) * dtype.itemsize
     except (OSError, zipfile.BadZipFile, EOFError) as exc:
         raise UsageError(f"{name}: not a readable .npz file ({one_line(exc)[:120]})") from None
+    if not members:
+        raise UsageError(f"{name} holds no .npy array: not a .npz file")
     check_dimensions((total,), 1, f"{name}, {len(members)} arrays", option="give a smaller file")
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return {k: data[k] for k in data.files}
+        with np.load(path, allow_pickle=False) as data:      # its .npy members only (others are not sized)
+            return {m.filename[:-4]: data[m.filename[:-4]] for m in members}
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise UsageError(f"{name}: not a readable .npz file ({one_line(exc)[:120]})") from None
 
@@ -149,14 +151,38 @@ PIL_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".tga", ".ppm"
 
 
 def image_shape(path, what: str = "image") -> tuple | None:
-    """(height, width, channels) of an EXR or a PIL-readable image from its header; None for other files."""
+    """(height, width, channels) of an EXR, a Radiance RGBE (``.hdr``, ``.rgbe``), a PFM or a PIL-readable
+    image from its header -- every format Mitsuba's ``bitmap`` reads; None for other files."""
     name = str(path).lower()
     if name.endswith(".exr"):
         return exr_shape(path, what)
+    if name.endswith((".hdr", ".rgbe", ".pfm")):
+        return _text_header_shape(path, what, name.endswith(".pfm"))
     if name.endswith(PIL_SUFFIXES):
         with _image(path, what) as im:
             return im.height, im.width, len(im.getbands())
     return None
+
+
+def _text_header_shape(path, what, pfm: bool) -> tuple:
+    """(height, width, channels) from the text header of a PFM (``PF``/``Pf``, then ``W H``) or a Radiance
+    RGBE file (lines up to a blank one, then ``-Y H +X W``); the first 4 KiB are read."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096).decode("latin-1")
+        if pfm:
+            kind, width, height = (head.split(None, 3) + ["", "", ""])[:3]
+            if kind in ("PF", "Pf"):
+                return int(height), int(width), 3 if kind == "PF" else 1
+        else:
+            axes = (head.split("\n\n", 1) + [""])[1].split("\n", 1)[0].split()
+            if head.startswith("#?") and len(axes) == 4 and {axes[0][1:], axes[2][1:]} == {"Y", "X"}:
+                rows, cols = int(axes[1]), int(axes[3])
+                return (rows, cols, 3) if axes[0][1:] == "Y" else (cols, rows, 3)
+    except (OSError, ValueError):
+        pass
+    raise InputFileError(f"{what} {shorten(str(path))}: not a readable {'PFM' if pfm else 'Radiance RGBE'} file "
+                         "(its header)")
 
 
 def check_image_memory(path, what: str = "image") -> None:

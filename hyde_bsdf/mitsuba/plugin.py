@@ -10,6 +10,7 @@ class docstring).
 from __future__ import annotations
 
 import math
+import threading
 
 import drjit as dr
 import mitsuba as mi
@@ -1133,9 +1134,10 @@ def _make_class():
 
 
 _CLASSES: dict = {}
-#: variants in which ``hyde`` is registered in this process (a repeated ``register()`` skips them:
-#: switching through every variant to register again cost ~1 s per call)
+#: variants in which ``hyde`` is registered in this process (a repeated ``register()`` skips them)
 _REGISTERED: set = set()
+#: held while a variant's class is built (Mitsuba may load two ``hyde`` BSDFs of a scene at once)
+_BUILD = threading.Lock()
 
 
 def plugin_class():
@@ -1143,9 +1145,19 @@ def plugin_class():
     variant = mi.variant()
     if variant is None:
         raise RuntimeError("hyde: call mi.set_variant(...) before using the hyde plugin")
-    if variant not in _CLASSES:
-        _CLASSES[variant] = _make_class()
+    with _BUILD:
+        if variant not in _CLASSES:
+            _CLASSES[variant] = _make_class()
     return _CLASSES[variant]
+
+
+def _construct(variant: str, props):
+    """Mitsuba's constructor of ``hyde`` in ``variant``.  The variant's class is built at the first ``hyde``
+    loaded there (:func:`plugin_class`), when that variant is the selected one, not at registration."""
+    if variant not in _CLASSES and mi.variant() != variant:
+        raise RuntimeError(f"hyde: a {variant!r} scene is loaded while {mi.variant()!r} is selected; "
+                           f"call mi.set_variant({variant!r}) first")
+    return (_CLASSES[variant] if variant in _CLASSES else plugin_class())(props)
 
 
 def register(variant: str | None = None) -> list[str]:
@@ -1157,37 +1169,37 @@ def register(variant: str | None = None) -> list[str]:
     device), so a later ``mi.set_variant`` of any of them finds it.  With a variant name,
     only that one; an unusable one raises
     :class:`hyde_bsdf.mitsuba.variants.VariantUnavailable` (a ``RuntimeError``) that says
-    which variant to use instead.  The current variant is restored (if none was set, the
-    last registered one stays selected: call ``mi.set_variant`` before use).  Calling it
+    which variant to use instead.  The selected variant is not changed (if none was set, the
+    last registered one is selected: call ``mi.set_variant`` before use).  Calling it
     again is harmless.
+
+    Each variant's Mitsuba module takes the registration directly (``mitsuba.llvm_ad_rgb.register_bsdf``),
+    without selecting the variant: selecting one costs ~0.2 CPU s (Mitsuba re-imports its Python AD
+    integrators), so registering in all eight usable variants by switching through them cost ~1.8 CPU s,
+    most of a validation script's start.  The plugin's class is built per variant at its first use.
     """
+    import importlib
+
     from hyde_bsdf.mitsuba.variants import VariantUnavailable, _cpu_twin, usable_variant, usable_variants
 
-    current = mi.variant()
     if variant is None:
         targets = usable_variants()
     else:
         usable_variant(variant, fallback=False)   # raises, naming the alternative, if unusable
         targets = [variant]
     done = []
-    try:
-        for v in targets:
-            if v in _REGISTERED:        # Mitsuba keeps a registration for the process: no variant switch
-                done.append(v)
-                continue
+    for v in targets:
+        if v not in _REGISTERED:        # Mitsuba keeps a registration for the process
             try:
-                if mi.variant() != v:
-                    mi.set_variant(v)
+                module = importlib.import_module(f"mitsuba.{v}")
             except ImportError as exc:   # a CUDA device present but not usable
                 if variant is not None:
                     raise VariantUnavailable(f"variant={v!r} cannot be initialised here ({exc}); "
                                              f"use {_cpu_twin(v)!r} instead") from exc
                 continue
-            cls = plugin_class()
-            mi.register_bsdf("hyde", lambda props, cls=cls: cls(props))
+            module.register_bsdf("hyde", lambda props, v=v: _construct(v, props))
             _REGISTERED.add(v)
-            done.append(v)
-    finally:
-        if current is not None and mi.variant() != current:
-            mi.set_variant(current)
+        done.append(v)
+    if done and mi.variant() is None:
+        mi.set_variant(done[-1])
     return done

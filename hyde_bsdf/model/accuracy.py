@@ -72,15 +72,19 @@ class Atlas:
             raise UsageError(f"{exc}; rebuild it with python hyde_bsdf/validation/accuracy_atlas.py table") from None
         a = self.arrays
         self.path = path
-        self.provenance = json.loads(str(a["provenance"]))
-        self.materials = [str(m) for m in a["materials"]]
-        self.variants = [tuple(str(v).split("/")) for v in a["variants"]]
-        self.elements = [str(e) for e in a["elements"]]
-        self.regions = [str(r) for r in a["regions"]]
-        self.status_names = [str(s) for s in a["status_names"]]
-        self.theta_i = a["theta_i_deg"].astype(float)
-        self.slopes = a["rms_slopes"].astype(float)
-        self.heights = a["heights_wl"].astype(float)
+        try:
+            self.provenance = json.loads(str(a["provenance"]))
+            self.materials = [str(m) for m in a["materials"]]
+            self.variants = [tuple(str(v).split("/")) for v in a["variants"]]
+            self.elements = [str(e) for e in a["elements"]]
+            self.regions = [str(r) for r in a["regions"]]
+            self.status_names = [str(s) for s in a["status_names"]]
+            self.theta_i = a["theta_i_deg"].astype(float)
+            self.slopes = a["rms_slopes"].astype(float)
+            self.heights = a["heights_wl"].astype(float)
+        except KeyError as exc:         # another .npz given as the atlas
+            raise UsageError(f"accuracy atlas {shorten(str(path))} has no array {exc}: not an accuracy atlas; rebuild "
+                             "it with python hyde_bsdf/validation/accuracy_atlas.py table") from None
 
     def __getitem__(self, key):
         return self.arrays[key]

@@ -13,11 +13,14 @@ The report shows the figures a script names (several scripts may write into the 
 so every figure goes through :func:`save_figure`.
 No ``FILE`` after the child ends means the script crashed: the report shows the last lines of its
 stderr as a failed check.  A script with its own command line passes it as ``cli(validate,
-__doc__, main)``: without ``--checks-json`` its ``main()`` runs as before.
+__doc__, main)``: without ``--checks-json`` its ``main()`` runs as before.  With several scripts at once
+the report sets ``HYDE_DRJIT_THREADS`` (each script's share of the cores); :func:`cli` sizes Dr.Jit's
+thread pool from it before ``validate`` runs (:func:`drjit_threads`).
 """
 import argparse
 import json
 import math
+import os
 import sys
 import textwrap
 import time
@@ -43,6 +46,7 @@ def cli(validate, doc, main=None):
     ap.add_argument("--checks-json", metavar="FILE",
                     help="write the docstring and the checks as JSON to FILE (how hyde-bsdf validate reads them)")
     a = ap.parse_args()
+    drjit_threads()
     checks = list(validate(a.outdir, quick=a.quick))
     if a.checks_json:
         write_checks_json(a.checks_json, doc, checks)
@@ -50,6 +54,16 @@ def cli(validate, doc, main=None):
     for c in checks:
         print(("PASS" if c["passed"] else "FAIL"), c["name"], c["value"])
     sys.exit(0 if all(c["passed"] for c in checks) else 1)
+
+
+def drjit_threads():
+    """Size Dr.Jit's thread pool from ``HYDE_DRJIT_THREADS`` when the report sets it (its share of the cores with
+    several scripts at once, ``hyde_bsdf.app.report.build.THREAD_VARIABLES``: Dr.Jit reads no variable itself)."""
+    threads = os.environ.get("HYDE_DRJIT_THREADS", "")
+    if threads.isdigit() and int(threads) > 0:
+        import drjit
+
+        drjit.set_thread_count(int(threads))
 
 
 def _plain(value):

@@ -86,14 +86,33 @@ def truncated_plane_db(theta_i_deg, w, length, theta_r_deg, pol):
     return np.array(out)
 
 
-def run(length, partitions, sigma_h, w, theta_i, incidence, seed=3):
+#: the runs made so far in this process, {arguments of :func:`timed_run`: (result, CPU s)}: the flat plates of part 1
+#: and of the width study are cases of the grid too (80 deg, w 75; 85 and 88 deg, w 75), each solved once
+_RUNS = {}
+
+
+def timed_run(length, partitions, sigma_h, w, theta_i, incidence, seed=3):
+    """(MoM result, this process's CPU seconds for it) of one run (s and p, fast solver, 10 pts/lambda); a run with
+    the same arguments as an earlier one returns that one's result and CPU seconds (deterministic: same seed)."""
+    import time
+
     from hyde_bsdf import mom
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", mom.MoMAccuracyWarning)
-        return mom.scatter(length, partitions, sigma_h, ELL, [theta_i], THETA_R, pts_per_wl=10, seed=seed,
-                           executor=mom.SerialExecutor(), taper_width_wl=w, polarization=("s", "p"), solver="fast",
-                           incidence=incidence, progress=False)
+    key = (float(length), int(partitions), float(sigma_h), float(w), float(theta_i), incidence, int(seed))
+    if key not in _RUNS:
+        t0 = time.process_time()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", mom.MoMAccuracyWarning)
+            res = mom.scatter(length, partitions, sigma_h, ELL, [theta_i], THETA_R, pts_per_wl=10, seed=seed,
+                              executor=mom.SerialExecutor(), taper_width_wl=w, polarization=("s", "p"),
+                              solver="fast", incidence=incidence, progress=False)
+        _RUNS[key] = (res, time.process_time() - t0)
+    return _RUNS[key]
+
+
+def run(length, partitions, sigma_h, w, theta_i, incidence, seed=3):
+    """The MoM result of :func:`timed_run`."""
+    return timed_run(length, partitions, sigma_h, w, theta_i, incidence, seed)[0]
 
 
 
@@ -147,8 +166,6 @@ def width_study(quick):
     86-89 deg outside the grazing zone where the analytic is above -90 dB of its peak (what the floor does to a
     result read without its flags); the angles reported valid there; and at 86-89.75 deg the MoM against the cut
     infinite-plane current (:func:`truncated_plane_db`)."""
-    import time
-
     from hyde_bsdf.mom.floor import GRAZING_ZONE
 
     band, tail = (THETA_R >= 85.5) & (THETA_R < 89.5), THETA_R >= 86.0
@@ -159,9 +176,7 @@ def width_study(quick):
             zone = 90.0 - THETA_R < math.degrees(GRAZING_ZONE / (K0 * w * math.cos(math.radians(ti))))
             seen = band & ~zone & (ref >= 1e-9 * ref.max())
             for f in (4, 6):
-                t0 = time.process_time()
-                res = run(f * w, 1, 0.0, w, ti, "beam")
-                cpu = time.process_time() - t0
+                res, cpu = timed_run(f * w, 1, 0.0, w, ti, "beam")
                 for pol in ("s", "p"):
                     err = db(getattr(res, "sigma_" + pol)[0]) - db(ref)
                     cut = err[tail] - truncated_plane_db(ti, w, f * w, THETA_R[tail], pol)
@@ -221,8 +236,6 @@ def width_figure(rows, path):
 def valid_grid(quick):
     """Issue 25's target on flat PEC plates (GRID_TI x GRID_W x GRID_L, beam and windowed current, s and p): at
     theta_r = 86-89 deg, the largest |sigma - analytic reflected beam| (dB) over the angles reported valid."""
-    import time
-
     band = (THETA_R >= 85.5) & (THETA_R < 89.5)
     rows = []
     for ti in GRID_TI:
@@ -230,9 +243,7 @@ def valid_grid(quick):
             ref = beam_reference(ti, w, THETA_R)
             for f in GRID_L:
                 for inc in ("beam", "window"):
-                    t0 = time.process_time()
-                    res = run(f * w, 1, 0.0, w, ti, inc)
-                    cpu = time.process_time() - t0
+                    res, cpu = timed_run(f * w, 1, 0.0, w, ti, inc)
                     for pol in ("s", "p"):
                         use = band & getattr(res, "valid_" + pol)[0]
                         err = np.abs(db(getattr(res, "sigma_" + pol)[0]) - db(ref))

@@ -55,7 +55,7 @@ the texels with a valid standard error, the pull std the unchecked standard erro
 the warnings.  Every case must have a pull std of 0.8-1.25 or a warning naming the cause
 (:class:`~hyde_bsdf.inverse.NotConvergedWarning`, :class:`~hyde_bsdf.inverse.BilinearFilterWarning`).
 Full run: 16 x 16 texels, 64 px per picture, the 7-picture design, 120 / 15 / 15 / 120 iterations;
-quick: 4 x 4 texels, the fixed rig's 2 pictures, 40 / 8 / 8 / 8 iterations, the band widened by twice
+quick: 4 x 4 texels, the fixed rig's 2 pictures, 40 (frozen) / 8 / 8 / 8 iterations, the band widened by twice
 the sampling error of a standard deviation of 16 values.  Writes ``svbrdf_index_cases.csv`` (case,
 parameter, iterations, filter, median error, pull std valid / unchecked, valid texels, warnings,
 passed) and ``svbrdf_index_cases.png`` (the pull histograms).
@@ -210,7 +210,10 @@ def validate(outdir="out/validation", quick=False):
                 _log(f"[svbrdf_index] {key[0]}, {key[1]}: {results[key][3]:.0f} s; " + "; ".join(
                     f"{r[2]} {100 * float(r[3]):.2f} % / {100 * float(r[4]):.2f} %, pulls {r[5]}"
                     for r in rows if (r[0], r[1]) == key))
-                _plot(out / "svbrdf_index.png", results, cfg)
+                if not quick:       # the picture so far (the quick run draws it once, below)
+                    _plot(out / "svbrdf_index.png", results, cfg)
+        if quick:
+            _plot(out / "svbrdf_index.png", results, cfg)
         _, honesty = honesty_cases(out, quick)
     finally:
         if previous is not None and previous != mi.variant():
@@ -267,6 +270,9 @@ HONESTY_CASES = (("converged", 1.0, "nearest", 3), ("stopped early", 1.0 / 8.0, 
                  ("stopped early, extra polish", 1.0 / 8.0, "nearest", 3), ("bilinear", 1.0, "bilinear", 3))
 #: the quick run's iterations per case (4 x 4 texels: the bilinear case's verdict needs no converged fit)
 QUICK_HONESTY_ITERATIONS = {"converged": 40, "stopped early": 8, "stopped early, extra polish": 8, "bilinear": 8}
+#: the quick run freezes the step (``dr.freeze``) of a fit from this many iterations on: recording it costs a few
+#: unfrozen iterations (measured, quick mode: 40 iterations 20 -> 11 s frozen; 8-10 iterations gain nothing)
+QUICK_FREEZE_FROM = 20
 #: the warning that names each case's cause (a case passes with pulls in the band or this warning)
 HONESTY_CAUSE = {"converged": inv.NotConvergedWarning, "stopped early": inv.NotConvergedWarning,
                  "stopped early, extra polish": inv.NotConvergedWarning, "bilinear": inv.BilinearFilterWarning}
@@ -300,7 +306,8 @@ def honesty_cases(out, quick: bool) -> tuple:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             r = inv.invert_maps(obs[filter_type], start, fit=tuple(start), iterations=iterations, spp=4, seed=7, progress=False,
-                                uncertainty_spp=cfg["uncertainty_spp"], polish=cfg["polish"], freeze=cfg["freeze"],
+                                uncertainty_spp=cfg["uncertainty_spp"], polish=cfg["polish"],
+                                freeze=cfg["freeze"] or iterations >= QUICK_FREEZE_FROM,
                                 extra_polish=extra,
                                 truth={k: np.asarray(truth[k], float) for k in start})
         found = [(w.category, str(w.message)) for w in caught if issubclass(w.category, UserWarning)

@@ -10,8 +10,9 @@ each one, collects the checks and the figures, and writes ``DIR/index.html`` (an
 ``DIR/checks.csv``, and each script's wall and CPU seconds in ``DIR/times.csv``): the machine, the
 time each script took, a table of every check with its
 number, tolerance and verdict, and the figures, in the sections' order whatever order the scripts
-ended in.  A script that reads another's output (:data:`AFTER`) starts after it.  A rerun into
-the same folder starts the scripts that took the most CPU time last time first.  A script that
+ended in.  A script that reads another's output (:data:`AFTER`) starts after it.  The scripts that
+took the most CPU time start first: as measured by the earlier report in the same folder, else by the
+one shipped with the package (:data:`MEASURED_TIMES`).  A script that
 crashes, is killed or is missing is reported as a failed check (with the last lines of its
 stderr); the report still completes.  A script's own output is not shown (run it alone to see it:
 ``python hyde_bsdf/validation/STEM.py --quick``).  Ctrl-C (or SIGTERM) ends the running scripts
@@ -170,16 +171,20 @@ def script_command(path: Path, outdir: Path, quick: bool, checks_json: Path) -> 
     return cmd + (["--quick"] if quick else [])
 
 
-#: the thread pools of NumPy's BLAS and OpenMP: with several scripts at once each child gets its
-#: share of the cores (a user's own setting is kept)
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+#: the thread pools of NumPy's BLAS, OpenMP and Dr.Jit: with several scripts at once each child gets its
+#: share of the cores (a user's own setting is kept).  Dr.Jit reads no variable of its own: the scripts'
+#: protocol (``hyde_bsdf/validation/_common.py``) sets its pool from :data:`DRJIT_THREADS`.  Measured
+#: (capture_camera --quick at load 8): 24 CPU s with Dr.Jit's default pool of one thread per core, 15 with one
+#: thread -- the validation's kernels are small, and idle workers spin on cores other scripts need
+DRJIT_THREADS = "HYDE_DRJIT_THREADS"
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", DRJIT_THREADS)
 
 
 def _child_env(jobs: int = 1) -> dict:
     """The report's environment; when this package runs from a source tree, that tree goes first
     on the child's PYTHONPATH, so the scripts import the same ``hyde_bsdf`` as the report.  With
-    ``jobs`` scripts at once, BLAS and OpenMP get ``cores // jobs`` threads each (a spinning
-    BLAS thread pool on a core another script needs slows both)."""
+    ``jobs`` scripts at once, BLAS, OpenMP and Dr.Jit get ``cores // jobs`` threads each (a spinning
+    thread pool on a core another script needs slows both)."""
     env = dict(os.environ)
     root = Path(__file__).resolve().parents[3]
     if (root / "pyproject.toml").is_file():
@@ -361,14 +366,20 @@ def build_report(outdir, quick=False, progress=True, force=False, scripts=None, 
     vdir = validation_dir(scripts)
     check_not_input([final], [vdir], "--outdir")          # the report is not the scripts' folder
     with OutputLock([final], "--outdir"), atomic_folder(final) as out:     # one report run per folder
-        return _build(out, vdir, quick, as_callback(progress, "[validate]"), jobs, _previous_cpu(final, quick))
+        previous = _previous_cpu(final / "times.csv", quick) or _previous_cpu(MEASURED_TIMES, quick)
+        return _build(out, vdir, quick, as_callback(progress, "[validate]"), jobs, previous)
 
 
-def _previous_cpu(folder: Path, quick: bool) -> dict:
-    """{script: CPU seconds} of the earlier report of the same mode in ``folder`` (its
-    ``times.csv``); empty when there is none or it cannot be read."""
+#: the ``times.csv`` of a measured report (quick and full rows), shipped with the package: the order a first report
+#: starts the scripts in (the longest first; a rerun reads its own folder's)
+MEASURED_TIMES = Path(__file__).resolve().parents[2] / "data" / "validation_times.csv"
+
+
+def _previous_cpu(path: Path, quick: bool) -> dict:
+    """{script: CPU seconds} of the report of the same mode in the ``times.csv`` at ``path``; empty when there is
+    none or it cannot be read."""
     try:
-        with open(folder / "times.csv", newline="", encoding="utf-8") as fh:
+        with open(path, newline="", encoding="utf-8") as fh:
             return {r["script"]: float(r["cpu_seconds"]) for r in csv.DictReader(fh)
                     if r["mode"] == ("quick" if quick else "full") and r["cpu_seconds"]}
     except (OSError, KeyError, ValueError, TypeError):
