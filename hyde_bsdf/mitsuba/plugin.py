@@ -557,8 +557,8 @@ def _lobe_flags(diffuse):
 
 
 class _Derived:
-    """Values derived from a texture's constant value, evaluated once (at load and at each update) so that
-    a traced call reads them instead of tracing their operations again: every live instance's methods are
+    """Values derived from a texture's constant value, traced once (at load and at each update) so that a
+    traced call reads them instead of tracing their operations again: every live instance's methods are
     traced at every render, and those operations are the cost per instance.
 
     ``get()`` returns them only while they are what the call would compute: the texture still holds the
@@ -580,11 +580,22 @@ class _Derived:
         return self.derived
 
 
+#: the instance's Python-only state, held in slots rather than in its ``__dict__``: ``dr.freeze`` walks the
+#: ``__dict__`` of every live instance at every replay (~4 us per entry), to find its Dr.Jit values, which
+#: live in the textures and the DHR lookup (kept in ``__dict__``)
+_PYTHON_STATE = ("m_rough_key", "m_sample_visible", "m_reader", "m_g1", "m_g", "m_visible_ratio", "m_snapshots",
+                 "m_shadowing", "m_rough_scale", "m_rough_range", "m_rough_constant", "m_polarized", "m_material",
+                 "m_gain_warned", "m_g_product", "m_diffuse_factor", "m_albedo_mean", "m_achromatic", "m_rough_values",
+                 "m_has_diffuse", "m_guard_tiny", "m_guard_scale", "m_guard_index", "m_guard_albedo", "m_diffuse",
+                 "m_achromatic_scale")
+
+
 def _make_class():
     """Build the BSDF class for the current variant (mi.BSDF differs per variant)."""
 
     class HydeBSDF(mi.BSDF):
         __doc__ = DOC
+        __slots__ = _PYTHON_STATE + ("__dict__",)
 
         def __init__(self, props):
             mi.BSDF.__init__(self, props)
@@ -798,15 +809,15 @@ def _make_class():
 
         def _rough_constant(self):
             """The values of :meth:`_rough` of a constant roughness (a ``uniform`` texture of one number whose
-            value needs no gradient), evaluated now, at load and at each update (a :class:`_Derived`), else None."""
+            value needs no gradient), traced here once, at load and at each update (a :class:`_Derived`), else
+            None.  They are not evaluated here (that would compile a kernel at load): Dr.Jit computes them inside
+            the render's kernel, from operations traced once instead of at every call."""
             if not (dr.is_jit_v(mi.Float) and _achromatic(self.m_rough)):
                 return None
             value = mi.traverse(self.m_rough)["value"]
             if dr.grad_enabled(value):
                 return None
-            derived = self._rough_traced(dr.zeros(mi.SurfaceInteraction3f), True)
-            dr.eval([x for x in derived if x is not None])
-            return _Derived(value, derived)
+            return _Derived(value, self._rough_traced(dr.zeros(mi.SurfaceInteraction3f), True))
 
         def _rough_traced(self, si, active):
             """:meth:`_rough` from one texture lookup."""
