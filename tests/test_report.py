@@ -287,6 +287,28 @@ def test_scripts_run_side_by_side_and_each_keeps_its_own_figures(tmp_path, monke
     assert left.count("CPU s)") == 1 and right.count("CPU s)") == 1
 
 
+def test_side_by_side_scripts_share_the_cores_in_blas_and_drjit(tmp_path, monkeypatch):
+    """``jobs=2``: each script gets cores // 2 threads (at least 1) in BLAS and OpenMP and in Dr.Jit's pool --
+    which reads no environment variable: the protocol (``_common.cli``) sizes it from HYDE_DRJIT_THREADS.  With
+    Dr.Jit's default pool (a thread per core) two small-kernel scripts at once spent 24 CPU s where one thread
+    each spends 15 (capture_camera --quick, docs/validation.md).  A user's own OMP_NUM_THREADS is kept."""
+    import os
+
+    from hyde_bsdf.app.report import build
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    monkeypatch.delenv("HYDE_DRJIT_THREADS", raising=False)
+    vdir = tmp_path / "scripts"
+    _write_fakes(vdir, {"threads": "import drjit\n    got = [drjit.thread_count(), os.environ['OMP_NUM_THREADS'], "
+                                   "os.environ['OPENBLAS_NUM_THREADS']]\n"
+                                   "    return [dict(name='threads', value=str(got), tolerance='-', passed=True)]"})
+    monkeypatch.setattr(build, "SECTIONS", [("Fake", ["threads"])])
+    monkeypatch.setattr(build, "machine_info", lambda: {"CPU": "test"})
+    ok, rows, _ = build_report(tmp_path / "report", quick=True, progress=False, scripts=vdir, jobs=2)
+    share = max(1, (os.cpu_count() or 1) // 2)
+    assert ok and rows[0]["value"] == str([share, "3", str(share)]), rows
+
+
 def test_a_script_that_reads_anothers_output_waits_for_it(tmp_path, monkeypatch):
     """A script of ``AFTER`` (mom_1d_model reads fig6_mom's run) starts only once the script it
     reads has ended, whatever the number of scripts at once; the others do not wait."""

@@ -139,3 +139,18 @@ def test_one_index_two_spellings_and_the_pec():
         Index(1.0, -1.0)
     with pytest.raises(UsageError, match="PEC"):
         PEC.mitsuba()
+
+
+@pytest.mark.parametrize("diffuse", ["paper", "reciprocal", "lambertian", "none"])
+def test_the_diffuse_part_has_the_shape_of_its_arguments_for_every_record(diffuse):
+    """diffuse_pbrdf returns broadcast(theta_i, theta_r, M00) for every record, also for the paper's
+    Eq. 17, whose value reads theta_i only: 12 incidence x 7 reflection angles give 12 x 7 values, each
+    row constant along theta_r for the paper's term (exact)."""
+    from hyde_bsdf.model.evaluator import diffuse_pbrdf
+
+    ti = np.radians(np.linspace(0.0, 80.0, 12))[:, None]
+    tr = np.radians(np.linspace(0.0, 80.0, 7))[None, :]
+    f = diffuse_pbrdf(ti, tr, 1.0, 0.3, diffuse, diffuse_reflectance=0.3 if diffuse == "lambertian" else None)
+    assert f.shape == (12, 7) and f.flags.writeable
+    if diffuse == "paper":
+        np.testing.assert_array_equal(f, np.repeat(f[:, :1], 7, axis=1))

@@ -38,8 +38,8 @@ def _image(path, what):
         with Image.open(path) as im:
             yield im
     except (OSError, ValueError, SyntaxError) as exc:       # PIL: UnidentifiedImageError, truncated files
-        raise UsageError(f"{what} {shorten(str(path))}: cannot read it ({one_line(exc)[:120]}); give .npy, PNG "
-                         "or TIFF") from None
+        raise UsageError(f"{what} {shorten(str(path))}: cannot read it as an image "
+                         f"({one_line(exc)[:120]})") from None
     finally:
         Image.MAX_IMAGE_PIXELS = limit
 

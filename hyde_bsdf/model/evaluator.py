@@ -155,7 +155,8 @@ def diffuse_pbrdf(theta_i, theta_r, M00, rms_slope, mode="paper", shadowing="vgr
     if not term.present:
         return np.zeros(np.broadcast(theta_i, theta_r, M00).shape)
     own = term_arguments(term, diffuse_reflectance=diffuse_reflectance)
-    return term.f00(DHRHemisphere(shadowing_term(shadowing).name, rms_slope), theta_i, theta_r, M00, **own)
+    f = term.f00(DHRHemisphere(shadowing_term(shadowing).name, rms_slope), theta_i, theta_r, M00, **own)
+    return np.broadcast_to(f, np.broadcast(theta_i, theta_r, M00).shape).copy()  # Eq. 17 reads one direction
 
 
 def pbrdf(theta_i, theta_r, phi, *, rms_slope, n=None, k=0.0, pec=False,

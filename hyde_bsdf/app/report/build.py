@@ -463,7 +463,7 @@ def _write_html(out, info, sections, rows, all_passed, quick):
 def build_parser() -> Parser:
     ap = Parser(prog="hyde-bsdf validate", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     writes(ap.add_argument("-o", "--outdir", default="out/report", help="report folder (default out/report)"))
-    ap.add_argument("--quick", action="store_true", help="small sweeps (about 300 CPU s: 12 minutes measured on 2 cores at load 12; docs/validation.md)")
+    ap.add_argument("--quick", action="store_true", help="small sweeps (about 260 CPU s: 6 minutes measured on 2 cores at load 7; docs/validation.md)")
     reads(ap.add_argument("--scripts", metavar="DIR", default=None,
                           help="folder of the validation scripts (default: the package's own, hyde_bsdf/validation/)"),
           "folder")
