@@ -34,10 +34,12 @@ iteration on the 96 x 72 scene (every material's roughness a grad-enabled parame
 ``dr.freeze`` (the update outside the frozen function, as the plugin's checks want).  Targets:
 <= 1.15 (smith/none) and <= 1.3 (default) at 50 materials, 96 x 72; the unfrozen loop <= 1.1.  With
 ``--floor``: roughconductor's model written as a Python BSDF with Mitsuba's C++ building blocks
-(:func:`python_floor_class`), side by side too: what any Python plugin of that model costs at least.
+(:func:`python_floor_class`), side by side too: what any Python plugin of that model costs at least.  With
+``--baseline DIR``: hyde from another checkout (``git worktree add DIR <commit>``) in the same rounds, a
+before/after that the machine's load cannot skew.
 
     python benchmarks/bench_render.py --instances [--rounds 3] [--materials 1,10,50]
-                                      [--sizes 96x72,320x240] [--loops] [--floor]
+                                      [--sizes 96x72,320x240] [--loops] [--floor] [--baseline DIR]
 
 **Cold load** (``--cold``, issue 31): a fresh Python process with an empty home folder (no Dr.Jit
 kernel cache, nothing of hyde-bsdf's) imports Mitsuba, sets the variant, registers ``hyde`` (hyde
@@ -396,9 +398,20 @@ def instance_child(config: str, count: int, width: int, height: int, task: str, 
     return {name: statistics.median(t[j] for t in times) for j, name in enumerate(("cpu_ms", "main_ms", "wall_ms"))}
 
 
-def _run_instance_child(config, count, width, height, task, repeats, warmup) -> dict:
-    cmd = [sys.executable, os.path.abspath(__file__), "--instance-child",
-           json.dumps([config, count, width, height, task, repeats, warmup])]
+#: runs another checkout's bench_render.py (argv[1]) with that checkout's package first on the path (an editable
+#: install's import hook, which would find this one, removed)
+BASELINE_BOOT = ("import runpy, sys; sys.meta_path[:] = [f for f in sys.meta_path if 'editable' not in repr(f).lower()]; "
+                 "sys.argv = sys.argv[1:]; sys.path.insert(0, sys.argv.pop(0)); runpy.run_path(sys.argv[0], run_name='__main__')")
+
+
+def _run_instance_child(config, count, width, height, task, repeats, warmup, baseline=None) -> dict:
+    """One fresh process; ``config`` "baseline NAME" runs NAME from the checkout ``baseline``."""
+    args = ["--instance-child", json.dumps([config.removeprefix("baseline "), count, width, height, task, repeats, warmup])]
+    if config.startswith("baseline "):
+        root = os.path.abspath(baseline)
+        cmd = [sys.executable, "-c", BASELINE_BOOT, root, os.path.join(root, "benchmarks", "bench_render.py"), *args]
+    else:
+        cmd = [sys.executable, os.path.abspath(__file__), *args]
     out = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ))
     if out.returncode != 0:
         raise RuntimeError(f"{config} / {count} materials / {task} failed:\n{out.stderr[-3000:]}")
@@ -406,25 +419,27 @@ def _run_instance_child(config, count, width, height, task, repeats, warmup) -> 
 
 
 def instances(rounds=3, materials=(1, 10, 50), sizes=((96, 72), (320, 240)), loops=True, repeats=7,
-              warmup=3, floor=False) -> list[dict]:
+              warmup=3, floor=False, baseline=None) -> list[dict]:
     """The per-instance benchmark (module docstring): one row per (task, materials, size, BSDF)."""
     cases = [("render", m, w, h) for w, h in sizes for m in materials]
     if loops:
         cases += [(task, m, 96, 72) for task in ("loop", "frozen") for m in (1, max(materials))]
     names = list(INSTANCE_CONFIGS) + ([FLOOR] if floor else [])
+    if baseline:
+        names += [f"baseline {n}" for n in INSTANCE_CONFIGS if n != "roughconductor"]
     rows = []
     for task, count, width, height in cases:
         per = {n: [] for n in names}
         for r in range(rounds):
             for name in (names if r % 2 == 0 else names[::-1]):
-                per[name].append(_run_instance_child(name, count, width, height, task, repeats, warmup))
+                per[name].append(_run_instance_child(name, count, width, height, task, repeats, warmup, baseline))
             print(f"[bench_render] {task} {count} materials {width}x{height} round {r + 1}/{rounds}: "
                   + ", ".join(f"{n} {per[n][-1]['cpu_ms']:.0f} ms" for n in names)
                   + f" (load {os.getloadavg()[0]:.1f})", file=sys.stderr, flush=True)
         for name in names:
             ratio = {f: statistics.median(a[f] / b[f] for a, b in zip(per[name], per["roughconductor"]))
                      for f in ("cpu_ms", "main_ms", "wall_ms")}
-            rows.append({"task": task, "materials": count, "size": f"{width}x{height}", "bsdf": name,
+            rows.append({"task": task, "materials": count, "size": f"{width}x{height}", "bsdf": name[:24],
                          "cpu_ms": statistics.median(t["cpu_ms"] for t in per[name]),
                          "main_ms": statistics.median(t["main_ms"] for t in per[name]),
                          "wall_ms": statistics.median(t["wall_ms"] for t in per[name]),
@@ -438,11 +453,11 @@ def instances(rounds=3, materials=(1, 10, 50), sizes=((96, 72), (320, 240)), loo
 def print_instances(rows: list[dict]) -> None:
     print(f"\ncost per instance ({INSTANCE_VARIANT}, 1 spp; CPU ms per render or iteration, median of the "
           f"process's warm ones; ratio = median over rounds of hyde / roughconductor side by side):")
-    print(f"{'task':7s} {'materials':>9s} {'size':>8s} {'bsdf':16s} {'CPU ms':>8s} {'ratio':>6s} "
+    print(f"{'task':7s} {'materials':>9s} {'size':>8s} {'bsdf':24s} {'CPU ms':>8s} {'ratio':>6s} "
           f"{'main ms':>8s} {'ratio':>6s} {'wall ratio':>10s} {'target':>7s}")
     for r in rows:
         target = f"<= {r['target']}" if r["target"] else ""
-        print(f"{r['task']:7s} {r['materials']:9d} {r['size']:>8s} {r['bsdf']:16s} {r['cpu_ms']:8.1f} "
+        print(f"{r['task']:7s} {r['materials']:9d} {r['size']:>8s} {r['bsdf']:24s} {r['cpu_ms']:8.1f} "
               f"{r['ratio_cpu']:6.3f} {r['main_ms']:8.1f} {r['ratio_main']:6.3f} {r['ratio_wall']:10.3f} {target:>7s}")
 
 
@@ -553,6 +568,9 @@ def main(argv=None) -> int:
     p.add_argument("--loops", action="store_true", help="--instances: also the unfrozen and frozen AD loop")
     p.add_argument("--floor", action="store_true",
                    help="--instances: also roughconductor's model as a Python BSDF (the floor of a Python plugin)")
+    p.add_argument("--baseline", default=None, metavar="DIR",
+                   help="--instances: also hyde from another checkout DIR (e.g. a git worktree of an older commit), "
+                        "in the same rounds")
     p.add_argument("--instance-child", default=None, help=argparse.SUPPRESS)
     p.add_argument("--cold", action="store_true", help="only the cold-load benchmark (issue 31)")
     p.add_argument("--cold-rounds", type=int, default=6, help="--cold: rounds of fresh processes (default 6)")
@@ -564,7 +582,8 @@ def main(argv=None) -> int:
         return 0
     if args.instances:
         sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
-        rows = instances(args.rounds, [int(m) for m in args.materials.split(",")], sizes, args.loops, floor=args.floor)
+        rows = instances(args.rounds, [int(m) for m in args.materials.split(",")], sizes, args.loops, floor=args.floor,
+                         baseline=args.baseline)
         print_instances(rows)
         out = Path(args.out).with_name("bench_render_instances.csv")
         _write_csv(out, rows)

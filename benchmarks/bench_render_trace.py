@@ -5,7 +5,8 @@ One scene of ``bench_render.py --instances`` (M spheres with M distinct material
 (Python tracing of every instance's BSDF methods inside Mitsuba's symbolic calls, and Dr.Jit's
 assembly of one callable per instance) and, for hyde, the part spent inside each of the plugin's
 methods and helpers (thread-time counters wrapped around them; nested calls are counted in each
-enclosing one).  A Python BSDF that does almost nothing (``--bsdf trivial``) shows the cost of a
+enclosing one), and the number of Dr.Jit variables one render creates (the operations traced, by Python
+or C++).  A Python BSDF that does almost nothing (``--bsdf trivial``) shows the cost of a
 Python instance as such; ``--bsdf pyrough`` is roughconductor's own model written in Python with Mitsuba's
 C++ building blocks (``bench_render.python_floor_class``): the floor of a Python plugin of that model.
 
@@ -113,9 +114,18 @@ def main(argv=None) -> int:
         dr.sync_thread()
         times.append(1e3 * (time.thread_time() - t0))
     main_ms = sorted(times)[len(times) // 2]
+    per_call = {name: tuple(c) for name, c in counters.items()}
+    # Dr.Jit variables one render creates (traced operations, the integrator's included): with index reuse
+    # off, every new variable takes the next index
+    dr.set_flag(dr.JitFlag.ReuseIndices, False)
+    first = dr.opaque(mi.Float, 0.0).index & 0xFFFFFFFF
+    dr.eval(mi.render(scene, spp=1, seed=99))
+    created = (dr.opaque(mi.Float, 0.0).index & 0xFFFFFFFF) - first - 1
+    dr.set_flag(dr.JitFlag.ReuseIndices, True)
     print(f"{args.bsdf}, {args.materials} materials, {VARIANT}: main thread {main_ms:.1f} ms per render "
-          f"(median of {args.renders}), {main_ms / args.materials:.2f} ms per material")
-    for name, (seconds, calls) in sorted(counters.items(), key=lambda kv: -kv[1][0]):
+          f"(median of {args.renders}), {main_ms / args.materials:.2f} ms per material; {created} Dr.Jit "
+          f"variables created per render ({created / args.materials:.0f} per material)")
+    for name, (seconds, calls) in sorted(per_call.items(), key=lambda kv: -kv[1][0]):
         print(f"  in {name:18s} {1e3 * seconds / args.renders:8.2f} ms per render, {calls / args.renders:5.0f} calls, "
               f"{1e6 * seconds / max(calls, 1):6.1f} us per call")
     return 0

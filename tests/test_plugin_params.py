@@ -229,7 +229,7 @@ def test_constant_roughness_is_derived_once_per_value_and_never_stale():
     value changes: eval after ``params.update()``, after an assignment without update, and in a frozen
     function replayed after an update equals the eval or render of a BSDF loaded with that value (bitwise:
     the same float32 operations); with the value grad-enabled, with or without an update, the gradient is
-    the one of the traced path (nonzero, equal).  ~3 s."""
+    the one of the traced path (nonzero, equal).  ~1 s (Dr.Jit kernel cache warm), ~6 s cold."""
     import drjit as dr
 
     mi = mitsuba_with_hyde("llvm_ad_rgb")
