@@ -18,6 +18,7 @@ the report sets ``HYDE_DRJIT_THREADS`` (each script's share of the cores); :func
 thread pool from it before ``validate`` runs (:func:`drjit_threads`).
 """
 import argparse
+import gc
 import json
 import math
 import os
@@ -47,6 +48,10 @@ def cli(validate, doc, main=None):
                     help="write the docstring and the checks as JSON to FILE (how hyde-bsdf validate reads them)")
     a = ap.parse_args()
     drjit_threads()
+    # what the imports made lives to the end of this short process: out of the collector's sight, so that the
+    # full collections a frozen Dr.Jit loop asks for before each replay (hyde_bsdf.inverse.maps._gradient) walk
+    # only the objects of the run (measured: 75 -> 0 ms per collection at start; svbrdf_index --quick makes 40)
+    gc.freeze()
     checks = list(validate(a.outdir, quick=a.quick))
     if a.checks_json:
         write_checks_json(a.checks_json, doc, checks)

@@ -133,7 +133,8 @@ def maps_all(atlas, path, variant=("vgroove", "paper")):
                 ax.set_yticks(range(len(labels)), labels, fontsize=4)
     fig.suptitle(textwrap.fill(f"Accuracy atlas: model {'/'.join(variant)} against the MoM over the lobe, 1-D "
                                "surfaces. " + MAP_NOTE, 110), fontsize=7)
-    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    # fixed margins (the labels' sizes are fixed): tight_layout measured every tick of the 25 maps (~3 CPU s)
+    fig.subplots_adjust(left=0.09, right=0.99, bottom=0.03, top=0.935, wspace=0.06, hspace=0.08)
     save_figure(fig, path, dpi=90)
     return path
 
