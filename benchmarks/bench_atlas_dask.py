@@ -35,6 +35,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--tasks", type=int, default=6, help="how many of the cheapest tasks (default 6)")
     args = ap.parse_args(argv)
+    # the workers' sampling profiler (a thread every 10 ms) runs inside each task's process and would be counted in
+    # its CPU seconds (time.process_time counts every thread): off, as on a cluster that runs long tasks
+    os.environ.setdefault("DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED", "False")
     from distributed import Client, LocalCluster
 
     from hyde_bsdf.mom import atlas

@@ -1,4 +1,4 @@
-"""Shared test set-up: the Hypothesis settings profile.
+"""Shared test set-up: the Hypothesis settings profile; SIGINT as from a terminal (see below).
 
 Hypothesis profiles (``HYPOTHESIS_PROFILE``):
 
@@ -14,8 +14,18 @@ Hypothesis profiles (``HYPOTHESIS_PROFILE``):
 Tests set their own count with ``max_examples=examples(N)``: N in ``ci``, 10 N in ``thorough``.
 """
 import os
+import signal
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# A suite started in the background of a shell without job control (`( ./run.sh test & )`) inherits
+# SIGINT ignored, under nohup SIGHUP too, and so would every command the signal tests start: their
+# Ctrl-C and hang-up rows would wait for the watchdog.  A handler (unlike an ignore) is reset to the
+# default at exec, so the children get the signals as from a terminal, however the suite was started
+# (the suite itself still shrugs off a hang-up it was told to ignore).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+if signal.getsignal(signal.SIGHUP) is signal.SIG_IGN:
+    signal.signal(signal.SIGHUP, lambda signum, frame: None)
 
 import pytest  # noqa: E402
 from hypothesis import HealthCheck, settings  # noqa: E402

@@ -286,7 +286,7 @@ CLI_ROWS = [
      "lie.npy': its header says 100000x100000x4x4 float64 values (1.16 TiB), but the file holds 8 B", "in"),
     ("stokes: a truncated PNG frame (new)", ["stokes", "--frames", "{in33}/trunc.png", "{in33}/f1.png",
      "{in33}/f2.png", "--angles", "0,45,90", "-o", "{tmp}/trunc.exr"], 2,
-     "trunc.png': cannot read it (image file is truncated)", "in"),
+     "trunc.png': cannot read it as an image (image file is truncated)", "in"),
     ("stokes: three 9600x9600 frames, 2 GiB available (was an allocation error after 20 s)", ["stokes", "--frames",
      "{in33}/big.png", "{in33}/big.png", "{in33}/big.png", "--angles", "0,45,90", "-o", "{tmp}/big.exr"], 2,
      "the Stokes images of 3 frame(s), 276480000 raw values (128 B each): about 33 GiB of memory needed", "lowmem"),
