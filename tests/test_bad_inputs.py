@@ -550,7 +550,7 @@ def paths(tmp_path_factory):
     from hyde_bsdf.fit.mueller_fit import synthetic_measurements
 
     th = np.radians([20.0, 40.0, 60.0])
-    meas = synthetic_measurements(th, th, np.full(3, np.pi), n=1.5, k=3.0, rms_slope=0.3)
+    meas = synthetic_measurements(th, th, np.full(3, np.pi), n=1.5, k=3.0, rms_slope=0.3, rng=3)
     write_measurements(tmp / "meas.csv", meas)
     text = (tmp / "meas.csv").read_text().splitlines()
     head = [ln for ln in text if ln.startswith("theta")][0]
@@ -678,7 +678,7 @@ def _issue33_files(tmp):
     for name, deg in (("two.csv", [20.0, 40.0]), ("twelve.csv", np.linspace(10.0, 70.0, 12))):
         th = np.radians(deg)
         write_measurements(d / name, synthetic_measurements(th, th, np.full(th.size, np.pi), n=1.5, k=3.0,
-                                                            rms_slope=0.3))
+                                                            rms_slope=0.3, rng=33))
     for i in range(3):                             # frames at the black level 2 DN: no light
         Image.fromarray(np.full((8, 8), 2, np.uint8)).save(d / f"blk{i}.png")
     _stokes_exr(d / "black.exr", 16, 0.0)

@@ -177,14 +177,13 @@ def test_non_finite_result_message_names_the_index(monkeypatch):
     """The guard against NaN output names where it happened (it said 'index []' before)."""
     from hyde_bsdf.model import evaluator
 
-    real = evaluator._specular
+    real = evaluator.rotated_fresnel_mueller
 
-    def poisoned(*args):
-        F, M00, above = real(*args)
-        F[1, 2, 0, 3] = np.nan
-        return F, M00, above
+    def poisoned(*args):                        # one block of 6 directions: element (0, 3) of the 6th, [1, 2]
+        real(*args)
+        args[-1][0, 3, 5] = np.nan
 
-    monkeypatch.setattr(evaluator, "_specular", poisoned)
+    monkeypatch.setattr(evaluator, "rotated_fresnel_mueller", poisoned)
     with pytest.raises(FloatingPointError, match=r"index \[1, 2\]"):
         hyde_bsdf.pbrdf(np.full((2, 3), 0.3), 0.4, 1.0, rms_slope=0.3, pec=True)
 

@@ -72,7 +72,7 @@ def _inputs(d: Path) -> None:
 
     (d / "scene.xml").write_text(SCENE)
     th = np.radians([20.0, 35.0, 50.0, 65.0])         # more geometries than the 3 parameters: a fit, not a warning
-    write_measurements(d / "meas.csv", synthetic_measurements(th, th, np.full(4, np.pi), n=1.5, k=3.0, rms_slope=0.3))
+    write_measurements(d / "meas.csv", synthetic_measurements(th, th, np.full(4, np.pi), n=1.5, k=3.0, rms_slope=0.3, rng=4))
     np.save(d / "mosaic.npy", np.random.default_rng(0).uniform(200, 800, (32, 32)))
     mi.set_variant("scalar_rgb")
     mi.Bitmap(np.full((4, 4, 1), 0.3, np.float32)).write(str(d / "alpha0.exr"))
