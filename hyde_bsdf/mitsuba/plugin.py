@@ -909,11 +909,13 @@ def _make_class():
             return po.safe_normalize(wi + wo, mi.Vector3f(0, 0, 1))
 
         def _geometry(self, wi, wo, active):
-            """(active, cos_i, cos_o, h, wi.h, wo.h) of a direction pair: shared by the value and the pdf."""
+            """(active, cos_i, cos_o, h, wi.h) of a direction pair: shared by the value and the pdf.  Where both
+            directions are above the surface (``active``), wi.h = wo.h = |wi + wo| / 2 > 0: both see the facet's
+            front, and no other check of it is needed."""
             cos_i = mi.Frame3f.cos_theta(wi)
             cos_o = mi.Frame3f.cos_theta(wo)
             h = self._half_vector(wi, wo)
-            return active & (cos_i > 0) & (cos_o > 0), cos_i, cos_o, h, dr.dot(wi, h), dr.dot(wo, h)
+            return active & (cos_i > 0) & (cos_o > 0), cos_i, cos_o, h, dr.dot(wi, h)
 
         def _diffuse(self, ctx, cos_i, cos_o, rough):
             """The diffuse term's factor (no M00, no cos theta_o); theta_in is the polar angle of the
@@ -1027,7 +1029,7 @@ def _make_class():
             spec_on, diff_on = lobes
             if not (spec_on or diff_on):
                 return dr.zeros(mi.Spectrum)
-            active, cos_i, cos_o, h, wi_h, wo_h = geo
+            active, cos_i, cos_o, h, wi_h = geo
             n, k = self._index(si, active)
             scale = self._scale(si, active)
             spec = lobe if spec_on else 0.0
@@ -1058,13 +1060,12 @@ def _make_class():
             specular lobe's from :meth:`_lobe`)."""
             if p_spec is None:
                 return mi.Float(0.0)
-            active, cos_i, cos_o, h, wi_h, wo_h = geo
+            active, cos_i, cos_o, h, wi_h = geo
             pdf_spec = 0.0
             if not (isinstance(p_spec, float) and p_spec == 0.0):
-                spec_ok = active & (wi_h > 0) & (wo_h > 0)
-                pdf_spec = dr.select(spec_ok, density, 0.0)
+                pdf_spec = dr.select(active, density, 0.0)     # active: wi.h = wo.h > 0 (``_geometry``)
                 if isinstance(p_spec, float) and p_spec == 1.0:
-                    return pdf_spec         # 0 where not active (spec_ok implies active)
+                    return pdf_spec
             pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo)
             return dr.select(active, p_spec * pdf_spec + (1.0 - p_spec) * pdf_diff, 0.0)
 
@@ -1144,7 +1145,8 @@ def _make_class():
             m, pdf_m = distr.sample(po.snap_to_normal(wi), sample2)
             # a back-facing normal (possible without visible-normal sampling) is a failed sample
             # (sample1 >= p_spec), not ~choose_spec: in scalar variants choose_spec is a Python bool
-            active = active & ((sample1 >= p_spec) | ((pdf_m != 0) & (dr.dot(wi, m) > 0)))
+            drawn = (pdf_m != 0) if self.m_sample_visible else (pdf_m != 0) & (dr.dot(wi, m) > 0)
+            active = active & ((sample1 >= p_spec) | drawn)
             wo_spec = mi.reflect(wi, m)
             wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
             wo = bs.wo = dr.select(choose_spec, wo_spec, wo_diff)
