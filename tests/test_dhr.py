@@ -123,3 +123,21 @@ def test_bad_input():
         dhr.dhr_specular_pec(0.3, -1.0)
     with pytest.raises(ValueError, match="shadowing"):
         dhr.dhr_specular_pec(0.3, 0.3, shadowing="x")
+
+
+def test_few_angles_read_the_fine_slice_bit_for_bit():
+    """The diffuse terms' 1 - rho(theta): for a few angles (a fit's geometries at a new rms_slope) the
+    spline is evaluated at the two nodes of the fine x slice around each angle only; np.interp reads no
+    other node, so the values equal the full slice's interpolation bit for bit (grazing, normal and
+    on-node angles included).  ~0.1 s."""
+    grid = dhr._fine_grid(dhr.X_SLICE_POINTS)
+    for shadowing in ("vgroove", "smith", "none"):
+        for s in (1e-4, 0.0123, 0.3, 1.7, 50.0):
+            theta = np.concatenate([[0.0, math.pi / 2, dhr.theta_of_x(grid[1234]), dhr.theta_of_x(grid[-2])],
+                                    rng.uniform(0.0, math.pi / 2, dhr._FEW_ANGLES - 4)])
+            x_grid, rho = dhr.load_table(shadowing).x_slice(s)
+            full = np.interp(dhr.x_of_theta(theta), x_grid, 1.0 - rho)
+            for few in (theta[:2], theta[:7].reshape(7, 1), theta):
+                got = dhr.DHRHemisphere(shadowing, s).one_minus(few)
+                assert got.shape == np.shape(few)
+                np.testing.assert_array_equal(got.ravel().view(np.int64), full[:np.size(few)].view(np.int64))

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.fit.adequacy import (Verdict, birge_scaling, blame_fixed_parameters, chi2_verdict,
+from hyde_bsdf.fit.adequacy import (Verdict, birge_scaling, blame_fixed_parameters, chi2_sf, chi2_verdict,
                                     cluster_covariance, correlation, floor_verdict, geometry_clusters, half_angles,
                                     larger_errors)
 from hyde_bsdf.fit.lab_data import LabData
@@ -306,8 +306,7 @@ class ModelFit:
 
     @property
     def p_value(self) -> float:
-        from scipy.stats import chi2 as chi2_dist
-        return float(chi2_dist.sf(self.chi2, self.dof)) if self.dof > 0 else float("nan")
+        return float(chi2_sf(self.chi2, self.dof)) if self.dof > 0 else float("nan")
 
     @property
     def correlation(self) -> np.ndarray:

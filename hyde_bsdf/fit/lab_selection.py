@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from hyde_bsdf.fit.adequacy import chi2_isf, chi2_sf
 from hyde_bsdf.fit.lab_data import LabData
 from hyde_bsdf.fit.lab_fit import PARAMETERS, LabModel, ModelFit, fit_model
 from hyde_bsdf.model import terms
@@ -171,8 +172,6 @@ def _contains(big: LabModel, small: LabModel) -> bool:
 
 def _choose(rows):
     """Index of the chosen row and why (module docstring, rules 1-3)."""
-    from scipy.stats import chi2 as chi2_dist
-
     ok = [i for i, r in enumerate(rows) if r.adequate]
     if not ok:
         i = min(range(len(rows)), key=lambda j: rows[j].bic)
@@ -187,7 +186,7 @@ def _choose(rows):
 
     while True:
         better = [j for j in ok if added(j, i) and rows[j].fit.chi2 < rows[i].fit.chi2
-                  and chi2_dist.sf(rows[i].fit.chi2 - rows[j].fit.chi2, added(j, i)) < NESTED_P]
+                  and chi2_sf(rows[i].fit.chi2 - rows[j].fit.chi2, added(j, i)) < NESTED_P]
         if not better:
             return i, why
         j = min(better, key=lambda b: rows[b].bic)
@@ -201,11 +200,9 @@ def _rivals(rows, chosen) -> list:
     """The adequate models the data do not rule out against the choice: their chi^2 exceeds the
     chosen one's by less than the difference test's limit (p = NESTED_P, the sizes' difference as
     degrees of freedom, at least 1) -- a model the choice beat in rule 2 is no rival."""
-    from scipy.stats import chi2 as chi2_dist
-
     c = rows[chosen]
     return [r for r in rows if r.adequate and not r.chosen and
-            r.fit.chi2 - c.fit.chi2 < chi2_dist.isf(NESTED_P, max(abs(r.size - c.size), 1))]
+            r.fit.chi2 - c.fit.chi2 < chi2_isf(NESTED_P, max(abs(r.size - c.size), 1))]
 
 
 def _spread_notes(rows, chosen) -> list:

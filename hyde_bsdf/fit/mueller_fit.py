@@ -81,7 +81,7 @@ from hyde_bsdf.model.index import admissible
 from hyde_bsdf.model.parameters import FIT_PARAMETERS, NATURAL_INDEX, RMS_SLOPE
 from hyde_bsdf.model.terms import check_pair
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, InadequateModelError, InadequateModelWarning, Verdict,
-                                    birge_scaling, blame_fixed_parameters, chi2_verdict, cluster_covariance,
+                                    birge_scaling, blame_fixed_parameters, chi2_sf, chi2_verdict, cluster_covariance,
                                     correlation, floor_verdict, geometry_clusters, half_angles, json_number,
                                     larger_errors)
 from hyde_bsdf.io.measurements import (ELEMENT_LIMIT, ELEMENT_NAMES, SIGMA_RANGE, Measurements, element_index,
@@ -579,8 +579,6 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
     parameter, and when there are fewer measured values than fitted parameters (the fit is
     then undetermined: refused, not attempted).
     """
-    from scipy.stats import chi2 as chi2_dist
-
     o = FitOptions.of(options, settings, "fit_mueller")
     shadowing, diffuse, corr_limit, strict, progress = o.shadowing, o.diffuse, o.corr_limit, o.strict, o.progress
     fitted, mode, given = check_options(fit, rms_slope, n0, k0, shadowing, diffuse, corr_limit)
@@ -626,7 +624,7 @@ def fit_mueller(theta_i, theta_r, phi, measured, *, sigma=None, fit=None, rms_sl
     result = FitResult(
         params=vals, fitted=fitted, stderr=stderr, covariance=cov, correlation=corr,
         chi2=chi2, dof=dof, reduced_chi2=chi2 / dof if dof > 0 else float("nan"),
-        p_value=float(chi2_dist.sf(chi2, dof)) if dof > 0 else float("nan"),
+        p_value=float(chi2_sf(chi2, dof)) if dof > 0 else float("nan"),
         residuals=data.split(r), success=bool(res.success), message=str(res.message), nfev=int(nfev),
         n_data=m, sigma_given=data.sigma_given, shadowing=shadowing, diffuse=mode,
         warnings=diag, condition_number=cond, rows=data.rows_in, repeats=data.repeats, stderr_scale=scale,

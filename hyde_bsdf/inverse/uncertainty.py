@@ -389,12 +389,12 @@ def convergence_test(step, rel, seen=None, threshold: float = CONVERGENCE_THRESH
 def misfit_pvalues(chi2, m, P: int):
     """Per texel, the chance that noise alone leaves a chi2 (:func:`texel_misfit`) this large: the
     chi-square survival function at m - P degrees of freedom (NaN where m <= P)."""
-    from scipy import stats
+    from hyde_bsdf.fit.adequacy import chi2_sf
 
     chi2, m = np.asarray(chi2, np.float64), np.asarray(m, np.float64)
     dof = m - P
     with np.errstate(invalid="ignore"):
-        return np.where(dof > 0, stats.chi2.sf(chi2, np.maximum(dof, 1.0)), np.nan)
+        return np.where(dof > 0, chi2_sf(chi2, np.maximum(dof, 1.0)), np.nan)
 
 
 def texel_convergence(steps, rel, seen, *, threshold: float = CONVERGENCE_THRESHOLD, clip=None,

@@ -88,6 +88,10 @@ TABLE_SLOPE_RANGE = DHR_TABLE_RMS_SLOPE   # wider than the accepted RMS_SLOPE (p
 #: the table's whole range (its error and size: mitsuba/plugin.py's DOC, "DHR lookup")
 TEXTURE_X_POINTS = 1025
 TEXTURE_SLOPE_PER_DECADE = 192
+#: the fine uniform x grid of :meth:`DHRTable.x_slice` (the diffuse terms interpolate it linearly)
+X_SLICE_POINTS = 4097
+#: up to this many angles :meth:`DHRHemisphere.one_minus` evaluates the spline at their nodes only
+_FEW_ANGLES = 64
 #: the shipped files in hyde_bsdf/data/ (written by tools/make_dhr_tables.py)
 TABLE_FILE = "dhr_table.npz"
 TEXTURE_FILE = "dhr_texture_{}.npz"
@@ -248,12 +252,19 @@ class DHRTable:
         return CubicSpline(self.log_slope, self.rho_avg)(ls)
 
     @lru_cache(maxsize=64)
-    def x_slice(self, rms_slope: float, points: int = 4097):
+    def x_slice(self, rms_slope: float, points: int = X_SLICE_POINTS):
         """rho at one rms_slope on a fine uniform grid of x, for np.interp in x.
 
         Evaluated as a tensor product (one column): the same spline values as ``ev`` at each point,
         bit for bit, in a third of the time (a fit's finite differences miss this cache often)."""
-        grid = np.linspace(0.0, 1.0, points)
+        return self.x_nodes(rms_slope, slice(None), points)
+
+    def x_nodes(self, rms_slope: float, nodes, points: int = X_SLICE_POINTS):
+        """(x, rho) of :meth:`x_slice` at the nodes ``nodes`` (an increasing index array, or a slice) only.
+
+        The spline is evaluated at each x on its own (its basis at that x, the coefficients of its
+        interval), so these are the slice's values bit for bit, at the cost of the nodes asked for."""
+        grid = _fine_grid(points)[nodes]
         ls = np.clip(math.log(rms_slope), self.log_slope[0], self.log_slope[-1])
         return grid, np.clip(self.spline()(grid, np.array([ls]), grid=True)[:, 0], 0.0, None)
 
@@ -283,13 +294,28 @@ class DHRHemisphere:
         return self._samples
 
     def one_minus(self, theta):
+        x = x_of_theta(theta)
+        if self._samples is None and np.size(x) <= _FEW_ANGLES:
+            # the slice's two nodes around each x only (a fit's few geometries at a new rms_slope):
+            # np.interp reads no other node, so the result is the full slice's bit for bit
+            below = np.searchsorted(_fine_grid(X_SLICE_POINTS), np.ravel(x), side="right") - 1
+            nodes = np.unique(np.clip(np.concatenate([below, below + 1]), 0, X_SLICE_POINTS - 1))
+            grid, rho_x = load_table(self.shadowing).x_nodes(self.rms_slope, nodes)
+            return np.interp(x, grid, 1.0 - rho_x)
         grid, one_minus_x = self._slice()
-        return np.interp(x_of_theta(theta), grid, one_minus_x)
+        return np.interp(x, grid, one_minus_x)
 
     @property
     def one_minus_avg(self) -> float:
         grid, one_minus_x = self._slice()
         return float(np.trapezoid(4.0 * (1.0 - grid) ** 3 * np.maximum(one_minus_x, 0.0), grid))
+
+
+@lru_cache(maxsize=4)
+def _fine_grid(points: int) -> np.ndarray:
+    grid = np.linspace(0.0, 1.0, points)
+    grid.flags.writeable = False
+    return grid
 
 
 def x_of_theta(theta):

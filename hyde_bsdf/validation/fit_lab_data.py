@@ -48,11 +48,9 @@ import warnings
 from pathlib import Path
 
 import numpy as np
-from scipy.special import erf
-from scipy.stats import binom
-from scipy.stats import norm as gaussian
-from scipy.stats import chi2 as chi2_dist
+from scipy.special import betainc, erf, ndtr
 
+from hyde_bsdf.fit.adequacy import chi2_sf
 from hyde_bsdf.fit.lab import fit_lab
 from hyde_bsdf.io.measurements import Measurements
 from hyde_bsdf.model.evaluator import pbrdf
@@ -283,7 +281,7 @@ def _check_chi2(result, meas):
             chi2 += float((((model - meas.values[e][rows]) / meas.sigma[e][rows]) ** 2).sum())
             m += int(rows.sum())
     dof = m - len(result.fit.free)
-    return chi2 / dof, float(chi2_dist.sf(chi2, dof))
+    return chi2 / dof, float(chi2_sf(chi2, dof))
 
 
 def judge(label, options, family, with_m00, seed, bounds):
@@ -414,8 +412,9 @@ def _checks(worst, summaries, rows, out, quick):
     silent_out = sum(s["silent"] for s in outside)
     first = sum(s["first_seed_silent_errors"] for s in inside)
     chance = [(sum(s["silent"] for s in inside), sum(s["fits"] for s in inside), 1e-3),
-              (sum(s["silent_errors"] for s in inside), sum(s["judged_values"] for s in inside), 2 * gaussian.sf(3.0))]
-    tails = [binom.sf(k - 1, n, q) if k else 1.0 for k, n, q in chance]
+              (sum(s["silent_errors"] for s in inside), sum(s["judged_values"] for s in inside), 2 * ndtr(-3.0))]  # P(|z| > 3)
+    # P(at least k of n at rate q), the binomial tail (scipy.stats.binom.sf(k - 1, n, q) bit for bit)
+    tails = [betainc(k, n - k + 1, q) if k else 1.0 for k, n, q in chance]
     jsons = sorted(out.glob("fit_lab_data_*.json"))
     schema = all(set(json.loads(p.read_text())) == {"model", "parameters", "covariance", "verdict", "models"}
                  for p in jsons)
