@@ -201,7 +201,7 @@ clipped at 0 (rho > 1 happens without shadowing near grazing).  A constant rough
 value needs no gradient) reads instead a 1-D table of the diffuse factor over the polar angle at that
 roughness, cut from the same texture at load and at each update (4 kB per material): one interpolation
 per direction in place of a 2-D lookup, the same values to float32 rounding; every traced operation
-is paid again for every instance at every render (``benchmarks/bench_render.py --instances``).
+is paid again for every instance at every render (the cost per instance, benchmarks/bench_render.py).
 
 Sampling.  With probability p_spec the specular lobe is sampled from the
 (visible) Beckmann normals (``mi.MicrofacetDistribution``), otherwise a cosine
