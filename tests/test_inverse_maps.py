@@ -165,3 +165,50 @@ def test_a_run_leaves_no_gradient_state_behind(problem):
         again.append(inv.Observation(scene, inv.observations.render_stokes_np(scene, 0, 64, seed=0)))
     second = inv.invert_maps(again, {"alpha": 0.3}, iterations=2, spp=4, seed=1, progress=False)
     assert np.isfinite(second.rel_stderr["alpha"]).any()
+
+
+#: a frozen step whose recording meets Dr.Jit arrays from NumPy memory waiting in cyclic garbage: the Python
+#: objects the step makes trigger the collector during the recording (argv[1]: "guarded" or "plain" dr.freeze)
+_GARBAGE_DURING_RECORDING = """
+import gc, sys
+import numpy as np
+import drjit as dr
+import mitsuba as mi
+from hyde_bsdf.inverse._common import freeze_step
+mi.set_variant("llvm_ad_rgb")
+
+class Holder:
+    pass
+
+def step(x):
+    junk = [[i] for i in range(20000)]          # allocations: the collector's threshold is reached here
+    return dr.sum(x * 2.0 + 1.0)
+
+fn = freeze_step(step) if sys.argv[1] == "guarded" else dr.freeze(step)
+x = mi.Float(np.arange(100, dtype=np.float32))
+for it in range(3):
+    for _ in range(50):
+        h = Holder()
+        h.arr = mi.TensorXf(np.random.rand(1000).astype(np.float32))   # Dr.Jit array from NumPy memory
+        h.cycle = h                                                    # freed only by the collector
+        del h
+    assert float(fn(x)[0]) == 10000.0
+print("recorded and replayed")
+"""
+
+
+def test_frozen_step_pauses_the_collector_while_dr_jit_records():
+    """The frozen optimisation step (invert_maps, invert) runs with the garbage collector paused: Dr.Jit arrays
+    made from NumPy memory that wait in cyclic garbage would otherwise be freed through host callbacks during the
+    recording, which Dr.Jit cannot record -- it aborts the process (shown with the plain dr.freeze).  Two child
+    processes, ~5 s."""
+    import subprocess
+    import sys
+
+    from pathlib import Path
+
+    run = lambda how: subprocess.run([sys.executable, "-c", _GARBAGE_DURING_RECORDING, how],  # noqa: E731
+                                     capture_output=True, text=True, timeout=300, cwd=Path(__file__).parents[1])
+    guarded, plain = run("guarded"), run("plain")
+    assert guarded.returncode == 0 and "recorded and replayed" in guarded.stdout, guarded.stderr[-2000:]
+    assert plain.returncode != 0 and "cannot be recorded" in plain.stderr, (plain.returncode, plain.stderr[-2000:])

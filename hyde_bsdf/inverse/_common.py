@@ -1,9 +1,10 @@
 """Small pieces the inverse modules share: luminance weights, error lines, the not-converged
-warning, the history of an optimisation and its CSV file.
+warning, a frozen optimisation step, the history of an optimisation and its CSV file.
 """
 from __future__ import annotations
 
 import csv
+import gc
 import time
 from pathlib import Path
 
@@ -21,6 +22,30 @@ def _first_line(exc) -> str:
 class NotConvergedWarning(UserWarning):
     """A fitted parameter that had not reached the minimum (in some texels, for a map): its standard
     errors there are NaN (they would understate the error); the value is not a result."""
+
+
+def freeze_step(step):
+    """``dr.freeze(step)``, called with the garbage collector paused (after Dr.Jit's queue is synchronised).
+
+    The collector must not run while Dr.Jit records (the first call, and any call that records again): Dr.Jit
+    arrays made from NumPy memory that wait in cyclic garbage are freed through host callbacks, which a recording
+    cannot hold -- Dr.Jit aborts the process.  Paused for the call, the garbage waits for the next collection
+    after it (instead of a full collection before every call: 30-70 ms each in a process with a large heap)."""
+    import drjit as dr
+
+    frozen = dr.freeze(step)
+
+    def call(*args):
+        dr.sync_thread()
+        enabled = gc.isenabled()
+        gc.disable()
+        try:
+            return frozen(*args)
+        finally:
+            if enabled:
+                gc.enable()
+
+    return call
 
 
 def record_iteration(row: dict, history: list, t0: float, t_it: float, t_first):

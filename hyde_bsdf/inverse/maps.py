@@ -8,7 +8,6 @@ update (:class:`~hyde_bsdf.inverse.adam.LogAdam`), and the uncertainty (:func:`m
 """
 from __future__ import annotations
 
-import gc
 import math
 import time
 import warnings
@@ -18,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.errors import UsageError
-from hyde_bsdf.inverse._common import _first_line, record_iteration, seconds_per_iteration, write_history
+from hyde_bsdf.inverse._common import (_first_line, freeze_step, record_iteration, seconds_per_iteration,
+                                      write_history)
 from hyde_bsdf.inverse.loss import StokesLoss, smoothness
 from hyde_bsdf.inverse.observations import (MAP_PARAMETERS, _obs_mask, film_channels, map_keys, render_stokes,
                                             texel_coverage)
@@ -589,7 +589,7 @@ def _adam_loop(problem, adam, step, *, iterations, seed, freeze, truth_np, progr
 
     # dr.freeze records the step's kernels once and replays them (no Python re-tracing of the
     # integrator and the BSDF per iteration); results equal the unfrozen step's
-    step_fn = dr.freeze(step) if freeze else step
+    step_fn = freeze_step(step) if freeze else step
     tensors = [fn.tensors for fn in problem.losses]
     history, t0, t_first = [], time.perf_counter(), None
     for it in range(iterations):
@@ -612,16 +612,8 @@ def _adam_loop(problem, adam, step, *, iterations, seed, freeze, truth_np, progr
 def _gradient(problem, adam, step, step_fn, seed_it, tensors, it):
     """One evaluation of the loss and its gradient: ((loss, data, reg), the values holding the gradient,
     the step function to use from now on -- the unfrozen one when Dr.Jit could not record the step)."""
-    import drjit as dr
-
     try:
         values = adam.values()
-        if step_fn is not step:
-            # release what is pending first: arrays made from NumPy memory and waiting for
-            # the garbage collector are freed through host callbacks, which a recording
-            # cannot hold (Dr.Jit aborts the process)
-            gc.collect()
-            dr.sync_thread()
         return step_fn(problem.scenes, values, seed_it, tensors), values, step_fn
     except RuntimeError as exc:
         if step_fn is step or it > 0:

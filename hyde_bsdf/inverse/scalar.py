@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from hyde_bsdf.errors import UsageError, shorten
-from hyde_bsdf.inverse._common import NotConvergedWarning, record_iteration, write_history
+from hyde_bsdf.inverse._common import NotConvergedWarning, freeze_step, record_iteration, write_history
 from hyde_bsdf.inverse.adam import LogAdam, check_gradients
 from hyde_bsdf.options import Options
 from hyde_bsdf.progress import as_callback
@@ -249,7 +249,7 @@ def _loss_step(params, loss_fn, names, spp: int, freeze: bool):
         dr.backward(loss)
         return loss
 
-    return dr.freeze(step) if freeze else step
+    return freeze_step(step) if freeze else step
 
 
 def _history_row(loss, values, fit, it):

@@ -2,11 +2,13 @@
 
 Not physics: the paper's equations live in :mod:`hyde_bsdf.mom.solver` and its solvers.  A pool worker runs
 single-threaded BLAS (the partitions already keep every core busy; a 2-thread LU of a 500-unknown partition is
-10x slower here) and keeps freed heap blocks (:func:`keep_freed_memory`).
+10x slower here) and keeps freed heap blocks (:func:`hyde_bsdf.resources.keep_freed_memory`).
 """
 from __future__ import annotations
 
 import ctypes
+
+from hyde_bsdf.resources import keep_freed_memory
 
 __all__ = ["openblas_libs", "limit_blas_threads", "restore_blas_threads", "keep_freed_memory", "worker_init"]
 
@@ -55,18 +57,6 @@ def limit_blas_threads(n=1):
 def restore_blas_threads(previous):
     for set_fn, count in previous:
         set_fn(count)
-
-
-def keep_freed_memory():
-    """glibc only: keep freed blocks up to 256 MiB in the heap instead of returning them to the system (each
-    partition allocates and frees the same temporaries; handing them back costs a page fault per 4 KiB on the
-    next use: a tenth of a Fig. 6 partition's CPU time was system time).  For pool workers only (process-wide)."""
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        libc.mallopt(-3, 256 * 2**20)      # M_MMAP_THRESHOLD
-        libc.mallopt(-1, 512 * 2**20)      # M_TRIM_THRESHOLD
-    except (OSError, AttributeError):      # not glibc
-        pass
 
 
 def worker_init():

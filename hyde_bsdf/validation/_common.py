@@ -48,6 +48,11 @@ def cli(validate, doc, main=None):
                     help="write the docstring and the checks as JSON to FILE (how hyde-bsdf validate reads them)")
     a = ap.parse_args()
     drjit_threads()
+    # a short process of its own: it keeps freed heap blocks, as the MoM's pool workers do (the scripts that solve
+    # partitions in-process allocate and free the same large temporaries; measured: stability_mom --quick spent
+    # 1.7 CPU s in page faults, 0.4 with this)
+    from hyde_bsdf.resources import keep_freed_memory
+    keep_freed_memory()
     # what the imports made lives to the end of this short process: out of the collector's sight, so that the
     # full collections a frozen Dr.Jit loop asks for before each replay (hyde_bsdf.inverse.maps._gradient) walk
     # only the objects of the run (measured: 75 -> 0 ms per collection at start; svbrdf_index --quick makes 40)
