@@ -32,7 +32,8 @@ the median over rounds of the round's hyde / roughconductor.  With ``--loops``: 
 iteration on the 96 x 72 scene (every material's roughness a grad-enabled parameter written through
 ``params.update()``, ``mi.render(scene, params)``, loss = mean, ``dr.backward``), unfrozen and inside
 ``dr.freeze`` (the update outside the frozen function, as the plugin's checks want).  Targets:
-<= 1.15 (smith/none) and <= 1.3 (default) at 50 materials, 96 x 72; the unfrozen loop <= 1.1.  With
+<= 1.15 (smith/none) and <= 1.3 (default) at 50 materials, 96 x 72; the unfrozen loop <= 1.1 (smith/none:
+roughconductor's model, whose overhead the issue measured).  With
 ``--floor``: roughconductor's model written as a Python BSDF with Mitsuba's C++ building blocks
 (:func:`python_floor_class`), side by side too: what any Python plugin of that model costs at least.  With
 ``--baseline DIR``: hyde from another checkout (``git worktree add DIR <commit>``) in the same rounds, a
@@ -315,6 +316,9 @@ def register_python_floor():
     mi.register_bsdf("pyrough", lambda props, cls=python_floor_class(): cls(props))
 
 INSTANCE_TARGETS = {"hyde smith/none": 1.15, "hyde default": 1.3}
+#: the unfrozen loop's target (<= 1.1) is the overhead of the plugin on roughconductor's own model (issue 31:
+#: "+20 % per iteration" was smith/none's); the default's mixture differentiates terms roughconductor has not
+LOOP_TARGET_BSDFS = ("hyde smith/none", "python floor")
 INSTANCE_VARIANT = "llvm_ad_rgb"
 
 
@@ -445,7 +449,7 @@ def instances(rounds=3, materials=(1, 10, 50), sizes=((96, 72), (320, 240)), loo
                          "wall_ms": statistics.median(t["wall_ms"] for t in per[name]),
                          "ratio_cpu": ratio["cpu_ms"], "ratio_main": ratio["main_ms"], "ratio_wall": ratio["wall_ms"],
                          "target": INSTANCE_TARGETS.get(name, "") if (task, count, width) == ("render", 50, 96)
-                         else (1.1 if task == "loop" and name != "roughconductor" else ""),
+                         else (1.1 if task == "loop" and name in LOOP_TARGET_BSDFS else ""),
                          "rounds": rounds, "variant": INSTANCE_VARIANT})
     return rows
 

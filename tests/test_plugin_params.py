@@ -227,9 +227,11 @@ def test_constant_roughness_is_derived_once_per_value_and_never_stale():
     """A constant roughness's derived values (alpha, the DHR coordinate, 1 - rho_avg) are evaluated once per
     value instead of at every traced call (issue 31, the cost per instance).  They must follow every way the
     value changes: eval after ``params.update()``, after an assignment without update, and in a frozen
-    function replayed after an update equals the eval or render of a BSDF loaded with that value (bitwise:
-    the same float32 operations); with the value grad-enabled, with or without an update, the gradient is
-    the one of the traced path (nonzero, equal).  ~1 s (Dr.Jit kernel cache warm), ~6 s cold."""
+    function replayed after an update equals the eval or render of a BSDF loaded with that value (to 2e-6
+    relative: a constant roughness reads a 1-D table of the diffuse factor at that roughness, the traced path
+    the 2-D texture, the same values up to float32 rounding; a stale roughness is off by percent); with the
+    value grad-enabled, with or without an update, the gradient is the one of the traced path (nonzero,
+    equal).  ~1 s (Dr.Jit kernel cache warm), ~6 s cold."""
     import drjit as dr
 
     mi = mitsuba_with_hyde("llvm_ad_rgb")
@@ -247,7 +249,8 @@ def test_constant_roughness_is_derived_once_per_value_and_never_stale():
         if update:
             params.update()
         fresh = _eval_batch(mi, mi.load_dict(bsdf(value)), wi, wo)
-        assert np.array_equal(_eval_batch(mi, b, wi, wo), fresh), (value, update)
+        got = _eval_batch(mi, b, wi, wo)
+        assert np.allclose(got, fresh, rtol=2e-6, atol=1e-9), (value, update, np.max(np.abs(got / fresh - 1)))
 
     si = dr.zeros(mi.SurfaceInteraction3f)
     si.wi = mi.Vector3f(*(mi.Float(wi[:, j]) for j in range(3)))

@@ -21,8 +21,11 @@ Conventions used here
 from __future__ import annotations
 
 
+import math
+
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 __all__ = [
     "accurate_cross",
@@ -36,6 +39,7 @@ __all__ = [
     "smith_g1_exact",
     "vgroove_g",
     "DHRLookup",
+    "DHRSlice",
 ]
 
 
@@ -204,46 +208,57 @@ def fresnel_average(cos_beta, n, k):
     return 0.5 * (rs2 + rp2)
 
 
-#: 1 / sqrt(pi)
-_INV_SQRT_PI = 0.5641895835477563
+#: G1(a) = a (2 sqrt(pi) + p1 a + ... + p5 a^5) / (1 + q1 a + ... + q6 a^6) on [0, G1_A_MAX], 1 beyond:
+#: fitted to the closed form by tools/fit_smith_g1.py (max relative error 1.3e-7, float32's rounding)
+G1_NUM = (-0.010827622920133277, 1.1198086147653181, 0.13367879149690562, 0.1072509449449645, 0.04296867782887565)
+G1_DEN = (1.769389500014301, 1.3107040943585058, 0.5928769949986893, 0.25218951682420315, 0.09301892441962625,
+          0.043680588969694074)
+G1_A_MAX = 4.3
+_TWO_SQRT_PI = 3.5449077018110318
 
 
 def smith_g1_exact(v, m, alpha):
-    """Smith's masking G1(v, m) of the Beckmann distribution in its exact form,
-    2 / (1 + erf(a) + exp(-a^2) / (a sqrt(pi))), a = cos(theta_v) / (alpha sin(theta_v)); 0 where ``v``
-    sees the back of ``m`` (v.m v.z <= 0), 1 along the normal.
+    """Smith's masking G1(v, m) of the Beckmann distribution, 2 / (1 + erf(a) + exp(-a^2) / (a sqrt(pi))),
+    a = cos(theta_v) / (alpha sin(theta_v)), to float32 precision; 0 where ``v`` sees the back of ``m``
+    (v.m v.z <= 0), 1 along the normal.
 
-    Mitsuba's ``MicrofacetDistribution.smith_g1`` is a rational fit of it (up to 0.31 % off, at
+    Evaluated as a rational function of a (:data:`G1_NUM`, :data:`G1_DEN`: relative error <= 1.3e-7 against
+    the closed form in float64, tools/fit_smith_g1.py; beyond a = 4.3, 1 - G1 < 2e-11 and it is 1): Dr.Jit's
+    erf and exp trace 145 operations per call, the rational function 14, and every operation is traced
+    again for every instance at every render (the cost per instance).
+
+    Mitsuba's ``MicrofacetDistribution.smith_g1`` is a coarser rational fit (up to 0.31 % off, at
     a = 0.56 and 1.34), while Mitsuba's visible-normal sampler draws from the density that the *exact*
-    G1 normalizes: a pdf written with the fit is off the sampled density by that much, and so is every
+    G1 normalizes: a pdf written with that fit is off the sampled density by that much, and so is every
     sampling weight (measured: the mean weight of roughconductor's ``sample`` is 0.3 % above its
     ``eval``'s integral at theta 75 deg, alpha 0.54).
     """
     xy2 = dr.fma(v.x, v.x, v.y * v.y)
-    normal = xy2 == 0.0
-    # a -> 0 (the horizon): G1 -> 0; the floor (also below the horizon, zeroed below) keeps the
-    # denominator >= 1 and scalar variants from dividing by 0
-    a = dr.maximum(v.z / (alpha * dr.sqrt(dr.select(normal, 1.0, xy2))), 1e-30)
-    g = 2.0 / (1.0 + dr.erf(a) + dr.exp(-a * a) * _INV_SQRT_PI / a)
-    return dr.select(dr.dot(v, m) * v.z <= 0.0, 0.0, dr.select(normal, 1.0, g))
+    # a in [0, G1_A_MAX]: below the horizon a = 0 (zeroed below), along the normal (xy2 = 0) the clamp (G1 = 1)
+    a = dr.clip(v.z * dr.rsqrt(dr.maximum(xy2, 1e-30)) / alpha, 0.0, G1_A_MAX)
+    num = G1_NUM[-1]
+    for c in G1_NUM[-2::-1]:
+        num = dr.fma(num, a, c)
+    den = G1_DEN[-1]
+    for c in G1_DEN[-2::-1]:
+        den = dr.fma(den, a, c)
+    g = a * dr.fma(num, a, _TWO_SQRT_PI) / dr.fma(den, a, 1.0)
+    return dr.select(dr.dot(v, m) * v.z <= 0.0, 0.0, dr.select(a < G1_A_MAX, g, 1.0))
 
 
 def vgroove_g(wi, wo, h):
     """Torrance-Sparrow V-groove shadowing/masking (paper Eq. 12), vector form.
 
-    G = min(1, 2 (n.h)(n.wo)/(wo.h), 2 (n.h)(n.wi)/(wi.h)) with n = +z; here
-    cos(alpha) = n.h and cos(beta) = wi.h = wo.h.  Returns 0 where a direction
-    is below the horizon or sees the back of the facet.
+    G = min(1, 2 (n.h)(n.wo)/(wo.h), 2 (n.h)(n.wi)/(wi.h)) with n = +z, cos(alpha) = n.h and
+    cos(beta) = wi.h = wo.h (h is the half vector of wi and wo, or the normal wo is reflected about):
+    G = min(1, 2 h.z min(wi.z, wo.z) / wi.h), one dot product and one division.  Returns 0 where a
+    direction is below the horizon or sees the back of the facet.
     """
-    cos_a = h.z
-    cos_b_i = dr.dot(wi, h)
-    cos_b_o = dr.dot(wo, h)
-    valid = (cos_b_i > 0) & (cos_b_o > 0) & (wi.z > 0) & (wo.z > 0)
+    cos_b = dr.dot(wi, h)
+    valid = (cos_b > 0) & (wi.z > 0) & (wo.z > 0)
     # the select keeps the division finite where the result is discarded anyway
-    g_i = 2.0 * cos_a * wi.z / dr.select(valid, cos_b_i, 1.0)
-    g_o = 2.0 * cos_a * wo.z / dr.select(valid, cos_b_o, 1.0)
-    g = dr.minimum(1.0, dr.minimum(g_i, g_o))
-    return dr.select(valid, g, 0.0)
+    g = 2.0 * h.z * dr.minimum(wi.z, wo.z) / dr.select(valid, cos_b, 1.0)
+    return dr.select(valid, dr.minimum(g, 1.0), 0.0)
 
 
 _LOOKUP_CLASSES: dict = {}
@@ -282,6 +297,7 @@ class DHRLookup:
             return
         self.log_lo, self.log_hi = texture.log_lo, texture.log_hi
         self.nt, self.ns = texture.one_minus.shape
+        self.host = texture          # the NumPy data, for :meth:`column`
         self.tex = mi.Texture2f(mi.TensorXf(texture.one_minus.ravel(), shape=(self.nt, self.ns, 1)),
                                 use_accel=False, filter_mode=dr.FilterMode.Linear,
                                 wrap_mode=dr.WrapMode.Clamp)
@@ -305,3 +321,39 @@ class DHRLookup:
     def one_minus_rho_avg(self, u_slope):
         """1 - rho_avg(rms_slope), rho_avg = 2 int rho cos sin dtheta (reciprocal diffuse term)."""
         return self.tex_avg.eval(mi.Point1f(u_slope))[0]
+
+    def column(self, rms_slope):
+        """(1 - rho at the texture's x nodes, 1 - rho_avg) at one roughness, as NumPy float64 arrays: the
+        texture interpolated linearly along ln(rms_slope) as its own lookup does (clamped at the ends)."""
+        import numpy as np
+
+        pos = (math.log(rms_slope) - self.log_lo) / (self.log_hi - self.log_lo) * (self.ns - 1)
+        j = min(max(int(math.floor(pos)), 0), self.ns - 2)
+        w = min(max(pos - j, 0.0), 1.0)
+        cols = self.host.one_minus[:, j:j + 2].astype(np.float64)
+        avg = self.host.one_minus_avg[j:j + 2].astype(np.float64)
+        return (1.0 - w) * cols[:, 0] + w * cols[:, 1], float((1.0 - w) * avg[0] + w * avg[1])
+
+
+class DHRSlice:
+    """A function of the polar angle tabulated on the DHR texture's x nodes (x = 1 - sqrt(cos theta)): the
+    diffuse term's factor at one constant roughness (:meth:`DHRLookup.column`, scaled by the term).
+
+    Read by linear interpolation from a flat array, two gathers per lookup: a 2-D texture lookup traces
+    about 50 operations, this one 11, and every traced operation is paid again for every instance at
+    every render.  The values are those of the 2-D lookup at that roughness up to float32 rounding.
+    """
+
+    def __init__(self, values):
+        values = np.asarray(values, dtype=np.float32)
+        self.nt = len(values)
+        # one more node, a copy of the last: x = 1 (theta = 90 deg) reads node nt - 1 and its successor
+        self.data = mi.Float(np.append(values, values[-1]))
+
+    def __call__(self, cos_theta):
+        x = 1.0 - dr.sqrt(dr.maximum(cos_theta, 0.0))
+        pos = dr.maximum(x, 0.0) * (self.nt - 1)       # x < 0 for cos theta = 1 + eps: the first node
+        i = mi.UInt32(pos)
+        w = pos - mi.Float(i)
+        g0 = dr.gather(mi.Float, self.data, i)
+        return dr.fma(w, dr.gather(mi.Float, self.data, i + 1) - g0, g0)

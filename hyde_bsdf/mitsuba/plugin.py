@@ -14,6 +14,7 @@ import threading
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 from hyde_bsdf.errors import UsageError, UsageTypeError, shorten
 from hyde_bsdf.io.ior import material_files
@@ -196,7 +197,11 @@ Its deviation from the table, 1 - rho clipped at 0, for rms_slope in @RMS_SLOPE@
 theta <= 89 deg is <= 1.9e-5 (vgroove), 2.6e-5 (smith), 1.3e-4 (none), target 2e-4
 (``hyde_bsdf/validation/plugin_checks.py``, "DHR texture interpolation error"); denser grids
 cost render time once the roughness varies per point (cache misses).  1 - rho is
-clipped at 0 (rho > 1 happens without shadowing near grazing).
+clipped at 0 (rho > 1 happens without shadowing near grazing).  A constant roughness (a number whose
+value needs no gradient) reads instead a 1-D table of the diffuse factor over the polar angle at that
+roughness, cut from the same texture at load and at each update (4 kB per material): one interpolation
+per direction in place of a 2-D lookup, the same values to float32 rounding; every traced operation
+is paid again for every instance at every render (the cost per instance, benchmarks/bench_render.py).
 
 Sampling.  With probability p_spec the specular lobe is sampled from the
 (visible) Beckmann normals (``mi.MicrofacetDistribution``), otherwise a cosine
@@ -250,8 +255,6 @@ def _ior_texture(path):
                              "values": ", ".join(repr(float(v)) for v in values)})
     color = mi.spectrum_list_to_srgb(wavelengths, values, False, False)
     if mi.is_monochromatic:
-        import numpy as np
-
         return mi.load_dict({"type": "uniform",
                              "value": float(np.asarray(mi.luminance(color), dtype=float).ravel()[0])})
     return mi.load_dict({"type": "srgb", "color": color, "unbounded": True})
@@ -476,10 +479,33 @@ def _diffuse_reciprocal(dhr, cos_in, cos_i, cos_o, u, one_minus_avg):
     return _one_minus_clipped(dhr, cos_i, u) * _one_minus_clipped(dhr, cos_o, u) * dr.inv_pi / one_minus_avg
 
 
-#: diffuse name -> its factor (dhr, cos theta_in, cos theta_i, cos theta_o, slope coordinate, 1 - rho_avg): the
-#: term without M00 and without cos theta_o ("none": no diffuse lobe; "lambertian": no factor of the
-#: facet M00 -- its albedo texture, diffuse_reflectance / pi, is added unpolarized in ``_value``)
-_DIFFUSE = {"paper": _diffuse_paper, "reciprocal": _diffuse_reciprocal, "none": None, "lambertian": None}
+def _slice_paper(one_minus, one_minus_avg):
+    """Eq. 17's factor on the texture's nodes at one roughness, (1 - rho) / pi (1 - rho clipped at 0)."""
+    return np.maximum(one_minus, 0.0) / math.pi
+
+
+def _from_slice_paper(factor, cos_in, cos_i, cos_o):
+    return factor(cos_in)
+
+
+def _slice_reciprocal(one_minus, one_minus_avg):
+    """The reciprocal term's factor of one direction, (1 - rho) / sqrt(pi (1 - rho_avg)): the term is the
+    product of the two directions' factors."""
+    return np.maximum(one_minus, 0.0) / math.sqrt(math.pi * max(one_minus_avg, 1e-30))
+
+
+def _from_slice_reciprocal(factor, cos_in, cos_i, cos_o):
+    return factor(cos_i) * factor(cos_o)
+
+
+#: diffuse name -> (its factor (dhr, cos theta_in, cos theta_i, cos theta_o, slope coordinate, 1 - rho_avg): the
+#: term without M00 and without cos theta_o; the same tabulated over the polar angle at one roughness from
+#: (1 - rho at the texture's nodes, 1 - rho_avg), and the term from that table (an ``optics.DHRSlice``) and
+#: (cos theta_in, cos theta_i, cos theta_o)), or None: "none" has no diffuse lobe; "lambertian" no factor of the
+#: facet M00 -- its albedo texture, diffuse_reflectance / pi, is added unpolarized in ``_value``
+_DIFFUSE = {"paper": (_diffuse_paper, _slice_paper, _from_slice_paper),
+            "reciprocal": (_diffuse_reciprocal, _slice_reciprocal, _from_slice_reciprocal),
+            "none": None, "lambertian": None}
 
 
 def _read_albedo(props, term):
@@ -508,8 +534,6 @@ def _gain_warning(values, scale):
     (Priest-Germer) and so does the albedo, whatever the diffuse term (it only adds to rho); rho at
     89.5 deg grows with roughness, so the largest value decides.  ``values``: the roughness values read
     at load or update (None: not readable), ``scale``: 1 for rms_slope, 1/sqrt(2) for alpha."""
-    import numpy as np
-
     from hyde_bsdf.model.dhr import load_table
 
     advice = "use shadowing='vgroove' or 'smith' for a material that conserves energy (docs/plugin.md)"
@@ -616,7 +640,7 @@ def _make_class():
             self.m_g, self.m_visible_ratio, self.m_g1 = _SHADOWING["smith_fit" if fit else shadow.name]
             # Smith's G is G1(wi) G1(wo) with the G1 of the density: the value and the pdf share G1(wi)
             self.m_g_product = shadow.name == "smith"
-            self.m_diffuse_factor = _DIFFUSE[term.name]
+            self.m_diffuse_factor = _DIFFUSE[term.name]     # (traced, tabulated at one roughness, from the table)
             self.m_albedo = _read_albedo(props, term)
             self.m_albedo_mean = terms.PARAMETER_DEFAULTS["diffuse_reflectance"]
             self.m_has_diffuse = term.present
@@ -644,8 +668,6 @@ def _make_class():
             """Whether eval must guard the index (|k|, a tiny or zero index): not for constants read at load
             or update (checked k >= 0) whose every value has eta or k >= INDEX_MIN, in RGB and mono
             variants (a spectrum is 0 outside its wavelengths); a dozen traced operations per call."""
-            import numpy as np
-
             if (mi.is_spectral and not self.m_achromatic) or any(t.is_spatially_varying() for t in (self.m_eta, self.m_k)):
                 return True
             values = [self.m_reader(t) for t in (self.m_eta, self.m_k)]
@@ -795,11 +817,12 @@ def _make_class():
         def _rough(self, si, active):
             """Roughness at the shading point: one texture lookup per call, shared by all terms.
 
-            Returns (alpha, rms_slope, u, 1 - rho_avg): an ``alpha`` texture's value is used as the
+            Returns (alpha, rms_slope, u, 1 - rho_avg, table): an ``alpha`` texture's value is used as the
             Beckmann alpha unchanged (bit-identical to roughconductor's), rms_slope = alpha / sqrt(2); u
             is the DHR texture's slope coordinate and 1 - rho_avg its 1-D lookup, read once per call for
             the lobe choice and the reciprocal term (both None without a diffuse term).  A constant roughness's
-            are computed once per value (:meth:`_rough_constant`), not traced at every call.
+            are computed once per value (:meth:`_rough_constant`), not traced at every call, and so is its
+            table of the diffuse factor over the polar angle (an ``optics.DHRSlice``; else None).
             """
             if self.m_rough_constant is not None:
                 derived = self.m_rough_constant.get()
@@ -817,7 +840,14 @@ def _make_class():
             value = mi.traverse(self.m_rough)["value"]
             if dr.grad_enabled(value):
                 return None
-            return _Derived(value, self._rough_traced(dr.zeros(mi.SurfaceInteraction3f), True))
+            derived = self._rough_traced(dr.zeros(mi.SurfaceInteraction3f), True)
+            if self.m_dhr is not None and self.m_diffuse_factor is not None and self.m_rough_values is not None:
+                # the diffuse factor over the polar angle at this roughness: one 1-D lookup per direction
+                lo, hi = self.m_rough_range
+                r = min(max(float(np.max(self.m_rough_values)), lo), hi)
+                one_minus, one_minus_avg = self.m_dhr.column(r * self.m_rough_scale)
+                derived = derived[:4] + (po.DHRSlice(self.m_diffuse_factor[1](one_minus, one_minus_avg)),)
+            return _Derived(value, derived)
 
         def _rough_traced(self, si, active):
             """:meth:`_rough` from one texture lookup."""
@@ -832,9 +862,9 @@ def _make_class():
             else:
                 alpha, rms = SQRT2 * r, r
             if self.m_dhr is None:
-                return alpha, rms, None, None
+                return alpha, rms, None, None, None
             u = self.m_dhr.slope_coord(rms)
-            return alpha, rms, u, self.m_dhr.one_minus_rho_avg(u)
+            return alpha, rms, u, self.m_dhr.one_minus_rho_avg(u), None
 
         def _scale(self, si, active):
             """specular_reflectance; values not readable at load are clamped to [0, 1] (NaN: 0)."""
@@ -879,17 +909,22 @@ def _make_class():
             return po.safe_normalize(wi + wo, mi.Vector3f(0, 0, 1))
 
         def _geometry(self, wi, wo, active):
-            """(active, cos_i, cos_o, h, wi.h, wo.h) of a direction pair: shared by the value and the pdf."""
+            """(active, cos_i, cos_o, h, wi.h) of a direction pair: shared by the value and the pdf.  Where both
+            directions are above the surface (``active``), wi.h = wo.h = |wi + wo| / 2 > 0: both see the facet's
+            front, and no other check of it is needed."""
             cos_i = mi.Frame3f.cos_theta(wi)
             cos_o = mi.Frame3f.cos_theta(wo)
             h = self._half_vector(wi, wo)
-            return active & (cos_i > 0) & (cos_o > 0), cos_i, cos_o, h, dr.dot(wi, h), dr.dot(wo, h)
+            return active & (cos_i > 0) & (cos_o > 0), cos_i, cos_o, h, dr.dot(wi, h)
 
         def _diffuse(self, ctx, cos_i, cos_o, rough):
             """The diffuse term's factor (no M00, no cos theta_o); theta_in is the polar angle of the
             direction the light arrives from (wo_hat: ``wo`` in Radiance mode, ``si.wi`` in Importance)."""
             cos_in = cos_o if ctx.mode == mi.TransportMode.Radiance else cos_i
-            return self.m_diffuse_factor(self.m_dhr, cos_in, cos_i, cos_o, rough[2], rough[3])
+            traced, _, from_table = self.m_diffuse_factor
+            if rough[4] is not None:        # a constant roughness: its 1-D table
+                return from_table(rough[4], cos_in, cos_i, cos_o)
+            return traced(self.m_dhr, cos_in, cos_i, cos_o, rough[2], rough[3])
 
         def _lobes(self, ctx):
             """(specular on, diffuse on) for this context (Python booleans)."""
@@ -994,7 +1029,7 @@ def _make_class():
             spec_on, diff_on = lobes
             if not (spec_on or diff_on):
                 return dr.zeros(mi.Spectrum)
-            active, cos_i, cos_o, h, wi_h, wo_h = geo
+            active, cos_i, cos_o, h, wi_h = geo
             n, k = self._index(si, active)
             scale = self._scale(si, active)
             spec = lobe if spec_on else 0.0
@@ -1025,13 +1060,12 @@ def _make_class():
             specular lobe's from :meth:`_lobe`)."""
             if p_spec is None:
                 return mi.Float(0.0)
-            active, cos_i, cos_o, h, wi_h, wo_h = geo
+            active, cos_i, cos_o, h, wi_h = geo
             pdf_spec = 0.0
             if not (isinstance(p_spec, float) and p_spec == 0.0):
-                spec_ok = active & (wi_h > 0) & (wo_h > 0)
-                pdf_spec = dr.select(spec_ok, density, 0.0)
+                pdf_spec = dr.select(active, density, 0.0)     # active: wi.h = wo.h > 0 (``_geometry``)
                 if isinstance(p_spec, float) and p_spec == 1.0:
-                    return pdf_spec         # 0 where not active (spec_ok implies active)
+                    return pdf_spec
             pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo)
             return dr.select(active, p_spec * pdf_spec + (1.0 - p_spec) * pdf_diff, 0.0)
 
@@ -1111,7 +1145,8 @@ def _make_class():
             m, pdf_m = distr.sample(po.snap_to_normal(wi), sample2)
             # a back-facing normal (possible without visible-normal sampling) is a failed sample
             # (sample1 >= p_spec), not ~choose_spec: in scalar variants choose_spec is a Python bool
-            active = active & ((sample1 >= p_spec) | ((pdf_m != 0) & (dr.dot(wi, m) > 0)))
+            drawn = (pdf_m != 0) if self.m_sample_visible else (pdf_m != 0) & (dr.dot(wi, m) > 0)
+            active = active & ((sample1 >= p_spec) | drawn)
             wo_spec = mi.reflect(wi, m)
             wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
             wo = bs.wo = dr.select(choose_spec, wo_spec, wo_diff)
