@@ -707,6 +707,25 @@ class _FitData:
         return residuals
 
 
+def recent_points(fn, size: int = 8):
+    """``fn(x)`` (arrays, or a tuple of arrays) remembering its last ``size`` points: an optimiser that asks for a
+    point again (the base of a Jacobian after a rejected step, the start of a refit) gets copies of the same
+    arrays, not a new evaluation of the model (a deterministic ``fn``: the same x, the same bits)."""
+    recent = {}
+
+    def call(x):
+        key = np.asarray(x, float).tobytes()
+        got = recent.get(key)
+        if got is None:
+            got = fn(x)
+            if len(recent) >= size:
+                del recent[next(iter(recent))]
+            recent[key] = got
+        return tuple(a.copy() for a in got) if isinstance(got, tuple) else got.copy()
+
+    return call
+
+
 class _Objective:
     """The weighted residuals of the fitted parameters and their bounded minimization."""
 
@@ -732,13 +751,14 @@ class _Objective:
             yd = np.concatenate([d.y[n][sel] for n in d.names])
             wd = np.concatenate([d.w[n][sel] for n in d.names])
 
-        def residual(x):
+        @recent_points
+        def weighted(x):
             model = _elements(a, b, c, d.names, **self.unpack(x), shadowing=self.shadowing,
                               diffuse=self.mode, strict=False)
             r = (np.concatenate([model[n] for n in d.names]) - yd) / wd
             self.report.tick(r)
             return r
-        return residual
+        return weighted
 
     def starts(self) -> np.ndarray:
         """Every combination of start values (several only for fitted n/k given no start)."""

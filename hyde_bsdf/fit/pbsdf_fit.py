@@ -41,7 +41,7 @@ import numpy as np
 from hyde_bsdf.errors import UsageError
 from hyde_bsdf.fit.adequacy import (ERRORS_NOTE, Verdict, cluster_covariance, correlation, floor_verdict,
                                     geometry_clusters, half_angles, json_number, larger_errors)
-from hyde_bsdf.fit.mueller_fit import DEFAULT_STARTS, raise_or_warn
+from hyde_bsdf.fit.mueller_fit import DEFAULT_STARTS, raise_or_warn, recent_points
 from hyde_bsdf.fit.pbsdf_samples import PbsdfSamples, pbsdf_samples
 from hyde_bsdf.fit.spectral import spectrum_element, wavelength_note
 from hyde_bsdf.model.evaluator import pbrdf
@@ -204,13 +204,16 @@ class _Problem:
         self.opts = dict(shadowing=shadowing, diffuse=diffuse)
         self.s00, self.sel = s00, sel
         self.tick = tick
+        self.parts = recent_points(self._parts)
 
     def values(self, x):
         v = dict(self.fixed)
         v.update(zip(self.free, x))
         return v
 
-    def parts(self, x):
+    def _parts(self, x):
+        """(log M00 residuals [bands, rows], normalized-element residuals [bands, 6, rows]) at ``x`` (``parts``:
+        the same, the last few points remembered)."""
         v = self.values(x)
         r00, rel = [], []
         for i, b in enumerate(self.bands):
@@ -226,7 +229,6 @@ class _Problem:
         r00, rel = self.parts(x)
         r = np.concatenate([r00.ravel() / self.s00, rel.ravel() / self.sel])
         self.tick(r)
-        self.last = (np.array(x, float), r)
         return r
 
     def _band_rows(self):
@@ -240,8 +242,7 @@ class _Problem:
         only band b's residuals, so three residual evaluations (rms_slope, every n, every k) give
         every column, however many bands (instead of one evaluation per column)."""
         x = np.asarray(x, float)
-        last = getattr(self, "last", None)
-        r0 = last[1] if last is not None and np.array_equal(last[0], x) else self(x)
+        r0 = self(x)                    # the optimiser's last point, remembered by parts
         h = 1e-6 * np.maximum(1.0, np.abs(x))
         h = np.where(x + h > hi, -h, h)
         J = np.zeros((r0.size, x.size))
@@ -256,7 +257,6 @@ class _Problem:
                 p = self.free[i]
                 sel = rows[p[1]] if isinstance(p, tuple) else slice(None)
                 J[sel, i] = d[sel] / h[i]
-        self.last = (x, r0)
         return J
 
 

@@ -103,6 +103,28 @@ def _check_memory(size: int) -> None:
                      "4x4 result)", "pass fewer directions in theta_i, theta_r, phi at once")
 
 
+#: the last block's directions (their bytes) and geometry: a fit evaluates the same directions at every step with
+#: other parameters, and the geometry depends on the directions alone (one entry, a block's worth of arrays)
+_LAST_GEOMETRY = [None]
+
+
+def _geometry(theta_i, theta_r, phi):
+    """(angle_trig's sines and cosines, above the horizon, (cos alpha, cos beta, tan^2 alpha), Eq. 10's
+    rotation terms) of one block of directions (1-D float arrays); the previous block's arrays (read-only)
+    when its angles are these, bit for bit."""
+    key = (theta_i.tobytes(), theta_r.tobytes(), phi.tobytes())
+    last = _LAST_GEOMETRY[0]
+    if last is not None and last[0] == key:
+        return last[1]
+    trig = angle_trig(theta_i, theta_r, phi)
+    up = (trig[1] > HORIZON_COS) & (trig[3] > HORIZON_COS)     # at or below the horizon: F = 0
+    geometry = (trig, up, cos_alpha_beta(*trig), rotation_terms(*trig))
+    for a in (*trig, up, *geometry[2], *geometry[3]):
+        a.flags.writeable = False
+    _LAST_GEOMETRY[0] = (key, geometry)
+    return geometry
+
+
 def _evaluate(theta_i, theta_r, phi, s, index, shadowing, diffuse=None):
     """F^s (plus, with ``diffuse`` = (term, hemisphere, its parameters), F^d_00) for broadcast angles,
     an :class:`Index` and a shadowing record, :data:`_BLOCK` directions at a time: beyond the result the
@@ -121,16 +143,15 @@ def _evaluate(theta_i, theta_r, phi, s, index, shadowing, diffuse=None):
         for lo in range(0, size, _BLOCK):
             sl = slice(lo, lo + _BLOCK)
             a, b = ti.flat[sl], tr.flat[sl]               # a copy of the block only
-            si, ci, sr, cr, sh, ch = trig = angle_trig(a, b, ph.flat[sl])
-            up = (ci > HORIZON_COS) & (cr > HORIZON_COS)       # at or below the horizon: F = 0
-            cos_a, cos_b, tan2_a = cos_alpha_beta(*trig)
+            trig, up, (cos_a, cos_b, tan2_a), rotation = _geometry(a, b, ph.flat[sl])
+            si, ci, sr, cr, sh, ch = trig
             G = shadowing.g(cos_a, cos_b, ci, cr, s)
             # Eq. 6: F^s = P M G / (4 cos ti cos tr cos alpha)
             scale = beckmann_P(cos_a, tan2_a, s) * G / (4.0 * ci * cr * cos_a)
             scale = np.where(up, scale, 0.0)
             A, B, C, S = fresnel_mueller_terms(np.where(up, cos_b, 1.0), index)
             block = buf[:, :, sl]
-            rotated_fresnel_mueller(A, B, C, S, *rotation_terms(*trig), scale, block)
+            rotated_fresnel_mueller(A, B, C, S, *rotation, scale, block)
             if diffuse is not None:                       # Eq. 17: F^d_00 above the horizon
                 term, hemisphere, own = diffuse
                 block[0, 0] += np.where(up, term.f00(hemisphere, a, b, A, **own), 0.0)
