@@ -356,21 +356,21 @@ class DHRSlice:
     """A function of the polar angle tabulated on the DHR texture's x nodes (x = 1 - sqrt(cos theta)): the
     diffuse term's factor at one constant roughness (:meth:`DHRLookup.column`, scaled by the term).
 
-    Read by linear interpolation from a flat array, two gathers per lookup: a 2-D texture lookup traces
-    about 50 operations, this one 11, and every traced operation is paid again for every instance at
-    every render.  The values are those of the 2-D lookup at that roughness up to float32 rounding.
+    Read by linear interpolation from flat arrays of the node values and of their differences to the next
+    node (computed in float64), two gathers per lookup: a 2-D texture lookup traces about 50 operations,
+    this one 8, and every traced operation is paid again for every instance at every render.  The values
+    are those of the 2-D lookup at that roughness up to float32 rounding.
     """
 
     def __init__(self, values):
-        values = np.asarray(values, dtype=np.float32)
+        values = np.asarray(values, dtype=np.float64)
         self.nt = len(values)
-        # one more node, a copy of the last: x = 1 (theta = 90 deg) reads node nt - 1 and its successor
-        self.data = mi.Float(aligned_float32(np.append(values, values[-1])))
+        self.data = mi.Float(aligned_float32(values))
+        # the last node (x = 1, theta = 90 deg) has no successor: difference 0
+        self.delta = mi.Float(aligned_float32(np.append(np.diff(values), 0.0)))
 
     def __call__(self, cos_theta):
-        x = 1.0 - dr.sqrt(dr.maximum(cos_theta, 0.0))
-        pos = dr.maximum(x, 0.0) * (self.nt - 1)       # x < 0 for cos theta = 1 + eps: the first node
+        # (1 - sqrt(cos theta)) (nt - 1) in [0, nt - 1]; cos theta is clipped (1 + eps, and inactive lanes)
+        pos = dr.fma(dr.sqrt(dr.clip(cos_theta, 0.0, 1.0)), 1.0 - self.nt, self.nt - 1.0)
         i = mi.UInt32(pos)
-        w = pos - mi.Float(i)
-        g0 = dr.gather(mi.Float, self.data, i)
-        return dr.fma(w, dr.gather(mi.Float, self.data, i + 1) - g0, g0)
+        return dr.fma(pos - mi.Float(i), dr.gather(mi.Float, self.delta, i), dr.gather(mi.Float, self.data, i))

@@ -199,7 +199,7 @@ theta <= 89 deg is <= 1.9e-5 (vgroove), 2.6e-5 (smith), 1.3e-4 (none), target 2e
 cost render time once the roughness varies per point (cache misses).  1 - rho is
 clipped at 0 (rho > 1 happens without shadowing near grazing).  A constant roughness (a number whose
 value needs no gradient) reads instead a 1-D table of the diffuse factor over the polar angle at that
-roughness, cut from the same texture at load and at each update (4 kB per material): one interpolation
+roughness, cut from the same texture at load and at each update (8 kB per material): one interpolation
 per direction in place of a 2-D lookup, the same values to float32 rounding; every traced operation
 is paid again for every instance at every render (the cost per instance, benchmarks/bench_render.py).
 
@@ -987,18 +987,19 @@ def _make_class():
             evaluated at cos beta = 1 there (finite), times factors that are 0.
             """
             no_diff = isinstance(diff, float) and diff == 0.0
-            spec = dr.select(active, spec, 0.0) * scale
-            if not no_diff:
-                diff = dr.select(active, diff, 0.0) * scale
             # a Float: broadcast to the index's spectrum where needed
             cos_beta = dr.select(active, cos_beta, 1.0)
-            if not self.m_polarized:
+            if not self.m_polarized:    # both terms multiply the same Fresnel average: their sum, masked once
+                weight = dr.select(active, spec if no_diff else spec + diff, 0.0) * scale
                 if isinstance(n, mi.Float):
                     fresnel = po.fresnel_average(cos_beta, n, k)
                 else:   # per channel on Floats: ~2x fewer host microseconds than on the spectrum type
                     fresnel = type(n)(*[po.fresnel_average(cos_beta, n[i], k[i]) for i in range(len(n))])
-                value = fresnel * (spec if no_diff else spec + diff)
+                value = fresnel * weight
                 return value if isinstance(value, mi.Spectrum) else mi.Spectrum(value)
+            spec = dr.select(active, spec, 0.0) * scale
+            if not no_diff:
+                diff = dr.select(active, diff, 0.0) * scale
             a, b, c, s = po.fresnel_mueller_entries(*po.facet_fresnel(cos_beta, n, k))
             # Light arrives along -wo_hat and leaves along +wi_hat (roughconductor's frames)
             if ctx.mode == mi.TransportMode.Radiance:
@@ -1063,9 +1064,10 @@ def _make_class():
             active, cos_i, cos_o, h, wi_h = geo
             pdf_spec = 0.0
             if not (isinstance(p_spec, float) and p_spec == 0.0):
-                pdf_spec = dr.select(active, density, 0.0)     # active: wi.h = wo.h > 0 (``_geometry``)
+                # 0 where not active; active: wi.h = wo.h > 0 (``_geometry``)
                 if isinstance(p_spec, float) and p_spec == 1.0:
-                    return pdf_spec
+                    return dr.select(active, density, 0.0)
+                pdf_spec = density      # masked with the mixture below
             pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo)
             return dr.select(active, p_spec * pdf_spec + (1.0 - p_spec) * pdf_diff, 0.0)
 
