@@ -75,6 +75,8 @@ def eval_paper(bsdf, om_i, om_r, s_i, s_r, *, wavelength=550.0, mode="radiance")
     import drjit as dr
     import mitsuba as mi
 
+    from hyde_bsdf.mitsuba.optics import aligned_float32
+
     om_i = np.atleast_2d(om_i)
     om_r = np.atleast_2d(om_r)
     s_i = np.atleast_2d(s_i)
@@ -87,7 +89,7 @@ def eval_paper(bsdf, om_i, om_r, s_i, s_r, *, wavelength=550.0, mode="radiance")
 
     def V(a):
         if jit:
-            return mi.Vector3f(*(mi.Float(np.ascontiguousarray(a[:, j], dtype=np.float32)) for j in range(3)))
+            return mi.Vector3f(*(mi.Float(aligned_float32(a[:, j])) for j in range(3)))
         return mi.Vector3f(*(float(a[0, j]) for j in range(3)))
 
     def one_batch(oi, orr, si_ax, sr_ax):

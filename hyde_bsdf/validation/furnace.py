@@ -76,8 +76,10 @@ def _mode(mi, mode):
 
 def _interactions(mi, dr, thetas, samples):
     """A SurfaceInteraction3f with ``samples`` lanes per angle (radians), wi in the x-z plane."""
+    from hyde_bsdf.mitsuba.optics import aligned_float32
+
     n = len(thetas) * samples
-    theta = dr.gather(mi.Float, mi.Float(np.asarray(thetas, np.float32)), dr.arange(mi.UInt32, n) // samples)
+    theta = dr.gather(mi.Float, mi.Float(aligned_float32(thetas)), dr.arange(mi.UInt32, n) // samples)
     si = dr.zeros(mi.SurfaceInteraction3f, n)
     si.wi = mi.Vector3f(dr.sin(theta), 0.0, dr.cos(theta))
     si.n = mi.Normal3f(0.0, 0.0, 1.0)
@@ -87,6 +89,8 @@ def _interactions(mi, dr, thetas, samples):
 
 def _estimates(mi, dr, bsdf, mode, thetas, samples, seed):
     """(mean, SE) per angle of the two estimators (see the module docstring): arrays (2, len(thetas))."""
+    from hyde_bsdf.mitsuba.optics import aligned_float32
+
     si = _interactions(mi, dr, thetas, samples)
     ctx = mi.BSDFContext(_mode(mi, mode))
     # uniform numbers from NumPy's PCG64: Dr.Jit's PCG32 seeded with one state and consecutive stream
@@ -94,7 +98,7 @@ def _estimates(mi, dr, bsdf, mode, thetas, samples, seed):
     rng = np.random.default_rng(seed)
 
     def uniform(count=1):
-        u = [mi.Float(rng.random(dr.width(si), dtype=np.float32)) for _ in range(count)]
+        u = [mi.Float(aligned_float32(rng.random(dr.width(si), dtype=np.float32))) for _ in range(count)]
         return u[0] if count == 1 else mi.Point2f(*u)
 
     # 1. the sampling weight

@@ -81,13 +81,15 @@ def _time_eval(mi, bsdf, om_i, om_r):
     variants a Python loop."""
     import drjit as dr
 
+    from hyde_bsdf.mitsuba.optics import aligned_float32
+
     ctx = mi.BSDFContext()
     if dr.is_jit_v(mi.Float):
         si = dr.zeros(mi.SurfaceInteraction3f)
-        si.wi = mi.Vector3f(*(mi.Float(om_r[:, j].astype(np.float32)) for j in range(3)))
+        si.wi = mi.Vector3f(*(mi.Float(aligned_float32(om_r[:, j])) for j in range(3)))
         if mi.is_spectral:
             si.wavelengths = mi.UnpolarizedSpectrum(633.0)
-        wo = mi.Vector3f(*(mi.Float(om_i[:, j].astype(np.float32)) for j in range(3)))
+        wo = mi.Vector3f(*(mi.Float(aligned_float32(om_i[:, j])) for j in range(3)))
         dr.eval(si, wo)
 
         def go():
@@ -244,6 +246,7 @@ def dhr_texture_error(out, quick):
     from hyde_bsdf.model.parameters import RMS_SLOPE
     from hyde_bsdf.mitsuba.variants import set_variant
     from hyde_bsdf.model.dhr import load_table
+    from hyde_bsdf.mitsuba.optics import aligned_float32
 
     set_variant("llvm_ad_rgb", fallback=False)
     rng = np.random.default_rng(17)
@@ -254,8 +257,8 @@ def dhr_texture_error(out, quick):
         theta = np.arccos(rng.uniform(math.cos(math.radians(theta_max)), 1.0, n))
         for sh in ("vgroove", "smith", "none"):
             lut = _dhr_lookup(sh)
-            got = np.maximum(np.array(lut.one_minus_rho(mi.Float(np.cos(theta)),
-                                                        lut.slope_coord(mi.Float(rms)))), 0.0)
+            got = np.maximum(np.array(lut.one_minus_rho(mi.Float(aligned_float32(np.cos(theta))),
+                                                        lut.slope_coord(mi.Float(aligned_float32(rms))))), 0.0)
             want = np.maximum(1.0 - load_table(sh)(theta, rms), 0.0)
             err = np.abs(got - want)
             i = int(err.argmax())
