@@ -60,7 +60,8 @@ def convergence(out, quick):
     for ax in (ax1, ax2):
         ax.legend(fontsize=8)
     fig.suptitle("DHR quadrature: accuracy against nodes and time")
-    fig.tight_layout()
+    # the margins tight_layout chose for these labels, fixed: it measured every tick label again (~0.3 CPU s)
+    fig.subplots_adjust(left=0.078, right=0.965, bottom=0.152, top=0.868, wspace=0.159)  # right: time ticks vary
     save_figure(fig, out / "dhr_convergence.png")
     write_csv(out / "dhr_convergence.csv", ["shadowing", "n_outer", "n_inner", "max_abs_error", "seconds_per_point"], rows)
     return [dict(name=f"DHR quadrature ({sh}) default rule, hard points: max error", value=v,

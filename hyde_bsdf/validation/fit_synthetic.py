@@ -301,7 +301,8 @@ def _plot_correlation(rows, path):
     axes[0].legend(fontsize=7)
     fig.suptitle(f"expected fit uncertainty (Jacobian at the truth; noise {NOISE}/sqrt({N_SAMPLES}) per value); "
                  "missing points: singular Jacobian", fontsize=9)
-    fig.tight_layout()
+    # the margins tight_layout chose for these labels, fixed: it measured every tick label again (~0.3 CPU s)
+    fig.subplots_adjust(left=0.033, right=0.989, bottom=0.146, top=0.837, wspace=0.142)
     save_figure(fig, path, dpi=110)
 
 

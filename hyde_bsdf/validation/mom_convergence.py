@@ -182,7 +182,8 @@ def main(argv=None):
         ax.grid(True, which="both", lw=0.3)
     axes[0].legend(fontsize=7)
     fig.suptitle("MoM convergence: error against run time (Fig. 6 statistics, 5 incidence angles)")
-    fig.tight_layout()
+    # the margins tight_layout chose for these labels, fixed: it measured every tick label again (~0.3 CPU s)
+    fig.subplots_adjust(left=0.065, right=0.988, bottom=0.133, top=0.898, wspace=0.202)
     png = os.path.join(args.outdir, "mom_convergence.png")
     save_figure(fig, png, dpi=120)
 

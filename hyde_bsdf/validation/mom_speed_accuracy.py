@@ -142,7 +142,8 @@ def validate(outdir="out/validation", quick=False):
     axes[0].set_ylabel("max(|dR_s|, |dR_p|, |d phase|/100 deg)")
     axes[1].set_ylabel("median rel. std error of M00 (lobe)")
     fig.suptitle("MoM, both polarisations, finite index: time against error", fontsize=9)
-    fig.tight_layout()
+    # the margins tight_layout chose for these labels, fixed: it measured every tick label again (~0.3 CPU s)
+    fig.subplots_adjust(left=0.068, right=0.99, bottom=0.16, top=0.828, wspace=0.26)
     save_figure(fig, out / "mom_speed_accuracy.png")
     d = next(r for r in a if r[1] == 10)
     slope_rows = [r for r in b]
