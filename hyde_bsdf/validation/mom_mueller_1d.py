@@ -143,7 +143,8 @@ def figure(case, res, mod, path):
         ax.set_xlabel("theta_r (deg, + = specular side)")
     fig.suptitle(f"MoM vs the 1-D pBRDF, {title}, rms slope {slope}, ell = {ELL:g} lambda, "
                  f"{res.params['partitions']} partitions", fontsize=9)
-    fig.tight_layout()
+    # the margins tight_layout chose for these labels, fixed: it measured every tick label again (~0.1 CPU s)
+    fig.subplots_adjust(left=0.075, right=0.985, bottom=0.084, top=0.907, wspace=0.17, hspace=0.232)
     save_figure(fig, path)
 
 

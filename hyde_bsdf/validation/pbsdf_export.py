@@ -377,7 +377,8 @@ def validate(outdir="out/validation", quick=False):
                       (f"{rec['resolution']} ({rec['mbytes']:.0f} MB)" if rec else
                        "none of this sweep" + (" (quick mode: small tables only)" if quick else "")))
                      + f"; default {'x'.join(map(str, DEFAULT_RESOLUTION))}", fontsize=9)
-        fig.tight_layout()
+        # the margins tight_layout chose for these labels, fixed: it measured every tick label again (~0.1 CPU s)
+        fig.subplots_adjust(left=0.046, right=0.99, bottom=0.133, top=0.835, wspace=0.366)
         save_figure(fig, out / "pbsdf_export.png")
     finally:
         for p in work.glob("*"):

@@ -369,7 +369,8 @@ def plot_plane(rows: list[dict], path: Path, title: str) -> None:
         ax.set_title(f"S{c}: {ok.sum()}/{ok.size} within 4 sigma + model tol", fontsize=9)
         ax.legend(fontsize=8)
     fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    # the margins tight_layout chose for these labels, fixed: it measured every tick label again (~0.1 CPU s)
+    fig.subplots_adjust(left=0.044, right=0.971, bottom=0.127, top=0.818, wspace=0.486)
     save_figure(fig, path, dpi=110)
 
 
