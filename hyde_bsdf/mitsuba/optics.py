@@ -342,8 +342,6 @@ class DHRLookup:
     def column(self, rms_slope):
         """(1 - rho at the texture's x nodes, 1 - rho_avg) at one roughness, as NumPy float64 arrays: the
         texture interpolated linearly along ln(rms_slope) as its own lookup does (clamped at the ends)."""
-        import numpy as np
-
         pos = (math.log(rms_slope) - self.log_lo) / (self.log_hi - self.log_lo) * (self.ns - 1)
         j = min(max(int(math.floor(pos)), 0), self.ns - 2)
         w = min(max(pos - j, 0.0), 1.0)
