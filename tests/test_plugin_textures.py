@@ -223,7 +223,8 @@ def test_arrays_for_dr_jit_start_on_64_bytes_so_kernels_are_reused():
     """The DHR lookups and the validation's direction arrays hand Dr.Jit NumPy memory that starts on a 64-byte
     boundary (aligned_float32): Dr.Jit writes an input's alignment into the kernel, so arrays from NumPy's
     16-byte-aligned blocks made a new kernel (compiled again, missing the disk cache) whenever the address was
-    not a multiple of 64 -- shown with the NumPy arrays themselves.  The same values; one kernel.  ~0.5 s."""
+    not a multiple of 64 -- shown with the NumPy arrays themselves where the CPU makes that difference.  The same
+    values; one kernel.  ~0.5 s."""
     import drjit as dr
 
     mi = mitsuba_with_hyde("llvm_ad_rgb")
@@ -242,4 +243,6 @@ def test_arrays_for_dr_jit_start_on_64_bytes_so_kernels_are_reused():
 
     assert aligned_float32(np.ones((3, 5))).ctypes.data % 64 == 0 and aligned_float32(np.ones((3, 5))).shape == (3, 5)
     assert len(kernels(aligned_float32)) == 1
-    assert len(kernels(lambda raw: raw)) == 2                 # "align 64" and "align 1" variants
+    # Unaligned memory makes an "align 1" variant beside "align 64" on this AVX-512 machine (2 kernels); on the CI
+    # machine's CPU the two fell together (1 kernel).  Aligned arrays give one kernel on both.
+    assert 1 <= len(kernels(lambda raw: raw)) <= 2
