@@ -174,12 +174,13 @@ Facet frame.  The facet's s axis (perpendicular to its plane of incidence) is
 wo_hat x wi_hat, parallel to roughconductor's cross(h, -wo_hat), but computed with
 a compensated (Kahan) cross product: near backscatter the plain float32 product
 tilts the Stokes frame by ~eps/|wi x wo| (roughconductor is off the float64
-evaluator by up to 3e-5 there, this plugin by < 2e-6).  Every normalisation goes
-through :func:`hyde_bsdf.mitsuba.optics.safe_normalize` (no float32 underflow of the
-squared norm) with a named fallback: "collinear" (wo_hat parallel to wi_hat to float32
-precision: backscatter or both along the normal; the facet is then at normal incidence,
+evaluator by up to 3e-5 there, this plugin by < 2e-6).  Every normalisation has a named
+fallback where float32 cannot normalise: "collinear" (the s axis through
+:func:`hyde_bsdf.mitsuba.optics.safe_normalize`: wo_hat parallel to wi_hat to float32
+precision, backscatter or both along the normal; the facet is then at normal incidence,
 where its Mueller matrix does not depend on the s axis, and s = stokes_basis(-wo_hat))
-and "opposite" (wi = -wo on the horizon: h = +z, an inactive lane).  Directions within
+and "opposite" (|wi + wo| < 1e-15, both within 1e-15 of the horizon: no half vector, the
+pair reflects nothing).  Directions within
 1e-15 of the normal are snapped onto it before Mitsuba's Smith G1, which is NaN there
 (roughconductor too); D G / (4 cos theta_i) and its pdf are capped at MAX_LOBE = 1e30.
 No direction pair gives NaN (tests: 1e-38 ... 1e-3 from the normal and from each other).
@@ -314,6 +315,10 @@ def _dhr_lookup(shadowing):
 #: (alpha 1.4e-4: D(0) = 1.6e7) seen at cos theta_i < 1e-31 would overflow float32 to Inf (and
 #: Inf * 0 = NaN in the Mueller entries); no physical radiance comes near this bound.
 MAX_LOBE = 1e30
+
+
+#: below this length wi + wo has no direction in float32 (``_half_vector``: its squared norm would lose components)
+MIN_HALF = 1e-15
 
 
 def _pos(x):
@@ -944,12 +949,17 @@ def _make_class():
 
         @staticmethod
         def _half_vector(wi, wo):
-            """The facet normal h = normalize(wi + wo).
+            """(h, found): the facet normal h = normalize(wi + wo), and where it is found.
 
-            Named fallback, "opposite": wi = -wo (both on the horizon, |wi + wo| < 1e-37) has no
-            half vector; the mean normal +z is used (such lanes are inactive: cos theta = 0).
+            Named fallback, "opposite": |wi + wo| < MIN_HALF (wi = -wo to float32 precision; above the surface
+            only where both lie within 1e-15 of the horizon) has no half vector: the pair reflects nothing
+            (``found`` is false; h is then finite and unused).  Elsewhere the squared norm, >= MIN_HALF^2 =
+            1e-30, neither underflows nor loses a component (squares down to 2^-24 of it are normal floats).
             """
-            return po.safe_normalize(wi + wo, mi.Vector3f(0, 0, 1))
+            v = wi + wo
+            n2 = dr.squared_norm(v)
+            found = n2 >= MIN_HALF * MIN_HALF
+            return v * dr.rsqrt(dr.select(found, n2, 1.0)), found
 
         def _geometry(self, wi, wo, active):
             """(active, cos_i, cos_o, h, wi.h) of a direction pair: shared by the value and the pdf.  Where both
@@ -957,8 +967,8 @@ def _make_class():
             front, and no other check of it is needed."""
             cos_i = mi.Frame3f.cos_theta(wi)
             cos_o = mi.Frame3f.cos_theta(wo)
-            h = self._half_vector(wi, wo)
-            return active & (cos_i > 0) & (cos_o > 0), cos_i, cos_o, h, dr.dot(wi, h)
+            h, found = self._half_vector(wi, wo)
+            return active & (cos_i > 0) & (cos_o > 0) & found, cos_i, cos_o, h, dr.dot(wi, h)
 
         def _diffuse(self, ctx, cos_i, cos_o, rough):
             """The diffuse term's factor (no M00, no cos theta_o); theta_in is the polar angle of the
