@@ -207,7 +207,7 @@ is paid again for every instance at every render (the cost per instance, benchma
 
 Sampling.  With probability p_spec the specular lobe is sampled from the
 visible Beckmann normals of the shadowing, otherwise a cosine hemisphere.  With "vgroove" these are
-the V-cavity's, exact (Heitz & d'Eon 2014, EGSR): a normal from D cos theta_m, then it or its mirror
+the V-cavity's, exact (Heitz & d'Eon 2014): a normal from D cos theta_m, then it or its mirror
 image, the cavity's other face, in proportion to their projected areas; the density is D G1 wi.m /
 cos theta_i with the V-cavity's G1, whose minimum over the two directions is Eq. 12's G, so the
 sampling weight is <= F (a sixth of the traced operations of Smith's).  With "smith" and "none"
@@ -215,8 +215,8 @@ they are Smith's (``mi.MicrofacetDistribution``).  p_spec = clamp(rho_avg, 0.05,
 (the 1-D texture of the reciprocal term): the ratio of the specular albedo rho F to
 rho F + (1 - rho) F (F common to both lobes) averaged over the incidence angle; one
 1-D lookup in place of a second 2-D one into the DHR texture (any p_spec in (0, 1)
-that the pdf also uses is unbiased); p_spec = 1 when ``diffuse="none"`` (then ``sample`` equals
-roughconductor's).  ``pdf`` and ``eval_pdf`` return the mixture density.
+that the pdf also uses is unbiased); p_spec = 1 when ``diffuse="none"`` (then, with "smith", ``sample``
+equals roughconductor's).  ``pdf`` and ``eval_pdf`` return the mixture density.
 
 Components: 0 = glossy reflection (specular lobe), 1 = diffuse reflection.
 """
@@ -464,9 +464,9 @@ def _g1_exact(distr, v, m):
 
 
 def _g1_vcavity(distr, v, m):
-    """The V-cavity masking of one direction, G1(v, m) = min(1, 2 cos theta_m cos theta_v / v.m), 0 where ``v``
-    sees the back of ``m`` (Heitz 2014, JCGT 3(2), Sec. 3): min(G1(wi, h), G1(wo, h)) is the V-groove G of
-    paper Eq. 12, and D G1(wi, m) (wi.m)+ / cos theta_i the density :func:`_sample_vcavity` draws from."""
+    """The V-cavity masking of one direction (Heitz 2014, JCGT 3(2)), G1(v, m) = min(1, 2 cos theta_m cos
+    theta_v / v.m), 0 where ``v`` sees the back of ``m``: min(G1(wi, h), G1(wo, h)) is the V-groove G of paper
+    Eq. 12, and D G1(wi, m) (wi.m)+ / cos theta_i the density :func:`_sample_vcavity` draws from."""
     v_m = dr.dot(v, m)
     front = v_m > 0
     return dr.select(front, dr.clip(2.0 * m.z * v.z / dr.select(front, v_m, 1.0), 0.0, 1.0), 0.0)
@@ -478,13 +478,13 @@ def _sample_smith(distr, wi, sample2, u):
 
 
 def _sample_vcavity(distr, wi, sample2, u):
-    """(m, its density): the visible normals of the V-cavity model, exactly (Heitz & d'Eon 2014, EGSR,
-    Sec. 5.2): m from D(m) cos theta_m (Mitsuba's sampler without visible normals), then m or its
-    mirror m' = (-m.x, -m.y, m.z), the cavity's other face, with probability proportional to its projected
-    area (wi.m)+ : (wi.m)+ + (wi.m')+ >= 2 cos theta_i cos theta_m > 0.  D(m') = D(m), so the density of the
-    chosen face is D cos theta_m 2 (wi.m)+ / ((wi.m)+ + (wi.m')+) = D G1(wi, m) (wi.m)+ / cos theta_i
-    (:func:`_g1_vcavity`).  With the V-groove G the sampling weight G F / G1(wi) is <= F.  ``u`` in [0, 1)
-    chooses the face; 166 traced operations against 906 of the visible Smith normals."""
+    """(m, its density): the visible normals of the V-cavity model, exactly (Heitz & d'Eon 2014, Comput. Graph.
+    Forum 33(4), its V-cavity algorithm): m from D(m) cos theta_m (Mitsuba's sampler without visible normals),
+    then m or its mirror m' = (-m.x, -m.y, m.z), the cavity's other face, with probability proportional to its
+    projected area (wi.m)+ ; (wi.m)+ + (wi.m')+ >= 2 cos theta_i cos theta_m > 0.  D(m') = D(m), so the
+    density of the chosen face is D cos theta_m 2 (wi.m)+ / ((wi.m)+ + (wi.m')+) = D G1(wi, m) (wi.m)+ /
+    cos theta_i (:func:`_g1_vcavity`).  With the V-groove G the sampling weight G F / G1(wi) is <= F.  ``u``
+    in [0, 1) chooses the face; 166 traced operations against 906 of the visible Smith normals."""
     m, pdf = mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, distr.alpha(), False).sample(wi, sample2)
     axial, lateral = wi.z * m.z, wi.x * m.x + wi.y * m.y
     a = dr.maximum(axial + lateral, 0.0)            # (wi.m)+
