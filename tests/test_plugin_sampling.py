@@ -1,7 +1,8 @@
 """Sampling of the ``hyde`` plugin: chi^2 tests and sample/eval/pdf consistency.
 
 Physics checked: the directions ``sample`` draws (visible-normal Beckmann sampling
-of the specular lobe mixed with cosine sampling of the diffuse lobe) follow the
+of the specular lobe -- the V-cavity's visible normals with V-groove shadowing, Smith's otherwise -- mixed with
+cosine sampling of the diffuse lobe) follow the
 density ``pdf`` reports - Mitsuba's chi^2 test on the sphere (``mitsuba.chi2``,
 with the polarization-aware adapter ``hyde_bsdf.validation._chi2``) at 13 (rms_slope,
 theta_i) configurations spanning rms_slope 0.02-1.5 and theta_i 0-85 deg, for
@@ -28,6 +29,8 @@ MODELS = {  # (shadowing, diffuse, sample_visible)
 CASES = [(v, m, c) for v, ms in MODELS.items() for m in ms for c in CONFIGS]
 #: issue 30: the Lambertian term (albedo 0.3), its own choice of lobe (p_spec from the albedo), at 3 configurations
 CASES += [("llvm_ad_rgb", ("smith", "lambertian", True), c) for c in ((0.02, 30), (0.3, 80), (1.0, 30))]
+#: the V-cavity's visible normals alone (the specular lobe's own sampling routine, without the lobe choice)
+CASES += [("llvm_ad_rgb", ("vgroove", "none", True), c) for c in ((0.02, 60), (0.3, 80), (1.0, 30), (1.5, 85))]
 
 
 
@@ -91,3 +94,31 @@ def test_weight_is_eval_over_pdf_polarized(mode, diffuse, visible):
     # per matrix, relative to its largest element (the m-vs-h float32 noise above)
     scale = np.abs(F).max(axis=(-2, -1), keepdims=True)
     assert (np.abs(W - F) <= 1e-4 * scale + 1e-7).all(), np.max(np.abs(W - F) / scale)
+
+
+def test_vcavity_visible_normals_bound_the_weight_by_fresnel():
+    """V-groove shadowing samples the visible normals of the V-cavity model (Heitz & d'Eon 2014): the density
+    D G1(wi, m) wi.m / cos theta_i with the V-cavity's G1, whose minimum over wi and wo is Eq. 12's G, so the
+    weight f cos theta_o / pdf = G F / G1(wi) <= F.  A perfect conductor (F = 1): every weight <= 1 (float32),
+    at rms_slope 0.05-2 and theta_i 0-89.5 deg, where Smith's visible normals (the sampler before) gave weights
+    above 1 near grazing incidence (G_V-groove / G1_Smith(wi) > 1); the mean weight is the lobe's albedo,
+    <= 1, and the chosen faces look at wi (wi.m > 0)."""
+    import drjit as dr
+
+    mi = mitsuba_with_hyde("llvm_ad_rgb")
+    rng = np.random.default_rng(7)
+    n = 50_000
+    for rms in (0.05, 0.3, 1.0, 2.0):
+        bsdf = mi.load_dict({"type": "hyde", "rms_slope": rms, "eta": 0.0, "k": 1e4, "diffuse": "none"})
+        for theta in (0.0, 40.0, 75.0, 89.5):
+            t = math.radians(theta)
+            si = dr.zeros(mi.SurfaceInteraction3f)
+            si.wi = mi.Vector3f(math.sin(t), 0.0, math.cos(t))
+            s1 = mi.Float(rng.random(n).astype(np.float32))
+            s2 = mi.Point2f(*(mi.Float(rng.random(n).astype(np.float32)) for _ in range(2)))
+            bs, weight = bsdf.sample(mi.BSDFContext(), si, s1, s2)
+            w = np.array(weight)[0]
+            assert w.max() <= 1.0 + 1e-5, (rms, theta, w.max())
+            assert 0.0 < w.mean() <= 1.0, (rms, theta, w.mean())    # the albedo (failed samples weigh 0)
+            m = np.array(dr.normalize(bs.wo + si.wi))[:, np.array(bs.pdf) > 0]
+            assert (np.array(si.wi)[:, :1] * m).sum(0).min() > 0

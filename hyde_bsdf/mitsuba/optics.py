@@ -124,8 +124,9 @@ def snap_to_normal(v):
     exact G1 is 1 to float precision, and a direction exactly along the normal takes Mitsuba's
     own "perpendicular incidence" branch (G1 = 1): the snap changes no finite result.
     """
-    tiny = dr.maximum(dr.abs(v.x), dr.abs(v.y)) < 1e-15 * dr.abs(v.z)
-    return type(v)(dr.select(tiny, 0.0, v.x), dr.select(tiny, 0.0, v.y), v.z)
+    x, y, z = v.x, v.y, v.z        # each component read once (a read creates a Python object: host cost)
+    tiny = dr.maximum(dr.abs(x), dr.abs(y)) < 1e-15 * dr.abs(z)
+    return type(v)(dr.select(tiny, 0.0, x), dr.select(tiny, 0.0, y), z)
 
 
 def complex_sqrt_lower(zr, zi):

@@ -118,7 +118,8 @@ DOC = r"""Hyde-Schmidt-Havrilla polarimetric rough-surface BRDF (``hyde``).
  * - sample_visible
    - bool ("true"/"false" strings are parsed)
    - true
-   - sample the specular lobe from the visible Beckmann normals (Heitz & d'Eon 2014)
+   - sample the specular lobe from the visible normals of the shadowing (Heitz & d'Eon 2014): the
+     V-cavity's with "vgroove", Smith's otherwise; false: from D cos theta_h
    - no
 
 Validation (:mod:`hyde_bsdf.mitsuba.param_checks`).  The constructor and every
@@ -173,12 +174,13 @@ Facet frame.  The facet's s axis (perpendicular to its plane of incidence) is
 wo_hat x wi_hat, parallel to roughconductor's cross(h, -wo_hat), but computed with
 a compensated (Kahan) cross product: near backscatter the plain float32 product
 tilts the Stokes frame by ~eps/|wi x wo| (roughconductor is off the float64
-evaluator by up to 3e-5 there, this plugin by < 2e-6).  Every normalisation goes
-through :func:`hyde_bsdf.mitsuba.optics.safe_normalize` (no float32 underflow of the
-squared norm) with a named fallback: "collinear" (wo_hat parallel to wi_hat to float32
-precision: backscatter or both along the normal; the facet is then at normal incidence,
+evaluator by up to 3e-5 there, this plugin by < 2e-6).  Every normalisation has a named
+fallback where float32 cannot normalise: "collinear" (the s axis through
+:func:`hyde_bsdf.mitsuba.optics.safe_normalize`: wo_hat parallel to wi_hat to float32
+precision, backscatter or both along the normal; the facet is then at normal incidence,
 where its Mueller matrix does not depend on the s axis, and s = stokes_basis(-wo_hat))
-and "opposite" (wi = -wo on the horizon: h = +z, an inactive lane).  Directions within
+and "opposite" (|wi + wo| < 1e-15, both within 1e-15 of the horizon: no half vector, the
+pair reflects nothing).  Directions within
 1e-15 of the normal are snapped onto it before Mitsuba's Smith G1, which is NaN there
 (roughconductor too); D G / (4 cos theta_i) and its pdf are capped at MAX_LOBE = 1e30.
 No direction pair gives NaN (tests: 1e-38 ... 1e-3 from the normal and from each other).
@@ -204,13 +206,17 @@ per direction in place of a 2-D lookup, the same values to float32 rounding; eve
 is paid again for every instance at every render (the cost per instance, benchmarks/bench_render.py).
 
 Sampling.  With probability p_spec the specular lobe is sampled from the
-(visible) Beckmann normals (``mi.MicrofacetDistribution``), otherwise a cosine
-hemisphere.  p_spec = clamp(rho_avg, 0.05, 0.95), rho_avg = 2 int rho cos sin dtheta
+visible Beckmann normals of the shadowing, otherwise a cosine hemisphere.  With "vgroove" these are
+the V-cavity's, exact (Heitz & d'Eon 2014): a normal from D cos theta_m, then it or its mirror
+image, the cavity's other face, in proportion to their projected areas; the density is D G1 wi.m /
+cos theta_i with the V-cavity's G1, whose minimum over the two directions is Eq. 12's G, so the
+sampling weight is <= F (a sixth of the traced operations of Smith's).  With "smith" and "none"
+they are Smith's (``mi.MicrofacetDistribution``).  p_spec = clamp(rho_avg, 0.05, 0.95), rho_avg = 2 int rho cos sin dtheta
 (the 1-D texture of the reciprocal term): the ratio of the specular albedo rho F to
 rho F + (1 - rho) F (F common to both lobes) averaged over the incidence angle; one
 1-D lookup in place of a second 2-D one into the DHR texture (any p_spec in (0, 1)
-that the pdf also uses is unbiased); p_spec = 1 when ``diffuse="none"`` (then ``sample`` equals
-roughconductor's).  ``pdf`` and ``eval_pdf`` return the mixture density.
+that the pdf also uses is unbiased); p_spec = 1 when ``diffuse="none"`` (then, with "smith", ``sample``
+equals roughconductor's).  ``pdf`` and ``eval_pdf`` return the mixture density.
 
 Components: 0 = glossy reflection (specular lobe), 1 = diffuse reflection.
 """
@@ -309,6 +315,10 @@ def _dhr_lookup(shadowing):
 #: (alpha 1.4e-4: D(0) = 1.6e7) seen at cos theta_i < 1e-31 would overflow float32 to Inf (and
 #: Inf * 0 = NaN in the Mueller entries); no physical radiance comes near this bound.
 MAX_LOBE = 1e30
+
+
+#: below this length wi + wo has no direction in float32 (``_half_vector``: its squared norm would lose components)
+MIN_HALF = 1e-15
 
 
 def _pos(x):
@@ -453,13 +463,50 @@ def _g1_exact(distr, v, m):
     return po.smith_g1_exact(v, m, distr.alpha())
 
 
+def _g1_vcavity(distr, v, m):
+    """The V-cavity masking of one direction (Heitz 2014, JCGT 3(2)), G1(v, m) = min(1, 2 cos theta_m cos
+    theta_v / v.m), 0 where ``v`` sees the back of ``m``: min(G1(wi, h), G1(wo, h)) is the V-groove G of paper
+    Eq. 12, and D G1(wi, m) (wi.m)+ / cos theta_i the density :func:`_sample_vcavity` draws from."""
+    v_m = dr.dot(v, m)
+    front = v_m > 0
+    return dr.select(front, dr.clip(2.0 * m.z * v.z / dr.select(front, v_m, 1.0), 0.0, 1.0), 0.0)
+
+
+def _sample_smith(distr, wi, sample2, u):
+    """(m, its density): Mitsuba's sampler, the visible Smith normals (Heitz & d'Eon 2014) or D cos theta_m."""
+    return distr.sample(po.snap_to_normal(wi), sample2)
+
+
+def _sample_vcavity(distr, wi, sample2, u):
+    """(m, its density): the visible normals of the V-cavity model, exactly (Heitz & d'Eon 2014, Comput. Graph.
+    Forum 33(4), its V-cavity algorithm): m from D(m) cos theta_m (Mitsuba's sampler without visible normals),
+    then m or its mirror m' = (-m.x, -m.y, m.z), the cavity's other face, with probability proportional to its
+    projected area (wi.m)+ ; (wi.m)+ + (wi.m')+ >= 2 cos theta_i cos theta_m > 0.  D(m') = D(m), so the
+    density of the chosen face is D cos theta_m 2 (wi.m)+ / ((wi.m)+ + (wi.m')+) = D G1(wi, m) (wi.m)+ /
+    cos theta_i (:func:`_g1_vcavity`).  With the V-groove G the sampling weight G F / G1(wi) is <= F.  ``u``
+    in [0, 1) chooses the face; 166 traced operations against 906 of the visible Smith normals."""
+    m, pdf = mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, distr.alpha(), False).sample(wi, sample2)
+    axial, lateral = wi.z * m.z, wi.x * m.x + wi.y * m.y
+    a = dr.maximum(axial + lateral, 0.0)            # (wi.m)+
+    b = dr.maximum(axial - lateral, 0.0)            # (wi.m')+
+    total = a + b
+    mirror = u * total >= a                         # probability b / (a + b)
+    m = mi.Vector3f(dr.select(mirror, -m.x, m.x), dr.select(mirror, -m.y, m.y), m.z)
+    ok = total > 0
+    return m, dr.select(ok, 2.0 * pdf * dr.select(mirror, b, a) / dr.select(ok, total, 1.0), 0.0)
+
+
 #: shadowing name -> (G(distr, wi, wo, h), the exact G / G1(wi) for visible-normal sampling or None,
-#: G1(distr, v, m) of the visible-normal density).  "smith" without a diffuse term that reads the DHR ("none",
+#: G1(distr, v, m) of the visible-normal density, the visible-normal sampler (distr, wi, sample2, u in [0, 1))
+#: -> (m, its density)).  "smith" without a diffuse term that reads the DHR ("none",
 #: "lambertian") is roughconductor's lobe, sampling included: Mitsuba's rational G1 ("smith_fit"); every other
 #: material uses the exact G1, in G (smith: the G whose DHR the diffuse term reads, so that specular + diffuse
-#: albedo = 1) and in the density (the one the sampler draws from)
-_SHADOWING = {"vgroove": (_g_vgroove, None, _g1_exact), "smith": (_g_smith_exact, _smith_visible_ratio_exact, _g1_exact),
-              "smith_fit": (_g_smith, _smith_visible_ratio, _g1_fit), "none": (_g_none, None, _g1_exact)}
+#: albedo = 1) and in the density (the one the sampler draws from).  "vgroove" samples the visible normals of
+#: its own masking, the V-cavity's: its weights are <= F and it traces a fifth of the operations
+_SHADOWING = {"vgroove": (_g_vgroove, None, _g1_vcavity, _sample_vcavity),
+              "smith": (_g_smith_exact, _smith_visible_ratio_exact, _g1_exact, _sample_smith),
+              "smith_fit": (_g_smith, _smith_visible_ratio, _g1_fit, _sample_smith),
+              "none": (_g_none, None, _g1_exact, _sample_smith)}
 
 
 def _one_minus_clipped(dhr, cos_theta, u):
@@ -607,8 +654,9 @@ class _Derived:
 #: the instance's Python-only state, held in slots rather than in its ``__dict__``: ``dr.freeze`` walks the
 #: ``__dict__`` of every live instance at every replay (~4 us per entry), to find its Dr.Jit values, which
 #: live in the textures and the DHR lookup (kept in ``__dict__``)
-_PYTHON_STATE = ("m_rough_key", "m_sample_visible", "m_reader", "m_g1", "m_g", "m_visible_ratio", "m_snapshots",
-                 "m_shadowing", "m_rough_scale", "m_rough_range", "m_rough_constant", "m_polarized", "m_material",
+_PYTHON_STATE = ("m_rough_key", "m_sample_visible", "m_reader", "m_g1", "m_g", "m_visible_ratio", "m_sampler",
+                 "m_snapshots", "m_shadowing", "m_rough_scale", "m_rough_range", "m_rough_constant", "m_polarized",
+                 "m_material",
                  "m_gain_warned", "m_g_product", "m_diffuse_factor", "m_albedo_mean", "m_achromatic", "m_rough_values",
                  "m_has_diffuse", "m_guard_tiny", "m_guard_scale", "m_guard_index", "m_guard_albedo", "m_diffuse",
                  "m_achromatic_scale")
@@ -637,7 +685,7 @@ def _make_class():
             self.m_shadowing, self.m_diffuse = shadow.name, term.name
             # smith without a term that reads its DHR: roughconductor's specular lobe, Mitsuba's rational G1
             fit = shadow.name == "smith" and not term.reads_dhr
-            self.m_g, self.m_visible_ratio, self.m_g1 = _SHADOWING["smith_fit" if fit else shadow.name]
+            self.m_g, self.m_visible_ratio, self.m_g1, self.m_sampler = _SHADOWING["smith_fit" if fit else shadow.name]
             # Smith's G is G1(wi) G1(wo) with the G1 of the density: the value and the pdf share G1(wi)
             self.m_g_product = shadow.name == "smith"
             self.m_diffuse_factor = _DIFFUSE[term.name]     # (traced, tabulated at one roughness, from the table)
@@ -901,12 +949,17 @@ def _make_class():
 
         @staticmethod
         def _half_vector(wi, wo):
-            """The facet normal h = normalize(wi + wo).
+            """(h, found): the facet normal h = normalize(wi + wo), and where it is found.
 
-            Named fallback, "opposite": wi = -wo (both on the horizon, |wi + wo| < 1e-37) has no
-            half vector; the mean normal +z is used (such lanes are inactive: cos theta = 0).
+            Named fallback, "opposite": |wi + wo| < MIN_HALF (wi = -wo to float32 precision; above the surface
+            only where both lie within 1e-15 of the horizon) has no half vector: the pair reflects nothing
+            (``found`` is false; h is then finite and unused).  Elsewhere the squared norm, >= MIN_HALF^2 =
+            1e-30, neither underflows nor loses a component (squares down to 2^-24 of it are normal floats).
             """
-            return po.safe_normalize(wi + wo, mi.Vector3f(0, 0, 1))
+            v = wi + wo
+            n2 = dr.squared_norm(v)
+            found = n2 >= MIN_HALF * MIN_HALF
+            return v * dr.rsqrt(dr.select(found, n2, 1.0)), found
 
         def _geometry(self, wi, wo, active):
             """(active, cos_i, cos_o, h, wi.h) of a direction pair: shared by the value and the pdf.  Where both
@@ -914,8 +967,8 @@ def _make_class():
             front, and no other check of it is needed."""
             cos_i = mi.Frame3f.cos_theta(wi)
             cos_o = mi.Frame3f.cos_theta(wo)
-            h = self._half_vector(wi, wo)
-            return active & (cos_i > 0) & (cos_o > 0), cos_i, cos_o, h, dr.dot(wi, h)
+            h, found = self._half_vector(wi, wo)
+            return active & (cos_i > 0) & (cos_o > 0) & found, cos_i, cos_o, h, dr.dot(wi, h)
 
         def _diffuse(self, ctx, cos_i, cos_o, rough):
             """The diffuse term's factor (no M00, no cos theta_o); theta_in is the polar angle of the
@@ -1100,10 +1153,14 @@ def _make_class():
         def eval_pdf(self, ctx, si, wo, active=True):
             return self._eval_pdf(ctx, si, wo, active, True, True)
 
-        def _sample_specular(self, ctx, si, wi, sample2, active, distr):
-            """The specular lobe alone (p_spec = 1): exactly roughconductor's sampling routine."""
+        def _sample_normal(self, distr, wi, sample2, u):
+            """(m, its density) from the visible normals of the shadowing (``m_sampler``), else D cos theta_m."""
+            return (self.m_sampler if self.m_sample_visible else _sample_smith)(distr, wi, sample2, u)
+
+        def _sample_specular(self, ctx, si, wi, sample1, sample2, active, distr):
+            """The specular lobe alone (p_spec = 1): with Smith shadowing exactly roughconductor's sampling routine."""
             bs = dr.zeros(mi.BSDFSample3f)
-            m, pdf = distr.sample(po.snap_to_normal(wi), sample2)
+            m, pdf = self._sample_normal(distr, wi, sample2, sample1)
             wo = bs.wo = mi.reflect(wi, m)
             bs.eta = 1.0
             bs.sampled_component = mi.UInt32(0)
@@ -1139,12 +1196,12 @@ def _make_class():
                 return dr.zeros(mi.BSDFSample3f), dr.zeros(mi.Spectrum)
             distr = self._distr(rough)
             if isinstance(p_spec, float) and p_spec == 1.0:
-                return self._sample_specular(ctx, si, wi, sample2, active, distr)
+                return self._sample_specular(ctx, si, wi, sample1, sample2, active, distr)
 
             # mixture of the specular (glossy) and diffuse lobes
             bs = dr.zeros(mi.BSDFSample3f)
             choose_spec = sample1 < p_spec
-            m, pdf_m = distr.sample(po.snap_to_normal(wi), sample2)
+            m, pdf_m = self._sample_normal(distr, wi, sample2, sample1 / p_spec)   # on the lanes that use m: in [0, 1)
             # a back-facing normal (possible without visible-normal sampling) is a failed sample
             # (sample1 >= p_spec), not ~choose_spec: in scalar variants choose_spec is a Python bool
             drawn = (pdf_m != 0) if self.m_sample_visible else (pdf_m != 0) & (dr.dot(wi, m) > 0)
