@@ -210,10 +210,10 @@ visible Beckmann normals of the shadowing, otherwise a cosine hemisphere.  With 
 the V-cavity's, exact (Heitz & d'Eon 2014): a normal from D cos theta_m, then it or its mirror
 image, the cavity's other face, in proportion to their projected areas; the density is D G1 wi.m /
 cos theta_i with the V-cavity's G1, whose minimum over the two directions is Eq. 12's G, so the
-sampling weight is <= F (a sixth of the traced operations of Smith's).  With "smith" and "none"
-they are Smith's (``mi.MicrofacetDistribution``).  p_spec = clamp(rho_avg, 0.05, 0.95), rho_avg = 2 int rho cos sin dtheta
-(the 1-D texture of the reciprocal term): the ratio of the specular albedo rho F to
-rho F + (1 - rho) F (F common to both lobes) averaged over the incidence angle; one
+sampling weight is <= F (a fifth of the traced operations of Smith's).  With "smith" and "none"
+they are Smith's (``mi.MicrofacetDistribution``).  p_spec = clamp(rho_avg, 0.05, 0.95),
+rho_avg = 2 int rho cos sin dtheta (the 1-D texture of the reciprocal term): the ratio of the
+specular albedo rho F to rho F + (1 - rho) F (F common to both lobes) averaged over the incidence angle; one
 1-D lookup in place of a second 2-D one into the DHR texture (any p_spec in (0, 1)
 that the pdf also uses is unbiased); p_spec = 1 when ``diffuse="none"`` (then, with "smith", ``sample``
 equals roughconductor's).  ``pdf`` and ``eval_pdf`` return the mixture density.
@@ -656,10 +656,9 @@ class _Derived:
 #: live in the textures and the DHR lookup (kept in ``__dict__``)
 _PYTHON_STATE = ("m_rough_key", "m_sample_visible", "m_reader", "m_g1", "m_g", "m_visible_ratio", "m_sampler",
                  "m_snapshots", "m_shadowing", "m_rough_scale", "m_rough_range", "m_rough_constant", "m_polarized",
-                 "m_material",
-                 "m_gain_warned", "m_g_product", "m_diffuse_factor", "m_albedo_mean", "m_achromatic", "m_rough_values",
-                 "m_has_diffuse", "m_guard_tiny", "m_guard_scale", "m_guard_index", "m_guard_albedo", "m_diffuse",
-                 "m_achromatic_scale")
+                 "m_material", "m_gain_warned", "m_g_product", "m_diffuse_factor", "m_albedo_mean", "m_achromatic",
+                 "m_rough_values", "m_has_diffuse", "m_guard_tiny", "m_guard_scale", "m_guard_index",
+                 "m_guard_albedo", "m_diffuse", "m_achromatic_scale")
 
 
 def _make_class():
@@ -685,7 +684,8 @@ def _make_class():
             self.m_shadowing, self.m_diffuse = shadow.name, term.name
             # smith without a term that reads its DHR: roughconductor's specular lobe, Mitsuba's rational G1
             fit = shadow.name == "smith" and not term.reads_dhr
-            self.m_g, self.m_visible_ratio, self.m_g1, self.m_sampler = _SHADOWING["smith_fit" if fit else shadow.name]
+            shadowing = _SHADOWING["smith_fit" if fit else shadow.name]
+            self.m_g, self.m_visible_ratio, self.m_g1, self.m_sampler = shadowing
             # Smith's G is G1(wi) G1(wo) with the G1 of the density: the value and the pdf share G1(wi)
             self.m_g_product = shadow.name == "smith"
             self.m_diffuse_factor = _DIFFUSE[term.name]     # (traced, tabulated at one roughness, from the table)
