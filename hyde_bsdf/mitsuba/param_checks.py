@@ -106,8 +106,13 @@ def probe(tex, one=False, params=None):
         # eval returns the stored value at every point and wavelength: read it, no kernel (a
         # scene of constants then loads without compiling one: its cold load, issue 31)
         value = float(np.asarray((mi.traverse(tex) if params is None else params)["value"], dtype=float).ravel()[0])
-        return np.full(1 if one or mi.is_monochromatic else _WAVELENGTHS.size if mi.is_spectral else 3, value)
+        return _uniform_values(value, one)
     return _eval_at(tex, np.array([0.5]), np.array([0.5]), one)
+
+
+def _uniform_values(value, one):
+    """What :func:`probe` reads of a ``uniform`` texture of stored value ``value``."""
+    return np.full(1 if one or mi.is_monochromatic else _WAVELENGTHS.size if mi.is_spectral else 3, value)
 
 
 def _eval_at(tex, u, v, one):
@@ -251,7 +256,10 @@ class Reader:
 
     def _read(self, tex, one):
         key = (id(tex), one)
-        data = self.raw(tex).get("data")
+        raw = self.raw(tex)
+        if tex.class_name() == "UniformSpectrum" and "value" in raw and raw["value"].size == 1:
+            return _uniform_values(float(raw["value"][0]), one)     # its one number, already read back
+        data = raw.get("data")
         # the texture itself is kept with the proof: its id cannot be reused by another texture
         proved, size, n_values = self.plain.get(key, (None, 0, 0))
         if data is not None and proved is tex and size == data.size:
