@@ -47,10 +47,11 @@ def _fmt(x):
     return f"{x:.7g}"
 
 
-def texture_data(tex):
-    """{key: float64 array} of a texture's traversable floating-point data (raw, as stored)."""
+def texture_data(tex, params=None):
+    """{key: float64 array} of a texture's traversable floating-point data (raw, as stored); ``params``: its
+    ``mi.traverse`` if already made."""
     out = {}
-    params = mi.traverse(tex)
+    params = mi.traverse(tex) if params is None else params
     for key in params.keys():
         value = params[key]
         if isinstance(value, (str, bool)) or key.endswith("to_uv") or key.endswith("range"):
@@ -92,20 +93,26 @@ def _wavelength_sets():
     return [_WAVELENGTHS[j::12] for j in range(12)]
 
 
-def probe(tex, one=False):
+def probe(tex, one=False, params=None):
     """Values of a spatially uniform texture (float64 array); None if it varies over the surface.
 
     Spectral variants: at 48 wavelengths 360-830 nm; RGB: the three channels; mono: one value.
-    ``one``: read ``eval_1`` (how the plugin reads the roughness) instead of ``eval``.
+    ``one``: read ``eval_1`` (how the plugin reads the roughness) instead of ``eval``; ``params``: the
+    texture's ``mi.traverse`` if already made.
     """
     if not _is_constant(tex):
         return None
     if tex.class_name() == "UniformSpectrum":
         # eval returns the stored value at every point and wavelength: read it, no kernel (a
         # scene of constants then loads without compiling one: its cold load, issue 31)
-        value = float(np.asarray(mi.traverse(tex)["value"], dtype=float).ravel()[0])
-        return np.full(1 if one or mi.is_monochromatic else _WAVELENGTHS.size if mi.is_spectral else 3, value)
+        value = float(np.asarray((mi.traverse(tex) if params is None else params)["value"], dtype=float).ravel()[0])
+        return _uniform_values(value, one)
     return _eval_at(tex, np.array([0.5]), np.array([0.5]), one)
+
+
+def _uniform_values(value, one):
+    """What :func:`probe` reads of a ``uniform`` texture of stored value ``value``."""
+    return np.full(1 if one or mi.is_monochromatic else _WAVELENGTHS.size if mi.is_spectral else 3, value)
 
 
 def _eval_at(tex, u, v, one):
@@ -177,10 +184,10 @@ def _eval_in_texture_space(tex, u, v, one):
     return _eval_at(tex, u, v, one)
 
 
-def values_of(tex, one=False):
+def values_of(tex, one=False, params=None):
     """Every value the texture can return, read through its ``eval``; None when not readable."""
     if _is_constant(tex):
-        return probe(tex, one)
+        return probe(tex, one, params)
     if _is_plain_checkerboard(tex):      # the centres of a color0 and a color1 square
         return _eval_in_texture_space(tex, np.array([0.25, 0.75]), np.array([0.25, 0.25]), one)
     return texel_values(tex, one)
@@ -212,7 +219,16 @@ class Reader:
     """
 
     def __init__(self):
-        self.data, self.values, self.plain = {}, {}, {}
+        self.data, self.values, self.plain, self.traversed = {}, {}, {}, {}
+
+    def traverse(self, tex):
+        """``mi.traverse(tex)``, made once per texture: its values are views of the texture's members (they
+        follow every assignment), and making one costs ~20 us (a class is built), five times per texture and
+        update before (an optimisation loop over 50 materials: ~5 ms of host time per update)."""
+        made = self.traversed.get(id(tex))
+        if made is None or made[0] is not tex:
+            made = self.traversed[id(tex)] = (tex, mi.traverse(tex))
+        return made[1]
 
     def forget(self, tex):
         """Read ``tex`` again at its next check (its values changed)."""
@@ -223,11 +239,12 @@ class Reader:
     def clear(self):
         self.data.clear()
         self.values.clear()
+        self.traversed.clear()
 
     def raw(self, tex):
         """:func:`texture_data` of ``tex``, read once per change."""
         if id(tex) not in self.data:
-            self.data[id(tex)] = texture_data(tex)
+            self.data[id(tex)] = texture_data(tex, self.traverse(tex))
         return self.data[id(tex)]
 
     def __call__(self, tex, one=False):
@@ -239,12 +256,15 @@ class Reader:
 
     def _read(self, tex, one):
         key = (id(tex), one)
-        data = self.raw(tex).get("data")
+        raw = self.raw(tex)
+        if tex.class_name() == "UniformSpectrum" and "value" in raw and raw["value"].size == 1:
+            return _uniform_values(float(raw["value"][0]), one)     # its one number, already read back
+        data = raw.get("data")
         # the texture itself is kept with the proof: its id cannot be reused by another texture
         proved, size, n_values = self.plain.get(key, (None, 0, 0))
         if data is not None and proved is tex and size == data.size:
             return _as_values(data, 1 if one else len(_wavelength_sets()), n_values)
-        values = values_of(tex, one)
+        values = values_of(tex, one, self.traverse(tex))
         if (values is not None and data is not None and np.isfinite(data).all()
                 and not np.isin(data, (0.0, 1.0)).all()):
             expected = _as_values(data, 1 if one else len(_wavelength_sets()), values.size)
@@ -365,10 +385,12 @@ class Snapshot:
     later ``params[key] = ...`` does not change.
     """
 
-    def __init__(self, textures):
+    def __init__(self, textures, reader=None):
         # traverse hands out the texture's own member: keep a copy (a new reference to the
-        # accepted JIT variable; scalar arrays are copied)
-        self.saved = [(tex, {key: _copy(value) for key, value in _leaves(tex)}) for tex in textures]
+        # accepted JIT variable; scalar arrays are copied).  ``reader``: a :class:`Reader` (its traversals)
+        self.saved = [(tex, {key: _copy(value) for key, value in
+                             _leaves(tex, reader.traverse(tex) if reader is not None else None)})
+                      for tex in textures]
 
     def restore(self):
         for tex, values in self.saved:
@@ -388,8 +410,8 @@ def _copy(value):
     return dr.copy(value)
 
 
-def _leaves(tex):
-    params = mi.traverse(tex)
+def _leaves(tex, params=None):
+    params = mi.traverse(tex) if params is None else params
     for key in params.keys():
         value = params[key]
         if isinstance(value, (str, bool)) or key.endswith("to_uv"):

@@ -598,10 +598,11 @@ def _gain_warning(values, scale):
             f"{rho.max():.3g} at {GAIN_THETA_DEG:g} deg (hyde_bsdf/validation/furnace.py); {advice}")
 
 
-def _achromatic(tex):
-    """Whether ``tex`` is a ``uniform`` texture of one number (its ``eval_1`` is all of it)."""
+def _achromatic(tex, params=None):
+    """Whether ``tex`` is a ``uniform`` texture of one number (its ``eval_1`` is all of it); ``params``: its
+    ``mi.traverse`` if already made."""
     try:
-        params = mi.traverse(tex)
+        params = mi.traverse(tex) if params is None else params
     except RuntimeError:
         return False
     return (list(params.keys()) == ["value"] and isinstance(params["value"], mi.Float)
@@ -798,6 +799,7 @@ def _make_class():
                 raise UsageError(f"hyde: replace_texture: unknown parameter {shorten(name)}; use {', '.join(attrs)}")
             old = getattr(self, attrs[name])
             setattr(self, attrs[name], texture)
+            self.m_reader.clear()           # nothing of the old texture is kept
             self._texture_kinds()
             try:
                 self._validate((name,))
@@ -850,7 +852,7 @@ def _make_class():
                 mean = pc.check_reflectance(self.m_albedo, self.m_reader, "diffuse_reflectance", DIFFUSE_REFLECTANCE.hi)
                 self.m_albedo_mean = terms.PARAMETER_DEFAULTS["diffuse_reflectance"] if mean is None else mean
             for group, members in groups.items():
-                self.m_snapshots[group] = pc.Snapshot(members)
+                self.m_snapshots[group] = pc.Snapshot(members, self.m_reader)
 
         def to_string(self):
             index = (f"material={self.m_material!r}" if self.m_material else
@@ -883,9 +885,12 @@ def _make_class():
             value needs no gradient), traced here once, at load and at each update (a :class:`_Derived`), else
             None.  They are not evaluated here (that would compile a kernel at load): Dr.Jit computes them inside
             the render's kernel, from operations traced once instead of at every call."""
-            if not (dr.is_jit_v(mi.Float) and _achromatic(self.m_rough)):
+            if not dr.is_jit_v(mi.Float):
                 return None
-            value = mi.traverse(self.m_rough)["value"]
+            params = self.m_reader.traverse(self.m_rough)
+            if not _achromatic(self.m_rough, params):
+                return None
+            value = params["value"]
             if dr.grad_enabled(value):
                 return None
             derived = self._rough_traced(dr.zeros(mi.SurfaceInteraction3f), True)
