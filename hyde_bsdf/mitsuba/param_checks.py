@@ -93,19 +93,18 @@ def _wavelength_sets():
     return [_WAVELENGTHS[j::12] for j in range(12)]
 
 
-def probe(tex, one=False, params=None):
+def probe(tex, one=False):
     """Values of a spatially uniform texture (float64 array); None if it varies over the surface.
 
     Spectral variants: at 48 wavelengths 360-830 nm; RGB: the three channels; mono: one value.
-    ``one``: read ``eval_1`` (how the plugin reads the roughness) instead of ``eval``; ``params``: the
-    texture's ``mi.traverse`` if already made.
+    ``one``: read ``eval_1`` (how the plugin reads the roughness) instead of ``eval``.
     """
     if not _is_constant(tex):
         return None
     if tex.class_name() == "UniformSpectrum":
         # eval returns the stored value at every point and wavelength: read it, no kernel (a
         # scene of constants then loads without compiling one: its cold load, issue 31)
-        value = float(np.asarray((mi.traverse(tex) if params is None else params)["value"], dtype=float).ravel()[0])
+        value = float(np.asarray(mi.traverse(tex)["value"], dtype=float).ravel()[0])
         return _uniform_values(value, one)
     return _eval_at(tex, np.array([0.5]), np.array([0.5]), one)
 
@@ -184,10 +183,10 @@ def _eval_in_texture_space(tex, u, v, one):
     return _eval_at(tex, u, v, one)
 
 
-def values_of(tex, one=False, params=None):
+def values_of(tex, one=False):
     """Every value the texture can return, read through its ``eval``; None when not readable."""
     if _is_constant(tex):
-        return probe(tex, one, params)
+        return probe(tex, one)
     if _is_plain_checkerboard(tex):      # the centres of a color0 and a color1 square
         return _eval_in_texture_space(tex, np.array([0.25, 0.75]), np.array([0.25, 0.25]), one)
     return texel_values(tex, one)
@@ -223,8 +222,7 @@ class Reader:
 
     def traverse(self, tex):
         """``mi.traverse(tex)``, made once per texture: its values are views of the texture's members (they
-        follow every assignment), and making one costs ~20 us (a class is built), five times per texture and
-        update before (an optimisation loop over 50 materials: ~5 ms of host time per update)."""
+        follow every assignment), and each ``mi.traverse`` builds a class (host time at every update)."""
         made = self.traversed.get(id(tex))
         if made is None or made[0] is not tex:
             made = self.traversed[id(tex)] = (tex, mi.traverse(tex))
@@ -264,7 +262,7 @@ class Reader:
         proved, size, n_values = self.plain.get(key, (None, 0, 0))
         if data is not None and proved is tex and size == data.size:
             return _as_values(data, 1 if one else len(_wavelength_sets()), n_values)
-        values = values_of(tex, one, self.traverse(tex))
+        values = values_of(tex, one)
         if (values is not None and data is not None and np.isfinite(data).all()
                 and not np.isin(data, (0.0, 1.0)).all()):
             expected = _as_values(data, 1 if one else len(_wavelength_sets()), values.size)
